@@ -1,0 +1,75 @@
+"""One family of errors, each carrying the exit code the CLI maps it to.
+
+Library code raises these with messages a user can act on; only the CLI turns them into a
+printed line and an exit status, in one place (`choreo.cli.main`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+class ChoreoError(Exception):
+    """Base of every error choreo reports to its user."""
+
+    exit_code = 1
+
+    def lines(self) -> list[str]:
+        """The message as the one-problem-a-line text the CLI prints."""
+        return [str(self)]
+
+
+class UsageError(ChoreoError):
+    """Bad arguments: nothing was sent to the robot."""
+
+    exit_code = 2
+
+
+class MotionRangeError(UsageError, ValueError):
+    """A motion number outside the controller's slots 0..119."""
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One located problem in a show file: `FILE:LINE:COL: PATH: WHAT` (1-based line/col)."""
+
+    file: str
+    line: int
+    column: int
+    path: str
+    message: str
+
+    def __str__(self) -> str:
+        where = f"{self.file}:{self.line}:{self.column}" if self.line else self.file
+        return f"{where}: {self.path}: {self.message}" if self.path else f"{where}: {self.message}"
+
+
+class ShowError(ChoreoError):
+    """A show file that cannot be run, with every problem found in it."""
+
+    exit_code = 2
+
+    def __init__(self, problems: list[Problem]) -> None:
+        self.problems = list(problems)
+        super().__init__("\n".join(str(p) for p in self.problems))
+
+    def lines(self) -> list[str]:
+        return [str(p) for p in self.problems]
+
+
+class LinkError(ChoreoError):
+    """The robot link failed: port would not open, no reply or NAK after retries, port lost."""
+
+    exit_code = 3
+
+
+class LogError(ChoreoError):
+    """A run log that cannot be written, or read back."""
+
+    exit_code = 2
+
+
+class Interrupted(ChoreoError):
+    """The user stopped the run (Ctrl-C or SIGTERM)."""
+
+    exit_code = 130

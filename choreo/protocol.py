@@ -1,0 +1,309 @@
+"""The RCB-4 frames that play a stored motion, and the replies to them.
+
+Pure: bytes in, values out, no I/O, so that the link, the simulator, the planner and the log
+review all agree on one definition of every byte. The source is `rcb4-play-motions.txt` as
+corrected by its errata: every frame is `[SIZE][CMD][args...][SUM]`, SIZE counts every byte,
+SUM is the low 8 bits of the sum of the bytes before it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+from choreo.errors import MotionRangeError
+
+MOTION_SLOTS = 120
+FIRST_SLOT_ADDRESS = 0x0BB8  # Heart to Heart 4 2.0/2.1 layout, which the document's frames match
+SLOT_SIZE = 0x0800
+MAX_FRAME_SIZE = 128
+
+CMD_MOV = 0x00
+CMD_CALL = 0x0C
+MOV_COM_TO_RAM = 0x02
+MOV_RAM_TO_COM = 0x20
+
+ACK_BYTE = 0x06
+NAK_BYTE = 0x15
+EXECUTING_BYTE = 0x23
+
+CONFIG_ADDRESS = 0x0000
+SUSPENDED_CONFIG = 0x8721  # ROM program run bit (bit 1) cleared: the board stops its program
+RESUMED_CONFIG = 0x8723  # run bit set again: the board runs what the CALL pushed
+SUSPEND_PROGRAM_COUNTER = 0x0003FD
+
+TYPE1_REPLY_SIZE = 4
+STATUS_REPLY_SIZE = 5
+
+
+def checksum(data: bytes) -> int:
+    """The frame's last byte: the low 8 bits of the sum of every byte before it."""
+    return sum(data) & 0xFF
+
+
+def build_frame(command: int, args: bytes) -> bytes:
+    """`[SIZE][CMD][args][SUM]`, refusing what the board could not take in one frame."""
+    size = len(args) + 3
+    if size > MAX_FRAME_SIZE:
+        raise ValueError(f"frame of {size} bytes exceeds the board's {MAX_FRAME_SIZE}-byte limit")
+    body = bytes((size, command)) + args
+    return body + bytes((checksum(body),))
+
+
+def mov_write(address: int, data: bytes) -> bytes:
+    """MOV COM -> RAM: write the literal bytes at a RAM address."""
+    return build_frame(CMD_MOV, bytes((MOV_COM_TO_RAM,)) + _le(address, 3) + data)
+
+
+def mov_read(address: int, count: int) -> bytes:
+    """MOV RAM -> COM: ask for `count` bytes of RAM from `address`."""
+    return build_frame(CMD_MOV, bytes((MOV_RAM_TO_COM, 0, 0, 0)) + _le(address, 2) + bytes((count,)))
+
+
+def call(address: int, condition: int = 0) -> bytes:
+    """CALL a ROM address (condition 0: always)."""
+    return build_frame(CMD_CALL, _le(address, 3) + bytes((condition,)))
+
+
+def _le(value: int, width: int) -> bytes:
+    return value.to_bytes(width, "little")
+
+
+def hexbytes(data: bytes) -> str:
+    """Lowercase hex bytes separated by spaces, the one spelling used on screen and in logs."""
+    return data.hex(" ")
+
+
+class FrameKind(str, Enum):
+    STOP = "stop"
+    PLAY = "play"
+    RESTORE = "restore"
+    STATUS = "status"
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A frame choreo sends, with what it is for (the log and the error messages need that)."""
+
+    kind: FrameKind
+    data: bytes
+    motion: int | None = None
+
+    @property
+    def hex(self) -> str:
+        return hexbytes(self.data)
+
+    @property
+    def command(self) -> int:
+        return self.data[1]
+
+    @property
+    def reply_sizes(self) -> tuple[int, ...]:
+        """Reply sizes the board may answer with: a bad frame gets a 4-byte NAK whatever it asked."""
+        if self.kind is FrameKind.STATUS:
+            return (TYPE1_REPLY_SIZE, STATUS_REPLY_SIZE)
+        return (TYPE1_REPLY_SIZE,)
+
+    def __str__(self) -> str:
+        return f"play {self.motion}" if self.kind is FrameKind.PLAY else self.kind.value
+
+
+def check_motion(motion: object) -> int:
+    """The motion number as an int, or a MotionRangeError a user can act on."""
+    if isinstance(motion, bool) or not isinstance(motion, int):
+        raise MotionRangeError(f"motion {motion!r} is not a whole number 0..{MOTION_SLOTS - 1}")
+    if not 0 <= motion < MOTION_SLOTS:
+        raise MotionRangeError(f"motion {motion} is out of range 0..{MOTION_SLOTS - 1}")
+    return motion
+
+
+def motion_address(motion: int) -> int:
+    """ROM address of a motion slot: 0x0BB8 + N * 0x800."""
+    return FIRST_SLOT_ADDRESS + check_motion(motion) * SLOT_SIZE
+
+
+def slot_of_address(address: int) -> int | None:
+    """The motion slot a CALL address starts, or None if it is not the start of a slot."""
+    offset = address - FIRST_SLOT_ADDRESS
+    if offset < 0 or offset % SLOT_SIZE:
+        return None
+    slot = offset // SLOT_SIZE
+    return slot if slot < MOTION_SLOTS else None
+
+
+# Step 1: config word 0x8721, program counter 0x0003FD, and zeros: 12 bytes at RAM 0x0000.
+_STOP = mov_write(CONFIG_ADDRESS, _le(SUSPENDED_CONFIG, 2) + _le(SUSPEND_PROGRAM_COUNTER, 3) + bytes(7))
+_RESTORE = mov_write(CONFIG_ADDRESS, _le(RESUMED_CONFIG, 2))
+_STATUS = mov_read(CONFIG_ADDRESS, 2)
+
+
+def stop_frame() -> Frame:
+    return Frame(FrameKind.STOP, _STOP)
+
+
+def play_frame(motion: int) -> Frame:
+    return Frame(FrameKind.PLAY, call(motion_address(motion)), motion)
+
+
+def restore_frame() -> Frame:
+    return Frame(FrameKind.RESTORE, _RESTORE)
+
+
+def status_frame() -> Frame:
+    return Frame(FrameKind.STATUS, _STATUS)
+
+
+def play_sequence(motion: int) -> tuple[Frame, Frame, Frame]:
+    """Steps 1-3 of the document: stop and save, CALL the slot, restore. Sent as one unit."""
+    return stop_frame(), play_frame(motion), restore_frame()
+
+
+def frame_for(kind: FrameKind | str, motion: int | None = None) -> Frame:
+    """The frame of a kind by name (what `choreo frames` and the log review need)."""
+    kind = FrameKind(kind)
+    if kind is FrameKind.PLAY:
+        if motion is None:
+            raise MotionRangeError("play needs a motion number 0..119")
+        return play_frame(motion)
+    return {FrameKind.STOP: stop_frame, FrameKind.RESTORE: restore_frame, FrameKind.STATUS: status_frame}[kind]()
+
+
+class ReplyKind(str, Enum):
+    ACK = "ack"
+    NAK = "nak"
+    STATUS = "status"
+    TIMEOUT = "timeout"
+    INVALID = "invalid"
+
+
+@dataclass(frozen=True)
+class Reply:
+    """What came back for one frame: a verdict, the raw bytes, and for a status the answer."""
+
+    kind: ReplyKind
+    data: bytes = b""
+    executing: bool | None = None
+    status: int | None = None  # the config word read by a status query
+    error: str | None = None
+
+    @property
+    def hex(self) -> str:
+        return hexbytes(self.data)
+
+    @property
+    def ok(self) -> bool:
+        return self.kind in (ReplyKind.ACK, ReplyKind.STATUS)
+
+    def describe(self) -> str:
+        """What a user reads in an error line: `NAK (04 0c 15 25)`, `nothing`, ..."""
+        if self.kind is ReplyKind.TIMEOUT:
+            return f"nothing ({self.hex})" if self.data else "nothing"
+        if self.kind is ReplyKind.INVALID:
+            return f"an invalid reply ({self.hex}): {self.error}"
+        return f"{self.kind.value.upper()} ({self.hex})"
+
+
+def invalid(data: bytes, error: str) -> Reply:
+    return Reply(ReplyKind.INVALID, bytes(data), error=error)
+
+
+def timeout(data: bytes = b"") -> Reply:
+    return Reply(ReplyKind.TIMEOUT, bytes(data), error="no complete reply before the timeout")
+
+
+def parse_reply(frame: Frame, data: bytes) -> Reply:
+    """Judge the bytes read for a frame by size byte, command byte and checksum, then meaning."""
+    data = bytes(data)
+    if len(data) < TYPE1_REPLY_SIZE:
+        return invalid(data, f"short reply: {len(data)} bytes, expected at least {TYPE1_REPLY_SIZE}")
+    if data[0] != len(data):
+        return invalid(data, f"size byte says {data[0]} but {len(data)} bytes came")
+    if data[0] not in frame.reply_sizes:
+        return invalid(data, f"a {data[0]}-byte reply to a {frame.kind.value} frame")
+    if checksum(data[:-1]) != data[-1]:
+        return invalid(data, f"bad checksum: {data[-1]:02x}, expected {checksum(data[:-1]):02x}")
+    if data[1] != frame.command:
+        return invalid(data, f"reply for command {data[1]:02x}, expected {frame.command:02x}")
+    if len(data) == STATUS_REPLY_SIZE:
+        word = data[2] | data[3] << 8
+        return Reply(ReplyKind.STATUS, data, executing=data[2] == EXECUTING_BYTE, status=word)
+    if data[2] == ACK_BYTE:
+        return Reply(ReplyKind.ACK, data)
+    if data[2] == NAK_BYTE:
+        return Reply(ReplyKind.NAK, data, error="the board refused the frame (NAK)")
+    return invalid(data, f"third byte {data[2]:02x} is neither ACK (06) nor NAK (15)")
+
+
+def ack(command: int) -> bytes:
+    """The board's type 1 ACK to a command (`04 00 06 0a` for MOV, `04 0c 06 16` for CALL)."""
+    body = bytes((TYPE1_REPLY_SIZE, command, ACK_BYTE))
+    return body + bytes((checksum(body),))
+
+
+def nak(command: int) -> bytes:
+    body = bytes((TYPE1_REPLY_SIZE, command, NAK_BYTE))
+    return body + bytes((checksum(body),))
+
+
+def ram_reply(data: bytes) -> bytes:
+    """The board's answer to MOV RAM -> COM: the bytes read, framed (`05 00 LO HI SUM`)."""
+    return build_frame(CMD_MOV, data)
+
+
+@dataclass(frozen=True)
+class Command:
+    """A frame as the board reads it: what the simulator executes and the log review explains."""
+
+    command: int
+    move_type: int | None = None
+    address: int | None = None
+    payload: bytes = b""
+    count: int | None = None
+    condition: int | None = None
+
+
+def parse_command(data: bytes) -> Command:
+    """Decode a frame sent to the board; ValueError says why it is not one."""
+    data = bytes(data)
+    if len(data) < 3 or data[0] != len(data):
+        raise ValueError(f"size byte does not match the {len(data)} bytes")
+    if checksum(data[:-1]) != data[-1]:
+        raise ValueError(f"bad checksum {data[-1]:02x}, expected {checksum(data[:-1]):02x}")
+    cmd, args = data[1], data[2:-1]
+    if cmd == CMD_CALL and len(args) == 4:
+        return Command(cmd, address=int.from_bytes(args[:3], "little"), condition=args[3])
+    if cmd == CMD_MOV and args[:1] == bytes((MOV_COM_TO_RAM,)) and len(args) >= 4:
+        return Command(cmd, MOV_COM_TO_RAM, int.from_bytes(args[1:4], "little"), bytes(args[4:]))
+    if cmd == CMD_MOV and args[:1] == bytes((MOV_RAM_TO_COM,)) and len(args) == 7:
+        return Command(cmd, MOV_RAM_TO_COM, int.from_bytes(args[4:6], "little"), count=args[6])
+    return Command(cmd, payload=bytes(args))
+
+
+def describe_frame(data: bytes) -> str:
+    """A frame sent to the board, in words: `CALL 0x000bb8: motion 0`."""
+    try:
+        cmd = parse_command(data)
+    except ValueError as exc:
+        return f"not a frame: {exc}"
+    if cmd.command == CMD_CALL:
+        slot = slot_of_address(cmd.address or 0)
+        what = f"motion {slot}" if slot is not None else "not a motion slot"
+        return f"CALL 0x{cmd.address:06x}: {what}"
+    if cmd.move_type == MOV_COM_TO_RAM:
+        name = {_STOP: "stop and save status", _RESTORE: "restore status"}.get(bytes(data), "write")
+        return f"MOV COM->RAM 0x{cmd.address:04x} <- {hexbytes(cmd.payload)}: {name}"
+    if cmd.move_type == MOV_RAM_TO_COM:
+        name = "status query" if bytes(data) == _STATUS else "read"
+        return f"MOV RAM->COM 0x{cmd.address:04x} x{cmd.count}: {name}"
+    return f"command {cmd.command:02x}"
+
+
+def describe_reply(data: bytes) -> str:
+    """A reply in words: `ACK`, `NAK`, `status 0x23: executing`."""
+    data = bytes(data)
+    if len(data) == TYPE1_REPLY_SIZE and data[0] == 4 and checksum(data[:3]) == data[3]:
+        return {ACK_BYTE: "ACK", NAK_BYTE: "NAK"}.get(data[2], f"type 1 reply {data[2]:02x}")
+    if len(data) == STATUS_REPLY_SIZE and data[0] == 5 and checksum(data[:4]) == data[4]:
+        state = "executing" if data[2] == EXECUTING_BYTE else "not executing"
+        return f"status 0x{data[2]:02x}: {state}"
+    return "no reply" if not data else f"invalid: {hexbytes(data)}"

@@ -1,0 +1,1 @@
+"""Reading run logs back: summary, frames, timeline, export, replay."""

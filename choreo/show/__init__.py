@@ -1,0 +1,1 @@
+"""Show files: loading with line marks, schema and semantic checks, and the compiled plan."""

@@ -1,0 +1,135 @@
+"""Every byte of the document's frames, and every verdict on a reply."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from choreo import protocol as p
+from choreo.errors import MotionRangeError
+
+DATA = Path(__file__).parent / "data"
+
+
+def spec_table() -> dict[int, str]:
+    rows = {}
+    for line in (DATA / "spec_play_frames.txt").read_text().splitlines():
+        if line.strip() and not line.startswith("#"):
+            motion, frame = line.split(None, 1)
+            rows[int(motion)] = frame.strip()
+    return rows
+
+
+def test_table_has_all_101_rows_of_the_document():
+    assert sorted(spec_table()) == list(range(101))
+
+
+@pytest.mark.parametrize("motion,expected", sorted(spec_table().items()))
+def test_play_frame_matches_every_row_of_the_document(motion, expected):
+    assert p.play_frame(motion).hex == expected
+
+
+@pytest.mark.parametrize("motion", range(101, 120))
+def test_slots_101_to_119_follow_the_formula(motion):
+    address = 0x0BB8 + motion * 0x800
+    body = bytes([0x07, 0x0C, address & 0xFF, address >> 8 & 0xFF, address >> 16 & 0xFF, 0x00])
+    assert p.play_frame(motion).data == body + bytes([sum(body) & 0xFF])
+    assert p.slot_of_address(address) == motion
+
+
+def test_document_checksums_hold_for_every_row():
+    for frame in spec_table().values():
+        data = bytes.fromhex(frame)
+        assert data[0] == len(data)
+        assert p.checksum(data[:-1]) == data[-1]
+
+
+def test_stop_restore_status_frames_byte_for_byte():
+    assert p.stop_frame().hex == "13 00 02 00 00 00 21 87 fd 03 00 00 00 00 00 00 00 00 bd"
+    assert p.restore_frame().hex == "09 00 02 00 00 00 23 87 b5"
+    assert p.status_frame().hex == "0a 00 20 00 00 00 00 00 02 2c"
+
+
+def test_play_sequence_is_stop_call_restore():
+    kinds = [f.kind for f in p.play_sequence(7)]
+    assert kinds == [p.FrameKind.STOP, p.FrameKind.PLAY, p.FrameKind.RESTORE]
+    assert p.play_sequence(7)[1].motion == 7
+
+
+@pytest.mark.parametrize("bad", [-1, 120, 140, 1.5, "3", True, None])
+def test_out_of_range_or_non_integer_motion_is_refused(bad):
+    with pytest.raises(MotionRangeError, match="0..119"):
+        p.play_frame(bad)
+
+
+def test_acks_are_the_documented_bytes():
+    assert p.ack(p.CMD_MOV).hex() == "0400060a"
+    assert p.ack(p.CMD_CALL).hex() == "040c0616"
+
+
+@pytest.mark.parametrize(
+    "frame,reply,kind",
+    [
+        (p.stop_frame(), "04 00 06 0a", p.ReplyKind.ACK),
+        (p.play_frame(0), "04 0c 06 16", p.ReplyKind.ACK),
+        (p.restore_frame(), "04 00 06 0a", p.ReplyKind.ACK),
+        (p.stop_frame(), "04 00 15 19", p.ReplyKind.NAK),
+        (p.play_frame(0), "04 0c 15 25", p.ReplyKind.NAK),
+        (p.status_frame(), "04 00 15 19", p.ReplyKind.NAK),
+        (p.status_frame(), "05 00 23 87 af", p.ReplyKind.STATUS),
+        (p.status_frame(), "05 00 21 87 ad", p.ReplyKind.STATUS),
+    ],
+)
+def test_valid_replies(frame, reply, kind):
+    assert p.parse_reply(frame, bytes.fromhex(reply)).kind is kind
+
+
+def test_status_reply_says_executing_only_for_0x23():
+    running = p.parse_reply(p.status_frame(), bytes.fromhex("05 00 23 87 af"))
+    idle = p.parse_reply(p.status_frame(), bytes.fromhex("05 00 21 87 ad"))
+    assert running.executing is True and running.status == 0x8723
+    assert idle.executing is False and idle.status == 0x8721
+
+
+@pytest.mark.parametrize(
+    "frame,reply,reason",
+    [
+        (p.stop_frame(), "", "short reply"),
+        (p.stop_frame(), "04 00 06", "short reply"),
+        (p.stop_frame(), "04 00 06 0b", "bad checksum"),
+        (p.stop_frame(), "05 00 06 0a 15", "5-byte reply"),
+        (p.stop_frame(), "04 0c 06 16", "command 0c"),
+        (p.play_frame(1), "04 00 06 0a", "command 00"),
+        (p.stop_frame(), "04 00 07 0b", "neither ACK"),
+        (p.stop_frame(), "05 00 21 87 ad", "5-byte reply to a stop"),
+        (p.status_frame(), "05 0c 23 87 bb", "command 0c"),
+        (p.status_frame(), "06 00 23 87 00 b0", "6-byte reply"),
+        (p.status_frame(), "ff 04 00 06 0a", "size byte"),
+    ],
+)
+def test_invalid_replies_carry_a_reason(frame, reply, reason):
+    verdict = p.parse_reply(frame, bytes.fromhex(reply))
+    assert verdict.kind is p.ReplyKind.INVALID
+    assert reason in verdict.error
+
+
+def test_parse_command_reads_what_the_board_reads():
+    stop = p.parse_command(p.stop_frame().data)
+    assert (stop.move_type, stop.address) == (p.MOV_COM_TO_RAM, 0)
+    assert stop.payload[:2] == bytes.fromhex("2187")
+    status = p.parse_command(p.status_frame().data)
+    assert (status.move_type, status.address, status.count) == (p.MOV_RAM_TO_COM, 0, 2)
+    play = p.parse_command(p.play_frame(5).data)
+    assert (play.command, play.address, play.condition) == (p.CMD_CALL, 0x0BB8 + 5 * 0x800, 0)
+    with pytest.raises(ValueError, match="checksum"):
+        p.parse_command(bytes.fromhex("07 0c b8 0b 00 00 d7"))
+
+
+def test_describe_frames_and_replies():
+    assert p.describe_frame(p.play_frame(0).data) == "CALL 0x000bb8: motion 0"
+    assert p.describe_frame(p.stop_frame().data).endswith("stop and save status")
+    assert p.describe_frame(p.status_frame().data).endswith("status query")
+    assert p.describe_reply(bytes.fromhex("04 0c 06 16")) == "ACK"
+    assert p.describe_reply(bytes.fromhex("04 00 15 19")) == "NAK"
+    assert p.describe_reply(bytes.fromhex("05 00 23 87 af")) == "status 0x23: executing"
