@@ -1,0 +1,119 @@
+"""The records a checked show compiles to: what the runner, `choreo plan` and the log share.
+
+A show file is loaded and checked into a `Show`, then flattened (repeats expanded) into a
+`Plan`: a list of `PlannedStep`s, each with its planned start on the show clock. The runner
+never looks at YAML; it walks the plan.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+from choreo.protocol import Frame
+
+DEFAULT_MOTION_S = 1.0  # a motion's expected length when the show does not say (the simulator's default)
+DEFAULT_DONE_TIMEOUT_S = 60.0  # `wait: done` gives up after this long unless the step says otherwise
+
+
+@dataclass(frozen=True)
+class RobotSettings:
+    """`robot:` in a show; every field optional (the command line overrides it)."""
+
+    port: str | None = None
+    baud: int | None = None
+    timeout: float | None = None  # seconds to wait for one reply
+    retries: int | None = None  # tries of a frame (or of a play sequence) before giving up
+
+
+@dataclass(frozen=True)
+class Motion:
+    """An entry of the show's `motions:` table."""
+
+    name: str
+    number: int
+    duration: float | None = None  # expected length in seconds, if the author gave it
+
+
+@dataclass(frozen=True)
+class Show:
+    """A loaded, checked show file."""
+
+    path: str
+    name: str
+    source: bytes  # the file as read: hashed into the log's metadata and attached to it
+    robot: RobotSettings = RobotSettings()
+    motions: dict[str, Motion] = field(default_factory=dict)
+    on_abort: int | None = None  # motion number played when a run is aborted
+
+    def duration_of(self, motion: int) -> float | None:
+        """The expected duration the show gives a motion number (by any of its names)."""
+        for entry in self.motions.values():
+            if entry.number == motion and entry.duration is not None:
+                return entry.duration
+        return None
+
+
+class StepKind(str, Enum):
+    PLAY = "play"
+    WAIT = "wait"
+    WAIT_DONE = "wait_done"
+
+
+@dataclass(frozen=True)
+class PlannedStep:
+    """One step of the flat plan.
+
+    `planned_s` is the start on the show clock with every motion taking its expected duration;
+    at run time `wait: done` re-anchors the clock to when the motion really ended, so the runner
+    recomputes due times with the same rule: a step is due at max(`at`, the end of the step
+    before it); a play ends when it starts, a wait SECONDS after it starts, a wait-done when the
+    board says the motion is over.
+    """
+
+    index: int  # 0-based position in the plan
+    path: str  # where it comes from, e.g. `steps[3].steps[1]` (repeat iterations: `steps[3]#2.steps[1]`)
+    kind: StepKind
+    line: int = 0  # 1-based line of the step in the show file, for messages
+    label: str | None = None
+    motion: int | None = None  # PLAY: the slot; WAIT_DONE: the motion it waits for
+    motion_name: str | None = None
+    seconds: float | None = None  # WAIT: how long; WAIT_DONE: the timeout
+    at: float | None = None  # the cue: not before this many seconds after the show's start
+    planned_s: float = 0.0
+    expected_s: float = 0.0  # how long the step is expected to take (WAIT_DONE: the motion's rest)
+    frames: tuple[Frame, ...] = ()  # what it sends (WAIT_DONE: one status query, repeated)
+
+    @property
+    def name(self) -> str:
+        """How a user refers to the step: its label, else `#index`."""
+        return self.label or f"#{self.index}"
+
+    def describe(self) -> str:
+        """What the step does, in a show author's words."""
+        if self.kind is StepKind.PLAY:
+            named = f" ({self.motion_name})" if self.motion_name else ""
+            return f"play {self.motion}{named}"
+        if self.kind is StepKind.WAIT:
+            return f"wait {self.seconds:g} s"
+        return f"wait until motion {self.motion} is done (timeout {self.seconds:g} s)"
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The flat, timed list of steps a show compiles to."""
+
+    steps: tuple[PlannedStep, ...]
+    estimated_s: float  # estimated total duration on the show clock
+
+    def motions_used(self) -> list[int]:
+        return sorted({s.motion for s in self.steps if s.kind is StepKind.PLAY and s.motion is not None})
+
+    def find(self, ref: str) -> int:
+        """The index of a step named by `--from`: an index or a label. KeyError if none."""
+        if ref.isdigit() and int(ref) < len(self.steps):
+            return int(ref)
+        for step in self.steps:
+            if step.label == ref:
+                return step.index
+        raise KeyError(ref)
