@@ -23,7 +23,7 @@ class RobotSettings:
     port: str | None = None
     baud: int | None = None
     timeout: float | None = None  # seconds to wait for one reply
-    retries: int | None = None  # tries of a frame (or of a play sequence) before giving up
+    retries: int | None = None  # extra tries after a failed one (default 2: 3 tries in all)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,297 @@
+"""One conversation with an RCB-4 board over any pyserial port.
+
+The link owns the I/O the protocol module refuses to do: it writes each frame in one call (the
+board drops a frame whose bytes arrive more than ~150 us apart), reads the reply size byte
+first and then the rest, judges it with `protocol.parse_reply`, retries within a bound, and
+reports every frame and every reply (or timeout) to its listeners, the log recorder among them.
+A play sequence that fails part-way is retried from its stop frame: re-sending a CALL alone
+could push a second return address on the board.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
+
+from choreo import protocol
+from choreo.clock import RunClock
+from choreo.errors import LinkError
+from choreo.protocol import Frame, Reply, ReplyKind
+
+if TYPE_CHECKING:
+    import serial
+
+DEFAULT_BAUD = 115200
+BAUD_RATES = (115200, 625000, 1250000)
+DEFAULT_TIMEOUT_S = 0.2
+DEFAULT_TRIES = 3
+QUIET_S = 0.01  # after a bad reply, the line counts as settled once this long passes with no byte
+
+
+@dataclass(frozen=True)
+class Tag:
+    """Which show step a frame belongs to, carried into the log and into error messages."""
+
+    step: int | None = None
+    label: str | None = None
+
+    def __str__(self) -> str:
+        if self.step is None:
+            return ""
+        return f"step {self.step}" + (f" '{self.label}'" if self.label else "")
+
+
+@dataclass(frozen=True, slots=True)
+class TxEvent:
+    """A frame about to be written (timestamped just before the write)."""
+
+    seq: int
+    frame: Frame
+    attempt: int
+    time_ns: int
+    tag: Tag | None
+
+
+@dataclass(frozen=True, slots=True)
+class RxEvent:
+    """The verdict on what came back for frame `seq` (timestamped when the reply completed)."""
+
+    seq: int
+    frame: Frame
+    reply: Reply
+    time_ns: int
+    latency_s: float
+    tag: Tag | None
+
+
+class LinkListener(Protocol):
+    def on_tx(self, event: TxEvent) -> None: ...
+
+    def on_rx(self, event: RxEvent) -> None: ...
+
+
+class PortLost(Exception):
+    """The port failed under us mid-exchange (adapter unplugged, device gone)."""
+
+
+def open_port(url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TIMEOUT_S,
+              exclusive: bool = True) -> serial.SerialBase:
+    """Open any pyserial URL (and `sim://`) with the board's line settings, or a LinkError."""
+    import serial
+
+    from choreo import urlhandler
+
+    urlhandler.register()
+    try:
+        return serial.serial_for_url(
+            url, baudrate=baud, bytesize=serial.EIGHTBITS, parity=serial.PARITY_EVEN,
+            stopbits=serial.STOPBITS_ONE, timeout=timeout, write_timeout=max(1.0, timeout),
+            exclusive=exclusive,
+        )
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise LinkError(f"port {url}: cannot open: {_reason(exc)}{_open_hint(exc)}") from None
+
+
+def _reason(exc: BaseException) -> str:
+    text = str(exc).strip() or type(exc).__name__
+    return text.splitlines()[0]
+
+
+def _open_hint(exc: BaseException) -> str:
+    text = str(exc).lower()
+    if "lock" in text or "busy" in text or "resource temporarily unavailable" in text:
+        return " (another program has the port open: close it, or stop the other choreo)"
+    if "permission" in text:
+        return " (no permission: add yourself to the dialout group, or check the device's mode)"
+    if "no such file" in text or "not found" in text:
+        return " (no such device: is the adapter plugged in? `choreo ports` lists what is there)"
+    return ""
+
+
+class Link:
+    """Frames out, replies in, with bounded retries; every event goes to the listeners."""
+
+    def __init__(self, port: serial.SerialBase, *, name: str | None = None,
+                 timeout: float = DEFAULT_TIMEOUT_S, tries: int = DEFAULT_TRIES,
+                 clock: RunClock | None = None, listeners: Iterable[LinkListener] = ()) -> None:
+        if tries < 1:
+            raise ValueError("a link needs at least one try per frame")
+        self.port = port
+        self.name = name or str(port.port)
+        self.timeout = timeout
+        self.tries = tries
+        self.clock = clock or RunClock()
+        self.listeners: list[LinkListener] = list(listeners)
+        self._seq = 0
+
+    @classmethod
+    def open(cls, url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TIMEOUT_S,
+             tries: int = DEFAULT_TRIES, clock: RunClock | None = None,
+             listeners: Iterable[LinkListener] = (), exclusive: bool = True) -> Link:
+        port = open_port(url, baud, timeout=timeout, exclusive=exclusive)
+        return cls(port, name=url, timeout=timeout, tries=tries, clock=clock, listeners=listeners)
+
+    @property
+    def baud(self) -> int:
+        return int(self.port.baudrate)
+
+    def close(self) -> None:
+        try:
+            self.port.close()
+        except Exception:  # closing a lost port may fail again; there is nothing left to save
+            pass
+
+    def __enter__(self) -> Link:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # -- the sequences a show uses ---------------------------------------------------------
+
+    def play(self, motion: int, tag: Tag | None = None) -> None:
+        """Stop, CALL the slot, restore; a failure anywhere retries the whole sequence."""
+        frames = protocol.play_sequence(motion)
+        failure: tuple[Frame, Reply] | None = None
+        for attempt in range(1, self.tries + 1):
+            for frame in frames:
+                reply = self.send(frame, attempt, tag)
+                if not reply.ok:
+                    failure = (frame, reply)
+                    self._settle(reply)
+                    break
+            else:
+                return
+        assert failure is not None
+        raise self._failed(f"play {motion}", *failure, tag)
+
+    def query_status(self, tag: Tag | None = None) -> Reply:
+        """Ask whether a motion is executing; the reply's `executing` says."""
+        return self.exchange(protocol.status_frame(), tag)
+
+    def exchange(self, frame: Frame, tag: Tag | None = None) -> Reply:
+        """One frame, retried alone until the board accepts it or the tries run out."""
+        reply = protocol.timeout()
+        for attempt in range(1, self.tries + 1):
+            reply = self.send(frame, attempt, tag)
+            if reply.ok:
+                return reply
+            self._settle(reply)
+        raise self._failed(str(frame), frame, reply, tag)
+
+    # -- one try ---------------------------------------------------------------------------
+
+    def send(self, frame: Frame, attempt: int = 1, tag: Tag | None = None) -> Reply:
+        """Write one frame, read and judge its reply; no retry. Port loss is a LinkError."""
+        self._seq += 1
+        seq = self._seq
+        sent = time.monotonic_ns()
+        event = TxEvent(seq, frame, attempt, self.clock.wall_ns(sent), tag)
+        for listener in self.listeners:
+            listener.on_tx(event)
+        try:
+            self._write(frame.data)
+            reply = self._read_reply(frame)
+        except PortLost as exc:
+            self._report(seq, frame, protocol.timeout(), sent, tag, error=f"port lost: {exc}")
+            raise LinkError(f"port {self.name}: lost{_during(tag)} while sending '{frame}' "
+                            f"({frame.kind.value} frame): {exc}: check the cable and the adapter") from None
+        self._report(seq, frame, reply, sent, tag)
+        return reply
+
+    def _report(self, seq: int, frame: Frame, reply: Reply, sent_ns: int, tag: Tag | None,
+                error: str | None = None) -> None:
+        if error is not None:
+            reply = Reply(ReplyKind.TIMEOUT, reply.data, error=error)
+        done = time.monotonic_ns()
+        event = RxEvent(seq, frame, reply, self.clock.wall_ns(done), (done - sent_ns) / 1e9, tag)
+        for listener in self.listeners:
+            listener.on_rx(event)
+
+    def _read_reply(self, frame: Frame) -> Reply:
+        """Size byte first (a NAK to a status query is 4 bytes, not 5), then the rest."""
+        first = self._read(1)
+        if not first:
+            return protocol.timeout()
+        size = first[0]
+        if size not in frame.reply_sizes:
+            junk = first + self._drain(QUIET_S)
+            return protocol.invalid(junk, f"junk: size byte {size:02x} is not a reply to a "
+                                          f"{frame.kind.value} frame")
+        data = first + self._read(size - 1)
+        if len(data) < size:
+            return protocol.invalid(data, f"short reply: {len(data)} of {size} bytes before the timeout")
+        return protocol.parse_reply(frame, data)
+
+    def _write(self, data: bytes) -> None:
+        try:
+            self.port.write(data)
+        except OSError as exc:  # serial.SerialException is an OSError
+            raise PortLost(_reason(exc)) from None
+
+    def _read(self, count: int) -> bytes:
+        try:
+            return bytes(self.port.read(count))
+        except OSError as exc:
+            raise PortLost(_reason(exc)) from None
+
+    def _drain(self, quiet_s: float, limit_s: float | None = None) -> bytes:
+        """Read and keep whatever arrives until the line has been quiet for `quiet_s`."""
+        limit = time.monotonic() + (self.timeout if limit_s is None else limit_s)
+        got = bytearray()
+        last = time.monotonic()
+        while True:
+            now = time.monotonic()
+            if now - last >= quiet_s or now >= limit:
+                return bytes(got)
+            try:
+                waiting = self.port.in_waiting
+            except OSError as exc:
+                raise PortLost(_reason(exc)) from None
+            if waiting:
+                got += self._read(waiting)
+                last = time.monotonic()
+            else:
+                time.sleep(min(0.001, quiet_s))
+
+    def _settle(self, reply: Reply) -> None:
+        """Before a retry, let a late or stray reply arrive and throw it away.
+
+        The protocol has no sequence numbers: a late ACK read as the answer to the retry would
+        shift every reply after it by one. After a timeout the late reply may still be on its
+        way, so wait up to one more timeout for the line to go quiet; after a bad reply a short
+        quiet spell is enough.
+        """
+        try:
+            if reply.kind is ReplyKind.TIMEOUT:
+                self._drain(quiet_s=self.timeout, limit_s=self.timeout)
+            else:
+                self._drain(quiet_s=QUIET_S)
+            self.port.reset_input_buffer()
+        except (OSError, PortLost) as exc:
+            raise LinkError(f"port {self.name}: lost while recovering from a bad reply: {_reason(exc)}: "
+                            "check the cable and the adapter") from None
+
+    def _failed(self, what: str, frame: Frame, reply: Reply, tag: Tag | None) -> LinkError:
+        came = {
+            ReplyKind.TIMEOUT: "no reply",
+            ReplyKind.NAK: f"NAK ({reply.hex})",
+        }.get(reply.kind, f"an invalid reply ({reply.hex}: {reply.error})")
+        where = f" {tag}:" if tag and tag.step is not None else ""
+        tries = f"{self.tries} tries" if self.tries != 1 else "1 try"
+        return LinkError(f"port {self.name}:{where} {came} to '{what}' ({frame.kind.value} frame) "
+                         f"after {tries}: {self._hint(reply)}")
+
+    def _hint(self, reply: Reply) -> str:
+        settings = f"check baud ({self.baud}), even parity"
+        if reply.kind is ReplyKind.TIMEOUT:
+            return f"{settings}, and the adapter (5 V inverted logic without Kondo's USB adapter)"
+        if reply.kind is ReplyKind.NAK:
+            return f"the board refused the frame: {settings}, and the cable (noise corrupts bytes)"
+        return f"{settings}, the cable, and that no other program talks on the port"
+
+
+def _during(tag: Tag | None) -> str:
+    return f" during {tag}" if tag and tag.step is not None else ""
