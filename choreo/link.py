@@ -11,13 +11,13 @@ could push a second return address on the board.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 from choreo import protocol
 from choreo.clock import RunClock
-from choreo.errors import LinkError
+from choreo.errors import Interrupted, LinkError
 from choreo.protocol import Frame, Reply, ReplyKind
 
 if TYPE_CHECKING:
@@ -124,6 +124,10 @@ class Link:
         self.tries = tries
         self.clock = clock or RunClock()
         self.listeners: list[LinkListener] = list(listeners)
+        # Checked before each frame: a stop request lets the frame in flight get its reply, then
+        # no further frame goes out (the runner sets it; Ctrl-C sets the runner's).
+        self.should_stop: Callable[[], bool] = lambda: False
+        self.last_tx_mono = 0.0  # monotonic time of the last write: polls are spaced from it
         self._seq = 0
 
     @classmethod
@@ -184,10 +188,16 @@ class Link:
     # -- one try ---------------------------------------------------------------------------
 
     def send(self, frame: Frame, attempt: int = 1, tag: Tag | None = None) -> Reply:
-        """Write one frame, read and judge its reply; no retry. Port loss is a LinkError."""
+        """Write one frame, read and judge its reply; no retry.
+
+        Port loss is a LinkError; a stop request (`should_stop`) is Interrupted, before the write.
+        """
+        if self.should_stop():
+            raise Interrupted(f"stopped before sending '{frame}'")
         self._seq += 1
         seq = self._seq
         sent = time.monotonic_ns()
+        self.last_tx_mono = sent / 1e9
         event = TxEvent(seq, frame, attempt, self.clock.wall_ns(sent), tag)
         for listener in self.listeners:
             listener.on_tx(event)

@@ -1,0 +1,33 @@
+"""`choreo ports`: the serial ports on this machine, Kondo's adapter marked."""
+
+from __future__ import annotations
+
+import argparse
+
+KONDO_USB = (0x165C, 0x0008)  # Kondo Dual USB Adapter HS (an FTDI chip)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("ports", help="list serial ports, marking Kondo adapters",
+                                   description="List the serial ports found; Kondo's USB adapter "
+                                   "(USB 165C:0008) is marked.")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from serial.tools import list_ports
+
+    ports = sorted(list_ports.comports(), key=lambda p: p.device)
+    if not ports:
+        print("no serial ports found (is the adapter plugged in? on Linux, Kondo's adapter may "
+              "need: modprobe ftdi_sio && echo 165C 0008 > /sys/bus/usb-serial/drivers/ftdi_sio/new_id)")
+        return 0
+    for port in ports:
+        print(describe_port(port))
+    return 0
+
+
+def describe_port(port) -> str:
+    usb = f" USB {port.vid:04X}:{port.pid:04X}" if port.vid is not None else ""
+    mark = "  <- Kondo adapter" if (port.vid, port.pid) == KONDO_USB else ""
+    return f"{port.device}  {port.description or ''}{usb}{mark}".rstrip()

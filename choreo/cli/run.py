@@ -1,0 +1,139 @@
+"""`choreo run SHOW`: play a show, with a progress line, Ctrl-C handling and a log."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from typing import TextIO
+
+from choreo.errors import Interrupted
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "run",
+        help="play a show on the robot (or the built-in simulator)",
+        description="Play a show file over the serial line and record every frame to an MCAP log. "
+        "With no --port and no robot.port in the show, runs against the built-in simulator.",
+    )
+    parser.add_argument("show", help="the show file (YAML)")
+    parser.add_argument("--port", help="pyserial URL or device: /dev/ttyUSB0, COM3, socket://, "
+                        "rfc2217://, loop://, spy://, sim:// (default: the show's robot.port, else sim://)")
+    parser.add_argument("--baud", type=int, help="115200 (default), 625000 or 1250000")
+    logs = parser.add_mutually_exclusive_group()
+    logs.add_argument("--log", metavar="PATH", help="log file (default runs/<show>-<UTC time>.mcap; "
+                      "never overwritten)")
+    logs.add_argument("--no-log", action="store_true", help="do not record a log")
+    parser.add_argument("--from", dest="from_step", metavar="STEP",
+                        help="start at this step (index from `choreo plan`, or label)")
+    parser.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for a reply (default 0.2)")
+    parser.add_argument("--retries", type=int, metavar="N",
+                        help="retries of a failed frame or play sequence (default 2: 3 tries)")
+    parser.add_argument("--quiet", "-q", action="store_true", help="no progress output")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from choreo.session import RunRequest, Session
+
+    request = RunRequest(args.show, port=args.port, baud=args.baud, log_path=args.log,
+                         no_log=args.no_log, from_step=args.from_step, timeout=args.timeout,
+                         retries=args.retries)
+    session = Session.prepare(request)
+    out = sys.stderr
+    if not args.quiet:
+        _say_setup(session, out)
+    progress = Progress(session, out, live=out.isatty(), quiet=args.quiet)
+    with _StopOnSignals() as stop, session:
+        result = session.run([progress], stop)
+    progress.finish()
+    if not args.quiet or result.outcome != "done":
+        late = f", {result.late_steps} late" if result.late_steps else ""
+        print(f"{result.outcome}: {result.steps_run} steps in {result.show_s:.3f} s{late}", file=out)
+        if session.log_path:
+            print(f"log: {session.log_path}", file=out)
+    if result.outcome != "done":
+        raise Interrupted(f"show {stop.reason}")
+    return 0
+
+
+def _say_setup(session, out: TextIO) -> None:
+    if session.port_source == "simulator":
+        where = "the built-in simulator (no --port given and the show names no robot.port)"
+    else:
+        where = f"{session.port_source}"
+    print(f"port: {session.port} at {session.baud} baud, from {where}", file=out)
+    first = f" from step {session.start}" if session.start else ""
+    print(f"show: {session.show.name}: {len(session.plan.steps)} steps{first}, "
+          f"about {session.plan.estimated_s:.1f} s", file=out)
+    print(f"log: {session.log_path}" if session.log_path else "log: off (--no-log)", file=out)
+
+
+class _StopOnSignals:
+    """First Ctrl-C or SIGTERM: finish the frame in flight, play the abort motion, close the log.
+    Second: leave at once (the log is still closed on the way out)."""
+
+    def __enter__(self):
+        from choreo.runner import StopRequest
+
+        self.stop = StopRequest()
+        self._previous = {}
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            self._previous[signum] = signal.signal(signum, self._handle)
+        return self.stop
+
+    def _handle(self, signum, frame) -> None:
+        if self.stop():
+            raise KeyboardInterrupt
+        name = "interrupted (Ctrl-C)" if signum == signal.SIGINT else "stopped (SIGTERM)"
+        self.stop.request(name)
+
+    def __exit__(self, *exc_info) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+
+
+class Progress:
+    """The run on screen: a live line on a terminal, a plain line a step otherwise."""
+
+    def __init__(self, session, out: TextIO, *, live: bool, quiet: bool) -> None:
+        self.total = len(session.plan.steps)
+        self.estimated = session.plan.estimated_s
+        self.out = out
+        self.live = live
+        self.quiet = quiet
+        self._width = 0
+
+    def on_step(self, event) -> None:
+        if self.quiet or event.event != "start":
+            return
+        step = event.step
+        label = f" {step.label}" if step.label else ""
+        text = (f"step {step.index + 1}/{self.total}{label}: {step.describe()}  "
+                f"{event.actual_s:6.2f}/{self.estimated:.1f} s")
+        if self.live:
+            done = int(20 * (step.index + 1) / max(self.total, 1))
+            line = f"{text} [{'#' * done}{'-' * (20 - done)}]"
+            self.out.write("\r" + line.ljust(self._width))
+            self._width = len(line)
+            self.out.flush()
+        else:
+            print(f"[{event.actual_s:8.3f} s] {text.rsplit('  ', 1)[0]}", file=self.out)
+
+    def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
+        if level < 3 or (self.quiet and level < 4):
+            return
+        self._clear()
+        word = {3: "warning", 4: "error"}.get(level, "note")
+        if level < 4:  # errors reach the user as the command's final line
+            print(f"{word}: {message}", file=self.out)
+
+    def finish(self) -> None:
+        self._clear()
+
+    def _clear(self) -> None:
+        if self.live and self._width:
+            self.out.write("\r" + " " * self._width + "\r")
+            self.out.flush()
+            self._width = 0

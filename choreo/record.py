@@ -1,0 +1,239 @@
+"""The run log: every frame, reply, step and warning of a run, as MCAP with JSON messages.
+
+The recorder is a listener of the link (frames and replies) and of the runner (steps and log
+lines). It is on the hot path of every frame, so it only serialises and appends; a background
+thread closes the current chunk and flushes the file every half second, so a killed run loses
+at most that much and a linear reader can read the rest. The file is created exclusively: a
+log is never overwritten.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+import socket
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from importlib import resources
+from pathlib import Path
+from typing import IO, TYPE_CHECKING
+
+from mcap.writer import CompressionType, Writer
+
+from choreo import __version__
+from choreo.errors import LogError
+
+if TYPE_CHECKING:
+    from choreo.link import RxEvent, TxEvent
+    from choreo.runner import StepEvent
+
+TX_TOPIC = "/rcb4/tx"
+RX_TOPIC = "/rcb4/rx"
+STEP_TOPIC = "/choreo/step"
+LOG_TOPIC = "/choreo/log"
+
+# topic -> (schema name, schema file under schemas/)
+CHANNELS = {
+    TX_TOPIC: ("choreo.Tx", "log.tx.schema.json"),
+    RX_TOPIC: ("choreo.Rx", "log.rx.schema.json"),
+    STEP_TOPIC: ("choreo.Step", "log.step.schema.json"),
+    LOG_TOPIC: ("foxglove.Log", "foxglove.Log.schema.json"),
+}
+
+METADATA_NAME = "choreo"
+RESULT_METADATA_NAME = "choreo.result"
+FLUSH_EVERY_S = 0.5
+CHUNK_SIZE = 64 * 1024
+
+# foxglove.Log levels
+DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
+
+
+def default_log_path(show_name: str, directory: str | Path = "runs", now: datetime | None = None) -> Path:
+    """`runs/<show name>-<UTC time>.mcap`, a name that sorts by time and never repeats a run's."""
+    now = now or datetime.now(timezone.utc)
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in show_name) or "show"
+    return Path(directory) / f"{safe}-{now.strftime('%Y%m%dT%H%M%SZ')}.mcap"
+
+
+def schema_text(filename: str) -> bytes:
+    return (resources.files("choreo.schemas") / filename).read_bytes()
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """What the log's `choreo` metadata says about the run."""
+
+    show_path: str
+    show_name: str
+    show_source: bytes
+    port: str
+    baud: int
+    start_ns: int
+
+    def metadata(self) -> dict[str, str]:
+        return {
+            "version": __version__,
+            "show": self.show_name,
+            "show_path": self.show_path,
+            "show_sha256": hashlib.sha256(self.show_source).hexdigest(),
+            "port": self.port,
+            "baud": str(self.baud),
+            "start_time": _iso(self.start_ns),
+            "start_ns": str(self.start_ns),
+            "host": socket.gethostname(),
+            "python": platform.python_version(),
+            "platform": sys.platform,
+        }
+
+
+def _iso(ns: int) -> str:
+    return datetime.fromtimestamp(ns / 1e9, timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def _dumps(message: dict) -> bytes:
+    return json.dumps(message, separators=(",", ":")).encode()
+
+
+class Recorder:
+    """Writes one run's MCAP log; a LinkListener and a runner listener at once."""
+
+    def __init__(self, path: str | Path, info: RunInfo, *, flush_every_s: float = FLUSH_EVERY_S) -> None:
+        self.path = Path(path)
+        self._file = _create_exclusive(self.path)
+        self._lock = threading.Lock()
+        self._dirty = False
+        self._closed = False
+        self.messages = 0
+        try:
+            self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
+            self._writer.start(profile="", library=f"choreo {__version__}")
+            self._channels = {topic: self._register(topic, *spec) for topic, spec in CHANNELS.items()}
+            self._writer.add_metadata(METADATA_NAME, info.metadata())
+            self._writer.add_attachment(
+                create_time=info.start_ns, log_time=info.start_ns,
+                name=Path(info.show_path).name, media_type="application/yaml", data=info.show_source,
+            )
+            self._writer.flush()
+            self._file.flush()
+        except OSError as exc:
+            self._file.close()
+            raise LogError(f"log {self.path}: cannot write: {exc.strerror or exc}") from None
+        self._stop = threading.Event()
+        self._flusher = threading.Thread(target=self._flush_loop, args=(flush_every_s,),
+                                         name="choreo-log-flush", daemon=True)
+        self._flusher.start()
+
+    def _register(self, topic: str, schema_name: str, filename: str) -> int:
+        schema_id = self._writer.register_schema(name=schema_name, encoding="jsonschema",
+                                                 data=schema_text(filename))
+        return self._writer.register_channel(topic=topic, message_encoding="json", schema_id=schema_id)
+
+    # -- listeners -------------------------------------------------------------------------
+
+    def on_tx(self, event: TxEvent) -> None:
+        tag = event.tag
+        self._write(TX_TOPIC, event.time_ns, {
+            "seq": event.seq,
+            "step": tag.step if tag else None,
+            "label": tag.label if tag else None,
+            "kind": event.frame.kind.value,
+            "motion": event.frame.motion,
+            "attempt": event.attempt,
+            "hex": event.frame.hex,
+        })
+
+    def on_rx(self, event: RxEvent) -> None:
+        reply = event.reply
+        self._write(RX_TOPIC, event.time_ns, {
+            "seq": event.seq,
+            "kind": reply.kind.value,
+            "hex": reply.hex,
+            "latency_ms": round(event.latency_s * 1e3, 4),
+            "executing": reply.executing,
+            "error": reply.error,
+        })
+
+    def on_step(self, event: StepEvent) -> None:
+        self._write(STEP_TOPIC, event.time_ns, event.message())
+
+    def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
+        time_ns = time.time_ns() if time_ns is None else time_ns
+        self._write(LOG_TOPIC, time_ns, {
+            "timestamp": {"sec": time_ns // 1_000_000_000, "nsec": time_ns % 1_000_000_000},
+            "level": level,
+            "message": message,
+            "name": "choreo",
+            "file": "",
+            "line": 0,
+        })
+
+    def _write(self, topic: str, time_ns: int, message: dict) -> None:
+        data = _dumps(message)
+        with self._lock:
+            if self._closed:
+                return
+            self._writer.add_message(self._channels[topic], log_time=time_ns, data=data,
+                                     publish_time=time_ns, sequence=self.messages)
+            self.messages += 1
+            self._dirty = True
+
+    # -- durability ------------------------------------------------------------------------
+
+    def _flush_loop(self, every_s: float) -> None:
+        while not self._stop.wait(every_s):
+            self.flush()
+
+    def flush(self) -> None:
+        """Close the chunk in progress and hand it to the OS: a SIGKILL now loses nothing."""
+        with self._lock:
+            if self._closed or not self._dirty:
+                return
+            try:
+                self._writer.flush()
+            except OSError:
+                return  # the disk failed under us; close() will report it
+            self._dirty = False
+
+    def close(self, result: dict[str, str] | None = None) -> None:
+        """Finish the file (summary, indexes, footer). Safe to call twice."""
+        if self._closed:
+            return
+        self._stop.set()
+        if self._flusher.is_alive() and self._flusher is not threading.current_thread():
+            self._flusher.join(timeout=2)
+        with self._lock:
+            self._closed = True
+            try:
+                if result is not None:
+                    self._writer.add_metadata(RESULT_METADATA_NAME, result)
+                self._writer.finish()
+                self._file.flush()
+                os.fsync(self._file.fileno())
+            except OSError as exc:
+                raise LogError(f"log {self.path}: cannot finish writing: {exc.strerror or exc}") from None
+            finally:
+                self._file.close()
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+def _create_exclusive(path: Path) -> IO[bytes]:
+    """Create the log file, refusing to overwrite one that exists."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return open(path, "xb")
+    except FileExistsError:
+        raise LogError(f"log {path}: already exists: choreo never overwrites a log; "
+                       "give another --log path or remove that file") from None
+    except OSError as exc:
+        raise LogError(f"log {path}: cannot create: {exc.strerror or exc}") from None

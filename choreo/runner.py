@@ -1,0 +1,242 @@
+"""The show clock: walks a compiled plan and has the link send each step on time.
+
+Every due time is absolute from the show's start (a step is due at max(its cue, the end of the
+step before it)), so the time frames take on the wire never accumulates as drift. The runner
+sleeps until just before a due time and spins the rest, so a cue's first byte leaves within a
+millisecond of it. It reports each step's start and end, late steps and retried frames to its
+listeners (the recorder, the progress display) and sends nothing the show did not ask for.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Protocol
+
+from choreo.clock import RunClock
+from choreo.errors import Interrupted, LinkError
+from choreo.link import Link, RxEvent, Tag, TxEvent
+from choreo.show.model import Plan, PlannedStep, StepKind
+
+POLL_S = 0.05  # the board refreshes its status every 50 ms: never poll faster
+LATE_MS = 1.0  # a step starting more than this after its due time is reported late
+
+DEBUG, INFO, WARNING, ERROR = 1, 2, 3, 4  # foxglove.Log levels
+
+
+@dataclass(frozen=True)
+class StepEvent:
+    """A step starting or ending, on the show clock (seconds since the show started)."""
+
+    step: PlannedStep
+    event: str  # start | end
+    planned_s: float  # when it was due at run time
+    actual_s: float
+    time_ns: int
+    late_ms: float = 0.0
+    outcome: str | None = None  # end: ok | failed | aborted | timeout
+
+    def message(self) -> dict:
+        step = self.step
+        return {
+            "index": step.index,
+            "path": step.path,
+            "label": step.label,
+            "kind": step.kind.value,
+            "motion": step.motion,
+            "event": self.event,
+            "planned_s": round(self.planned_s, 6),
+            "estimated_s": round(step.planned_s, 6),
+            "actual_s": round(self.actual_s, 6),
+            "late_ms": round(self.late_ms, 3),
+            "outcome": self.outcome,
+        }
+
+
+class RunListener(Protocol):
+    def on_step(self, event: StepEvent) -> None: ...
+
+    def on_log(self, level: int, message: str, time_ns: int | None = None) -> None: ...
+
+
+@dataclass(frozen=True)
+class RunResult:
+    outcome: str  # done | aborted
+    steps_run: int
+    late_steps: int
+    show_s: float  # show clock at the end
+
+    def metadata(self) -> dict[str, str]:
+        return {"outcome": self.outcome, "steps_run": str(self.steps_run),
+                "late_steps": str(self.late_steps), "show_s": f"{self.show_s:.6f}"}
+
+
+class StopRequest:
+    """Set from a signal handler: no more show frames after the one in flight."""
+
+    def __init__(self) -> None:
+        self._event = threading.Event()
+        self.reason = "stopped"
+
+    def request(self, reason: str = "stopped") -> None:
+        self.reason = reason
+        self._event.set()
+
+    def __call__(self) -> bool:
+        return self._event.is_set()
+
+
+class WaitTimeout(LinkError):
+    """`wait: done` gave up: the board kept saying the motion is executing."""
+
+
+class Runner:
+    """Plays a plan over a link on one monotonic show clock."""
+
+    def __init__(self, plan: Plan, link: Link, *, clock: RunClock | None = None,
+                 listeners: Iterable[RunListener] = (), start: int = 0, on_abort: int | None = None,
+                 stop: StopRequest | None = None, poll_s: float = POLL_S) -> None:
+        self.plan = plan
+        self.link = link
+        self.clock = clock or link.clock
+        self.listeners = list(listeners)
+        self.start = start
+        self.on_abort = on_abort
+        self.stop = stop or StopRequest()
+        self.poll_s = poll_s
+        self._zero = 0.0
+        self._last_play_done: float | None = None  # monotonic time the last restore was answered
+        self._last_motion: int | None = None
+        self._late = 0
+        self._run = 0
+
+    # -- the show ----------------------------------------------------------------------------
+
+    def run(self) -> RunResult:
+        """Play the plan from `start`; LinkError on a fault, RunResult otherwise (done or aborted)."""
+        steps = self.plan.steps[self.start:]
+        cursor = steps[0].planned_s if steps else 0.0  # --from: the clock starts at that step's time
+        self._zero = time.monotonic() - cursor
+        self.link.listeners.append(_RetryReporter(self))
+        self.link.should_stop = self.stop
+        try:
+            for step in steps:
+                cursor = self._run_step(step, cursor)
+        except Interrupted:
+            return self._abort()
+        return RunResult("done", self._run, self._late, self.show_time())
+
+    def show_time(self) -> float:
+        return time.monotonic() - self._zero
+
+    def _run_step(self, step: PlannedStep, cursor: float) -> float:
+        due = max(step.at, cursor) if step.at is not None else cursor
+        if not self.clock.sleep_until(self._zero + due, self.stop):
+            raise Interrupted(self.stop.reason)
+        started = self.show_time()
+        late_ms = (started - due) * 1e3
+        self._emit(StepEvent(step, "start", due, started, self._now_ns(), late_ms))
+        self._run += 1
+        if late_ms > LATE_MS:
+            self._late += 1
+            cue = f" (cue at {step.at:g} s)" if step.at is not None else ""
+            self._log(WARNING, f"step {step.index} {step.name}{cue} started {late_ms:.1f} ms late")
+        outcome = "failed"
+        try:
+            end = self._do(step, due)
+            outcome = "ok"
+            return end
+        except WaitTimeout:
+            outcome = "timeout"
+            raise
+        except Interrupted:
+            outcome = "aborted"
+            raise
+        except LinkError as exc:
+            self._log(ERROR, str(exc))
+            raise
+        finally:
+            self._emit(StepEvent(step, "end", due, self.show_time(), self._now_ns(), 0.0, outcome))
+
+    def _do(self, step: PlannedStep, due: float) -> float:
+        """Carry out a step; returns when the next step is due on the show clock."""
+        tag = Tag(step.index, step.label)
+        if step.kind is StepKind.PLAY:
+            assert step.motion is not None
+            self.link.play(step.motion, tag)
+            self._last_play_done = time.monotonic()
+            self._last_motion = step.motion
+            return due
+        if step.kind is StepKind.WAIT:
+            end = due + (step.seconds or 0.0)
+            if not self.clock.sleep_until(self._zero + end, self.stop):
+                raise Interrupted(self.stop.reason)
+            return end
+        return self._wait_done(step, tag) - self._zero
+
+    def _wait_done(self, step: PlannedStep, tag: Tag) -> float:
+        """Poll the status every `poll_s` until the motion is over; the monotonic time it was seen."""
+        started = time.monotonic()
+        timeout = step.seconds if step.seconds is not None else 60.0
+        first = self._last_play_done + self.poll_s if self._last_play_done is not None else started
+        due = max(first, started)
+        while True:
+            if not self.clock.sleep_until(due, self.stop):
+                raise Interrupted(self.stop.reason)
+            reply = self.link.query_status(tag)
+            if not reply.executing:
+                return time.monotonic()
+            # The next poll is 50 ms after this one really went out, never sooner.
+            due = self.link.last_tx_mono + self.poll_s
+            if due - started > timeout:
+                motion = step.motion if step.motion is not None else self._last_motion
+                raise WaitTimeout(
+                    f"port {self.link.name}: step {step.index} {step.name}: motion {motion} still "
+                    f"executing after {timeout:g} s (wait: done timeout): give the step a longer "
+                    f"`timeout:`, or check that the motion ends")
+
+    # -- stopping ----------------------------------------------------------------------------
+
+    def _abort(self) -> RunResult:
+        """No more show frames; play the show's abort motion if it has one."""
+        self._log(WARNING, f"show {self.stop.reason} at {self.show_time():.3f} s")
+        if self.on_abort is not None:
+            self._log(INFO, f"playing abort motion {self.on_abort}")
+            self.link.should_stop = lambda: False
+            try:
+                self.link.play(self.on_abort, Tag(None, "on_abort"))
+            except LinkError as exc:
+                self._log(ERROR, f"abort motion {self.on_abort} failed: {exc}")
+                raise
+        return RunResult("aborted", self._run, self._late, self.show_time())
+
+    # -- reporting ---------------------------------------------------------------------------
+
+    def _now_ns(self) -> int:
+        return self.clock.wall_ns()
+
+    def _emit(self, event: StepEvent) -> None:
+        for listener in self.listeners:
+            listener.on_step(event)
+
+    def _log(self, level: int, message: str) -> None:
+        for listener in self.listeners:
+            listener.on_log(level, message, self._now_ns())
+
+
+class _RetryReporter:
+    """Turns each failed try the link reports into a warning line in the log."""
+
+    def __init__(self, runner: Runner) -> None:
+        self.runner = runner
+
+    def on_tx(self, event: TxEvent) -> None:
+        pass
+
+    def on_rx(self, event: RxEvent) -> None:
+        if not event.reply.ok:
+            where = f"{event.tag}: " if event.tag and event.tag.step is not None else ""
+            self.runner._log(WARNING, f"{where}{event.reply.describe()} to '{event.frame}' "
+                                      f"({event.frame.kind.value} frame, seq {event.seq})")

@@ -1,0 +1,174 @@
+"""One `choreo run`: settle the settings, open the log then the port, run, close both.
+
+The order is the safety contract: the show is loaded and checked before anything is opened
+(a bad file never moves the robot), the log is created before the port (a log that cannot be
+written stops the run before any frame), and whatever happens the log is finished with the
+run's outcome in its metadata.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import urlencode
+
+from choreo.clock import RunClock
+from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError
+from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
+from choreo.runner import ERROR, RunListener, Runner, RunResult, StopRequest
+from choreo.show.model import DEFAULT_MOTION_S, Plan, Show
+
+
+@dataclass(frozen=True)
+class RunRequest:
+    """What the user asked for on the command line (None: not given)."""
+
+    show_path: str
+    port: str | None = None
+    baud: int | None = None
+    log_path: str | None = None
+    no_log: bool = False
+    from_step: str | None = None
+    timeout: float | None = None
+    retries: int | None = None
+    log_dir: str = "runs"
+
+
+@dataclass
+class Session:
+    """A prepared run: the checked show, its plan and every setting resolved."""
+
+    show: Show
+    plan: Plan
+    start: int
+    port: str
+    port_source: str  # command line | show | simulator
+    baud: int
+    timeout: float
+    tries: int
+    log_path: Path | None
+    clock: RunClock = field(default_factory=RunClock)
+    recorder: object | None = None
+    link: Link | None = None
+    result: RunResult | None = None
+
+    @classmethod
+    def prepare(cls, request: RunRequest) -> Session:
+        """Load and check the show and settle the settings; opens nothing."""
+        from choreo.show.load import load_show
+        from choreo.show.plan import compile_plan
+
+        show = load_show(request.show_path)
+        plan = compile_plan(show)
+        robot = show.robot
+        start = _start_index(plan, request.from_step)
+        if request.port:
+            port, source = request.port, "command line"
+        elif robot.port:
+            port, source = robot.port, "show"
+        else:
+            port, source = simulator_url(show, plan), "simulator"
+        baud = _pick(request.baud, robot.baud, DEFAULT_BAUD)
+        if baud not in BAUD_RATES:
+            raise UsageError(f"baud {baud}: the RCB-4 runs at {', '.join(map(str, BAUD_RATES))}")
+        timeout = float(_pick(request.timeout, robot.timeout, DEFAULT_TIMEOUT_S))
+        retries = int(_pick(request.retries, robot.retries, DEFAULT_TRIES - 1))
+        if timeout <= 0 or retries < 0:
+            raise UsageError("--timeout must be > 0 seconds and --retries >= 0")
+        log_path = None
+        if not request.no_log:
+            from choreo.record import default_log_path
+
+            log_path = Path(request.log_path) if request.log_path else default_log_path(
+                show.name, request.log_dir)
+        return cls(show, plan, start, port, source, baud, timeout, retries + 1, log_path)
+
+    # -- opening and closing ---------------------------------------------------------------
+
+    def __enter__(self) -> Session:
+        try:
+            self._open()
+        except BaseException:
+            self.__exit__(*_exc_info())
+            raise
+        return self
+
+    def _open(self) -> None:
+        if self.log_path is not None:
+            from choreo.record import Recorder, RunInfo
+
+            info = RunInfo(self.show.path, self.show.name, self.show.source, self.port, self.baud,
+                           self.clock.wall_anchor_ns)
+            self.recorder = Recorder(self.log_path, info)
+        try:
+            self.link = Link.open(self.port, self.baud, timeout=self.timeout, tries=self.tries,
+                                  clock=self.clock, listeners=[self.recorder] if self.recorder else [])
+        except LinkError as exc:
+            if self.recorder is not None:
+                self.recorder.on_log(ERROR, str(exc))
+            raise
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self.link is not None:
+            self.link.close()
+        if self.recorder is not None:
+            self.recorder.close(self._outcome(exc))
+
+    def _outcome(self, exc: BaseException | None) -> dict[str, str]:
+        if self.result is not None and exc is None:
+            meta = self.result.metadata()
+        elif isinstance(exc, (Interrupted, KeyboardInterrupt)):
+            meta = {"outcome": "interrupted"}
+        else:
+            meta = {"outcome": "failed"}
+        if isinstance(exc, ChoreoError):
+            meta["error"] = str(exc)
+            meta["exit_code"] = str(exc.exit_code)
+        elif isinstance(exc, KeyboardInterrupt):
+            meta["exit_code"] = "130"
+        elif exc is None:
+            meta["exit_code"] = "130" if meta["outcome"] == "aborted" else "0"
+        return meta
+
+    # -- running ---------------------------------------------------------------------------
+
+    def run(self, listeners: list[RunListener] = (), stop: StopRequest | None = None) -> RunResult:
+        assert self.link is not None, "open the session first (with session:)"
+        everyone = ([self.recorder] if self.recorder else []) + list(listeners)
+        runner = Runner(self.plan, self.link, clock=self.clock, listeners=everyone, start=self.start,
+                        on_abort=self.show.on_abort, stop=stop)
+        self.result = runner.run()
+        return self.result
+
+
+def simulator_url(show: Show, plan: Plan) -> str:
+    """`sim://` with the show's motion durations, so `wait: done` behaves as on the robot."""
+    durations = {}
+    for motion in plan.motions_used() + ([show.on_abort] if show.on_abort is not None else []):
+        durations[motion] = show.duration_of(motion) or DEFAULT_MOTION_S
+    if not durations:
+        return "sim://"
+    spec = ",".join(f"{m}:{d:g}" for m, d in sorted(durations.items()))
+    return "sim://?" + urlencode({"durations": spec}, safe=":,")
+
+
+def _start_index(plan: Plan, ref: str | None) -> int:
+    if ref is None:
+        return 0
+    try:
+        return plan.find(ref)
+    except KeyError:
+        labels = [s.label for s in plan.steps if s.label]
+        known = f"; labels: {', '.join(labels)}" if labels else ""
+        raise UsageError(f"--from {ref}: no step with that index (0..{len(plan.steps) - 1}) "
+                         f"or label{known}") from None
+
+
+def _pick(*values):
+    return next(v for v in values if v is not None)
+
+
+def _exc_info():
+    import sys
+
+    return sys.exc_info()
