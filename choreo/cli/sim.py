@@ -1,0 +1,124 @@
+"""`choreo sim`: the simulated RCB-4 board on a pseudo-terminal, for any serial program."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+
+from choreo.errors import LinkError, UsageError
+
+FAULT_HELP = (
+    "K (a whole number >= 1): every K-th frame (K, 2K, 3K...; for --lose only frame K); "
+    "P (0 < P < 1, with a decimal point): each frame with probability P, seeded by --seed"
+)
+
+EPILOG = """\
+The first line of standard output is the device path alone (e.g. /dev/pts/4); the server then
+answers frames there until Ctrl-C (SIGINT) or SIGTERM, and exits 0. Point any serial program at
+the path, e.g. `choreo run --port /dev/pts/4 shows/dance.yaml`, at the board's baud, 8 data
+bits, even parity, 1 stop bit; a client set otherwise gets no reply, as from a real board.
+
+Faults (each K or P, several allowed): --lose closes the pty (the port is lost) and the server
+exits 3 with a line on stderr; --drop: no reply (the frame had no effect); --nak: a NAK (no
+effect); --badsum: the reply with a wrong checksum; --short: half the reply; --junk: ff 00 aa
+before the reply; --late: the reply --late-ms later than due (default 500). Examples:
+--drop 5 drops frames 5, 10, 15...; --drop 0.2 drops each frame with probability 0.2.
+The same options work in a sim:// URL: sim://?motion_s=0.5&drop=5&durations=3:2.5,7:1.2
+"""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "sim",
+        help="run the simulated controller on a pseudo-terminal",
+        description="Serve a simulated RCB-4 board on a pseudo-terminal and print its device path.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    board = parser.add_argument_group("board")
+    board.add_argument("--baud", metavar="N", help="the board's baud: 115200 (default), 625000, 1250000")
+    board.add_argument("--motion-s", metavar="S", help="how long each motion runs, seconds (default 1.0)")
+    board.add_argument(
+        "--durations", metavar="SLOT:S,...", help="per-slot durations, e.g. 3:2.5,7:1.2 (others: --motion-s)"
+    )
+    board.add_argument("--reply-ms", metavar="MS", help="delay before each reply, ms (default 0.2)")
+    board.add_argument(
+        "--no-wire", action="store_true", help="bytes take no time (default: 11 bits a byte at the baud)"
+    )
+    board.add_argument(
+        "--gap-ms", metavar="MS", help="inter-byte gap that drops a partial frame, ms (default 20)"
+    )
+    board.add_argument(
+        "--no-settings-check", action="store_true", help="answer whatever baud/parity the client set"
+    )
+    faults = parser.add_argument_group("faults", FAULT_HELP)
+    for kind, what in (
+        ("lose", "lose the port (close the pty, exit 3)"),
+        ("drop", "send no reply"),
+        ("nak", "reply NAK"),
+        ("badsum", "reply with a wrong checksum"),
+        ("short", "send half the reply"),
+        ("junk", "send garbage bytes before the reply"),
+        ("late", "reply --late-ms late"),
+    ):
+        faults.add_argument(f"--{kind}", metavar="K|P", help=what)
+    faults.add_argument("--late-ms", metavar="MS", help="how late a --late reply is, ms (default 500)")
+    faults.add_argument("--seed", metavar="N", help="seed for faults given as a probability (default 0)")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log every frame and reply to stderr")
+    parser.set_defaults(handler=run)
+
+
+def options_from_args(args: argparse.Namespace) -> dict[str, str]:
+    """The command line as the `name -> text` mapping the sim:// query also produces."""
+    from choreo.sim.options import OPTION_NAMES
+
+    values = {name: getattr(args, name) for name in OPTION_NAMES if getattr(args, name, None) is not None}
+    if args.no_wire:
+        values["wire"] = "0"
+    return values
+
+
+def run(args: argparse.Namespace) -> int:
+    from choreo.sim.options import parse_options
+    from choreo.sim.pty import PtyServer, ServeEnd
+    from choreo.sim.wire import PTY_GAP_S
+
+    try:
+        options = parse_options(options_from_args(args))
+    except ValueError as exc:
+        raise UsageError(f"choreo sim: {_as_flags(str(exc))}") from None
+    start = time.monotonic()
+    on_entry = None
+    if args.verbose:
+        def on_entry(entry):  # type: ignore[no-untyped-def]
+            print(entry.line(start), file=sys.stderr, flush=True)
+
+    board = options.board(on_entry=on_entry)
+    server = PtyServer(board, gap_s=options.gap_s or PTY_GAP_S, check_settings=not args.no_settings_check)
+    with server:
+        path = server.path
+        print(path, flush=True)
+        print(f"choreo sim: simulated RCB-4 on {path}, {options.describe()}; Ctrl-C to stop", file=sys.stderr)
+        previous = {sig: signal.signal(sig, lambda *_: server.stop()) for sig in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            end = server.serve()
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+    if end is ServeEnd.LOST:
+        raise LinkError(
+            f"choreo sim: fault 'lose' at frame {board.lost_at_frame}: closed {path} "
+            "as if the adapter was unplugged"
+        )
+    return 0
+
+
+def _as_flags(message: str) -> str:
+    """Spell option names as the command line does: `option motion_s=` -> `--motion-s `."""
+    from choreo.sim.options import OPTION_NAMES
+
+    for name in sorted(OPTION_NAMES, key=len, reverse=True):
+        message = message.replace(f"{name}=", f"--{name.replace('_', '-')} ")
+    return message

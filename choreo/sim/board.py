@@ -1,0 +1,331 @@
+"""A deterministic model of an RCB-4 board as the play-motion sequence sees it.
+
+Time is explicit: every call takes `now` (seconds, any monotonic clock), and the board never
+sleeps or starts threads. That makes it exact under test (a motion of 1.0 s started at t=2.0 runs
+at t=2.999 and not at t=3.0) and lets the same model serve the in-process `sim://` port (clock:
+`time.monotonic()`) and the pseudo-terminal server.
+
+What it models, following the spec and its errata:
+
+- RAM (`RAM_SIZE` bytes) with the config word at 0x0000, power-on value 0x0002 (only bit 1,
+  "ROM program run", set).
+- MOV COM->RAM writes the literal bytes; MOV RAM->COM answers `05 00 LO HI SUM`-style
+  (`ram_reply`) with the bytes read. A write that touches the program counter (RAM 0x0002-0x0004,
+  as the stop frame does) forgets an armed slot: the board would resume at the written address.
+- CALL of a slot's start address arms that slot. A CALL of any other address is ACKed and arms
+  nothing (the real board would just jump there).
+- A write that sets the config run bit (the restore frame, 0x8723) starts the armed motion, which
+  runs for its slot's duration; while it runs, the status read shows the config low byte 0x23.
+  When it ends, the board clears the run bit (0x8721: low byte 0x21).
+- A write that clears the run bit (the stop frame, 0x8721) stops a running motion at once.
+- A run-bit write with nothing armed and nothing running runs nothing, so the run bit clears at
+  once: the program it would resume has already returned. A status read then shows 0x21.
+- A frame with a bad checksum, a malformed frame, a command the model does not implement, or an
+  address outside the modelled RAM gets a NAK `04 CMD 15 SUM`. Bytes that cannot be a frame at
+  all (a size byte below 3 or above 128) get a NAK with the command byte that followed, or 00.
+- ACK check (`04 fe 06 08`) is answered with the same 4 bytes, as the real board does.
+
+Wire time: a reply's first byte starts `reply_delay_s` after the frame's last byte arrived (and
+not before the board finished sending its previous reply: one serial line, in order), and each
+byte takes 11 bit times (start, 8 data, even parity, stop) at the board's baud. `Transmission`
+carries, per byte, the time it has fully arrived at the client.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+from choreo import protocol as p
+from choreo.sim.faults import NOT_EXECUTED, FaultInjector, FaultPlan
+
+RAM_SIZE = 0x0400
+POWER_ON_CONFIG = 0x0002
+RUN_BIT = 0x02  # config bit 1: ROM program run
+PROGRAM_COUNTER = range(0x0002, 0x0005)  # where the stop frame saves the program counter
+BITS_PER_BYTE = 11  # start + 8 data + even parity + stop
+BOARD_BAUDS = (115200, 625000, 1250000)
+DEFAULT_BAUD = 115200
+DEFAULT_REPLY_DELAY_S = 0.0002
+DEFAULT_MOTION_S = 1.0
+CMD_ACK_CHECK = 0xFE
+
+
+@dataclass(frozen=True)
+class Transmission:
+    """Bytes the board sends, with the time each one has fully arrived at the client."""
+
+    data: bytes
+    times: tuple[float, ...]
+
+    @property
+    def start(self) -> float:
+        return self.times[0] if self.times else 0.0
+
+    @property
+    def end(self) -> float:
+        return self.times[-1] if self.times else 0.0
+
+
+@dataclass(frozen=True)
+class JournalEntry:
+    """One thing that happened on the board, for tests and for `choreo sim -v`.
+
+    kind: `frame` (a frame or a burst of noise the board answered or ignored), `partial`
+    (an incomplete frame dropped after an inter-byte gap), `ignored` (bytes sent with the wrong
+    line settings, which a real board cannot read), `motion` (a motion ended by itself).
+    """
+
+    kind: str
+    at: float  # board time: the frame's last byte arrived, or the event happened
+    data: bytes = b""
+    number: int | None = None  # 1-based frame count, the one faults are scheduled on
+    reply: bytes | None = None  # what was sent back (after faults); None: nothing
+    reply_at: float | None = None  # when the reply's last byte arrives at the client
+    faults: tuple[str, ...] = ()
+    note: str = ""
+
+    def __str__(self) -> str:
+        return self.line()
+
+    def line(self, origin: float = 0.0) -> str:
+        """One line of text; times are seconds since `origin` (the server's start, say)."""
+        head = f"{self.at - origin:10.6f} "
+        if self.kind != "frame":
+            return head + f"{self.kind}: {self.note}" + (f" [{p.hexbytes(self.data)}]" if self.data else "")
+        sent = "no reply" if self.reply is None else f"-> {p.hexbytes(self.reply)}"
+        tags = f" [fault: {', '.join(self.faults)}]" if self.faults else ""
+        return head + f"#{self.number} {p.hexbytes(self.data)} ({self.note}) {sent}{tags}"
+
+
+@dataclass
+class _Running:
+    slot: int
+    started: float
+    ends: float
+
+
+@dataclass(frozen=True)
+class _Outcome:
+    reply: bytes
+    note: str
+    command: int
+
+
+@dataclass(eq=False)
+class SimBoard:
+    """The board: RAM, an armed slot, a running motion, a reply line, faults and a journal."""
+
+    baud: int = DEFAULT_BAUD
+    reply_delay_s: float = DEFAULT_REPLY_DELAY_S
+    motion_s: float = DEFAULT_MOTION_S
+    durations: Mapping[int, float] = field(default_factory=dict)
+    faults: FaultPlan = field(default_factory=FaultPlan)
+    wire: bool = True  # emulate 11 bits a byte at `baud`; False: bytes take no time
+    journal_size: int = 100_000
+    on_entry: Callable[[JournalEntry], None] | None = None
+
+    def __post_init__(self) -> None:
+        if self.baud not in BOARD_BAUDS:
+            raise ValueError(f"baud {self.baud}: an RCB-4 runs at {', '.join(map(str, BOARD_BAUDS))}")
+        if self.reply_delay_s < 0:
+            raise ValueError(f"reply delay must be >= 0, not {self.reply_delay_s}")
+        self.durations = dict(self.durations)
+        for slot, seconds in [(None, self.motion_s), *self.durations.items()]:
+            if seconds < 0:
+                raise ValueError(f"motion duration must be >= 0 s, not {seconds}")
+            if slot is not None and not 0 <= slot < p.MOTION_SLOTS:
+                raise ValueError(f"duration for slot {slot}: slots are 0..{p.MOTION_SLOTS - 1}")
+        self.ram = bytearray(RAM_SIZE)
+        self.ram[0:2] = POWER_ON_CONFIG.to_bytes(2, "little")
+        self.armed: int | None = None
+        self.frames_received = 0
+        self.lost = False
+        self.lost_at_frame: int | None = None
+        self.journal: deque[JournalEntry] = deque(maxlen=self.journal_size)
+        self._running: _Running | None = None
+        self._injector = FaultInjector(self.faults)
+        self._tx_free = float("-inf")  # when the board's transmit line is idle again
+        self._now = float("-inf")
+
+    # -- time and state ----------------------------------------------------------------------
+
+    @property
+    def byte_time(self) -> float:
+        """Seconds one byte occupies the line (11 bits at the board's baud), 0 without wire time."""
+        return BITS_PER_BYTE / self.baud if self.wire else 0.0
+
+    def duration(self, slot: int) -> float:
+        return self.durations.get(slot, self.motion_s)
+
+    def config(self, now: float) -> int:
+        """The config word at RAM 0x0000 as of `now`."""
+        self._advance(now)
+        return self.ram[0] | self.ram[1] << 8
+
+    def running(self, now: float) -> int | None:
+        """The slot whose motion is running at `now`, or None."""
+        self._advance(now)
+        return self._running.slot if self._running else None
+
+    def motion_end(self) -> float | None:
+        """When the running motion will end (board time), or None."""
+        return self._running.ends if self._running else None
+
+    def _advance(self, now: float) -> None:
+        """Bring the model up to `now`: a motion whose time is over ends and clears the run bit.
+
+        The model never goes back in time: a query for an earlier moment than the last frame
+        answers with the current state (frames themselves must come in order, see `receive`).
+        """
+        if now <= self._now:
+            return
+        self._now = now
+        run = self._running
+        if run is not None and now >= run.ends:
+            self._running = None
+            self.ram[0] &= ~RUN_BIT & 0xFF
+            self._record(JournalEntry("motion", run.ends, note=f"motion {run.slot} ended, run bit cleared"))
+
+    # -- frames ------------------------------------------------------------------------------
+
+    def receive(self, data: bytes, now: float) -> Transmission | None:
+        """Take one frame (or one burst of noise) whose last byte arrived at `now`.
+
+        Returns what the board sends back, timed, or None when it sends nothing (a `drop` or
+        `lose` fault). After a `lose` fault, `lost` is True and every later frame is refused
+        with a ValueError: the transport must stop using the port.
+        """
+        if self.lost:
+            raise ValueError(f"the simulated port was lost at frame {self.lost_at_frame}")
+        if now < self._now:
+            raise ValueError(f"frame at {now} arrived before the board's time {self._now}: frames come in order")
+        self._advance(now)
+        data = bytes(data)
+        self.frames_received += 1
+        number = self.frames_received
+        kinds = self._injector.decide(number)
+        if NOT_EXECUTED.isdisjoint(kinds):
+            outcome = self._execute(data, now)
+            reply, command, note = outcome.reply, outcome.command, outcome.note
+        else:  # the frame never reached the board, or the board refused it
+            reply, command, note = b"", _command_byte(data), _described(data) + ": not executed"
+        damage = self._injector.damage(kinds, command, reply)
+        if damage.lost:
+            self.lost = True
+            self.lost_at_frame = number
+            note = _described(data) + ": port lost"
+        sent = None
+        if damage.reply is not None:
+            sent = self._schedule(damage.reply, now + self.reply_delay_s + damage.extra_delay_s)
+        self._record(
+            JournalEntry(
+                "frame", now, data, number,
+                reply=sent.data if sent else None,
+                reply_at=sent.end if sent else None,
+                faults=kinds, note=note,
+            )
+        )
+        return sent
+
+    def note(self, kind: str, at: float, data: bytes, text: str) -> None:
+        """Journal something the transport saw that never became a frame (partial, ignored)."""
+        self._record(JournalEntry(kind, at, bytes(data), note=text))
+
+    def _schedule(self, data: bytes, ready: float) -> Transmission:
+        start = max(ready, self._tx_free)
+        bt = self.byte_time
+        times = tuple(start + (i + 1) * bt for i in range(len(data)))
+        self._tx_free = times[-1] if times else start
+        return Transmission(data, times)
+
+    def _record(self, entry: JournalEntry) -> None:
+        self.journal.append(entry)
+        if self.on_entry is not None:
+            self.on_entry(entry)
+
+    def _execute(self, data: bytes, now: float) -> _Outcome:
+        """What the board does with a frame, and the reply it would send."""
+        if not data or not 3 <= data[0] <= p.MAX_FRAME_SIZE:
+            cmd = data[1] if len(data) > 1 else 0x00
+            size = f"{data[0]:02x}" if data else "none"
+            return _Outcome(p.nak(cmd), f"not a frame (size byte {size}): NAK", cmd)
+        try:
+            command = p.parse_command(data)
+        except ValueError as exc:
+            return _Outcome(p.nak(data[1]), f"{exc}: NAK", data[1])
+        cmd = command.command
+        if cmd == p.CMD_CALL and command.address is not None:
+            return self._call(command)
+        if command.move_type == p.MOV_COM_TO_RAM:
+            return self._write(command, now)
+        if command.move_type == p.MOV_RAM_TO_COM:
+            return self._read(command)
+        if cmd == CMD_ACK_CHECK and command.payload == bytes((p.ACK_BYTE,)):
+            return _Outcome(p.ack(cmd), "ACK check: ACK", cmd)
+        return _Outcome(p.nak(cmd), f"command {cmd:02x} is not modelled: NAK", cmd)
+
+    def _call(self, command: p.Command) -> _Outcome:
+        address = command.address or 0
+        slot = p.slot_of_address(address)
+        self.armed = slot
+        what = f"motion {slot} armed" if slot is not None else "not a slot start, nothing armed"
+        return _Outcome(p.ack(p.CMD_CALL), f"CALL 0x{address:06x}: {what}", p.CMD_CALL)
+
+    def _write(self, command: p.Command, now: float) -> _Outcome:
+        address, payload = command.address or 0, command.payload
+        if address + len(payload) > RAM_SIZE:
+            return _Outcome(
+                p.nak(p.CMD_MOV),
+                f"write of {len(payload)} bytes at 0x{address:06x} is outside the modelled RAM: NAK",
+                p.CMD_MOV,
+            )
+        was_running = self.ram[0] & RUN_BIT
+        self.ram[address : address + len(payload)] = payload
+        written = range(address, address + len(payload))
+        notes = [f"RAM 0x{address:04x} <- {p.hexbytes(payload)}"]
+        if any(a in written for a in PROGRAM_COUNTER) and self.armed is not None:
+            notes.append(f"program counter rewritten, motion {self.armed} disarmed")
+            self.armed = None
+        if 0 in written:
+            notes.append(self._config_written(bool(was_running), now))
+        return _Outcome(p.ack(p.CMD_MOV), ", ".join(n for n in notes if n), p.CMD_MOV)
+
+    def _config_written(self, was_running: bool, now: float) -> str:
+        """React to a write of the config word's low byte: start or stop a motion."""
+        if not self.ram[0] & RUN_BIT:
+            if self._running is not None:
+                slot, self._running = self._running.slot, None
+                return f"run bit cleared: motion {slot} stopped"
+            return "run bit cleared"
+        if self.armed is not None:
+            slot, self.armed = self.armed, None
+            seconds = self.duration(slot)
+            self._running = _Running(slot, now, now + seconds)
+            return f"run bit set: motion {slot} started, runs {seconds:g} s"
+        if self._running is not None:
+            return f"run bit set: motion {self._running.slot} keeps running"
+        self.ram[0] &= ~RUN_BIT & 0xFF
+        return "run bit set with nothing armed: nothing to run, run bit cleared at once"
+
+    def _read(self, command: p.Command) -> _Outcome:
+        address, count = command.address or 0, command.count or 0
+        if count == 0 or count > p.MAX_FRAME_SIZE - 3 or address + count > RAM_SIZE:
+            return _Outcome(
+                p.nak(p.CMD_MOV), f"read of {count} bytes at 0x{address:04x} is not possible: NAK", p.CMD_MOV
+            )
+        data = bytes(self.ram[address : address + count])
+        what = f"RAM 0x{address:04x} x{count} -> {p.hexbytes(data)}"
+        if address == 0 and count >= 1:
+            state = "executing" if data[0] == p.EXECUTING_BYTE else "not executing"
+            what += f" (status: {state})"
+        return _Outcome(p.ram_reply(data), what, p.CMD_MOV)
+
+
+def _command_byte(data: bytes) -> int:
+    return data[1] if len(data) > 1 else 0x00
+
+
+def _described(data: bytes) -> str:
+    return p.describe_frame(data) if data and 3 <= data[0] <= p.MAX_FRAME_SIZE else "noise"

@@ -1,0 +1,184 @@
+"""The simulator's options, one parser for the `sim://` query string and `choreo sim`'s arguments.
+
+Every option is spelled `name=value` in a URL (`sim://?motion_s=0.5&drop=5`) and `--name value`
+with dashes on the command line (`--motion-s 0.5 --drop 5`), and both go through
+`parse_options`, so they accept and refuse exactly the same values with the same messages.
+
+| option | meaning | default |
+|---|---|---|
+| baud | the board's baud: 115200, 625000 or 1250000 | 115200 |
+| motion_s | how long every motion runs, seconds | 1.0 |
+| durations | per-slot durations, `SLOT:SECONDS,...` (`3:2.5,7:1.2`) | none |
+| reply_ms | the board's delay between a frame's last byte and its reply | 0.2 |
+| wire | 1: bytes take 11 bit times at the baud; 0: bytes take no time | 1 |
+| gap_ms | an inter-byte gap longer than this drops a partial frame | 0.15 (sim://), 20 (pty) |
+| seed | seed of the random faults | 0 |
+| late_ms | how late a `late` reply is | 500 |
+| lose, drop, nak, badsum, short, junk, late | faults: K (every K-th frame) or P (probability) | none |
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from urllib.parse import parse_qsl
+
+from choreo.protocol import MOTION_SLOTS
+from choreo.sim.board import BOARD_BAUDS, DEFAULT_BAUD, DEFAULT_MOTION_S, DEFAULT_REPLY_DELAY_S, SimBoard
+from choreo.sim.faults import DEFAULT_LATE_S, FAULT_KINDS, FaultPlan
+
+SETTINGS = ("baud", "motion_s", "durations", "reply_ms", "wire", "gap_ms", "seed", "late_ms")
+OPTION_NAMES: tuple[str, ...] = SETTINGS + FAULT_KINDS
+
+
+@dataclass(frozen=True)
+class SimOptions:
+    """Everything that configures a simulated board and its line."""
+
+    baud: int = DEFAULT_BAUD
+    motion_s: float = DEFAULT_MOTION_S
+    durations: Mapping[int, float] = field(default_factory=dict)
+    reply_s: float = DEFAULT_REPLY_DELAY_S
+    wire: bool = True
+    gap_s: float | None = None  # None: the transport's own default
+    faults: FaultPlan = field(default_factory=FaultPlan)
+
+    def board(self, **kwargs: object) -> SimBoard:
+        """A fresh board with these options (kwargs: `on_entry`, `journal_size`)."""
+        return SimBoard(
+            baud=self.baud,
+            reply_delay_s=self.reply_s,
+            motion_s=self.motion_s,
+            durations=dict(self.durations),
+            faults=self.faults,
+            wire=self.wire,
+            **kwargs,  # type: ignore[arg-type]
+        )
+
+    def describe(self) -> str:
+        """One line for a banner: `115200 baud 8E1, motions 1 s, no faults`."""
+        slots = ", ".join(f"{slot}: {sec:g} s" for slot, sec in sorted(self.durations.items()))
+        motions = f"motions {self.motion_s:g} s" + (f" ({slots})" if slots else "")
+        return f"{self.baud} baud 8E1, {motions}, {self.faults.describe()}"
+
+
+def parse_query(query: str) -> SimOptions:
+    """Options from a URL query string (`motion_s=0.5&drop=5`); ValueError says what is wrong."""
+    pairs = parse_qsl(query, keep_blank_values=True)
+    seen: dict[str, str] = {}
+    for name, value in pairs:
+        if name in seen:
+            raise ValueError(f"option {name!r} is given twice")
+        seen[name] = value
+    return parse_options(seen)
+
+
+def parse_options(values: Mapping[str, str]) -> SimOptions:
+    """Options from `name -> text`; every error names the option and what it accepts."""
+    unknown = [name for name in values if name not in OPTION_NAMES]
+    if unknown:
+        raise ValueError(f"unknown option {unknown[0]!r} (known: {', '.join(OPTION_NAMES)})")
+    faults = {kind: values[kind] for kind in FAULT_KINDS if kind in values}
+    seed = _parsed(values, "seed", _whole, 0)
+    late_s = _parsed(values, "late_ms", _milliseconds, DEFAULT_LATE_S)
+    try:
+        plan = FaultPlan.parse(faults, seed=seed, late_s=late_s)
+    except ValueError as exc:
+        raise ValueError(f"fault {exc}") from None
+    return SimOptions(
+        baud=_parsed(values, "baud", parse_baud, DEFAULT_BAUD),
+        motion_s=_parsed(values, "motion_s", _seconds, DEFAULT_MOTION_S),
+        durations=_parsed(values, "durations", parse_durations, {}),
+        reply_s=_parsed(values, "reply_ms", _milliseconds, DEFAULT_REPLY_DELAY_S),
+        wire=_parsed(values, "wire", _flag, True),
+        gap_s=_parsed(values, "gap_ms", _positive_milliseconds, None),
+        faults=plan,
+    )
+
+
+def _parsed(values: Mapping[str, str], name: str, parse, default):  # type: ignore[no-untyped-def]
+    if name not in values:
+        return default
+    try:
+        return parse(values[name])
+    except ValueError as exc:
+        raise ValueError(f"option {name}={values[name]!r}: {exc}") from None
+
+
+def parse_baud(text: str) -> int:
+    try:
+        baud = int(text)
+    except ValueError:
+        baud = None
+    if baud not in BOARD_BAUDS:
+        raise ValueError(f"the board's baud is one of {', '.join(map(str, BOARD_BAUDS))}")
+    return baud
+
+
+def parse_durations(text: str) -> dict[int, float]:
+    """`3:2.5,7:1.2` -> {3: 2.5, 7: 1.2}: how long the motion in each named slot runs."""
+    durations: dict[int, float] = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        slot_text, sep, seconds_text = item.partition(":")
+        if not sep:
+            raise ValueError(f"{item!r} is not SLOT:SECONDS (e.g. 3:2.5)")
+        try:
+            slot = int(slot_text)
+        except ValueError:
+            raise ValueError(f"{item!r}: slot {slot_text!r} is not a whole number") from None
+        if not 0 <= slot < MOTION_SLOTS:
+            raise ValueError(f"{item!r}: slot {slot} is out of range 0..{MOTION_SLOTS - 1}")
+        if slot in durations:
+            raise ValueError(f"slot {slot} is given twice")
+        try:
+            durations[slot] = _seconds(seconds_text)
+        except ValueError as exc:
+            raise ValueError(f"{item!r}: {exc}") from None
+    return durations
+
+
+def _number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError("not a number") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise ValueError("not a finite number")
+    return value
+
+
+def _seconds(text: str) -> float:
+    value = _number(text)
+    if value < 0:
+        raise ValueError("seconds must be >= 0")
+    return value
+
+
+def _milliseconds(text: str) -> float:
+    value = _number(text)
+    if value < 0:
+        raise ValueError("milliseconds must be >= 0")
+    return value / 1000
+
+
+def _positive_milliseconds(text: str) -> float:
+    value = _milliseconds(text)
+    if value <= 0:
+        raise ValueError("milliseconds must be > 0")
+    return value
+
+
+def _whole(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise ValueError("not a whole number") from None
+
+
+def _flag(text: str) -> bool:
+    lowered = text.strip().lower()
+    if lowered in ("1", "true", "yes", "on"):
+        return True
+    if lowered in ("0", "false", "no", "off"):
+        return False
+    raise ValueError("not 1 or 0")

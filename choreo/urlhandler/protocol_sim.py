@@ -1,0 +1,176 @@
+"""`sim://`: a simulated RCB-4 board behind pyserial's own API, in-process.
+
+`choreo.urlhandler.register()` makes `serial.serial_for_url("sim://?motion_s=0.5&drop=5")`
+open one; anything that talks to a pyserial port (the link, a test) then talks to the board
+model exactly as to a real board over a USB adapter, without hardware or threads.
+
+URL: `sim://` followed by an optional query with the options of `choreo.sim.options`
+(`baud`, `motion_s`, `durations`, `reply_ms`, `wire`, `gap_ms`, `seed`, `late_ms` and the fault
+kinds `lose`, `drop`, `nak`, `badsum`, `short`, `junk`, `late`). An unknown option or a bad value
+raises ValueError naming it.
+
+Faithful where it matters: the board answers only a port set to its baud with 8 data bits, even
+parity and 1 stop bit (a real board cannot read anything else), replies arrive byte by byte on
+the board's schedule (wire time and reply delay), `reset_input_buffer` drops only what has
+already arrived, and after a `lose` fault every read and write raises `SerialException`, as an
+unplugged adapter does. The board is on `port.board`, its line on `port.line`.
+"""
+
+from __future__ import annotations
+
+import numbers
+import time
+from urllib.parse import urlsplit
+
+from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
+
+from choreo.sim.board import SimBoard
+from choreo.sim.options import SimOptions, parse_query
+from choreo.sim.wire import REAL_GAP_S, Line, LineSettings
+
+_MAX_SLEEP_S = 0.05  # upper bound of one sleep while waiting, so a closed port is noticed
+
+
+class Serial(SerialBase):
+    """A pyserial port whose other end is a `SimBoard`."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        self.board: SimBoard | None = None
+        self.line: Line | None = None
+        self.options: SimOptions | None = None
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+
+    # -- opening -----------------------------------------------------------------------------
+
+    def open(self) -> None:
+        if self.is_open:
+            raise SerialException("Port is already open.")
+        if self._port is None:
+            raise SerialException("Port must be configured before it can be used.")
+        self.options = self.from_url(self._port)
+        self.board = self.options.board()
+        self.line = Line(self.board, self.options.gap_s or REAL_GAP_S)
+        self.is_open = True
+        self._reconfigure_port()
+
+    @staticmethod
+    def from_url(url: str) -> SimOptions:
+        """The options in a `sim://?...` URL; ValueError names what is wrong."""
+        parts = urlsplit(url)
+        if parts.scheme != "sim":
+            raise ValueError(f"{url!r}: expected a URL like sim://?motion_s=0.5&drop=5")
+        if parts.netloc or parts.path.strip("/") or parts.fragment:
+            raise ValueError(f"{url!r}: sim:// takes options only after '?', like sim://?motion_s=0.5")
+        try:
+            return parse_query(parts.query)
+        except ValueError as exc:
+            raise ValueError(f"sim://: {exc}") from None
+
+    def _reconfigure_port(self) -> None:
+        """Record the client's settings: the board ignores a line it cannot read."""
+        if not isinstance(self._baudrate, numbers.Integral) or not 0 < self._baudrate < 2**32:
+            raise ValueError(f"invalid baudrate: {self._baudrate!r}")
+        if self.line is not None:
+            self.line.settings = LineSettings(
+                int(self._baudrate), int(self._bytesize), str(self._parity), float(self._stopbits)
+            )
+
+    def close(self) -> None:
+        self.is_open = False
+        super().close()
+
+    # -- data --------------------------------------------------------------------------------
+
+    def _live(self) -> Line:
+        if not self.is_open or self.line is None:
+            raise PortNotOpenError()
+        if self.line.board.lost:
+            raise SerialException(
+                f"{self._port}: port lost (simulated unplug, fault 'lose' at frame "
+                f"{self.line.board.lost_at_frame})"
+            )
+        return self.line
+
+    @property
+    def in_waiting(self) -> int:
+        line = self._live()
+        now = time.monotonic()
+        line.poll(now)
+        return line.available(now)
+
+    def read(self, size: int = 1) -> bytes:
+        """Up to `size` bytes, waiting for them on the board's schedule until the port's timeout.
+
+        timeout None waits for all `size` bytes; 0 returns what has arrived at once.
+        """
+        line = self._live()
+        deadline = None if self._timeout is None else time.monotonic() + self._timeout
+        data = bytearray()
+        while len(data) < size:
+            now = time.monotonic()
+            line.poll(now)
+            data += line.take(now, size - len(data))
+            if len(data) >= size or (deadline is not None and now >= deadline):
+                break
+            wake = line.next_event()
+            wait = _MAX_SLEEP_S if wake is None else max(wake - now, 0.0)
+            if deadline is not None:
+                wait = min(wait, deadline - now)
+            time.sleep(min(max(wait, 0.0), _MAX_SLEEP_S))
+            line = self._live()
+        return bytes(data)
+
+    def write(self, data: bytes) -> int:
+        """Put the bytes on the wire to the board at once (write each frame in one call)."""
+        line = self._live()
+        data = to_bytes(data)
+        line.send(data, time.monotonic())
+        self._live()  # a `lose` fault on this frame: the write itself fails, as on an unplug
+        return len(data)
+
+    def reset_input_buffer(self) -> None:
+        """Drop the reply bytes already received; those still on the wire arrive later."""
+        line = self._live()
+        now = time.monotonic()
+        line.poll(now)
+        line.discard(now)
+
+    def reset_output_buffer(self) -> None:
+        """Nothing waits to be sent: `write` puts everything on the wire at once."""
+        self._live()
+
+    @property
+    def out_waiting(self) -> int:
+        self._live()
+        return 0
+
+    # -- modem lines: a board has none; answer like a plain three-wire adapter ----------------
+
+    def _update_break_state(self) -> None:
+        pass
+
+    def _update_rts_state(self) -> None:
+        pass
+
+    def _update_dtr_state(self) -> None:
+        pass
+
+    @property
+    def cts(self) -> bool:
+        self._live()
+        return True
+
+    @property
+    def dsr(self) -> bool:
+        self._live()
+        return True
+
+    @property
+    def ri(self) -> bool:
+        self._live()
+        return False
+
+    @property
+    def cd(self) -> bool:
+        self._live()
+        return True

@@ -1,0 +1,488 @@
+"""The simulated board, exactly: explicit time, no sleeping, every answer and every fault."""
+
+from __future__ import annotations
+
+import pytest
+
+from choreo import protocol as p
+from choreo.sim.board import RAM_SIZE, SimBoard, Transmission
+from choreo.sim.faults import FAULT_KINDS, JUNK, FaultPlan, Trigger
+from choreo.sim.options import parse_durations, parse_options, parse_query
+from choreo.sim.wire import Framer, Line, LineSettings
+
+STOP = p.stop_frame().data
+RESTORE = p.restore_frame().data
+STATUS = p.status_frame().data
+ACK_MOV = bytes.fromhex("0400060a")
+ACK_CALL = bytes.fromhex("040c0616")
+
+
+def board(**kwargs) -> SimBoard:
+    kwargs.setdefault("wire", False)
+    kwargs.setdefault("reply_delay_s", 0.0)
+    return SimBoard(**kwargs)
+
+
+def reply(b: SimBoard, frame: bytes, now: float) -> bytes | None:
+    sent = b.receive(frame, now)
+    return None if sent is None else sent.data
+
+
+def status_low(b: SimBoard, now: float) -> int:
+    data = reply(b, STATUS, now)
+    assert data is not None and len(data) == 5 and data[:2] == b"\x05\x00"
+    assert data[4] == p.checksum(data[:4])
+    return data[2]
+
+
+def play(b: SimBoard, motion: int, now: float) -> None:
+    assert reply(b, STOP, now) == ACK_MOV
+    assert reply(b, p.play_frame(motion).data, now) == ACK_CALL
+    assert reply(b, RESTORE, now) == ACK_MOV
+
+
+# -- the board model ---------------------------------------------------------------------------
+
+
+def test_power_on_config_has_only_the_run_bit():
+    b = board()
+    assert b.config(0.0) == 0x0002
+    assert len(b.ram) >= 0x0400
+    assert reply(b, STATUS, 0.0) == p.ram_reply(b"\x02\x00")
+
+
+def test_play_sequence_runs_the_motion_for_its_duration_then_clears_the_run_bit():
+    b = board(motion_s=1.0)
+    play(b, 3, 10.0)
+    assert b.running(10.0) == 3
+    assert status_low(b, 10.0) == 0x23
+    assert status_low(b, 10.999) == 0x23
+    assert status_low(b, 11.0) == 0x21
+    assert b.config(11.0) == 0x8721
+    assert b.running(11.0) is None
+    ended = [e for e in b.journal if e.kind == "motion"]
+    assert len(ended) == 1 and ended[0].at == 11.0 and "motion 3 ended" in ended[0].note
+
+
+def test_status_reply_is_what_the_protocol_parses_as_executing():
+    b = board(motion_s=0.5)
+    play(b, 0, 0.0)
+    verdict = p.parse_reply(p.status_frame(), reply(b, STATUS, 0.1))
+    assert verdict.kind is p.ReplyKind.STATUS and verdict.executing and verdict.status == 0x8723
+    verdict = p.parse_reply(p.status_frame(), reply(b, STATUS, 0.6))
+    assert verdict.kind is p.ReplyKind.STATUS and not verdict.executing and verdict.status == 0x8721
+
+
+def test_durations_are_per_slot_with_a_default():
+    b = board(motion_s=1.0, durations={7: 2.5})
+    play(b, 7, 0.0)
+    assert status_low(b, 2.4) == 0x23
+    assert status_low(b, 2.5) == 0x21
+    play(b, 8, 3.0)
+    assert status_low(b, 3.9) == 0x23
+    assert status_low(b, 4.0) == 0x21
+
+
+def test_stop_frame_stops_a_running_motion_at_once():
+    b = board(motion_s=5.0)
+    play(b, 1, 0.0)
+    assert reply(b, STOP, 1.0) == ACK_MOV
+    assert b.running(1.0) is None
+    assert status_low(b, 1.0) == 0x21
+
+
+def test_new_play_while_running_replaces_the_motion():
+    b = board(durations={1: 5.0, 2: 0.5})
+    play(b, 1, 0.0)
+    play(b, 2, 1.0)
+    assert b.running(1.2) == 2
+    assert status_low(b, 1.5) == 0x21
+
+
+def test_restore_with_nothing_armed_runs_nothing_and_clears_the_run_bit_at_once():
+    b = board()
+    assert reply(b, STOP, 0.0) == ACK_MOV
+    assert reply(b, RESTORE, 0.0) == ACK_MOV
+    assert b.running(0.0) is None
+    assert status_low(b, 0.0) == 0x21
+    assert "nothing armed" in b.journal[-2].note
+
+
+def test_call_of_a_non_slot_address_is_acked_and_arms_nothing():
+    b = board()
+    reply(b, STOP, 0.0)
+    assert reply(b, p.call(0x0BB9), 0.0) == ACK_CALL
+    assert b.armed is None
+    reply(b, RESTORE, 0.0)
+    assert b.running(0.0) is None
+
+
+def test_call_arms_and_the_stop_frame_disarms_by_rewriting_the_program_counter():
+    b = board()
+    assert reply(b, p.play_frame(119).data, 0.0) == ACK_CALL
+    assert b.armed == 119
+    reply(b, STOP, 0.0)
+    assert b.armed is None
+
+
+def test_mov_write_and_read_any_ram():
+    b = board()
+    assert reply(b, p.mov_write(0x0100, b"\x01\x02\x03"), 0.0) == ACK_MOV
+    assert reply(b, p.mov_read(0x0100, 3), 0.0) == p.ram_reply(b"\x01\x02\x03")
+    assert reply(b, p.mov_write(RAM_SIZE - 1, b"\x01\x02"), 0.0) == p.nak(p.CMD_MOV)
+    assert reply(b, p.mov_read(RAM_SIZE - 1, 2), 0.0) == p.nak(p.CMD_MOV)
+
+
+@pytest.mark.parametrize("frame", [STOP, RESTORE, STATUS, p.play_frame(5).data])
+def test_bad_checksum_gets_a_four_byte_nak_for_its_command(frame):
+    b = board()
+    bad = frame[:-1] + bytes(((frame[-1] + 1) & 0xFF,))
+    assert reply(b, bad, 0.0) == p.nak(frame[1])
+    assert p.parse_reply(p.status_frame(), p.nak(0)).kind is p.ReplyKind.NAK
+    assert b.config(0.0) == 0x0002  # nothing executed
+
+
+@pytest.mark.parametrize(
+    "frame,command",
+    [
+        (p.build_frame(p.CMD_CALL, b"\xb8\x0b"), p.CMD_CALL),  # CALL with too few arguments
+        (p.build_frame(p.CMD_MOV, b"\x02\x00"), p.CMD_MOV),  # MOV write without an address
+        (p.build_frame(p.CMD_MOV, b"\x12\x00\x00\x00"), p.CMD_MOV),  # move type not modelled
+        (p.build_frame(0x33, b"\x01"), 0x33),  # unknown command
+    ],
+)
+def test_malformed_or_unknown_frames_get_a_nak(frame, command):
+    assert reply(board(), frame, 0.0) == p.nak(command)
+
+
+def test_noise_that_cannot_be_a_frame_gets_a_nak_with_the_byte_it_saw():
+    assert reply(board(), b"\xff\x0c\x01", 0.0) == p.nak(0x0C)
+    assert reply(board(), b"\x01", 0.0) == p.nak(0x00)
+
+
+def test_ack_check_is_answered():
+    assert reply(board(), bytes.fromhex("04fe0608"), 0.0) == bytes.fromhex("04fe0608")
+
+
+def test_reply_times_follow_the_reply_delay_and_eleven_bits_a_byte():
+    b = SimBoard(baud=115200, reply_delay_s=0.0002)
+    sent = b.receive(STATUS, 1.0)
+    bt = 11 / 115200
+    assert sent.data == p.ram_reply(b"\x02\x00")
+    assert sent.times == pytest.approx([1.0002 + (i + 1) * bt for i in range(5)], abs=1e-12)
+
+
+def test_reply_times_at_1250000_baud():
+    b = SimBoard(baud=1250000, reply_delay_s=0.0)
+    sent = b.receive(STOP, 0.0)
+    assert sent.end == pytest.approx(4 * 11 / 1250000)
+
+
+def test_replies_queue_on_the_line_when_frames_come_faster_than_replies():
+    b = SimBoard(reply_delay_s=0.0)
+    first = b.receive(STATUS, 0.0)
+    second = b.receive(STATUS, 0.0001)
+    assert second.start == pytest.approx(first.end + 11 / 115200)
+
+
+def test_without_wire_time_bytes_arrive_with_the_reply_delay_only():
+    sent = SimBoard(wire=False, reply_delay_s=0.001).receive(STOP, 2.0)
+    assert sent.times == (2.001,) * 4
+
+
+def test_journal_records_frames_replies_and_counts():
+    seen = []
+    b = board(on_entry=seen.append)
+    play(b, 4, 0.0)
+    assert b.frames_received == 3
+    frames = [e for e in b.journal if e.kind == "frame"]
+    assert [e.number for e in frames] == [1, 2, 3]
+    assert [e.data for e in frames] == [STOP, p.play_frame(4).data, RESTORE]
+    assert [e.reply for e in frames] == [ACK_MOV, ACK_CALL, ACK_MOV]
+    assert "motion 4 started" in frames[2].note
+    assert seen == list(b.journal)
+    assert "#2 07 0c b8 2b 00 00 f6" in str(frames[1])
+
+
+def test_journal_is_bounded():
+    b = board(journal_size=5)
+    for i in range(20):
+        reply(b, STATUS, float(i))
+    assert len(b.journal) == 5 and b.frames_received == 20
+
+
+def test_frames_must_come_in_order_but_queries_may_look_back():
+    b = board()
+    reply(b, STATUS, 5.0)
+    with pytest.raises(ValueError, match="in order"):
+        b.receive(STATUS, 4.0)
+    assert b.config(1.0) == 0x0002
+
+
+@pytest.mark.parametrize("kwargs", [{"baud": 9600}, {"motion_s": -1}, {"durations": {120: 1.0}}, {"reply_delay_s": -1}])
+def test_bad_board_settings_are_refused(kwargs):
+    with pytest.raises(ValueError):
+        SimBoard(**kwargs)
+
+
+# -- faults ------------------------------------------------------------------------------------
+
+
+def faulty(kind: str, spelled: str, seed: int = 0, **kwargs) -> SimBoard:
+    return board(faults=FaultPlan.parse({kind: spelled}, seed=seed), **kwargs)
+
+
+def hit_frames(b: SimBoard) -> list[int]:
+    return [e.number for e in b.journal if e.kind == "frame" and e.faults]
+
+
+EXPECTED = {
+    "drop": None,
+    "nak": p.nak(p.CMD_MOV),
+    "badsum": p.ram_reply(b"\x02\x00")[:-1] + bytes((p.ram_reply(b"\x02\x00")[-1] ^ 0xFF,)),
+    "short": p.ram_reply(b"\x02\x00")[:2],
+    "junk": JUNK + p.ram_reply(b"\x02\x00"),
+    "late": p.ram_reply(b"\x02\x00"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(EXPECTED))
+def test_every_kth_frame_fault_hits_frames_k_2k_3k(kind):
+    b = faulty(kind, "3")
+    replies = [reply(b, STATUS, float(i)) for i in range(1, 10)]
+    assert hit_frames(b) == [3, 6, 9]
+    for number, data in enumerate(replies, start=1):
+        assert data == (EXPECTED[kind] if number % 3 == 0 else p.ram_reply(b"\x02\x00"))
+
+
+def test_every_frame_with_k_1():
+    b = faulty("drop", "1")
+    assert [reply(b, STATUS, float(i)) for i in range(3)] == [None, None, None]
+
+
+def test_late_reply_comes_late_ms_after_it_was_due_and_the_next_queues_behind_it():
+    b = board(faults=FaultPlan.parse({"late": "1"}, late_s=0.25), wire=True, reply_delay_s=0.0002)
+    sent = b.receive(STATUS, 1.0)
+    assert sent.start == pytest.approx(1.0 + 0.0002 + 0.25 + 11 / 115200)
+    b2 = board(faults=FaultPlan.parse({"late": "2"}, late_s=0.5))
+    b2.receive(STATUS, 0.0)
+    late = b2.receive(STATUS, 0.1)
+    after = b2.receive(STATUS, 0.2)
+    assert late.start == pytest.approx(0.6) and after.start >= late.end
+
+
+@pytest.mark.parametrize("kind", ["drop", "nak"])
+def test_drop_and_nak_mean_the_board_did_not_execute_the_frame(kind):
+    b = faulty(kind, "2")
+    reply(b, STOP, 0.0)
+    reply(b, p.play_frame(3).data, 0.0)  # frame 2: hit, not executed
+    assert b.armed is None
+
+
+@pytest.mark.parametrize("kind", ["badsum", "short", "junk", "late"])
+def test_reply_faults_still_execute_the_frame(kind):
+    b = faulty(kind, "2")
+    reply(b, STOP, 0.0)
+    reply(b, p.play_frame(3).data, 0.0)
+    assert b.armed == 3
+
+
+def test_lose_happens_once_at_frame_k_and_then_the_board_refuses_everything():
+    b = faulty("lose", "2")
+    assert reply(b, STATUS, 0.0) is not None
+    assert reply(b, STATUS, 0.1) is None
+    assert b.lost and b.lost_at_frame == 2
+    with pytest.raises(ValueError, match="lost at frame 2"):
+        b.receive(STATUS, 0.2)
+
+
+@pytest.mark.parametrize("kind", sorted(EXPECTED))
+def test_probability_faults_are_deterministic_for_a_seed(kind):
+    def hits(seed: int) -> list[int]:
+        b = faulty(kind, "0.25", seed=seed)
+        for i in range(400):
+            reply(b, STATUS, float(i))
+        return hit_frames(b)
+
+    first = hits(7)
+    assert first == hits(7)
+    assert first != hits(8)
+    assert 50 <= len(first) <= 150  # 0.25 of 400 = 100; far outside this is a broken generator
+    b = faulty(kind, "0.25", seed=7)
+    for i in range(400):
+        data = reply(b, STATUS, float(i))
+        assert data == (EXPECTED[kind] if i + 1 in first else p.ram_reply(b"\x02\x00"))
+
+
+def test_probability_lose_happens_once_and_is_repeatable():
+    def lost_at(seed: int) -> int:
+        b = faulty("lose", "0.1", seed=seed)
+        for i in range(1000):
+            if reply(b, STATUS, float(i)) is None:
+                break
+        assert b.lost
+        return b.lost_at_frame
+
+    assert lost_at(3) == lost_at(3)
+    assert {lost_at(s) for s in range(5)} != {lost_at(0)}
+
+
+def test_each_kind_draws_on_its_own_so_adding_a_kind_changes_no_other():
+    plans = [{"nak": "0.3"}, {"nak": "0.3", "drop": "0.3"}, {"nak": "0.3", "junk": "0.5", "late": "0.1"}]
+    boards = [board(faults=FaultPlan.parse(plan, seed=1)) for plan in plans]
+    for b in boards:
+        for i in range(200):
+            reply(b, STATUS, float(i))
+    nak_hits = [[e.number for e in b.journal if "nak" in e.faults] for b in boards]
+    assert nak_hits[0] and nak_hits[0] == nak_hits[1] == nak_hits[2]
+
+
+def test_several_faults_on_one_frame_combine_in_the_documented_order():
+    b = board(faults=FaultPlan.parse({"junk": "1", "badsum": "1", "late": "1"}, late_s=0.1))
+    sent = b.receive(STATUS, 0.0)
+    good = p.ram_reply(b"\x02\x00")
+    assert sent.data == JUNK + good[:-1] + bytes((good[-1] ^ 0xFF,))
+    assert sent.start == pytest.approx(0.1)
+    b = board(faults=FaultPlan.parse({"drop": "1", "nak": "1"}))
+    assert reply(b, STATUS, 0.0) is None
+
+
+@pytest.mark.parametrize(
+    "text,expected",
+    [("5", Trigger(every=5)), ("1", Trigger(every=1)), ("0.2", Trigger(probability=0.2)), (".5", Trigger(probability=0.5))],
+)
+def test_trigger_spelling(text, expected):
+    assert Trigger.parse(text) == expected
+
+
+@pytest.mark.parametrize("text", ["0", "1.0", "0.0", "-1", "x", "", "1.5", "nan"])
+def test_trigger_spelling_refuses(text):
+    with pytest.raises(ValueError):
+        Trigger.parse(text)
+
+
+def test_unknown_fault_kind_is_refused():
+    with pytest.raises(ValueError, match="unknown fault kind 'melt'"):
+        FaultPlan({"melt": Trigger(every=1)})
+    assert set(FAULT_KINDS) == {"lose", "drop", "nak", "badsum", "short", "junk", "late"}
+
+
+# -- options -----------------------------------------------------------------------------------
+
+
+def test_query_options_parse():
+    o = parse_query("motion_s=0.5&drop=5&durations=3:2.5,7:1.2&reply_ms=0.3&seed=4&wire=0&baud=625000&late_ms=100")
+    assert o.motion_s == 0.5 and o.durations == {3: 2.5, 7: 1.2} and o.reply_s == pytest.approx(0.0003)
+    assert o.wire is False and o.baud == 625000
+    assert o.faults.triggers == {"drop": Trigger(every=5)} and o.faults.seed == 4 and o.faults.late_s == 0.1
+    b = o.board()
+    assert b.duration(3) == 2.5 and b.duration(0) == 0.5 and b.baud == 625000
+
+
+@pytest.mark.parametrize(
+    "query,message",
+    [
+        ("colour=red", "unknown option 'colour'"),
+        ("drop=0", "fault drop=0"),
+        ("drop=1.0", "strictly between 0 and 1"),
+        ("baud=9600", "115200, 625000, 1250000"),
+        ("motion_s=-1", "motion_s"),
+        ("durations=3", "SLOT:SECONDS"),
+        ("durations=200:1", "out of range"),
+        ("wire=maybe", "wire"),
+        ("seed=x", "seed"),
+        ("drop=1&drop=2", "given twice"),
+    ],
+)
+def test_bad_options_name_the_problem(query, message):
+    with pytest.raises(ValueError, match=message):
+        parse_query(query)
+
+
+def test_durations_spelling():
+    assert parse_durations("3:2.5, 7:1.2,") == {3: 2.5, 7: 1.2}
+    assert parse_options({}).durations == {}
+
+
+# -- the line: framing, settings, timing -------------------------------------------------------
+
+
+def test_framer_splits_contiguous_frames_and_drops_a_partial_after_a_gap():
+    f = Framer(gap_s=0.001)
+    units = []
+    for i, byte in enumerate(STATUS + STATUS[:4]):
+        units += f.push(byte, i * 0.0001, 0.0001)
+    assert [u.kind for u in units] == ["frame"] and units[0].data == STATUS
+    assert f.expire(0.0013) is None
+    partial = f.expire(0.0025)
+    assert partial.kind == "partial" and partial.data == STATUS[:4]
+
+
+def test_framer_a_late_byte_starts_a_new_frame():
+    f = Framer(gap_s=0.001)
+    for i, byte in enumerate(STATUS[:3]):
+        f.push(byte, i * 0.0001, 0.0001)
+    units = []
+    for i, byte in enumerate(STATUS):
+        units += f.push(byte, 1.0 + i * 0.0001, 0.0001)
+    assert [u.kind for u in units] == ["partial", "frame"]
+
+
+def test_line_delivers_the_reply_on_schedule_including_the_frames_own_wire_time():
+    b = SimBoard(reply_delay_s=0.0002)
+    line = Line(b)
+    line.send(STATUS, 10.0)
+    bt = 11 / 115200
+    arrived = 10.0 + len(STATUS) * bt
+    first_byte = arrived + 0.0002 + bt
+    assert b.journal[-1].at == pytest.approx(arrived)
+    assert line.available(first_byte - 1e-9) == 0
+    assert line.next_event() == pytest.approx(first_byte)
+    assert line.take(first_byte, 10) == b"\x05"
+    assert line.take(first_byte + 4 * bt, 10) == p.ram_reply(b"\x02\x00")[1:]
+
+
+def test_line_flush_drops_only_what_has_arrived():
+    b = board()
+    line = Line(b)
+    line.send(STATUS, 0.0)
+    assert line.discard(0.0) == 5 and line.pending() == 0
+
+
+def test_line_partial_frame_and_noise():
+    b = board()
+    line = Line(b, gap_s=0.01)
+    line.send(STATUS[:4], 0.0)
+    line.poll(0.005)
+    assert line.pending() == 0 and b.frames_received == 0
+    line.poll(0.02)
+    assert b.journal[-1].kind == "partial"
+    line.send(b"\x00\x0c\x99", 1.0)
+    line.poll(1.02)
+    assert line.take(2.0, 10) == p.nak(0x0C)
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [LineSettings(9600), LineSettings(115200, parity="N"), LineSettings(115200, bytesize=7), LineSettings(115200, stopbits=2)],
+)
+def test_line_with_wrong_settings_gets_no_reply(settings):
+    b = board()
+    line = Line(b)
+    line.settings = settings
+    line.send(STATUS, 0.0)
+    assert line.pending() == 0 and b.frames_received == 0
+    assert b.journal[-1].kind == "ignored" and "cannot be read" in b.journal[-1].note
+
+
+def test_right_settings_at_another_board_baud():
+    b = board(baud=625000)
+    line = Line(b)
+    line.settings = LineSettings(625000)
+    line.send(STATUS, 0.0)
+    assert line.take(1.0, 5) == p.ram_reply(b"\x02\x00")
+
+
+def test_transmission_helpers():
+    t = Transmission(b"ab", (1.0, 2.0))
+    assert (t.start, t.end) == (1.0, 2.0)
