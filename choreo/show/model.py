@@ -36,6 +36,38 @@ class Motion:
 
 
 @dataclass(frozen=True)
+class Step:
+    """A `play`, `wait` or `wait: done` step as written in the show, before repeats expand.
+
+    `load_show` resolves motion names to numbers and fills in defaults, so the planner never
+    needs the YAML or the `motions:` table.
+    """
+
+    path: str  # where it is in the file, e.g. `steps[3].steps[1]`
+    kind: StepKind
+    line: int = 0  # 1-based line and column of the step, for messages
+    column: int = 0
+    label: str | None = None
+    at: float | None = None  # the cue, if the step has one
+    motion: int | None = None  # PLAY: the slot
+    motion_name: str | None = None  # PLAY: the name it was played by, if any
+    seconds: float | None = None  # WAIT: how long; WAIT_DONE: the timeout
+
+
+@dataclass(frozen=True)
+class Repeat:
+    """`repeat: N` with nested `steps:`, as written; `compile_plan` expands it N times."""
+
+    path: str
+    count: int
+    steps: tuple[Step | Repeat, ...]
+    line: int = 0
+    column: int = 0
+    label: str | None = None  # names the first step of the first iteration
+    at: float | None = None  # cues the first step of the first iteration
+
+
+@dataclass(frozen=True)
 class Show:
     """A loaded, checked show file."""
 
@@ -45,6 +77,7 @@ class Show:
     robot: RobotSettings = RobotSettings()
     motions: dict[str, Motion] = field(default_factory=dict)
     on_abort: int | None = None  # motion number played when a run is aborted
+    steps: tuple[Step | Repeat, ...] = ()  # the steps as written; `compile_plan` flattens them
 
     def duration_of(self, motion: int) -> float | None:
         """The expected duration the show gives a motion number (by any of its names)."""

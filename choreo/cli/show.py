@@ -1,0 +1,117 @@
+"""`choreo validate SHOW...` and `choreo plan SHOW`: check show files, print the compiled timeline.
+
+Both exit 2 with one located line a problem when a file is bad (the CLI's `main` prints
+`ShowError`'s lines). The library is imported inside the handlers: `choreo --help` must not pay
+for YAML or jsonschema.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    validate = subparsers.add_parser(
+        "validate",
+        help="check show files",
+        description="Check show files against the format (YAML, schema, motion names, cues) and "
+        "print one line for each valid file: its steps, motions and estimated duration. "
+        "Every problem of every file is listed, one a line, with exit status 2.",
+    )
+    validate.add_argument("shows", nargs="+", metavar="SHOW", help="a show file (YAML)")
+    validate.set_defaults(handler=run_validate)
+
+    plan = subparsers.add_parser(
+        "plan",
+        help="print a show's compiled timeline",
+        description="Print the plan a show compiles to, repeats expanded: one line a step with its "
+        "index, path, label, planned start, what it does and the frames it sends (hex), then "
+        "the estimated total duration.",
+    )
+    plan.add_argument("show", metavar="SHOW", help="a show file (YAML)")
+    plan.set_defaults(handler=run_plan)
+
+
+def run_validate(args: argparse.Namespace) -> int:
+    from choreo.errors import ShowError
+    from choreo.show.load import load_show
+    from choreo.show.plan import compile_plan
+
+    problems = []
+    for path in args.shows:
+        try:
+            show = load_show(path)
+        except ShowError as exc:
+            problems.extend(exc.problems)
+            continue
+        print(summary_line(show, compile_plan(show)), flush=True)
+    if problems:
+        raise ShowError(problems)
+    return 0
+
+
+def summary_line(show, plan) -> str:  # type: ignore[no-untyped-def]  # model types: imported lazily
+    """`shows/x.yaml: ok, 26 steps, motions 0 home, 1 bow, estimated 22.0 s`."""
+    names: dict[int, str] = {}
+    for entry in show.motions.values():
+        names.setdefault(entry.number, entry.name)
+    motions = ", ".join(f"{n} {names[n]}" if n in names else str(n) for n in plan.motions_used())
+    late = _late_note(plan)
+    steps = f"{len(plan.steps)} step{'s' if len(plan.steps) != 1 else ''}"
+    return f"{show.path}: ok, {steps}, motions {motions}, estimated {_seconds(plan.estimated_s)}{late}"
+
+
+def run_plan(args: argparse.Namespace) -> int:
+    from choreo.show.plan import load_plan
+
+    show, plan = load_plan(args.show)
+    for line in plan_lines(show, plan):
+        print(line)
+    return 0
+
+
+def plan_lines(show, plan) -> list[str]:  # type: ignore[no-untyped-def]
+    """The plan as aligned text: a header, one line a step, the total."""
+    rows = [
+        (
+            str(step.index),
+            step.path,
+            step.label or "-",
+            _start(step),
+            step.describe(),
+            " | ".join(frame.hex for frame in step.frames) or "-",
+        )
+        for step in plan.steps
+    ]
+    header = ("#", "path", "label", "start", "step", "frames")
+    widths = [max(len(row[i]) for row in [header, *rows]) for i in range(5)]
+    lines = [f"{show.name} ({show.path})"]
+    for row in [header, *rows]:
+        cells = [row[0].rjust(widths[0])] + [row[i].ljust(widths[i]) for i in range(1, 5)] + [row[5]]
+        lines.append("  ".join(cells))
+    lines.append(f"estimated total {_seconds(plan.estimated_s)} ({len(plan.steps)} steps){_late_note(plan)}")
+    return lines
+
+
+def _start(step) -> str:  # type: ignore[no-untyped-def]
+    """`14.000 s`, with the cue when the step has one: `14.000 s (at 14)`, late ones flagged."""
+    text = f"{step.planned_s:.3f} s"
+    if step.at is None:
+        return text
+    if step.planned_s > step.at + 1e-9:
+        return f"{text} (at {step.at:g}, late {step.planned_s - step.at:.3f} s)"
+    return f"{text} (at {step.at:g})"
+
+
+def _late_note(plan) -> str:  # type: ignore[no-untyped-def]
+    from choreo.show.plan import late_cues
+
+    late = late_cues(plan)
+    if not late:
+        return ""
+    names = ", ".join(step.name for step in late[:3]) + (", ..." if len(late) > 3 else "")
+    return f"; {len(late)} cue{'s' if len(late) != 1 else ''} planned late ({names})"
+
+
+def _seconds(seconds: float) -> str:
+    return f"{seconds:.1f} s" if seconds < 60 else f"{seconds:.1f} s ({int(seconds // 60)} min {seconds % 60:04.1f} s)"
