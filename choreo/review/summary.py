@@ -1,0 +1,405 @@
+"""`choreo log summary`: did the show run as planned, where did the timing slip, what did the robot say.
+
+One linear pass over the log (see `reader`), in memory that does not grow with the log: counts,
+distributions kept as counters of microsecond-rounded values (reply latencies are bounded by the
+reply timeout, cue lateness by the show), per-slot motion statistics, and only the first few
+plays and log lines listed one by one. It is the command the benchmark holds to "at least as fast
+as bare iteration with the mcap reader", so the loop is one function with local names.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from choreo.review.reader import Cut, LogReader, decode
+
+TX_TOPIC = "/rcb4/tx"
+RX_TOPIC = "/rcb4/rx"
+STEP_TOPIC = "/choreo/step"
+LOG_TOPIC = "/choreo/log"
+
+LATE_MS = 1.0  # the runner reports a step starting later than this as late
+FRAME_KINDS = ("stop", "play", "restore", "status")
+REPLY_KINDS = ("ack", "nak", "status", "timeout", "invalid")
+LISTED_PLAYS = 30  # plays listed one by one; past this, per motion slot only
+LISTED_LOG_LINES = 10
+WARNING, ERROR = 3, 4  # foxglove.Log levels
+
+
+class Distribution:
+    """Values in milliseconds, kept as counts per microsecond: exact to 1 us, bounded in memory.
+
+    A log of a million replies has a few thousand distinct latencies, so quantiles over the
+    whole run cost a dict of that size, not a list of a million floats.
+    """
+
+    def __init__(self, counts: dict[int, int] | None = None) -> None:
+        self.counts: dict[int, int] = counts if counts is not None else {}
+
+    def add(self, ms: float) -> None:
+        key = round(ms * 1000)
+        self.counts[key] = self.counts.get(key, 0) + 1
+
+    def __len__(self) -> int:
+        return sum(self.counts.values())
+
+    @property
+    def min(self) -> float | None:
+        return min(self.counts) / 1000 if self.counts else None
+
+    @property
+    def max(self) -> float | None:
+        return max(self.counts) / 1000 if self.counts else None
+
+    def quantile(self, q: float) -> float | None:
+        """The nearest-rank quantile (the value below which a fraction q of the samples lie)."""
+        n = len(self)
+        if not n:
+            return None
+        rank = max(1, -(-q * n // 1))  # ceil(q * n), at least the first
+        seen = 0
+        for key in sorted(self.counts):
+            seen += self.counts[key]
+            if seen >= rank:
+                return key / 1000
+        return max(self.counts) / 1000
+
+    @property
+    def median(self) -> float | None:
+        return self.quantile(0.5)
+
+    @property
+    def p99(self) -> float | None:
+        return self.quantile(0.99)
+
+    def above(self, ms: float) -> int:
+        return sum(c for k, c in self.counts.items() if k > ms * 1000)
+
+
+@dataclass(frozen=True)
+class Play:
+    """A motion the board was told to play: from its ACKed restore to the status that saw it end."""
+
+    motion: int
+    step: int | None
+    label: str | None
+    start_s: float  # show clock: the restore frame that started it
+    duration_s: float | None  # to the first status query that found it not executing
+    ended_by: str  # "status" (measured), "stop" (the next play stopped it), "end of log"
+
+
+@dataclass
+class MotionStats:
+    """One motion slot over the run: how often it played and how long it really took."""
+
+    motion: int
+    plays: int = 0
+    durations: list[float] = field(default_factory=list)  # kept per slot up to a bound
+
+    def add(self, play: Play) -> None:
+        self.plays += 1
+        if play.duration_s is not None:
+            if len(self.durations) < 10_000:
+                self.durations.append(play.duration_s)
+
+    @property
+    def measured(self) -> int:
+        return len(self.durations)
+
+    @property
+    def median_s(self) -> float | None:
+        if not self.durations:
+            return None
+        ordered = sorted(self.durations)
+        return ordered[(len(ordered) - 1) // 2]
+
+
+@dataclass(frozen=True)
+class LogLine:
+    show_s: float
+    level: int
+    message: str
+
+
+@dataclass
+class Summary:
+    """Everything `choreo log summary` reports about one run log."""
+
+    path: Path
+    run: dict[str, str]
+    result: dict[str, str] | None
+    complete: bool
+    cut: Cut | None
+    messages: int = 0
+    duration_s: float | None = None  # show clock at the last message (or the result's, if closed)
+    steps_run: int = 0
+    steps_done: int = 0
+    steps_late: int = 0
+    steps_failed: int = 0
+    steps_aborted: int = 0
+    steps_unfinished: int = 0
+    frames: dict[str, int] = field(default_factory=dict)  # tx kind -> count
+    retries: int = 0  # frames sent again (attempt > 1)
+    replies: dict[str, int] = field(default_factory=dict)  # rx kind -> count
+    unanswered: int = 0  # frames with no reply in the log (a cut log)
+    latency: Distribution = field(default_factory=Distribution)  # ms, replies that came back
+    lateness: Distribution = field(default_factory=Distribution)  # ms, step starts
+    plays: list[Play] = field(default_factory=list)  # the first LISTED_PLAYS
+    plays_total: int = 0
+    motions: dict[int, MotionStats] = field(default_factory=dict)
+    warnings: int = 0
+    errors: int = 0
+    log_lines: list[LogLine] = field(default_factory=list)  # the first LISTED_LOG_LINES warnings/errors
+
+    @property
+    def frames_sent(self) -> int:
+        return sum(self.frames.values())
+
+    @property
+    def show_name(self) -> str:
+        return self.run.get("show") or self.path.stem
+
+
+def summarize(path: str | Path) -> Summary:
+    """Read a run log once and summarise it (LogError if it is not a log; a cut log is fine)."""
+    with LogReader(path) as reader:
+        return summarize_reader(reader)
+
+
+def show_zero_ns(reader: LogReader) -> int | None:
+    """The run's start as the metadata gives it (wall-clock ns), before a step says better."""
+    start = reader.run_info.get("start_ns")
+    return int(start) if start and start.isdigit() else None
+
+
+def summarize_reader(reader: LogReader) -> Summary:
+    summary = Summary(reader.path, dict(reader.run_info), None, False, None)
+    frames = dict.fromkeys(FRAME_KINDS, 0)
+    replies = dict.fromkeys(REPLY_KINDS, 0)
+    latency: dict[int, int] = {}
+    lateness: dict[int, int] = {}
+    steps_open: set[int] = set()
+    outcomes = {"ok": 0, "failed": 0, "timeout": 0, "aborted": 0}
+    zero = show_zero_ns(reader)
+    zero_from_step = False
+    retries = late = started = 0
+    pending_seq = -1  # the tx waiting for its rx
+    last_time = None
+    # motion tracking: play -> restore ACKed -> running until a status says not executing
+    armed: tuple[int, int | None, str | None] | None = None  # motion, step, label of the last CALL
+    restore_seq = -1
+    restore_ns = 0
+    running: tuple[int, int | None, str | None, int] | None = None  # motion, step, label, start ns
+    status_seq = -1
+    status_ns = 0
+    finished: list[tuple[int, int | None, str | None, int, int | None, str]] = []
+    count = 0
+
+    for topic, log_time, data in reader.messages():
+        count += 1
+        last_time = log_time
+        if topic == RX_TOPIC:
+            m = decode(data)
+            kind = m["kind"]
+            replies[kind] = replies.get(kind, 0) + 1
+            seq = m["seq"]
+            if seq == pending_seq:
+                pending_seq = -1
+            if kind == "status":
+                key = round(m["latency_ms"] * 1000)
+                latency[key] = latency.get(key, 0) + 1
+                if running is not None and seq == status_seq and m["executing"] is False:
+                    finished.append((*running, status_ns - running[3], "status"))
+                    running = None
+            elif kind == "ack":
+                key = round(m["latency_ms"] * 1000)
+                latency[key] = latency.get(key, 0) + 1
+                if seq == restore_seq and armed is not None:
+                    if running is not None:
+                        finished.append((*running, None, "stop"))
+                    running = (*armed, restore_ns)
+                    armed = None
+            elif kind == "nak":
+                key = round(m["latency_ms"] * 1000)
+                latency[key] = latency.get(key, 0) + 1
+        elif topic == TX_TOPIC:
+            m = decode(data)
+            kind = m["kind"]
+            frames[kind] = frames.get(kind, 0) + 1
+            if pending_seq != -1:
+                summary.unanswered += 1
+            pending_seq = m["seq"]
+            if m["attempt"] > 1:
+                retries += 1
+            if kind == "status":
+                status_seq = pending_seq
+                status_ns = log_time
+            elif kind == "restore":
+                restore_seq = pending_seq
+                restore_ns = log_time
+            elif kind == "play":
+                armed = (m["motion"], m["step"], m["label"])
+            elif kind == "stop" and running is not None:
+                finished.append((*running, None, "stop"))
+                running = None
+        elif topic == STEP_TOPIC:
+            m = decode(data)
+            index = m["index"]
+            if m["event"] == "start":
+                started += 1
+                steps_open.add(index)
+                late_ms = m["late_ms"]
+                key = round(late_ms * 1000)
+                lateness[key] = lateness.get(key, 0) + 1
+                if late_ms > LATE_MS:
+                    late += 1
+                if not zero_from_step:
+                    # the show clock's zero in wall-clock ns: this start's time minus its show time
+                    zero = log_time - round(m["actual_s"] * 1e9)
+                    zero_from_step = True
+            else:
+                steps_open.discard(index)
+                outcome = m["outcome"]
+                outcomes[outcome] = outcomes.get(outcome, 0) + 1
+        elif topic == LOG_TOPIC:
+            m = decode(data)
+            level = m.get("level", 0)
+            if level >= WARNING:
+                if level >= ERROR:
+                    summary.errors += 1
+                else:
+                    summary.warnings += 1
+                if len(summary.log_lines) < LISTED_LOG_LINES:
+                    summary.log_lines.append(LogLine(_show_s(log_time, zero), level, str(m.get("message", ""))))
+        if len(finished) > 256:
+            _add_plays(summary, finished, zero)
+
+    if pending_seq != -1:
+        summary.unanswered += 1
+    if running is not None:
+        finished.append((*running, None, "end of log"))
+    _add_plays(summary, finished, zero)
+    summary.messages = count
+    summary.cut = reader.cut
+    summary.result = reader.result
+    summary.complete = reader.complete
+    summary.frames = frames
+    summary.replies = replies
+    summary.retries = retries
+    summary.latency = Distribution(latency)
+    summary.lateness = Distribution(lateness)
+    summary.steps_run = started
+    summary.steps_late = late
+    summary.steps_done = outcomes.get("ok", 0)
+    summary.steps_failed = outcomes.get("failed", 0) + outcomes.get("timeout", 0)
+    summary.steps_aborted = outcomes.get("aborted", 0)
+    summary.steps_unfinished = len(steps_open)
+    result_s = (reader.result or {}).get("show_s")
+    if result_s:
+        summary.duration_s = float(result_s)
+    elif last_time is not None and zero is not None:
+        summary.duration_s = _show_s(last_time, zero)
+    return summary
+
+
+def _show_s(log_time: int, zero: int | None) -> float:
+    return (log_time - zero) / 1e9 if zero is not None else 0.0
+
+
+def _add_plays(summary: Summary, finished: list, zero: int | None) -> None:
+    """Move finished plays into the summary's per-slot statistics (and the listed first few)."""
+    for motion, step, label, start_ns, duration_ns, ended_by in finished:
+        play = Play(motion, step, label, _show_s(start_ns, zero),
+                    duration_ns / 1e9 if duration_ns is not None else None, ended_by)
+        summary.plays_total += 1
+        if len(summary.plays) < LISTED_PLAYS:
+            summary.plays.append(play)
+        summary.motions.setdefault(motion, MotionStats(motion)).add(play)
+    finished.clear()
+
+
+# -- text --------------------------------------------------------------------------------------
+
+
+def _ms(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f} ms"
+
+
+def render(summary: Summary) -> Iterable[str]:
+    """The summary as the lines `choreo log summary` prints."""
+    run = summary.run
+    if summary.complete:
+        state = "complete"
+    elif summary.cut is not None:
+        state = f"UNFINISHED: {summary.cut}"
+    elif summary.result is None:
+        state = "UNFINISHED: the run recorded no result (it did not close its log)"
+    else:
+        state = "UNFINISHED: no MCAP footer"
+    yield f"log       {summary.path}  ({state})"
+    sha = run.get("show_sha256", "")
+    where = f" ({run['show_path']}" + (f", sha256 {sha[:12]}" if sha else "") + ")" if run.get("show_path") else ""
+    yield f"show      {summary.show_name}{where}"
+    if run:
+        yield (f"run       started {run.get('start_time', '?')} on {run.get('port', '?')} at "
+               f"{run.get('baud', '?')} baud (choreo {run.get('version', '?')}, host {run.get('host', '?')})")
+    else:
+        yield "run       no `choreo` metadata: not a log written by choreo run"
+    duration = f"{summary.duration_s:.3f} s" if summary.duration_s is not None else "-"
+    if summary.result:
+        outcome = summary.result.get("outcome", "?")
+        error = summary.result.get("error")
+        code = summary.result.get("exit_code")
+        yield f"outcome   {outcome}" + (f" (exit {code})" if code else "") + f", {duration} on the show clock"
+        if error:
+            yield f"          {error}"
+    else:
+        yield f"outcome   unknown (no result recorded): {duration} on the show clock up to the last message"
+    steps = (f"steps     {summary.steps_run} run: {summary.steps_done} done, {summary.steps_late} late, "
+             f"{summary.steps_failed} failed")
+    if summary.steps_aborted:
+        steps += f", {summary.steps_aborted} aborted"
+    if summary.steps_unfinished:
+        steps += f", {summary.steps_unfinished} unfinished"
+    yield steps
+    kinds = ", ".join(f"{k} {n}" for k, n in summary.frames.items() if n or k in FRAME_KINDS)
+    yield f"frames    {summary.frames_sent} sent ({kinds}); {summary.retries} retries"
+    replies = ", ".join(f"{k.upper() if k in ('ack', 'nak') else k} {n}" for k, n in summary.replies.items())
+    unanswered = f"; {summary.unanswered} unanswered (log cut)" if summary.unanswered else ""
+    yield f"replies   {replies}{unanswered}"
+    lat = summary.latency
+    yield (f"latency   min {_ms(lat.min)}, median {_ms(lat.median)}, p99 {_ms(lat.p99)}, "
+           f"max {_ms(lat.max)} ({len(lat)} replies)")
+    lateness = summary.lateness
+    yield (f"cues      lateness median {_ms(lateness.median)}, p99 {_ms(lateness.p99)}, max "
+           f"{_ms(lateness.max)} ({len(lateness)} step starts, {lateness.above(LATE_MS)} over {LATE_MS:g} ms)")
+    yield from _render_motions(summary)
+    yield f"log lines {summary.warnings} warnings, {summary.errors} errors"
+    for line in summary.log_lines:
+        word = "error  " if line.level >= ERROR else "warning"
+        yield f"  {line.show_s:9.3f} s  {word} {line.message}"
+    if summary.warnings + summary.errors > len(summary.log_lines):
+        yield f"  ... and {summary.warnings + summary.errors - len(summary.log_lines)} more (choreo log frames)"
+    yield f"messages  {summary.messages}"
+
+
+def _render_motions(summary: Summary) -> Iterable[str]:
+    if not summary.plays_total:
+        yield "motions   none played"
+        return
+    yield f"motions   {summary.plays_total} played (measured: restore to the first status not executing)"
+    for stats in sorted(summary.motions.values(), key=lambda s: s.motion):
+        if stats.durations:
+            spread = (f"median {stats.median_s:.3f} s (min {min(stats.durations):.3f}, "
+                      f"max {max(stats.durations):.3f})")
+        else:
+            spread = "not measured (no status query saw it end)"
+        yield f"  motion {stats.motion:3d}  x{stats.plays:<5d} {spread}"
+    if summary.plays_total <= LISTED_PLAYS:
+        for play in summary.plays:
+            where = f"step {play.step}" + (f" '{play.label}'" if play.label else "") if play.step is not None else "abort"
+            took = (f"{play.duration_s:.3f} s" if play.duration_s is not None
+                    else f"not measured (ended by {play.ended_by})")
+            yield f"  {play.start_s:9.3f} s  motion {play.motion:3d}  {where}: {took}"
