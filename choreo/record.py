@@ -231,6 +231,10 @@ def _create_exclusive(path: Path) -> IO[bytes]:
     """Create the log file, refusing to overwrite one that exists."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a file where a folder should be is a FileExistsError too
+        raise LogError(f"log {path}: cannot create its folder {path.parent}: "
+                       f"{exc.strerror or exc}") from None
+    try:
         return open(path, "xb")
     except FileExistsError:
         raise LogError(f"log {path}: already exists: choreo never overwrites a log; "

@@ -46,6 +46,7 @@ class StepEvent:
             "label": step.label,
             "kind": step.kind.value,
             "motion": step.motion,
+            "cue": step.at,
             "event": self.event,
             "planned_s": round(self.planned_s, 6),
             "estimated_s": round(step.planned_s, 6),
@@ -71,6 +72,11 @@ class RunResult:
     def metadata(self) -> dict[str, str]:
         return {"outcome": self.outcome, "steps_run": str(self.steps_run),
                 "late_steps": str(self.late_steps), "show_s": f"{self.show_s:.6f}"}
+
+
+def step_ref(step: PlannedStep) -> str:
+    """How messages name a step: `step 4 'spin'` (the index `choreo plan` and `--from` use)."""
+    return f"step {step.index}" + (f" '{step.label}'" if step.label else "")
 
 
 class StopRequest:
@@ -136,13 +142,18 @@ class Runner:
         if not self.clock.sleep_until(self._zero + due, self.stop):
             raise Interrupted(self.stop.reason)
         started = self.show_time()
-        late_ms = (started - due) * 1e3
-        self._emit(StepEvent(step, "start", due, started, self._now_ns(), late_ms))
+        # A cue is measured against its own time: one the show has already overrun (a motion
+        # ran long before it) starts at once and counts as late by the overrun.
+        planned = step.at if step.at is not None else due
+        late_ms = (started - planned) * 1e3
+        self._emit(StepEvent(step, "start", planned, started, self._now_ns(), late_ms))
         self._run += 1
-        if late_ms > LATE_MS:
+        if late_ms > LATE_MS and step.kind is StepKind.PLAY:
+            # Only a play's lateness shows on stage; a wait after a play always starts once the
+            # play's frames are answered, and its end stays on the absolute schedule anyway.
             self._late += 1
             cue = f" (cue at {step.at:g} s)" if step.at is not None else ""
-            self._log(WARNING, f"step {step.index} {step.name}{cue} started {late_ms:.1f} ms late")
+            self._log(WARNING, f"{step_ref(step)}{cue} started {late_ms:.1f} ms late")
         outcome = "failed"
         try:
             end = self._do(step, due)
@@ -158,7 +169,7 @@ class Runner:
             self._log(ERROR, str(exc))
             raise
         finally:
-            self._emit(StepEvent(step, "end", due, self.show_time(), self._now_ns(), 0.0, outcome))
+            self._emit(StepEvent(step, "end", planned, self.show_time(), self._now_ns(), 0.0, outcome))
 
     def _do(self, step: PlannedStep, due: float) -> float:
         """Carry out a step; returns when the next step is due on the show clock."""
@@ -193,7 +204,7 @@ class Runner:
             if due - started > timeout:
                 motion = step.motion if step.motion is not None else self._last_motion
                 raise WaitTimeout(
-                    f"port {self.link.name}: step {step.index} {step.name}: motion {motion} still "
+                    f"port {self.link.name}: {step_ref(step)}: motion {motion} still "
                     f"executing after {timeout:g} s (wait: done timeout): give the step a longer "
                     f"`timeout:`, or check that the motion ends")
 

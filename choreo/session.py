@@ -63,7 +63,7 @@ class Session:
         robot = show.robot
         start = _start_index(plan, request.from_step)
         if request.port:
-            port, source = request.port, "command line"
+            port, source = with_show_durations(request.port, show, plan), "command line"
         elif robot.port:
             port, source = robot.port, "show"
         else:
@@ -150,6 +150,17 @@ def simulator_url(show: Show, plan: Plan) -> str:
         return "sim://"
     spec = ",".join(f"{m}:{d:g}" for m, d in sorted(durations.items()))
     return "sim://?" + urlencode({"durations": spec}, safe=":,")
+
+
+def with_show_durations(url: str, show: Show, plan: Plan) -> str:
+    """`--port sim://?drop=5` still runs the show's motions for their expected durations."""
+    if not url.lower().startswith("sim://") or "durations=" in url or "motion_s=" in url:
+        return url
+    ours = simulator_url(show, plan)
+    if "?" not in ours:
+        return url
+    query = ours.split("?", 1)[1]
+    return f"{url}&{query}" if "?" in url else f"{url.rstrip('/')}?{query}"
 
 
 def _start_index(plan: Plan, ref: str | None) -> int:

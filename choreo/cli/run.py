@@ -98,7 +98,8 @@ class Progress:
     """The run on screen: a live line on a terminal, a plain line a step otherwise."""
 
     def __init__(self, session, out: TextIO, *, live: bool, quiet: bool) -> None:
-        self.total = len(session.plan.steps)
+        self.first = session.start
+        self.total = len(session.plan.steps) - session.start
         self.estimated = session.plan.estimated_s
         self.out = out
         self.live = live
@@ -109,17 +110,17 @@ class Progress:
         if self.quiet or event.event != "start":
             return
         step = event.step
-        label = f" {step.label}" if step.label else ""
-        text = (f"step {step.index + 1}/{self.total}{label}: {step.describe()}  "
-                f"{event.actual_s:6.2f}/{self.estimated:.1f} s")
+        label = f" '{step.label}'" if step.label else ""
+        where = f"step {step.index}{label} ({step.index - self.first + 1}/{self.total})"
+        clock = f"{event.actual_s:.2f}/{self.estimated:.1f} s"
         if self.live:
-            done = int(20 * (step.index + 1) / max(self.total, 1))
-            line = f"{text} [{'#' * done}{'-' * (20 - done)}]"
+            done = int(20 * (step.index - self.first + 1) / max(self.total, 1))
+            line = f"{where}: {step.describe()}  {clock} [{'#' * done}{'-' * (20 - done)}]"
             self.out.write("\r" + line.ljust(self._width))
             self._width = len(line)
             self.out.flush()
         else:
-            print(f"[{event.actual_s:8.3f} s] {text.rsplit('  ', 1)[0]}", file=self.out)
+            print(f"[{event.actual_s:8.3f} s] {where}: {step.describe()}", file=self.out)
 
     def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
         if level < 3 or (self.quiet and level < 4):

@@ -1,0 +1,127 @@
+"""Test helpers for `choreo run`: writing small shows, running the CLI, reading logs back.
+
+Logs are read with the mcap library's own readers (not choreo's), so the tests check the file
+that Foxglove and the mcap tools will see.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from mcap.reader import NonSeekingReader, make_reader
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def write_show(directory: Path, body: str, name: str = "show.yaml") -> Path:
+    path = directory / name
+    path.write_text(textwrap.dedent(body).lstrip())
+    return path
+
+
+@dataclass
+class RunLog:
+    """A log read back: messages by topic (decoded JSON, with log_time), metadata, attachments."""
+
+    messages: dict[str, list[dict]] = field(default_factory=dict)
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    attachments: list = field(default_factory=list)
+    schemas: dict[str, str] = field(default_factory=dict)  # topic -> schema name
+
+    def topic(self, name: str) -> list[dict]:
+        return self.messages.get(name, [])
+
+    @property
+    def tx(self) -> list[dict]:
+        return self.topic("/rcb4/tx")
+
+    @property
+    def rx(self) -> list[dict]:
+        return self.topic("/rcb4/rx")
+
+    @property
+    def steps(self) -> list[dict]:
+        return self.topic("/choreo/step")
+
+    @property
+    def logs(self) -> list[dict]:
+        return self.topic("/choreo/log")
+
+    def tx_hex(self) -> list[str]:
+        return [m["hex"] for m in self.tx]
+
+
+def read_log(path: Path) -> RunLog:
+    """A complete log, through the indexed (seeking) reader."""
+    log = RunLog()
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            decoded = json.loads(message.data)
+            decoded["_log_time"] = message.log_time
+            log.messages.setdefault(channel.topic, []).append(decoded)
+            log.schemas[channel.topic] = schema.name
+        for record in reader.iter_metadata():
+            log.metadata[record.name] = dict(record.metadata)
+        log.attachments = list(reader.iter_attachments())
+    return log
+
+
+def read_log_linear(path: Path) -> tuple[RunLog, str | None]:
+    """Whatever a linear reader gets out of a possibly cut file, and the error that stopped it."""
+    log = RunLog()
+    error = None
+    with open(path, "rb") as f:
+        try:
+            for schema, channel, message in NonSeekingReader(f).iter_messages(log_time_order=False):
+                decoded = json.loads(message.data)
+                decoded["_log_time"] = message.log_time
+                log.messages.setdefault(channel.topic, []).append(decoded)
+        except Exception as exc:  # the cut: a truncated record at the end
+            error = f"{type(exc).__name__}: {exc}"
+    return log, error
+
+
+def choreo(*args: str, cwd: Path | None = None, timeout: float = 60) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "choreo", *args], capture_output=True, text=True,
+                          cwd=cwd or REPO, timeout=timeout, env=_env())
+
+
+def start_choreo(*args: str, cwd: Path | None = None) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "choreo", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=cwd or REPO, env=_env())
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    return env
+
+
+def wait_for(predicate, timeout: float = 20.0, every: float = 0.05) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(every)
+    return False
+
+
+def log_has_steps(path: Path, count: int) -> bool:
+    """True once a linear reader sees `count` step messages in a running show's log."""
+    if not path.exists():
+        return False
+    log, _ = read_log_linear(path)
+    return len(log.steps) >= count
+
+
+def interrupt(process: subprocess.Popen, signum: int = signal.SIGINT) -> None:
+    process.send_signal(signum)

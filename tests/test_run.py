@@ -1,0 +1,431 @@
+"""`choreo run`: the exact wire sequence, polling, cues, faults, stops and the log, end to end.
+
+Shows run against the simulator (in-process `sim://` and `choreo sim` on a pseudo-terminal with
+real pyserial); the logs are read back with the mcap library's own readers.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+from pathlib import Path
+
+import pytest
+import serial
+
+from choreo import protocol as p
+from choreo.cli import main
+from choreo.session import RunRequest, Session
+from runlog import choreo, log_has_steps, read_log, read_log_linear, start_choreo, wait_for, write_show
+
+STOP = p.stop_frame().hex
+RESTORE = p.restore_frame().hex
+STATUS = p.status_frame().hex
+
+WIRE_SHOW = """
+    version: 1
+    name: wire
+    motions:
+      wave: {number: 3, duration: 0.2}
+      bow: {number: 7, duration: 0.1}
+    steps:
+      - play: wave
+        label: first
+      - wait: done
+      - play: 7
+      - wait: 0.1
+      - play: bow
+        label: last
+"""
+
+
+def run_session(show: Path, **kwargs) -> tuple[Session, int]:
+    session = Session.prepare(RunRequest(str(show), **kwargs))
+    with session:
+        session.run()
+    return session, 0
+
+
+def test_exact_wire_sequence_matches_the_board_and_the_log(tmp_path):
+    show = write_show(tmp_path, WIRE_SHOW)
+    log_path = tmp_path / "wire.mcap"
+    session, _ = run_session(show, log_path=str(log_path))
+    board_frames = [e.data.hex(" ") for e in session.link.port.board.journal if e.kind == "frame"]
+    log = read_log(log_path)
+
+    polls = log.tx_hex()[3:-6]
+    assert polls and set(polls) == {STATUS}
+    expected = ([STOP, p.play_frame(3).hex, RESTORE] + polls
+                + [STOP, p.play_frame(7).hex, RESTORE, STOP, p.play_frame(7).hex, RESTORE])
+    assert log.tx_hex() == expected
+    assert board_frames == expected  # the log holds exactly what reached the board
+
+
+def test_wait_done_polls_50_ms_apart_until_not_executing(tmp_path):
+    show = write_show(tmp_path, WIRE_SHOW)
+    log_path = tmp_path / "poll.mcap"
+    run_session(show, log_path=str(log_path))
+    log = read_log(log_path)
+    rx_by_seq = {m["seq"]: m for m in log.rx}
+    restore = next(m for m in log.tx if m["kind"] == "restore")
+    polls = [m for m in log.tx if m["kind"] == "status"]
+    assert len(polls) >= 3  # a 0.2 s motion is seen executing at least twice
+    first_gap = polls[0]["_log_time"] - rx_by_seq[restore["seq"]]["_log_time"]
+    assert first_gap >= 50_000_000
+    gaps = [b["_log_time"] - a["_log_time"] for a, b in zip(polls, polls[1:])]
+    assert min(gaps) >= 50_000_000  # never faster than the board refreshes its status
+    verdicts = [rx_by_seq[m["seq"]]["executing"] for m in polls]
+    assert verdicts[-1] is False and all(verdicts[:-1])
+
+
+def test_times_are_absolute_and_wait_done_reanchors(tmp_path):
+    show = write_show(tmp_path, """
+        version: 1
+        name: clock
+        motions:
+          a: {number: 1, duration: 0.15}
+        steps:
+          - play: 2
+          - wait: 0.1
+          - play: 2
+          - wait: 0.1
+          - play: a
+          - wait: done
+          - play: 4
+    """)
+    log_path = tmp_path / "clock.mcap"
+    run_session(show, log_path=str(log_path))
+    starts = [m for m in read_log(log_path).steps if m["event"] == "start"]
+    assert [m["planned_s"] for m in starts[:5]] == [0.0, 0.0, 0.1, 0.1, 0.2]
+    assert all(m["actual_s"] >= m["planned_s"] for m in starts)
+    done_end = next(m for m in read_log(log_path).steps if m["kind"] == "wait_done" and m["event"] == "end")
+    assert starts[6]["planned_s"] == pytest.approx(done_end["actual_s"], abs=0.002)
+
+
+def test_cue_never_starts_early_and_an_overrun_cue_is_reported_late(tmp_path):
+    show = write_show(tmp_path, """
+        version: 1
+        name: cues
+        steps:
+          - play: 1
+          - play: 2
+            at: 0.3
+            label: cue
+          - wait: 0.2
+          - play: 5
+            at: 0.4
+            label: overrun
+    """)
+    log_path = tmp_path / "cue.mcap"
+    assert main(["run", str(show), "--log", str(log_path), "--quiet"]) == 0
+    log = read_log(log_path)
+    starts = {m["label"]: m for m in log.steps if m["event"] == "start"}
+    assert starts["cue"]["planned_s"] == 0.3 and starts["cue"]["actual_s"] >= 0.3
+    assert starts["cue"]["cue"] == 0.3
+    assert starts["cue"]["late_ms"] < 100  # generous: timing accuracy is measured in bench/
+    first = next(m for m in log.tx if m["label"] == "cue")
+    zero = log.steps[0]["_log_time"]
+    assert first["_log_time"] - zero >= 300_000_000  # the cue's first byte, not before its time
+    overrun = starts["overrun"]  # due at 0.5 s (0.3 + 0.2), cued at 0.4: starts at once, 100 ms late
+    assert overrun["planned_s"] == 0.4 and overrun["actual_s"] >= 0.5
+    assert overrun["late_ms"] >= 100
+    warnings = [m["message"] for m in log.logs if m["level"] == 3]
+    assert any("step 3 'overrun' (cue at 0.4 s) started" in w and "ms late" in w for w in warnings)
+
+
+def test_full_log_contents(tmp_path):
+    show = write_show(tmp_path, WIRE_SHOW)
+    log_path = tmp_path / "full.mcap"
+    assert main(["run", str(show), "--log", str(log_path), "--quiet"]) == 0
+    log = read_log(log_path)
+    assert log.schemas == {"/rcb4/tx": "choreo.Tx", "/rcb4/rx": "choreo.Rx",
+                           "/choreo/step": "choreo.Step"}  # no warnings: no /choreo/log message
+    assert [m["seq"] for m in log.tx] == list(range(1, len(log.tx) + 1))
+    assert [m["seq"] for m in log.rx] == [m["seq"] for m in log.tx]  # one rx for every tx
+    assert all(m["kind"] in ("ack", "status") and m["latency_ms"] > 0 for m in log.rx)
+    assert {m["kind"] for m in log.tx} == {"stop", "play", "restore", "status"}
+    assert [m["motion"] for m in log.tx if m["kind"] == "play"] == [3, 7, 7]
+    assert all(m["attempt"] == 1 for m in log.tx)
+    assert [m["step"] for m in log.tx[:3]] == [0, 0, 0] and log.tx[0]["label"] == "first"
+    for index in range(5):
+        events = [m["event"] for m in log.steps if m["index"] == index]
+        assert events == ["start", "end"]
+    assert all(m["outcome"] == "ok" for m in log.steps if m["event"] == "end")
+    times = [m["_log_time"] for m in log.tx]
+    assert times == sorted(times)
+    meta = log.metadata["choreo"]
+    assert meta["show"] == "wire" and meta["baud"] == "115200" and meta["port"].startswith("sim://")
+    assert len(meta["show_sha256"]) == 64 and meta["start_time"].endswith("Z")
+    assert {"version", "show_path", "host", "python"} <= set(meta)
+    assert log.metadata["choreo.result"]["outcome"] == "done"
+    (attachment,) = log.attachments
+    assert attachment.media_type == "application/yaml" and attachment.data == show.read_bytes()
+
+
+def test_default_port_is_the_simulator_and_says_so(tmp_path, capsys):
+    show = write_show(tmp_path, WIRE_SHOW)
+    assert main(["run", str(show), "--no-log"]) == 0
+    err = capsys.readouterr().err
+    assert "built-in simulator" in err and "sim://?durations=3:0.2,7:0.1" in err
+    assert "log: off" in err
+
+
+def test_from_label_starts_there_on_that_steps_clock(tmp_path):
+    show = write_show(tmp_path, WIRE_SHOW)
+    log_path = tmp_path / "from.mcap"
+    assert main(["run", str(show), "--from", "last", "--log", str(log_path), "-q"]) == 0
+    log = read_log(log_path)
+    assert log.tx_hex() == [STOP, p.play_frame(7).hex, RESTORE]
+    assert main(["run", str(show), "--from", "nowhere", "--no-log", "-q"]) == 2
+
+
+# -- faults ---------------------------------------------------------------------------------
+
+FAULT_SHOW = """
+    version: 1
+    name: faults
+    steps:
+      - play: 3
+        label: wave
+      - wait: done
+        timeout: 2
+"""
+
+
+@pytest.mark.parametrize(
+    "query,words",
+    [
+        ("drop=1", ["no reply to 'play 3' (stop frame) after 3 tries", "check baud (115200), even parity"]),
+        ("nak=1", ["NAK (04 00 15 19) to 'play 3' (stop frame) after 3 tries"]),
+        ("badsum=1", ["invalid reply", "bad checksum", "'play 3'"]),
+        ("junk=1", ["invalid reply", "junk"]),
+        ("short=1", ["'play 3'"]),
+        ("late=1&late_ms=400", ["no reply to 'play 3' (stop frame) after 3 tries"]),
+        ("lose=2", ["lost", "step 0 'wave'", "check the cable"]),
+    ],
+)
+def test_fault_that_persists_is_exit_3_with_one_clear_line(tmp_path, capsys, query, words):
+    show = write_show(tmp_path, FAULT_SHOW)
+    log_path = tmp_path / "fault.mcap"
+    code = main(["run", str(show), "--port", f"sim://?{query}", "--timeout", "0.1",
+                 "--log", str(log_path), "-q"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 3
+    assert len(err) == 1 and err[0].startswith("port sim://")
+    for word in words:
+        assert word in err[0]
+    log = read_log(log_path)  # complete and readable despite the fault
+    assert [m["seq"] for m in log.rx] == [m["seq"] for m in log.tx]
+    assert log.metadata["choreo.result"]["outcome"] == "failed"
+    assert log.metadata["choreo.result"]["exit_code"] == "3"
+    assert any(m["level"] == 4 for m in log.logs)  # the error, in foxglove.Log shape
+    assert log.steps[-1]["outcome"] == "failed"
+
+
+RETRY_SHOW = """
+    version: 1
+    name: retries
+    motions:
+      wave: {number: 3, duration: 0.4}
+    steps:
+      - play: 2
+      - wait: 0.05
+      - play: wave
+      - wait: done
+        timeout: 2
+"""
+
+
+# Every 5th frame: the 5th is the second play's CALL (retried from its stop frame), later ones
+# hit status polls (retried alone).
+@pytest.mark.parametrize("query", ["drop=5", "nak=5", "badsum=5", "junk=5", "short=5", "late=5&late_ms=150"])
+def test_transient_fault_is_retried_and_logged(tmp_path, query):
+    show = write_show(tmp_path, RETRY_SHOW)
+    log_path = tmp_path / "retry.mcap"
+    assert main(["run", str(show), "--port", f"sim://?{query}", "--timeout", "0.1",
+                 "--log", str(log_path), "-q"]) == 0
+    log = read_log(log_path)
+    bad = [m for m in log.rx if m["kind"] not in ("ack", "status")]
+    assert bad and bad[0]["seq"] == 5, "the fault shows in the log"
+    assert [m["kind"] for m in log.tx[3:8]] == ["stop", "play", "stop", "play", "restore"]
+    assert [m["attempt"] for m in log.tx[3:8]] == [1, 1, 2, 2, 2]
+    assert any(m["level"] == 3 for m in log.logs)  # each failed try is a warning
+    # the play sequence was retried from its stop frame, never a CALL alone
+    for m in log.tx:
+        if m["kind"] == "play" and m["attempt"] > 1:
+            previous = log.tx[m["seq"] - 2]
+            assert previous["kind"] == "stop" and previous["attempt"] == m["attempt"]
+    assert log.metadata["choreo.result"]["outcome"] == "done"
+
+
+def test_missing_port_is_exit_3_before_any_frame(tmp_path, capsys):
+    show = write_show(tmp_path, FAULT_SHOW)
+    log_path = tmp_path / "missing.mcap"
+    assert main(["run", str(show), "--port", "/dev/choreo-no-such-port", "--log", str(log_path)]) == 3
+    err = capsys.readouterr().err
+    assert "port /dev/choreo-no-such-port: cannot open" in err and "No such file" in err
+    log = read_log(log_path)
+    assert log.tx == [] and "cannot open" in log.logs[0]["message"]
+
+
+def test_wait_done_timeout_is_exit_3(tmp_path, capsys):
+    show = write_show(tmp_path, """
+        version: 1
+        name: slow
+        motions:
+          long: {number: 9, duration: 5}
+        steps:
+          - play: long
+          - wait: done
+            timeout: 0.3
+    """)
+    assert main(["run", str(show), "--no-log", "-q"]) == 3
+    err = capsys.readouterr().err
+    assert "motion 9 still executing after 0.3 s" in err
+
+
+def test_bad_show_is_exit_2_and_nothing_is_sent_or_logged(tmp_path):
+    show = write_show(tmp_path, "version: 1\nsteps:\n  - play: 140\n")
+    done = choreo("run", str(show), "--port", "/dev/choreo-no-such-port", cwd=tmp_path)
+    assert done.returncode == 2
+    assert "3:11: steps[0].play: motion 140 is out of range 0..119" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert not (tmp_path / "runs").exists()
+
+
+def test_log_is_never_overwritten(tmp_path, capsys):
+    show = write_show(tmp_path, WIRE_SHOW)
+    log_path = tmp_path / "kept.mcap"
+    log_path.write_bytes(b"an earlier run")
+    assert main(["run", str(show), "--log", str(log_path)]) == 2
+    assert "already exists" in capsys.readouterr().err
+    assert log_path.read_bytes() == b"an earlier run"
+
+
+def test_unwritable_log_is_exit_2_before_the_robot_moves(tmp_path, capsys):
+    show = write_show(tmp_path, WIRE_SHOW)
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    assert main(["run", str(show), "--port", "/dev/choreo-no-such-port",
+                 "--log", str(blocker / "x.mcap")]) == 2
+    assert "cannot create" in capsys.readouterr().err  # the port was never tried
+
+
+# -- stopping -------------------------------------------------------------------------------
+
+STOP_SHOW = """
+    version: 1
+    name: stoppable
+    motions:
+      home: {number: 0, duration: 0.1}
+      bow: {number: 1, duration: 0.1}
+    on_abort: home
+    steps:
+      - play: bow
+      - wait: done
+      - wait: 20
+      - play: 5
+"""
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_signal_stops_plays_abort_motion_and_closes_the_log(tmp_path, signum):
+    show = write_show(tmp_path, STOP_SHOW)
+    log_path = tmp_path / "stop.mcap"
+    process = start_choreo("run", str(show), "--log", str(log_path))
+    assert wait_for(lambda: log_has_steps(log_path, 5))  # in the 20 s wait
+    process.send_signal(signum)
+    _, err = process.communicate(timeout=10)
+    assert process.returncode == 130, err
+    log = read_log(log_path)
+    plays = [m for m in log.tx if m["kind"] == "play"]
+    assert [m["motion"] for m in plays] == [1, 0]  # motion 5 never sent; home played on abort
+    assert plays[-1]["label"] == "on_abort" and plays[-1]["step"] is None
+    assert log.metadata["choreo.result"]["outcome"] == "aborted"
+    assert log.steps[-1]["outcome"] == "aborted"
+    assert "aborted" in err
+
+
+def test_second_ctrl_c_leaves_at_once_with_the_log_closed(tmp_path):
+    show = write_show(tmp_path, STOP_SHOW.replace("duration: 0.1}\n    on_abort", "duration: 0.1}\n    on_abort"))
+    log_path = tmp_path / "twice.mcap"
+    process = start_choreo("run", str(show), "--log", str(log_path))
+    assert wait_for(lambda: log_has_steps(log_path, 5))
+    process.send_signal(signal.SIGINT)
+    process.send_signal(signal.SIGINT)
+    process.communicate(timeout=10)
+    assert process.returncode == 130
+    log = read_log(log_path)  # the summary and footer were written: the indexed reader works
+    assert log.metadata["choreo.result"]["outcome"] in ("aborted", "interrupted")
+
+
+def test_sigkilled_run_leaves_a_log_a_linear_reader_reads(tmp_path):
+    show = write_show(tmp_path, STOP_SHOW)
+    log_path = tmp_path / "killed.mcap"
+    process = start_choreo("run", str(show), "--log", str(log_path))
+    assert wait_for(lambda: log_has_steps(log_path, 5))
+    process.kill()
+    process.communicate(timeout=10)
+    log, _ = read_log_linear(log_path)
+    assert log.tx_hex()[:3] == [STOP, p.play_frame(1).hex, RESTORE]
+    assert len(log.rx) == len(log.tx)
+    assert [m["event"] for m in log.steps[:2]] == ["start", "end"]
+    with pytest.raises(Exception):
+        read_log(log_path)  # no footer: only a linear reader gets at it
+
+
+# -- on a pseudo-terminal, with real pyserial ---------------------------------------------------
+
+@pytest.fixture
+def sim_pty():
+    process = start_choreo("sim", "--durations", "3:0.2,7:0.1")
+    path = process.stdout.readline().strip()
+    assert path.startswith("/dev/")
+    yield path
+    process.send_signal(signal.SIGTERM)
+    process.communicate(timeout=10)
+
+
+def test_run_over_a_pseudo_terminal(tmp_path, sim_pty):
+    show = write_show(tmp_path, WIRE_SHOW)
+    log_path = tmp_path / "pty.mcap"
+    assert main(["run", str(show), "--port", sim_pty, "--log", str(log_path), "-q"]) == 0
+    log = read_log(log_path)
+    assert log.tx_hex()[:3] == [STOP, p.play_frame(3).hex, RESTORE]
+    assert log.tx_hex()[-3:] == [STOP, p.play_frame(7).hex, RESTORE]
+    assert all(m["kind"] in ("ack", "status") for m in log.rx)
+
+
+def test_port_in_use_is_refused(tmp_path, sim_pty, capsys):
+    show = write_show(tmp_path, WIRE_SHOW)
+    with serial.Serial(sim_pty, 115200, parity="E", exclusive=True):
+        assert main(["run", str(show), "--port", sim_pty, "--no-log", "-q"]) == 3
+    err = capsys.readouterr().err
+    assert f"port {sim_pty}: cannot open" in err and "another program" in err
+
+
+def test_port_lost_mid_show_over_a_pty(tmp_path):
+    process = start_choreo("sim", "--lose", "5")
+    path = process.stdout.readline().strip()
+    show = write_show(tmp_path, WIRE_SHOW)
+    log_path = tmp_path / "lost.mcap"
+    try:
+        code = main(["run", str(show), "--port", path, "--log", str(log_path), "-q"])
+    finally:
+        process.communicate(timeout=10)
+    assert code == 3
+    log = read_log(log_path)
+    assert log.metadata["choreo.result"]["exit_code"] == "3"
+    assert len(log.rx) == len(log.tx)
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="uses the default runs/ folder of a fresh checkout")
+def test_dance_runs_on_a_fresh_checkout_and_writes_a_valid_log(tmp_path):
+    done = choreo("run", str(Path(__file__).parent.parent / "shows" / "dance.yaml"), cwd=tmp_path,
+                  timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "built-in simulator" in done.stderr
+    (log_path,) = (tmp_path / "runs").glob("*.mcap")
+    log = read_log(log_path)
+    assert log.metadata["choreo.result"]["outcome"] == "done"
+    assert len(log.rx) == len(log.tx) > 26 * 3 // 2
