@@ -22,7 +22,7 @@ from pathlib import Path
 from choreo import protocol
 from choreo.show.model import DEFAULT_MOTION_S, Plan, PlannedStep, Repeat, Show, Step, StepKind
 
-_DIGITS = 6  # times are kept to the microsecond so that 0.1 + 0.2 plans as 0.3
+_DIGITS = 9  # sums are rounded to the nanosecond so that 0.1 + 0.2 plans as 0.3
 
 
 @dataclass(frozen=True)
@@ -45,7 +45,7 @@ def compile_plan(show: Show) -> Plan:
     status = (protocol.status_frame(),)
     for index, flat in enumerate(_flatten(show.steps)):
         step = flat.step
-        start = _round(max(clock, flat.at or 0.0))
+        start = max(clock, flat.at or 0.0)  # never rounded below its cue
         motion = step.motion
         if step.kind is StepKind.PLAY:
             assert motion is not None, f"{flat.path}: a play step without a motion"
@@ -58,7 +58,7 @@ def compile_plan(show: Show) -> Plan:
             frames = ()
         else:
             motion = last_play[1] if last_play else None
-            expected = 0.0 if waited or last_play is None else max(0.0, last_play[0] + last_play[2] - start)
+            expected = 0.0 if waited or last_play is None else max(0.0, _round(last_play[0] + last_play[2] - start))
             waited = True
             frames = status
         planned.append(
@@ -73,11 +73,11 @@ def compile_plan(show: Show) -> Plan:
                 seconds=step.seconds,
                 at=flat.at,
                 planned_s=start,
-                expected_s=_round(expected),
+                expected_s=expected,
                 frames=frames,
             )
         )
-        clock = _round(start + expected)
+        clock = max(start, _round(start + expected))  # rounding never moves time backwards
     return Plan(tuple(planned), clock)
 
 
