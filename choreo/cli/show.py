@@ -72,12 +72,13 @@ def run_plan(args: argparse.Namespace) -> int:
 
 def plan_lines(show, plan) -> list[str]:  # type: ignore[no-untyped-def]
     """The plan as aligned text: a header, one line a step, the total."""
+    digits = max((len(f"{step.planned_s:.3f}") for step in plan.steps), default=1)
     rows = [
         (
             str(step.index),
             step.path,
             step.label or "-",
-            _start(step),
+            _start(step, digits),
             step.describe(),
             " | ".join(frame.hex for frame in step.frames) or "-",
         )
@@ -93,9 +94,9 @@ def plan_lines(show, plan) -> list[str]:  # type: ignore[no-untyped-def]
     return lines
 
 
-def _start(step) -> str:  # type: ignore[no-untyped-def]
-    """`14.000 s`, with the cue when the step has one: `14.000 s (at 14)`, late ones flagged."""
-    text = f"{step.planned_s:.3f} s"
+def _start(step, digits: int) -> str:  # type: ignore[no-untyped-def]
+    """` 4.000 s`, with the cue when the step has one: `14.000 s (at 14)`, late ones flagged."""
+    text = f"{step.planned_s:{digits}.3f} s"
     if step.at is None:
         return text
     if step.planned_s > step.at + 1e-9:
