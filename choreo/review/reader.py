@@ -77,6 +77,8 @@ class Cut:
     reason: str
 
     def __str__(self) -> str:
+        if self.offset >= self.size:
+            return f"{self.reason} (after {self.size:,} bytes)"
         return f"{self.reason} (readable up to byte {self.offset:,} of {self.size:,})"
 
 

@@ -136,7 +136,7 @@ class Summary:
     duration_s: float | None = None  # show clock at the last message (or the result's, if closed)
     steps_run: int = 0
     steps_done: int = 0
-    steps_late: int = 0
+    steps_late: int = 0  # play steps that started more than LATE_MS after their time (as the runner counts)
     steps_failed: int = 0
     steps_aborted: int = 0
     steps_unfinished: int = 0
@@ -145,7 +145,7 @@ class Summary:
     replies: dict[str, int] = field(default_factory=dict)  # rx kind -> count
     unanswered: int = 0  # frames with no reply in the log (a cut log)
     latency: Distribution = field(default_factory=Distribution)  # ms, replies that came back
-    lateness: Distribution = field(default_factory=Distribution)  # ms, step starts
+    lateness: Distribution = field(default_factory=Distribution)  # ms, play step starts (the cues)
     plays: list[Play] = field(default_factory=list)  # the first LISTED_PLAYS
     plays_total: int = 0
     motions: dict[int, MotionStats] = field(default_factory=dict)
@@ -250,11 +250,12 @@ def summarize_reader(reader: LogReader) -> Summary:
             if m["event"] == "start":
                 started += 1
                 steps_open.add(index)
-                late_ms = m["late_ms"]
-                key = round(late_ms * 1000)
-                lateness[key] = lateness.get(key, 0) + 1
-                if late_ms > LATE_MS:
-                    late += 1
+                if m["kind"] == "play":  # a wait starts when the play before it is answered
+                    late_ms = m["late_ms"]
+                    key = round(late_ms * 1000)
+                    lateness[key] = lateness.get(key, 0) + 1
+                    if late_ms > LATE_MS:
+                        late += 1
                 if not zero_from_step:
                     # the show clock's zero in wall-clock ns: this start's time minus its show time
                     zero = log_time - round(m["actual_s"] * 1e9)
@@ -374,7 +375,7 @@ def render(summary: Summary) -> Iterable[str]:
            f"max {_ms(lat.max)} ({len(lat)} replies)")
     lateness = summary.lateness
     yield (f"cues      lateness median {_ms(lateness.median)}, p99 {_ms(lateness.p99)}, max "
-           f"{_ms(lateness.max)} ({len(lateness)} step starts, {lateness.above(LATE_MS)} over {LATE_MS:g} ms)")
+           f"{_ms(lateness.max)} ({len(lateness)} plays, {lateness.above(LATE_MS)} over {LATE_MS:g} ms)")
     yield from _render_motions(summary)
     yield f"log lines {summary.warnings} warnings, {summary.errors} errors"
     for line in summary.log_lines:

@@ -1,0 +1,200 @@
+"""`choreo log summary|frames|timeline|export LOG` and `choreo replay LOG`: reviewing a run.
+
+Everything prints to stdout as it is read, so `choreo log frames LOG | head` answers at once and
+a closed pipe ends the command quietly. A log cut short by a killed run is reviewed as far as it
+goes and says where it stops (exit 0): that is the run a reviewer most needs to see.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Iterable
+from contextlib import contextmanager
+from typing import Iterator, TextIO
+
+from choreo.errors import UsageError
+
+FRAME_AND_REPLY_KINDS = ("stop", "play", "restore", "status", "ack", "nak", "timeout", "invalid")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "log",
+        help="review a run's log: summary, frames, timeline, export",
+        description="Review the MCAP log of a run (complete, or cut short by a crash).",
+    )
+    commands = parser.add_subparsers(dest="log_command", metavar="COMMAND")
+    commands.required = True
+
+    summary = commands.add_parser(
+        "summary", help="did the show run as planned: steps, frames, replies, latency, lateness, motions",
+        description="Summarise a run: show, port, duration; steps done, late and failed; frames and "
+        "replies by kind; reply latency and cue lateness; each motion's measured duration; "
+        "whether the log is complete.")
+    summary.add_argument("log", help="the run's .mcap log")
+    summary.set_defaults(handler=run_summary)
+
+    frames = commands.add_parser(
+        "frames", help="every frame and reply, one line each, with what it means",
+        description="One line a frame or reply: show time, direction, seq, kind, bytes, meaning.")
+    frames.add_argument("log", help="the run's .mcap log")
+    frames.add_argument("--step", type=int, metavar="N", help="only the frames of step N (index from `choreo plan`)")
+    frames.add_argument("--kind", choices=FRAME_AND_REPLY_KINDS, metavar="K",
+                        help="only frames of this kind or with replies of this kind: "
+                        + ", ".join(FRAME_AND_REPLY_KINDS))
+    frames.set_defaults(handler=run_frames)
+
+    timeline = commands.add_parser(
+        "timeline", help="each motion on the show clock, planned against actual",
+        description="Each motion as a bar on the show clock, planned against actual, with late cues "
+        "and faults marked. Text by default; --png draws a picture (needs matplotlib: choreo[plot]).")
+    timeline.add_argument("log", help="the run's .mcap log")
+    timeline.add_argument("--png", metavar="FILE", help="write a PNG picture to FILE instead of text")
+    timeline.set_defaults(handler=run_timeline)
+
+    export = commands.add_parser(
+        "export", help="one row a frame with all its fields, as CSV or JSON",
+        description="Write one row a frame (the frame's and its reply's fields, times as wall-clock ns "
+        "and show-clock s) for spreadsheets and pandas. FILE '-' is stdout.")
+    export.add_argument("log", help="the run's .mcap log")
+    export.add_argument("--csv", metavar="FILE", help="write CSV to FILE")
+    export.add_argument("--json", metavar="FILE", help="write a JSON array to FILE")
+    export.set_defaults(handler=run_export)
+
+    replay = subparsers.add_parser(
+        "replay", help="send a recorded run's frames again and compare the replies",
+        description="Send every frame of a run's log again with its recorded timing (to the built-in "
+        "simulator unless --port says otherwise), record a new log, and report where the replies "
+        "differ from the recorded ones. Exit 0 when it ran; with --strict, exit 1 if any differ.")
+    replay.add_argument("log", help="the recorded run's .mcap log")
+    replay.add_argument("--port", help="where to send the frames (default: sim://, set up from the "
+                        "show attached to the log; a real robot only if you name its port)")
+    replay.add_argument("--speed", type=float, default=1.0, metavar="X",
+                        help="timing factor: 2 plays twice as fast (default 1, the recorded timing)")
+    replay.add_argument("--baud", type=int, help="baud rate (default: the recorded run's for --port, "
+                        "115200 for the simulator)")
+    replay.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for a reply (default 0.2)")
+    replay.add_argument("--log", dest="new_log", metavar="PATH",
+                        help="the replay's own log (default runs/<show>-replay-<UTC time>.mcap)")
+    replay.add_argument("--strict", action="store_true", help="exit 1 if any reply differs")
+    replay.add_argument("--quiet", "-q", action="store_true", help="print only the result line")
+    replay.set_defaults(handler=run_replay)
+
+
+@contextmanager
+def _stdout() -> Iterator[TextIO]:
+    """stdout for a command's output; a reader that went away (`| head`) ends it quietly.
+
+    After a broken pipe stdout is pointed at /dev/null, so the interpreter's last flush at exit
+    does not fail again (and turn the exit status into 120).
+    """
+    try:
+        yield sys.stdout
+        sys.stdout.flush()
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        raise
+
+
+def _print_all(lines: Iterable[str]) -> None:
+    with _stdout() as out:
+        for line in lines:
+            out.write(line + "\n")
+
+
+def run_summary(args: argparse.Namespace) -> int:
+    from choreo.review.summary import render, summarize
+
+    _print_all(render(summarize(args.log)))
+    return 0
+
+
+def run_frames(args: argparse.Namespace) -> int:
+    from choreo.review.frames import frame_lines
+    from choreo.review.reader import LogReader
+
+    with LogReader(args.log) as reader:
+        _print_all(frame_lines(reader, step=args.step, kind=args.kind))
+    return 0
+
+
+def run_timeline(args: argparse.Namespace) -> int:
+    from choreo.review.reader import LogReader
+    from choreo.review.timeline import build, render_png, render_text
+
+    with LogReader(args.log) as reader:
+        timeline = build(reader)
+    if args.png:
+        path = render_png(timeline, args.png)
+        cut = f" (log unfinished: {timeline.cut.reason})" if timeline.cut else ""
+        _print_all([f"timeline: {path}: {len(timeline.runs)} motions, {len(timeline.late)} late cues, "
+                    f"{len(timeline.faults)} faults{cut}"])
+        return 0
+    _print_all(render_text(timeline))
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    from choreo.review.export import CsvSink, JsonSink, export
+    from choreo.review.reader import LogReader
+
+    targets = [(name, value) for name, value in (("csv", args.csv), ("json", args.json)) if value]
+    if not targets:
+        raise UsageError("log export: say where: --csv FILE and/or --json FILE ('-' for stdout)")
+    if sum(1 for _, value in targets if value == "-") > 1:
+        raise UsageError("log export: only one of --csv and --json can go to stdout ('-')")
+    with LogReader(args.log) as reader, _stdout():
+        files = []
+        try:
+            sinks = []
+            for name, value in targets:
+                out = sys.stdout if value == "-" else _create(value)
+                if out is not sys.stdout:
+                    files.append(out)
+                sinks.append(CsvSink(out) if name == "csv" else JsonSink(out))
+            count = export(reader, sinks)
+        finally:
+            for file in files:
+                file.close()
+        cut = reader.cut
+    written = ", ".join(value for _, value in targets if value != "-")
+    if written:
+        note = f" (log unfinished: {cut.reason})" if cut else ""
+        print(f"exported {count} frames to {written}{note}", file=sys.stderr)
+    return 0
+
+
+def _create(path: str) -> TextIO:
+    try:
+        return open(path, "w", encoding="utf-8", newline="")
+    except OSError as exc:
+        raise UsageError(f"log export: cannot write {path}: {exc.strerror or exc}") from None
+
+
+def run_replay(args: argparse.Namespace) -> int:
+    from choreo.review.replay import replay
+
+    def started(report) -> None:
+        if not args.quiet:
+            note = f" (simulator without the show's durations: {report.show_note})" if report.show_note else ""
+            print(f"replay: {report.source} on {report.port} at speed {report.speed:g}{note}", file=sys.stderr)
+            print(f"log: {report.log_path}", file=sys.stderr)
+
+    with _stdout() as out:
+        def differs(difference) -> None:
+            if not args.quiet:
+                out.write(f"differs: {difference}\n")
+                out.flush()
+
+        report = replay(args.log, port=args.port, speed=args.speed, baud=args.baud, timeout=args.timeout,
+                        log_path=args.new_log, on_difference=differs, on_start=started)
+        unmatched = f", {report.unmatched} with no recorded reply" if report.unmatched else ""
+        cut = f"; the recorded log is unfinished: {report.cut.reason}" if report.cut else ""
+        out.write(f"replayed {report.frames} frames: {report.same} same, {report.different} differ"
+                  f"{unmatched}; worst lag {report.max_lag_ms:.1f} ms{cut}\n")
+        out.write(f"log: {report.log_path}\n")
+    return 1 if args.strict and report.different else 0

@@ -1,0 +1,67 @@
+"""The show a run played, as attached to its log: motion names, expected durations, the sim URL.
+
+A log carries the show file itself (application/yaml), so a review can say "wave" rather than
+"motion 4", draw each motion's planned length, and replay against a simulator that runs the
+motions as long as the show says. The attachment goes through choreo's own show loader (every
+check, the YAML-bomb guards included): a log is data from elsewhere, and a show that no longer
+loads (an older format, a tampered log) only costs those niceties, never the review.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from choreo.review.reader import LogReader
+
+
+@dataclass(frozen=True)
+class AttachedShow:
+    """What a review takes from the attached show; empty when the log has none or it fails to load."""
+
+    show: object | None = None  # choreo.show.model.Show
+    plan: object | None = None  # choreo.show.model.Plan
+    names: dict[int, str] = field(default_factory=dict)  # slot -> first name in `motions:`
+    durations: dict[int, float] = field(default_factory=dict)  # slot -> expected seconds
+    problem: str | None = None  # why the show could not be used, if it could not
+
+    def name_of(self, motion: int | None) -> str | None:
+        return self.names.get(motion) if motion is not None else None
+
+    def expected_s(self, motion: int) -> float:
+        """The motion's expected length: the show's, else the default the plan and simulator use."""
+        from choreo.show.model import DEFAULT_MOTION_S
+
+        return self.durations.get(motion, DEFAULT_MOTION_S)
+
+
+def attached_show(reader: LogReader) -> AttachedShow:
+    """Load the show attached to the log (through a temporary file: the loader reads paths)."""
+    attachment = reader.show_attachment()
+    if attachment is None:
+        return AttachedShow(problem="the log has no show attached")
+    source = reader.attachment_data(attachment)
+    try:
+        from choreo.errors import ChoreoError
+        from choreo.show.load import load_show
+        from choreo.show.plan import compile_plan
+    except ImportError as exc:  # pragma: no cover - the loader ships with choreo
+        return AttachedShow(problem=f"cannot load shows here: {exc}")
+    name = Path(attachment.name).name or "show.yaml"
+    with tempfile.TemporaryDirectory(prefix="choreo-review-") as tmp:
+        path = Path(tmp) / name
+        path.write_bytes(source)
+        try:
+            show = load_show(path)
+            plan = compile_plan(show)
+        except ChoreoError as exc:
+            first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            return AttachedShow(problem=f"the attached show {attachment.name} does not load: {first}")
+    names: dict[int, str] = {}
+    durations: dict[int, float] = {}
+    for motion in show.motions.values():
+        names.setdefault(motion.number, motion.name)
+        if motion.duration is not None:
+            durations.setdefault(motion.number, motion.duration)
+    return AttachedShow(show, plan, names, durations)

@@ -1,0 +1,108 @@
+"""`choreo log export`: one row a frame, with every field of the frame and of its reply.
+
+For spreadsheets and pandas (`pandas.read_csv`, `pandas.read_json`): a flat table, times both as
+wall-clock nanoseconds (exact, as logged) and show-clock seconds (what a reviewer reads), and the
+meaning of each frame and reply in words. Written as it is read, so a long log never sits in memory.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Iterator
+from typing import TextIO
+
+from choreo.review.frames import Exchange, exchanges, frame_meaning, reply_meaning
+from choreo.review.reader import LogReader
+
+COLUMNS = (
+    "seq",
+    "tx_time_ns", "tx_show_s", "step", "label", "frame", "motion", "attempt", "tx_hex", "frame_meaning",
+    "rx_time_ns", "rx_show_s", "reply", "rx_hex", "latency_ms", "executing", "error", "reply_meaning",
+)
+
+
+def row(exchange: Exchange) -> dict:
+    """One frame and its reply as a flat dict (None where the log has no such field)."""
+    tx = exchange.tx or {}
+    rx = exchange.rx or {}
+    return {
+        "seq": exchange.seq,
+        "tx_time_ns": exchange.tx_ns,
+        "tx_show_s": _round(exchange.tx_s),
+        "step": tx.get("step"),
+        "label": tx.get("label"),
+        "frame": tx.get("kind"),
+        "motion": tx.get("motion"),
+        "attempt": tx.get("attempt"),
+        "tx_hex": tx.get("hex"),
+        "frame_meaning": frame_meaning(tx) if exchange.tx else None,
+        "rx_time_ns": exchange.rx_ns,
+        "rx_show_s": _round(exchange.rx_s),
+        "reply": rx.get("kind"),
+        "rx_hex": rx.get("hex"),
+        "latency_ms": rx.get("latency_ms"),
+        "executing": rx.get("executing"),
+        "error": rx.get("error"),
+        "reply_meaning": reply_meaning(rx) if exchange.rx else None,
+    }
+
+
+def _round(seconds: float | None) -> float | None:
+    return None if seconds is None else round(seconds, 9)
+
+
+def rows(reader: LogReader) -> Iterator[dict]:
+    for exchange in exchanges(reader):
+        yield row(exchange)
+
+
+class CsvSink:
+    """CSV with a header row; empty cells for missing values, booleans as true/false."""
+
+    def __init__(self, out: TextIO) -> None:
+        self.writer = csv.DictWriter(out, fieldnames=COLUMNS, lineterminator="\n")
+        self.writer.writeheader()
+
+    def write(self, record: dict) -> None:
+        self.writer.writerow({k: _csv_value(v) for k, v in record.items()})
+
+    def close(self) -> None:
+        pass
+
+
+def _csv_value(value: object) -> object:
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return value
+
+
+class JsonSink:
+    """A JSON array of row objects, one per line, written as it goes (valid JSON when closed)."""
+
+    def __init__(self, out: TextIO) -> None:
+        self.out = out
+        self.first = True
+        out.write("[")
+
+    def write(self, record: dict) -> None:
+        self.out.write("\n" if self.first else ",\n")
+        self.out.write(json.dumps(record, separators=(", ", ": ")))
+        self.first = False
+
+    def close(self) -> None:
+        self.out.write("\n]\n" if not self.first else "]\n")
+
+
+def export(reader: LogReader, sinks: list[CsvSink | JsonSink]) -> int:
+    """Write every frame to every sink; the number of frames written."""
+    count = 0
+    for record in rows(reader):
+        for sink in sinks:
+            sink.write(record)
+        count += 1
+    for sink in sinks:
+        sink.close()
+    return count

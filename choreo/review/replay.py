@@ -1,0 +1,247 @@
+"""`choreo replay LOG`: send a recorded run's frames again, on their recorded timing, and compare.
+
+Every frame of the log goes out again, byte for byte (retries included: they were on the wire
+too), at its recorded time on the show clock divided by `--speed`, and each reply is compared
+with the one recorded. The replay is a run of its own: it is recorded to a new log (same topics,
+steps re-timed to the replay's clock), so it can be reviewed with the same commands.
+
+The default port is the built-in simulator, set up from the show attached to the log (its
+motions run as long as the show says) - never the robot the show names: a replay moves a real
+robot only when `--port` says so.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from choreo.errors import ChoreoError, UsageError
+from choreo.review.attached import AttachedShow, attached_show
+from choreo.review.frames import ShowClock, reply_meaning
+from choreo.review.reader import Cut, LogReader, decode
+from choreo.review.summary import RX_TOPIC, STEP_TOPIC, TX_TOPIC
+
+LISTED_DIFFERENCES = 200  # kept in the report; all are counted (and written to the new log)
+
+
+@dataclass(frozen=True)
+class Difference:
+    """A frame whose reply in the replay is not the one recorded."""
+
+    seq: int  # the recorded frame's seq
+    step: int | None
+    frame: str  # frame kind
+    show_s: float  # recorded show time of the frame
+    recorded: dict
+    replayed: dict
+
+    def __str__(self) -> str:
+        where = f"step {self.step} " if self.step is not None else ""
+        return (f"{self.show_s:9.3f} s  #{self.seq} {where}{self.frame}: recorded "
+                f"{_said(self.recorded)}, replay {_said(self.replayed)}")
+
+
+def _said(reply: dict) -> str:
+    hex_ = reply.get("hex") or ""
+    return f"{reply_meaning(reply)}" + (f" ({hex_})" if hex_ and reply.get("kind") not in ("timeout", "invalid") else "")
+
+
+@dataclass
+class ReplayReport:
+    source: Path
+    port: str
+    speed: float
+    log_path: Path | None
+    frames: int = 0
+    same: int = 0
+    different: int = 0
+    unmatched: int = 0  # frames whose recorded reply is missing (a cut log)
+    differences: list[Difference] = field(default_factory=list)
+    max_lag_ms: float = 0.0  # how far behind its recorded time (scaled) a frame left at worst
+    cut: Cut | None = None
+    show_note: str | None = None  # why the simulator runs without the show's durations
+
+
+def default_port(show: AttachedShow) -> str:
+    """`sim://` with the attached show's motion durations, or plain `sim://`."""
+    if show.show is None or show.plan is None:
+        return "sim://"
+    from choreo.session import simulator_url
+
+    return simulator_url(show.show, show.plan)
+
+
+def _with_durations(url: str, show: AttachedShow) -> str:
+    """`--port sim://?drop=5`: still the show's durations (as `choreo run` does)."""
+    if show.show is None or show.plan is None:
+        return url
+    try:
+        from choreo.session import with_show_durations
+    except ImportError:
+        return url
+    return with_show_durations(url, show.show, show.plan)
+
+
+@dataclass
+class _StepRecord:
+    """A recorded step event, re-timed for the new log (what Recorder.on_step needs of it)."""
+
+    time_ns: int
+    fields: dict
+
+    def message(self) -> dict:
+        return self.fields
+
+
+def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, baud: int | None = None,
+           timeout: float | None = None, log_path: str | Path | None = None, log_dir: str | Path = "runs",
+           on_difference: Callable[[Difference], None] | None = None,
+           on_start: Callable[[ReplayReport], None] | None = None) -> ReplayReport:
+    """Replay the run recorded in `source`; the report says where the replies differ.
+
+    LinkError (exit 3) if the port fails; a LogError if `source` is not a log or the new log
+    cannot be written. A cut log replays as far as it goes.
+    """
+    if not speed > 0:
+        raise UsageError(f"--speed {speed:g}: give a speed above 0 (1 is the recorded timing, 2 twice as fast)")
+    from choreo.clock import RunClock
+    from choreo.link import DEFAULT_BAUD, DEFAULT_TIMEOUT_S, Link
+    from choreo.record import Recorder, RunInfo, default_log_path
+
+    with LogReader(source) as reader:
+        show = attached_show(reader)
+        url = _with_durations(port, show) if port else default_port(show)
+        recorded_baud = reader.run_info.get("baud", "")
+        if baud is None:
+            baud = int(recorded_baud) if port and recorded_baud.isdigit() else DEFAULT_BAUD
+        name = reader.run_info.get("show") or reader.path.stem
+        clock = RunClock()
+        new_log = Path(log_path) if log_path else default_log_path(f"{name}-replay", log_dir)
+        attachment = reader.show_attachment()
+        show_source = reader.attachment_data(attachment) if attachment else b""
+        show_path = reader.run_info.get("show_path") or (attachment.name if attachment else "show.yaml")
+        report = ReplayReport(reader.path, url, speed, new_log,
+                              show_note=None if show.show is not None or port else show.problem)
+        recorder = Recorder(new_log, RunInfo(show_path, name, show_source, url, baud, clock.wall_anchor_ns))
+        outcome: dict[str, str] = {"outcome": "failed"}
+        try:
+            recorder.on_log(2, f"replay of {reader.path} at speed {speed:g} on {url}", clock.wall_ns())
+            link = Link.open(url, baud, timeout=timeout or DEFAULT_TIMEOUT_S, tries=1, clock=clock,
+                             listeners=[recorder])
+            try:
+                if on_start is not None:
+                    on_start(report)
+                _replay_frames(reader, link, recorder, clock, speed, report, on_difference)
+            finally:
+                link.close()
+            report.cut = reader.cut
+            outcome = {"outcome": "done", "replay_of": str(reader.path), "speed": f"{speed:g}",
+                       "frames": str(report.frames), "differences": str(report.different),
+                       "show_s": f"{_elapsed(clock):.6f}", "exit_code": "0"}
+        except ChoreoError as exc:
+            outcome["error"] = str(exc)
+            outcome["exit_code"] = str(exc.exit_code)
+            raise
+        except KeyboardInterrupt:
+            outcome = {"outcome": "interrupted", "exit_code": "130"}
+            raise
+        finally:
+            recorder.close(outcome)
+    return report
+
+
+def _elapsed(clock) -> float:
+    return (time.monotonic_ns() - clock.mono_anchor_ns) / 1e9
+
+
+def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, report: ReplayReport,
+                   on_difference: Callable[[Difference], None] | None) -> None:
+    """The recorded frames, each at its show time / speed; replies compared as they come."""
+    from choreo.link import Tag
+    from choreo.protocol import Frame, FrameKind
+
+    recorded_clock = ShowClock(reader)
+    zero_mono: float | None = None  # replay's monotonic time of recorded show time 0
+    first_s = 0.0
+    pending: dict[int, tuple[dict, dict, float]] = {}  # recorded seq -> (tx, replayed reply, show s)
+
+    def due(show_s: float) -> None:
+        nonlocal zero_mono, first_s
+        if zero_mono is None:
+            first_s = show_s  # start at once, whatever show time the recording starts at
+            zero_mono = time.monotonic()
+        target = zero_mono + (show_s - first_s) / speed
+        clock.sleep_until(target)
+        lag_ms = (time.monotonic() - target) * 1e3
+        if lag_ms > report.max_lag_ms:
+            report.max_lag_ms = lag_ms
+
+    for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC)):
+        message = decode(data)
+        if topic == STEP_TOPIC:
+            recorded_clock.see_step(log_time, message)
+            show_s = recorded_clock.seconds(log_time) or 0.0
+            due(show_s)
+            recorder.on_step(_StepRecord(clock.wall_ns(), _retimed(message, first_s, speed,
+                                                                   (time.monotonic() - zero_mono))))
+        elif topic == TX_TOPIC:
+            show_s = recorded_clock.seconds(log_time) or 0.0
+            try:
+                kind = FrameKind(message["kind"])
+                frame = Frame(kind, bytes.fromhex(message["hex"]), message.get("motion"))
+            except (KeyError, ValueError):
+                raise UsageError(f"log {reader.path}: frame #{message.get('seq')} cannot be sent again: "
+                                 f"kind {message.get('kind')!r}, bytes {message.get('hex')!r}") from None
+            if message["seq"] in pending:  # its recorded reply never came: nothing to compare
+                pending.pop(message["seq"])
+                report.unmatched += 1
+            due(show_s)
+            reply = link.send(frame, message.get("attempt", 1), Tag(message.get("step"), message.get("label")))
+            report.frames += 1
+            replayed = {"kind": reply.kind.value, "hex": reply.hex, "executing": reply.executing,
+                        "error": reply.error}
+            pending[message["seq"]] = (message, replayed, show_s)
+            if len(pending) > 64:  # replies missing from the recording: do not hold them forever
+                pending.pop(next(iter(pending)))
+                report.unmatched += 1
+        else:
+            held = pending.pop(message.get("seq"), None)
+            if held is None:
+                continue
+            tx, replayed, show_s = held
+            if _same(message, replayed):
+                report.same += 1
+                continue
+            report.different += 1
+            difference = Difference(message["seq"], tx.get("step"), tx.get("kind", "?"), show_s, message, replayed)
+            if len(report.differences) < LISTED_DIFFERENCES:
+                report.differences.append(difference)
+            recorder.on_log(3, f"replay differs: {difference}", clock.wall_ns())
+            if on_difference is not None:
+                on_difference(difference)
+    report.unmatched += len(pending)
+
+
+def _same(recorded: dict, replayed: dict) -> bool:
+    """Same verdict and, where the board answered, the same bytes (a status byte included)."""
+    if recorded.get("kind") != replayed["kind"]:
+        return False
+    if replayed["kind"] in ("timeout",):
+        return True
+    return (recorded.get("hex") or "") == (replayed["hex"] or "")
+
+
+def _retimed(message: dict, first_s: float, speed: float, elapsed_s: float) -> dict:
+    """A recorded step event on the replay's clock (seconds since the replay's first frame)."""
+    fields = dict(message)
+    for key in ("planned_s", "estimated_s"):
+        if isinstance(fields.get(key), (int, float)):
+            fields[key] = round(max(0.0, (fields[key] - first_s) / speed), 6)
+    fields["actual_s"] = round(elapsed_s, 6)
+    if fields.get("event") == "start" and isinstance(fields.get("planned_s"), (int, float)):
+        fields["late_ms"] = round(max(0.0, (elapsed_s - fields["planned_s"]) * 1e3), 3)
+    if isinstance(fields.get("cue"), (int, float)):
+        fields["cue"] = round(max(0.0, (fields["cue"] - first_s) / speed), 6)
+    return fields
