@@ -1,0 +1,75 @@
+"""The runner in-process: stopping between frames, the abort motion, nothing unasked sent."""
+
+from __future__ import annotations
+
+import pytest
+
+from choreo import protocol as p
+from choreo.link import Link
+from choreo.runner import Runner, StopRequest
+from choreo.show.load import load_show
+from choreo.show.plan import compile_plan
+from runlog import write_show
+
+SHOW = """
+    version: 1
+    name: runner
+    motions:
+      home: {number: 0, duration: 0.05}
+    on_abort: home
+    steps:
+      - play: 3
+      - wait: 0.05
+      - play: 4
+"""
+
+
+class Frames:
+    """A link listener that keeps what was sent, and can pull the stop cord at a given frame."""
+
+    def __init__(self, stop: StopRequest | None = None, stop_at: int | None = None) -> None:
+        self.sent: list[p.Frame] = []
+        self.stop, self.stop_at = stop, stop_at
+
+    def on_tx(self, event) -> None:
+        self.sent.append(event.frame)
+        if self.stop is not None and event.seq == self.stop_at:
+            self.stop.request("interrupted (test)")
+
+    def on_rx(self, event) -> None:
+        pass
+
+
+def runner_for(tmp_path, body: str, stop: StopRequest, frames: Frames) -> Runner:
+    show = load_show(write_show(tmp_path, body))
+    link = Link.open("sim://?durations=0:0.05", listeners=[frames])
+    return Runner(compile_plan(show), link, on_abort=show.on_abort, stop=stop)
+
+
+def test_stop_lets_the_frame_in_flight_finish_then_sends_only_the_abort_motion(tmp_path):
+    stop = StopRequest()
+    frames = Frames(stop, stop_at=1)  # Ctrl-C while the first stop frame is on the wire
+    runner = runner_for(tmp_path, SHOW, stop, frames)
+    result = runner.run()
+    assert result.outcome == "aborted"
+    assert [f.hex for f in frames.sent] == [p.stop_frame().hex, *[f.hex for f in p.play_sequence(0)]]
+    board = runner.link.port.board
+    assert [e.reply is not None for e in board.journal if e.kind == "frame"] == [True] * 4
+
+
+def test_a_show_without_abort_motion_sends_nothing_after_the_stop(tmp_path):
+    stop = StopRequest()
+    frames = Frames(stop, stop_at=4)  # during the second play's stop frame
+    runner = runner_for(tmp_path, SHOW.replace("    on_abort: home\n", ""), stop, frames)
+    assert runner.run().outcome == "aborted"
+    assert [f.kind.value for f in frames.sent] == ["stop", "play", "restore", "stop"]
+
+
+def test_the_runner_sends_exactly_the_plan(tmp_path):
+    stop = StopRequest()
+    frames = Frames()
+    runner = runner_for(tmp_path, SHOW, stop, frames)
+    result = runner.run()
+    assert result.outcome == "done" and result.steps_run == 3
+    assert [f.hex for f in frames.sent] == [f.hex for f in p.play_sequence(3) + p.play_sequence(4)]
+    assert result.show_s == pytest.approx(0.05, abs=0.05)
