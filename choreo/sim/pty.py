@@ -12,6 +12,10 @@ parity; data bits and parity enable too where the platform keeps them: Linux's p
 forces CS8 and clears PARENB, so there even parity cannot be told from none) and, like a real
 board, does not answer a client whose settings it cannot read.
 
+Reopening: Debian's and Ubuntu's C library refuses (EINVAL) a tcsetattr on a pty whose only
+change is even parity, which is what pyserial sends when it opens a pty already set up by an
+earlier client; the server keeps the pty "re-armed" so that never happens (see `rearm`).
+
 `stop()` is safe to call from a signal handler: it writes one byte to a pipe the loop watches.
 """
 
@@ -32,7 +36,7 @@ from choreo.sim.wire import PTY_GAP_S, Line, LineSettings
 _TCGETS2 = 0x802C542A  # Linux: termios2 with the actual speeds (custom bauds use BOTHER)
 _TCSETS2 = 0x402C542B
 _BOTHER = 0o010000
-_MAX_WAIT_S = 1.0
+_MAX_WAIT_S = 0.1  # idle tick: re-arm the pty for the next client (see rearm)
 # termios speed codes (B9600, B115200, ...) -> baud; BOTHER is not among them.
 _SPEEDS = {
     getattr(termios, name): int(name[1:])
@@ -76,6 +80,7 @@ class PtyServer:
         tty.setraw(slave)
         _set_line(slave, self.board.baud)
         self._parity_visible = _parity_is_visible(slave)
+        rearm(slave)
         os.set_blocking(master, False)
         wake_r, wake_w = os.pipe()
         os.set_blocking(wake_r, False)
@@ -120,6 +125,8 @@ class PtyServer:
             if self.board.lost:
                 self.close()
                 return ServeEnd.LOST
+            if self._slave is not None:
+                rearm(self._slave)  # a client may have just configured the port
             readable, _, _ = select.select(
                 [master, wake_r], [master] if self._unsent else [], [], self._timeout(now)
             )
@@ -187,35 +194,83 @@ def _speed(fd: int, code: int) -> int | None:
 
 
 def _termios2_speed(fd: int) -> int | None:
+    buf = _termios2(fd)
+    if buf is None:
+        return None
+    return int(buf[10]) or None
+
+
+def _set_line(fd: int, baud: int) -> None:
+    """Start the pty at the board's settings, so a client that sets nothing is understood.
+
+    Through termios2 where there is one (exact custom speeds, and no C library second-guessing
+    the result); a plain tcsetattr otherwise, whose refusal is harmless (clients set their own).
+    """
+    buf = _termios2(fd)
+    if buf is not None:
+        buf[2] = (buf[2] & ~(termios.CSIZE | termios.PARODD | termios.CSTOPB | termios.CBAUD)) | (
+            termios.CS8 | termios.PARENB | _BOTHER
+        )
+        buf[9] = buf[10] = baud
+        if _set_termios2(fd, buf):
+            return
+    try:
+        attrs = termios.tcgetattr(fd)
+        attrs[2] = (attrs[2] & ~(termios.CSIZE | termios.PARODD | termios.CSTOPB)) | termios.CS8 | termios.PARENB
+        code = getattr(termios, f"B{baud}", None)
+        if code is not None:
+            attrs[4] = attrs[5] = code
+        termios.tcsetattr(fd, termios.TCSANOW, attrs)
+    except termios.error:
+        pass
+
+
+def rearm(fd: int) -> None:
+    """Set IGNBRK on the pty, so that the next client's tcsetattr always changes something.
+
+    Debian's and Ubuntu's C library reads the settings back after tcsetattr and fails with
+    EINVAL when nothing but bits the pty driver forces (CS8, CREAD, no PARENB) would change:
+    pyserial opening an already-configured pty with even parity hits exactly that (pyserial
+    issue 196), so a second `choreo run` on the same `choreo sim` would fail to open. pyserial
+    and cfmakeraw clear IGNBRK, which means nothing on a pty (no line, no breaks), so with it set
+    every client configuration is a real change. The server re-sets it whenever it finds it
+    cleared; a client reconfiguring twice within microseconds could race with that, nothing else.
+    """
+    buf = _termios2(fd)
+    if buf is not None:
+        if not buf[0] & termios.IGNBRK:
+            buf[0] |= termios.IGNBRK
+            _set_termios2(fd, buf)
+        return
+    try:
+        attrs = termios.tcgetattr(fd)
+        if not attrs[0] & termios.IGNBRK:
+            attrs[0] |= termios.IGNBRK
+            termios.tcsetattr(fd, termios.TCSANOW, attrs)
+    except termios.error:
+        pass
+
+
+def _termios2(fd: int) -> array.array | None:
+    """Linux's termios2 (flags and exact speeds) as pyserial reads it, or None elsewhere."""
     try:
         import fcntl
 
         buf = array.array("i", [0] * 64)
         fcntl.ioctl(fd, _TCGETS2, buf)
-        return int(buf[10]) or None
+        return buf
     except (ImportError, OSError):
         return None
 
 
-def _set_line(fd: int, baud: int) -> None:
-    """Start the pty at the board's settings, so a client that sets nothing is understood."""
-    attrs = termios.tcgetattr(fd)
-    attrs[2] = (attrs[2] & ~(termios.CSIZE | termios.PARODD | termios.CSTOPB)) | termios.CS8 | termios.PARENB
-    code = getattr(termios, f"B{baud}", None)
-    if code is not None:
-        attrs[4] = attrs[5] = code
-    termios.tcsetattr(fd, termios.TCSANOW, attrs)
-    if code is None:
-        try:
-            import fcntl
+def _set_termios2(fd: int, buf: array.array) -> bool:
+    try:
+        import fcntl
 
-            buf = array.array("i", [0] * 64)
-            fcntl.ioctl(fd, _TCGETS2, buf)
-            buf[2] = (buf[2] & ~termios.CBAUD) | _BOTHER
-            buf[9] = buf[10] = baud
-            fcntl.ioctl(fd, _TCSETS2, buf)
-        except (ImportError, OSError):
-            pass  # the platform cannot say; clients set their own speed anyway
+        fcntl.ioctl(fd, _TCSETS2, buf)
+        return True
+    except (ImportError, OSError):
+        return False
 
 
 def _parity_is_visible(fd: int) -> bool:
