@@ -6,6 +6,7 @@ reads is the point, and a wrong column sends them to the wrong character.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -15,7 +16,7 @@ import pytest
 import yaml
 
 from choreo.errors import Problem, ShowError
-from choreo.show.load import MAX_BYTES, MAX_DEPTH, MAX_PLAN_STEPS, load_schema, load_show
+from choreo.show.load import MAX_BYTES, MAX_DEPTH, MAX_PLAN_STEPS, load_schema, load_show, load_show_bytes
 from choreo.show.model import DEFAULT_DONE_TIMEOUT_S, Repeat, Step, StepKind
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -86,6 +87,19 @@ def test_dance_loads_into_records():
     assert groove.steps[1].path == "steps[8].steps[1]"
     spin = next(s for s in show.steps if s.label == "spin")
     assert spin.at == 14.0
+
+
+def test_a_show_loads_from_bytes_too():
+    """For a show attached to a log: no file needed, the same checks, the name given used."""
+    source = (ROOT / "shows" / "dance.yaml").read_bytes()
+    show = load_show_bytes(source, "attached/dance.yaml")
+    assert show == dataclasses.replace(load_show(ROOT / "shows" / "dance.yaml"), path="attached/dance.yaml")
+    with pytest.raises(ShowError) as info:
+        load_show_bytes(b"version: 1\nsteps: [{play: 200}]\n", "log:show.yaml")
+    assert info.value.lines() == ["log:show.yaml:2:16: steps[0].play: motion 200 is out of range 0..119"]
+    with pytest.raises(ShowError) as info:
+        load_show_bytes(b"#" * (MAX_BYTES + 1))
+    assert info.value.lines() == ["<show>: the file is over 256 KiB, too big for a show file"]
 
 
 def test_minimal_show_gets_defaults(tmp_path):
@@ -231,6 +245,26 @@ def test_aliases_are_refused(tmp_path):
     """)
     assert (problem.line, problem.column, problem.path) == (4, 5, "steps[1]")
     assert problem.message == "aliases (*p) are not allowed in a show file: write the value out"
+
+
+def test_aliases_anywhere_are_one_problem_and_no_crash(tmp_path):
+    found = problems(tmp_path, """
+        version: 1
+        n: &n 2
+        steps:
+          - repeat: *n
+            steps: [{play: 1}]
+          - repeat: *n
+            steps: [{play: 1}]
+            at: *n
+    """)
+    assert located(found) == [(2, 1, "n"), (4, 13, "steps[0].repeat")]
+    assert found[1].message.endswith("(2 more after this one)")
+
+
+def test_keys_that_are_not_text_do_not_hide_other_problems(tmp_path):
+    found = problems(tmp_path, "? [a, b]\n: 1\nsteps: [{play: 1}]\n")
+    assert located(found) == [(1, 1, "version"), (1, 3, "")]
 
 
 def test_merge_keys_are_refused(tmp_path):

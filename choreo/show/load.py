@@ -65,10 +65,18 @@ _Parser = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 def load_show(path: str | Path) -> Show:
     """The checked show at `path`; `ShowError` listing every problem if it cannot be run."""
-    file = str(path)
-    report = _Report(file)
+    report = _Report(str(path))
     source = _read(Path(path), report)
     if source is None:
+        raise ShowError(report.problems())
+    return load_show_bytes(source, str(path))
+
+
+def load_show_bytes(source: bytes, path: str = "<show>") -> Show:
+    """A show from its bytes (e.g. attached to a log); `path` names it in messages and records."""
+    report = _Report(path)
+    if len(source) > MAX_BYTES:
+        report.add((0, 0), "", f"the file is over {MAX_BYTES // 1024} KiB, too big for a show file")
         raise ShowError(report.problems())
     text = _decode(source, report)
     doc = _parse(text, report) if text is not None else None
@@ -78,7 +86,7 @@ def load_show(path: str | Path) -> Show:
     _check_meaning(doc, report)
     if report.any():
         raise ShowError(report.problems())
-    return _build_show(file, source, doc)
+    return _build_show(path, source, doc)
 
 
 def load_schema() -> dict[str, Any]:
@@ -277,6 +285,7 @@ class _Builder:
     def _alias(self, event: yaml.AliasEvent, path: JsonPath) -> None:
         """Refused: reported once at the first, counted after it (a bomb holds thousands)."""
         self.report.silenced.add(path)
+        self.report.flagged.add(path)
         if self.first_alias is None:
             self.first_alias = (_mark_of(event), path, event.anchor)
         else:
@@ -294,7 +303,6 @@ class _Builder:
         mark = _mark_of(event)
         if not isinstance(event, yaml.ScalarEvent):
             self.report.add(mark, parent.path, "a key must be plain text (no lists, mappings or aliases as keys)")
-            self.report.silenced.add(parent.path)
             parent.key = _DISCARD
             if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
                 self._push(_Frame(None, parent.path, is_key=True))
@@ -711,7 +719,8 @@ def _check_steps(walk: _Walk, steps: list[Any], path: JsonPath, looping: bool) -
             walk.report.add(walk.doc.mark(here + ("wait",)), here + ("wait",), "`wait: done` has no motion to wait for: play one before it")
             total += 1
         elif "repeat" in step and isinstance(step.get("steps"), list) and walk.ok(here + ("steps",)):
-            count = int(step["repeat"]) if walk.ok(here + ("repeat",)) and "repeat" in step else 1
+            repeat = step["repeat"]
+            count = int(repeat) if walk.ok(here + ("repeat",)) and isinstance(repeat, (int, float)) else 1
             _check_repeat_label(walk, step, here)
             inner = _check_steps(walk, step["steps"], here + ("steps",), looping or count > 1)
             total += min(count * inner, MAX_PLAN_STEPS + 1)
