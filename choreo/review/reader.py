@@ -156,13 +156,13 @@ class LogReader:
         return next((a for a in self.attachments if a.media_type == "application/yaml"), None)
 
     def attachment_data(self, attachment: Attachment) -> bytes:
-        assert self._file is not None, "the log is closed"
-        here = self._file.tell()
+        """An attachment's bytes (read now: a log's attachments never sit in memory unasked)."""
         try:
-            self._file.seek(attachment.offset)
-            return self._file.read(attachment.size)
-        finally:
-            self._file.seek(here)
+            with open(self.path, "rb") as f:
+                f.seek(attachment.offset)
+                return f.read(attachment.size)
+        except OSError as exc:
+            raise self._fail(f"cannot read attachment {attachment.name}: {exc.strerror or exc}") from None
 
     def show_source(self) -> bytes | None:
         attachment = self.show_attachment()

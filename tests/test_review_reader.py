@@ -1,0 +1,189 @@
+"""The linear log reader: the same messages as the mcap library reads, any cut survived, clear errors.
+
+Logs here are written by choreo's Recorder with synthetic frames (bench/log_review.py's generator,
+the same one the benchmark uses) or by hand, byte by byte, where a writer would not produce the
+case (a compression choreo cannot read). Real `choreo run` logs are in test_review_commands.py.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from mcap.reader import NonSeekingReader
+from mcap.writer import CompressionType, Writer
+
+from choreo.errors import LogError
+from choreo.review.reader import MAGIC, LogReader, decode
+from choreo.review.summary import Distribution, summarize
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+from bench.log_review import generate_log  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def synthetic(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("reader") / "run.mcap"
+    generate_log(path, 1500)
+    return path
+
+
+def mcap_messages(path: Path) -> list[tuple[str, int, bytes]]:
+    """What the mcap library reads from the file, in file order."""
+    with open(path, "rb") as f:
+        return [(channel.topic, message.log_time, message.data)
+                for _, channel, message in NonSeekingReader(f).iter_messages(log_time_order=False)]
+
+
+def read_all(path: Path) -> tuple[list[tuple[str, int, bytes]], LogReader]:
+    with LogReader(path) as reader:
+        return list(reader.messages()), reader
+
+
+def test_reads_every_message_as_the_mcap_library_does(synthetic):
+    ours, reader = read_all(synthetic)
+    assert ours == mcap_messages(synthetic)
+    assert len(ours) >= 1500
+    assert reader.complete and reader.footer and reader.cut is None
+    assert reader.run_info["show"] == "bench" and reader.run_info["baud"] == "115200"
+    assert reader.result["outcome"] == "done"
+    assert reader.show_source().startswith(b"version: 1")
+    assert {c.topic for c in reader.channels.values()} == {"/rcb4/tx", "/rcb4/rx", "/choreo/step", "/choreo/log"}
+
+
+def test_topic_filter_and_a_second_pass(synthetic):
+    with LogReader(synthetic) as reader:
+        rx = list(reader.messages(["/rcb4/rx"]))
+        everything = list(reader.messages())
+    assert rx and {t for t, _, _ in rx} == {"/rcb4/rx"}
+    assert rx == [m for m in everything if m[0] == "/rcb4/rx"]
+
+
+def test_a_log_cut_anywhere_yields_a_prefix_and_says_where(synthetic, tmp_path):
+    full = mcap_messages(synthetic)
+    data = synthetic.read_bytes()
+    cut_file = tmp_path / "cut.mcap"
+    previous = 0
+    offsets = list(range(0, len(data), 997)) + [len(data) - 1, len(data) - 30, 9, 8, 7]
+    for offset in sorted(offsets):
+        cut_file.write_bytes(data[:offset])
+        messages, reader = read_all(cut_file)
+        assert messages == full[:len(messages)], offset
+        assert reader.cut is not None and not reader.complete, offset
+        assert reader.cut.offset <= offset and reader.cut.size == offset
+        assert len(messages) >= previous  # more file, never fewer messages
+        previous = len(messages)
+    assert previous > 0.9 * len(full)
+
+
+def test_a_cut_chunk_gives_up_its_whole_messages(tmp_path):
+    """A chunk cut short by a kill still holds whole messages: they are read, not thrown away."""
+    path = tmp_path / "one-chunk.mcap"
+    with open(path, "wb") as f:
+        writer = Writer(f, chunk_size=1 << 20, compression=CompressionType.NONE)
+        writer.start()
+        schema = writer.register_schema("choreo.Tx", "jsonschema", b"{}")
+        channel = writer.register_channel("/rcb4/tx", "json", schema)
+        for seq in range(1, 101):
+            writer.add_message(channel, log_time=seq, publish_time=seq,
+                               data=json.dumps({"seq": seq, "kind": "status"}).encode())
+        writer.finish()
+    data = path.read_bytes()
+    chunk_at = data.index(bytes((0x06,)), len(MAGIC) + 9)  # after the header record
+    (length,) = struct.unpack_from("<Q", data, chunk_at + 1)
+    path.write_bytes(data[:chunk_at + 9 + length // 2])
+    messages, reader = read_all(path)
+    assert 40 <= len(messages) < 100
+    assert [decode(d)["seq"] for _, _, d in messages] == list(range(1, len(messages) + 1))
+    assert "inside a chunk" in reader.cut.reason and "whole messages read" in reader.cut.reason
+
+
+def test_summary_of_a_cut_log_counts_what_survived(synthetic, tmp_path):
+    data = synthetic.read_bytes()
+    cut_file = tmp_path / "cut.mcap"
+    cut_file.write_bytes(data[:len(data) // 2])
+    summary = summarize(cut_file)
+    whole = summarize(synthetic)
+    assert not summary.complete and summary.cut is not None and summary.result is None
+    assert 0 < summary.messages < whole.messages
+    assert 0 < summary.frames_sent < whole.frames_sent
+    assert whole.complete and whole.unanswered == 0
+
+
+def test_lz4_chunks_are_read(tmp_path):
+    pytest.importorskip("lz4")
+    path = tmp_path / "lz4.mcap"
+    with open(path, "wb") as f:
+        writer = Writer(f, chunk_size=512, compression=CompressionType.LZ4)
+        writer.start()
+        channel = writer.register_channel("/rcb4/rx", "json", writer.register_schema("choreo.Rx", "jsonschema", b"{}"))
+        for seq in range(1, 200):
+            writer.add_message(channel, log_time=seq, publish_time=seq, data=b'{"seq": %d}' % seq)
+        writer.finish()
+    messages, reader = read_all(path)
+    assert [decode(d)["seq"] for _, _, d in messages] == list(range(1, 200))
+    assert reader.footer
+
+
+def _record(opcode: int, body: bytes) -> bytes:
+    return struct.pack("<BQ", opcode, len(body)) + body
+
+
+def _string(text: str) -> bytes:
+    return struct.pack("<I", len(text)) + text.encode()
+
+
+def test_a_compression_it_cannot_read_is_a_clear_log_error(tmp_path):
+    records = b"\x00" * 16
+    chunk = struct.pack("<QQQI", 0, 0, 64, 0) + _string("brotli") + struct.pack("<Q", len(records)) + records
+    path = tmp_path / "odd.mcap"
+    path.write_bytes(MAGIC + _record(0x01, _string("") + _string("x")) + _record(0x06, chunk))
+    with LogReader(path) as reader, pytest.raises(LogError, match=r"compression 'brotli'.*lz4 and zstd"):
+        list(reader.messages())
+
+
+def test_not_mcap_missing_and_empty_files(tmp_path):
+    text = tmp_path / "show.yaml"
+    text.write_text("version: 1\n")
+    with pytest.raises(LogError, match=r"^log .*show.yaml: not an MCAP file"):
+        LogReader(text)
+    with pytest.raises(LogError, match=r"cannot open: No such file"):
+        LogReader(tmp_path / "nope.mcap")
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    messages, reader = read_all(empty)
+    assert messages == [] and "before it wrote anything" in reader.cut.reason
+
+
+def test_decode_takes_what_json_takes():
+    assert decode(b'{"seq":1,"kind":"ack","executing":null}') == {"seq": 1, "kind": "ack", "executing": None}
+    assert decode(b' {"a": [1, 2.5]} ') == {"a": [1, 2.5]}
+    with pytest.raises(ValueError):
+        decode(b"{not json")
+
+
+def test_distribution_quantiles_are_nearest_rank_to_the_microsecond():
+    values = [0.4123, 1.0, 1.0, 2.5, 7.25, 0.001, 3.3333]
+    dist = Distribution()
+    for v in values:
+        dist.add(v)
+    ordered = sorted(round(v, 3) for v in values)
+    assert len(dist) == 7 and dist.min == 0.001 and dist.max == 7.25
+    assert dist.median == ordered[3] and dist.quantile(0.99) == ordered[-1]
+    assert dist.quantile(0.01) == ordered[0] and dist.above(1.0) == 3
+    assert Distribution().median is None
+
+
+def test_frames_into_a_closed_pipe_ends_quietly(synthetic):
+    """`choreo log frames LOG | head -3`: three lines, exit 0, nothing on stderr."""
+    done = subprocess.run(
+        f"'{sys.executable}' -m choreo log frames '{synthetic}' | head -3; exit ${{PIPESTATUS[0]}}",
+        shell=True, executable="/bin/bash", capture_output=True, text=True, cwd=REPO)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr == ""
+    assert len(done.stdout.splitlines()) == 3
