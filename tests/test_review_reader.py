@@ -187,3 +187,24 @@ def test_frames_into_a_closed_pipe_ends_quietly(synthetic):
     assert done.returncode == 0, done.stderr
     assert done.stderr == ""
     assert len(done.stdout.splitlines()) == 3
+
+
+def test_a_message_choreo_did_not_write_is_one_clear_line(tmp_path, capsys):
+    from choreo.cli import main
+
+    path = tmp_path / "foreign.mcap"
+    with open(path, "wb") as f:
+        writer = Writer(f)
+        writer.start()
+        camera = writer.register_channel("/camera", "protobuf", writer.register_schema("x.Image", "protobuf", b""))
+        tx = writer.register_channel("/rcb4/tx", "json", writer.register_schema("choreo.Tx", "jsonschema", b"{}"))
+        writer.add_message(camera, log_time=1, publish_time=1, data=b"\x00\xff binary")
+        writer.add_message(tx, log_time=2, publish_time=2, data=b'{"seq": 1}')
+        writer.finish()
+    assert main(["log", "summary", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"log {path}: message 2 on /rcb4/tx is not a choreo /rcb4/tx message "
+                   "(missing field 'kind'): was this log written by choreo run?\n")
+    # frames and export show what is there, field by field, and leave the other topics alone
+    assert main(["log", "frames", str(path)]) == 0
+    assert "not a frame" in capsys.readouterr().out

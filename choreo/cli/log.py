@@ -10,9 +10,9 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
-from typing import Iterator, TextIO
+from typing import TextIO
 
 from choreo.errors import UsageError
 
@@ -124,15 +124,15 @@ def run_frames(args: argparse.Namespace) -> int:
 
 def run_timeline(args: argparse.Namespace) -> int:
     from choreo.review.reader import LogReader
-    from choreo.review.timeline import build, render_png, render_text
+    from choreo.review.timeline import build, counted, render_png, render_text
 
     with LogReader(args.log) as reader:
         timeline = build(reader)
     if args.png:
         path = render_png(timeline, args.png)
         cut = f" (log unfinished: {timeline.cut.reason})" if timeline.cut else ""
-        _print_all([f"timeline: {path}: {len(timeline.runs)} motions, {len(timeline.late)} late cues, "
-                    f"{len(timeline.faults)} faults{cut}"])
+        _print_all([f"timeline: {path}: {counted(len(timeline.runs), 'motion')}, "
+                    f"{counted(len(timeline.late), 'late cue')}, {counted(len(timeline.faults), 'fault')}{cut}"])
         return 0
     _print_all(render_text(timeline))
     return 0

@@ -15,10 +15,6 @@ from choreo.protocol import describe_frame, describe_reply
 from choreo.review.reader import LogReader, decode
 from choreo.review.summary import RX_TOPIC, STEP_TOPIC, TX_TOPIC, show_zero_ns
 
-FRAME_KINDS = ("stop", "play", "restore", "status")
-REPLY_KINDS = ("ack", "nak", "status", "timeout", "invalid")
-
-
 class ShowClock:
     """Wall-clock log times to show-clock seconds.
 
@@ -73,21 +69,26 @@ def exchanges(reader: LogReader, clock: ShowClock | None = None) -> Iterator[Exc
     """Frames paired with their replies, in the order they were sent."""
     clock = clock or ShowClock(reader)
     held: tuple[dict, int] | None = None  # a frame whose reply has not come yet
-    for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC)):
-        if topic == STEP_TOPIC:
-            if not clock.from_step:
-                clock.see_step(log_time, decode(data))
-            continue
-        message = decode(data)
-        if topic == TX_TOPIC:
-            if held is not None:
-                yield _pair(clock, held[0], held[1], None, None)
-            held = (message, log_time)
-        elif held is not None and held[0].get("seq") == message.get("seq"):
-            yield _pair(clock, held[0], held[1], message, log_time)
-            held = None
-        else:  # a reply without its frame in the log
-            yield _pair(clock, None, None, message, log_time)
+    topic, number = None, 0
+    try:
+        for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC)):
+            number += 1
+            if topic == STEP_TOPIC:
+                if not clock.from_step:
+                    clock.see_step(log_time, decode(data))
+                continue
+            message = decode(data)
+            if topic == TX_TOPIC:
+                if held is not None:
+                    yield _pair(clock, held[0], held[1], None, None)
+                held = (message, log_time)
+            elif held is not None and held[0].get("seq") == message.get("seq"):
+                yield _pair(clock, held[0], held[1], message, log_time)
+                held = None
+            else:  # a reply without its frame in the log
+                yield _pair(clock, None, None, message, log_time)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise reader.not_choreo(topic, number, exc) from None
     if held is not None:
         yield _pair(clock, held[0], held[1], None, None)
 
@@ -158,7 +159,10 @@ def frame_lines(reader: LogReader, step: int | None = None, kind: str | None = N
     for exchange in exchanges(reader):
         if matches(exchange, step, kind):
             shown += 1
-            yield from lines(exchange)
+            try:
+                yield from lines(exchange)
+            except (KeyError, TypeError, ValueError, AttributeError) as exc:
+                raise reader.not_choreo(TX_TOPIC, exchange.seq, exc) from None
     if reader.cut is not None:
         yield f"log unfinished: {reader.cut}"
     if not shown:

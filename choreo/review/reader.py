@@ -185,6 +185,12 @@ class LogReader:
     def __exit__(self, *exc_info: object) -> None:
         self.close()
 
+    def not_choreo(self, topic: str | None, number: int, exc: BaseException) -> LogError:
+        """A message whose fields are not what choreo writes: say which one, not a traceback."""
+        detail = f"missing field {exc}" if isinstance(exc, KeyError) else str(exc) or type(exc).__name__
+        return self._fail(f"message {number} on {topic or '?'} is not a choreo {topic or ''} message "
+                          f"({detail}): was this log written by choreo run?")
+
     def _fail(self, what: str) -> LogError:
         return LogError(f"log {self.path}: {what}")
 

@@ -178,49 +178,54 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
         if lag_ms > report.max_lag_ms:
             report.max_lag_ms = lag_ms
 
-    for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC)):
-        message = decode(data)
-        if topic == STEP_TOPIC:
-            recorded_clock.see_step(log_time, message)
-            show_s = recorded_clock.seconds(log_time) or 0.0
-            due(show_s)
-            recorder.on_step(_StepRecord(clock.wall_ns(), _retimed(message, first_s, speed,
-                                                                   (time.monotonic() - zero_mono))))
-        elif topic == TX_TOPIC:
-            show_s = recorded_clock.seconds(log_time) or 0.0
-            try:
-                kind = FrameKind(message["kind"])
-                frame = Frame(kind, bytes.fromhex(message["hex"]), message.get("motion"))
-            except (KeyError, ValueError):
-                raise UsageError(f"log {reader.path}: frame #{message.get('seq')} cannot be sent again: "
-                                 f"kind {message.get('kind')!r}, bytes {message.get('hex')!r}") from None
-            if message["seq"] in pending:  # its recorded reply never came: nothing to compare
-                pending.pop(message["seq"])
-                report.unmatched += 1
-            due(show_s)
-            reply = link.send(frame, message.get("attempt", 1), Tag(message.get("step"), message.get("label")))
-            report.frames += 1
-            replayed = {"kind": reply.kind.value, "hex": reply.hex, "executing": reply.executing,
-                        "error": reply.error}
-            pending[message["seq"]] = (message, replayed, show_s)
-            if len(pending) > 64:  # replies missing from the recording: do not hold them forever
-                pending.pop(next(iter(pending)))
-                report.unmatched += 1
-        else:
-            held = pending.pop(message.get("seq"), None)
-            if held is None:
-                continue
-            tx, replayed, show_s = held
-            if _same(message, replayed):
-                report.same += 1
-                continue
-            report.different += 1
-            difference = Difference(message["seq"], tx.get("step"), tx.get("kind", "?"), show_s, message, replayed)
-            if len(report.differences) < LISTED_DIFFERENCES:
-                report.differences.append(difference)
-            recorder.on_log(3, f"replay differs: {difference}", clock.wall_ns())
-            if on_difference is not None:
-                on_difference(difference)
+    topic, number = None, 0
+    try:
+        for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC)):
+            number += 1
+            message = decode(data)
+            if topic == STEP_TOPIC:
+                recorded_clock.see_step(log_time, message)
+                show_s = recorded_clock.seconds(log_time) or 0.0
+                due(show_s)
+                recorder.on_step(_StepRecord(clock.wall_ns(), _retimed(message, first_s, speed,
+                                                                       (time.monotonic() - zero_mono))))
+            elif topic == TX_TOPIC:
+                show_s = recorded_clock.seconds(log_time) or 0.0
+                try:
+                    kind = FrameKind(message["kind"])
+                    frame = Frame(kind, bytes.fromhex(message["hex"]), message.get("motion"))
+                except (KeyError, ValueError):
+                    raise UsageError(f"log {reader.path}: frame #{message.get('seq')} cannot be sent again: "
+                                     f"kind {message.get('kind')!r}, bytes {message.get('hex')!r}") from None
+                if message["seq"] in pending:  # its recorded reply never came: nothing to compare
+                    pending.pop(message["seq"])
+                    report.unmatched += 1
+                due(show_s)
+                reply = link.send(frame, message.get("attempt", 1), Tag(message.get("step"), message.get("label")))
+                report.frames += 1
+                replayed = {"kind": reply.kind.value, "hex": reply.hex, "executing": reply.executing,
+                            "error": reply.error}
+                pending[message["seq"]] = (message, replayed, show_s)
+                if len(pending) > 64:  # replies missing from the recording: do not hold them forever
+                    pending.pop(next(iter(pending)))
+                    report.unmatched += 1
+            else:
+                held = pending.pop(message.get("seq"), None)
+                if held is None:
+                    continue
+                tx, replayed, show_s = held
+                if _same(message, replayed):
+                    report.same += 1
+                    continue
+                report.different += 1
+                difference = Difference(message["seq"], tx.get("step"), tx.get("kind", "?"), show_s, message, replayed)
+                if len(report.differences) < LISTED_DIFFERENCES:
+                    report.differences.append(difference)
+                recorder.on_log(3, f"replay differs: {difference}", clock.wall_ns())
+                if on_difference is not None:
+                    on_difference(difference)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise reader.not_choreo(topic, number, exc) from None
     report.unmatched += len(pending)
 
 

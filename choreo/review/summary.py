@@ -197,85 +197,90 @@ def summarize_reader(reader: LogReader) -> Summary:
     finished: list[tuple[int, int | None, str | None, int, int | None, str]] = []
     count = 0
 
-    for topic, log_time, data in reader.messages():
-        count += 1
-        last_time = log_time
-        if topic == RX_TOPIC:
-            m = decode(data)
-            kind = m["kind"]
-            replies[kind] = replies.get(kind, 0) + 1
-            seq = m["seq"]
-            if seq == pending_seq:
-                pending_seq = -1
-            if kind == "status":
-                key = round(m["latency_ms"] * 1000)
-                latency[key] = latency.get(key, 0) + 1
-                if running is not None and seq == status_seq and m["executing"] is False:
-                    finished.append((*running, status_ns - running[3], "status"))
+    topic = None
+    try:
+        for topic, log_time, data in reader.messages():
+            count += 1
+            last_time = log_time
+            if topic == RX_TOPIC:
+                m = decode(data)
+                kind = m["kind"]
+                replies[kind] = replies.get(kind, 0) + 1
+                seq = m["seq"]
+                if seq == pending_seq:
+                    pending_seq = -1
+                if kind == "status":
+                    key = round(m["latency_ms"] * 1000)
+                    latency[key] = latency.get(key, 0) + 1
+                    if running is not None and seq == status_seq and m["executing"] is False:
+                        finished.append((*running, status_ns - running[3], "status"))
+                        running = None
+                elif kind == "ack":
+                    key = round(m["latency_ms"] * 1000)
+                    latency[key] = latency.get(key, 0) + 1
+                    if seq == restore_seq and armed is not None:
+                        if running is not None:
+                            finished.append((*running, None, "stop"))
+                        running = (*armed, restore_ns)
+                        armed = None
+                elif kind == "nak":
+                    key = round(m["latency_ms"] * 1000)
+                    latency[key] = latency.get(key, 0) + 1
+            elif topic == TX_TOPIC:
+                m = decode(data)
+                kind = m["kind"]
+                frames[kind] = frames.get(kind, 0) + 1
+                if pending_seq != -1:
+                    summary.unanswered += 1
+                pending_seq = m["seq"]
+                if m["attempt"] > 1:
+                    retries += 1
+                if kind == "status":
+                    status_seq = pending_seq
+                    status_ns = log_time
+                elif kind == "restore":
+                    restore_seq = pending_seq
+                    restore_ns = log_time
+                elif kind == "play":
+                    armed = (m["motion"], m["step"], m["label"])
+                elif kind == "stop" and running is not None:
+                    finished.append((*running, None, "stop"))
                     running = None
-            elif kind == "ack":
-                key = round(m["latency_ms"] * 1000)
-                latency[key] = latency.get(key, 0) + 1
-                if seq == restore_seq and armed is not None:
-                    if running is not None:
-                        finished.append((*running, None, "stop"))
-                    running = (*armed, restore_ns)
-                    armed = None
-            elif kind == "nak":
-                key = round(m["latency_ms"] * 1000)
-                latency[key] = latency.get(key, 0) + 1
-        elif topic == TX_TOPIC:
-            m = decode(data)
-            kind = m["kind"]
-            frames[kind] = frames.get(kind, 0) + 1
-            if pending_seq != -1:
-                summary.unanswered += 1
-            pending_seq = m["seq"]
-            if m["attempt"] > 1:
-                retries += 1
-            if kind == "status":
-                status_seq = pending_seq
-                status_ns = log_time
-            elif kind == "restore":
-                restore_seq = pending_seq
-                restore_ns = log_time
-            elif kind == "play":
-                armed = (m["motion"], m["step"], m["label"])
-            elif kind == "stop" and running is not None:
-                finished.append((*running, None, "stop"))
-                running = None
-        elif topic == STEP_TOPIC:
-            m = decode(data)
-            index = m["index"]
-            if m["event"] == "start":
-                started += 1
-                steps_open.add(index)
-                if m["kind"] == "play":  # a wait starts when the play before it is answered
-                    late_ms = m["late_ms"]
-                    key = round(late_ms * 1000)
-                    lateness[key] = lateness.get(key, 0) + 1
-                    if late_ms > LATE_MS:
-                        late += 1
-                if not zero_from_step:
-                    # the show clock's zero in wall-clock ns: this start's time minus its show time
-                    zero = log_time - round(m["actual_s"] * 1e9)
-                    zero_from_step = True
-            else:
-                steps_open.discard(index)
-                outcome = m["outcome"]
-                outcomes[outcome] = outcomes.get(outcome, 0) + 1
-        elif topic == LOG_TOPIC:
-            m = decode(data)
-            level = m.get("level", 0)
-            if level >= WARNING:
-                if level >= ERROR:
-                    summary.errors += 1
+            elif topic == STEP_TOPIC:
+                m = decode(data)
+                index = m["index"]
+                if m["event"] == "start":
+                    started += 1
+                    steps_open.add(index)
+                    if m["kind"] == "play":  # a wait starts when the play before it is answered
+                        late_ms = m["late_ms"]
+                        key = round(late_ms * 1000)
+                        lateness[key] = lateness.get(key, 0) + 1
+                        if late_ms > LATE_MS:
+                            late += 1
+                    if not zero_from_step:
+                        # the show clock's zero in wall-clock ns: this start's time minus its show time
+                        zero = log_time - round(m["actual_s"] * 1e9)
+                        zero_from_step = True
                 else:
-                    summary.warnings += 1
-                if len(summary.log_lines) < LISTED_LOG_LINES:
-                    summary.log_lines.append(LogLine(_show_s(log_time, zero), level, str(m.get("message", ""))))
-        if len(finished) > 256:
-            _add_plays(summary, finished, zero)
+                    steps_open.discard(index)
+                    outcome = m["outcome"]
+                    outcomes[outcome] = outcomes.get(outcome, 0) + 1
+            elif topic == LOG_TOPIC:
+                m = decode(data)
+                level = m.get("level", 0)
+                if level >= WARNING:
+                    if level >= ERROR:
+                        summary.errors += 1
+                    else:
+                        summary.warnings += 1
+                    if len(summary.log_lines) < LISTED_LOG_LINES:
+                        summary.log_lines.append(LogLine(_show_s(log_time, zero), level, str(m.get("message", ""))))
+            if len(finished) > 256:
+                _add_plays(summary, finished, zero)
+
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise reader.not_choreo(topic, count, exc) from None
 
     if pending_seq != -1:
         summary.unanswered += 1

@@ -52,6 +52,19 @@ class MotionRun:
         return None if self.planned_s is None else self.planned_s + self.expected_s
 
     @property
+    def measured(self) -> bool:
+        """A status query saw it end: `end_s` is its end (to within the 50 ms poll)."""
+        return self.ended_by == "status"
+
+    @property
+    def drawn_end_s(self) -> float | None:
+        """Where its actual bar ends: the measured end, else its expected length at most (what
+        ended it - the next play's stop frame, the log's end - is only an upper bound)."""
+        if self.start_s is None or self.end_s is None or self.measured:
+            return self.end_s
+        return min(self.end_s, self.start_s + self.expected_s)
+
+    @property
     def actual_s(self) -> float | None:
         if self.start_s is None or self.end_s is None:
             return None
@@ -120,67 +133,72 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
             show.expected_s(playing.motion), playing.due_s, playing.start_s, end_s, ended_by,
             playing.late_ms))
 
-    for topic, log_time, data in reader.messages():
-        message = decode(data)
-        if topic == STEP_TOPIC:
-            clock.see_step(log_time, message)
-            now = clock.seconds(log_time)
-            if message["event"] == "start":
-                late_ms = message.get("late_ms") or 0.0
-                # Only a play's lateness shows on stage (a wait starts when the play is answered).
-                if late_ms > LATE_MS and message.get("kind") == "play":
-                    label = f" '{message['label']}'" if message.get("label") else ""
-                    timeline.marks.append(Mark(now, "late", f"step {message['index']}{label} started "
-                                                            f"{late_ms:.1f} ms late (due {message['planned_s']:.3f} s)"))
-                if message.get("kind") == "play":
-                    steps[message["index"]] = message
-        elif topic == TX_TOPIC:
-            now = clock.seconds(log_time)
-            kind = message.get("kind")
-            frames[message["seq"]] = (kind, message, now)
-            if kind == "play":
-                key = (message.get("step"), message.get("motion"))
-                if armed is not None and (armed.step, armed.motion) == key:
-                    armed.start_s = None  # the play sequence tried again from its stop frame
-                else:
-                    if armed is not None:
-                        finish(armed, None, "not started")
-                    step = steps.pop(key[0], None) if key[0] is not None else None
-                    armed = _Playing(message["motion"], key[0], message.get("label"),
-                                     step.get("estimated_s") if step else None,
-                                     step.get("planned_s") if step else None,
-                                     step.get("late_ms", 0.0) if step else 0.0)
-            elif kind == "restore" and armed is not None:
-                armed.start_s = now
-            elif kind == "stop" and running is not None:
-                finish(running, now, "stop")
-                running = None
-        elif topic == RX_TOPIC:
-            now = clock.seconds(log_time)
-            kind = message.get("kind")
-            frame_kind, tx, sent_s = frames.pop(message.get("seq"), (None, {}, now))
-            if kind not in ("ack", "status"):
-                step = tx.get("step")
-                where = f"step {step}: " if step is not None else ""
-                what = message.get("error") or kind
-                timeline.marks.append(Mark(now, "fault", f"{where}{kind.upper()} to {frame_kind or 'a frame'} "
-                                                          f"(#{message.get('seq')}): {what}"))
-                if frame_kind == "restore" and armed is not None:
-                    armed.start_s = None  # that try did not start it
-            elif frame_kind == "restore" and armed is not None and armed.start_s is not None:
-                if running is not None:
-                    finish(running, armed.start_s, "stop")
-                running, armed = armed, None
-            elif frame_kind == "status" and running is not None and message.get("executing") is False:
-                finish(running, sent_s, "status")  # the query that found it over
-                running = None
-        elif topic == LOG_TOPIC and message.get("level", 0) >= ERROR:
-            now = clock.seconds(log_time)
-            timeline.marks.append(Mark(now, "error", str(message.get("message", ""))))
-        else:
-            now = clock.seconds(log_time)
-        if now is not None:
-            last_s = max(last_s, now)
+    topic, number = None, 0
+    try:
+        for topic, log_time, data in reader.messages((STEP_TOPIC, TX_TOPIC, RX_TOPIC, LOG_TOPIC)):
+            number += 1
+            message = decode(data)
+            if topic == STEP_TOPIC:
+                clock.see_step(log_time, message)
+                now = clock.seconds(log_time)
+                if message["event"] == "start":
+                    late_ms = message.get("late_ms") or 0.0
+                    # Only a play's lateness shows on stage (a wait starts when the play is answered).
+                    if late_ms > LATE_MS and message.get("kind") == "play":
+                        label = f" '{message['label']}'" if message.get("label") else ""
+                        timeline.marks.append(Mark(now, "late", f"step {message['index']}{label} started "
+                                                                f"{late_ms:.1f} ms late (due {message['planned_s']:.3f} s)"))
+                    if message.get("kind") == "play":
+                        steps[message["index"]] = message
+            elif topic == TX_TOPIC:
+                now = clock.seconds(log_time)
+                kind = message.get("kind")
+                frames[message["seq"]] = (kind, message, now)
+                if kind == "play":
+                    key = (message.get("step"), message.get("motion"))
+                    if armed is not None and (armed.step, armed.motion) == key:
+                        armed.start_s = None  # the play sequence tried again from its stop frame
+                    else:
+                        if armed is not None:
+                            finish(armed, None, "not started")
+                        step = steps.pop(key[0], None) if key[0] is not None else None
+                        armed = _Playing(message["motion"], key[0], message.get("label"),
+                                         step.get("estimated_s") if step else None,
+                                         step.get("planned_s") if step else None,
+                                         step.get("late_ms", 0.0) if step else 0.0)
+                elif kind == "restore" and armed is not None:
+                    armed.start_s = now
+                elif kind == "stop" and running is not None:
+                    finish(running, now, "stop")
+                    running = None
+            elif topic == RX_TOPIC:
+                now = clock.seconds(log_time)
+                kind = message.get("kind")
+                frame_kind, tx, sent_s = frames.pop(message.get("seq"), (None, {}, now))
+                if kind not in ("ack", "status"):
+                    step = tx.get("step")
+                    where = f"step {step}: " if step is not None else ""
+                    what = message.get("error") or kind
+                    timeline.marks.append(Mark(now, "fault", f"{where}{kind.upper()} to {frame_kind or 'a frame'} "
+                                                              f"(#{message.get('seq')}): {what}"))
+                    if frame_kind == "restore" and armed is not None:
+                        armed.start_s = None  # that try did not start it
+                elif frame_kind == "restore" and armed is not None and armed.start_s is not None:
+                    if running is not None:
+                        finish(running, armed.start_s, "stop")
+                    running, armed = armed, None
+                elif frame_kind == "status" and running is not None and message.get("executing") is False:
+                    finish(running, sent_s, "status")  # the query that found it over
+                    running = None
+            elif topic == LOG_TOPIC and message.get("level", 0) >= ERROR:
+                now = clock.seconds(log_time)
+                timeline.marks.append(Mark(now, "error", str(message.get("message", ""))))
+            else:
+                now = clock.seconds(log_time)
+            if now is not None:
+                last_s = max(last_s, now)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise reader.not_choreo(topic, number, exc) from None
     if armed is not None:
         finish(armed, None, "not started")
     if running is not None:
@@ -213,12 +231,14 @@ def render_text(timeline: Timeline) -> Iterator[str]:
     if timeline.show_problem:
         yield f"(planned lengths: {timeline.show_problem}; 1 s each assumed)"
     ruler = f"0 s{'':{BAR_WIDTH - 3 - len(f'{span:.1f} s')}}{span:.1f} s"
-    yield f"{'step':>5}  {'motion':<18} {'planned':>15} {'actual':>15}  |{ruler}|"
+    yield f"{'step':>5}  {'motion':<22} {'planned':>15} {'actual':>15}  |{ruler}|"
     for run in timeline.runs:
         bar = [" "] * BAR_WIDTH
         for i in _cells(run.planned_s, run.planned_end_s, scale):
             bar[i] = "-"
         for i in _cells(run.start_s, run.end_s, scale):
+            bar[i] = "."
+        for i in _cells(run.start_s, run.drawn_end_s, scale):
             bar[i] = "#"
         if run.late_ms > LATE_MS and run.start_s is not None:
             bar[_cells(run.start_s, run.start_s, scale)[0]] = "!"
@@ -226,19 +246,25 @@ def render_text(timeline: Timeline) -> Iterator[str]:
         if run.start_s is None:
             actual = "not started"
         else:
-            actual = _span(run.start_s, run.end_s) + ("" if run.ended_by == "status" else "?")
+            actual = _span(run.start_s, run.end_s) if run.measured else f"{run.start_s:.3f}-?"
         step = str(run.step) if run.step is not None else "abort"
-        yield f"{step:>5}  {run.title()[:18]:<18} {planned:>15} {actual:>15}  |{''.join(bar)}|"
+        yield f"{step:>5}  {run.title()[:22]:<22} {planned:>15} {actual:>15}  |{''.join(bar)}|"
     if not timeline.runs:
         yield "  (no motion played)"
     if any(r.ended_by not in ("status", "not started") for r in timeline.runs):
-        yield "?: end not seen by a status query (stopped by the next play, or the log ends)"
+        yield ("?: no status query saw it end (no `wait: done`): '#' for its expected length, "
+               "'.' up to what stopped it (the next play, or the log's end)")
     for title, marks in (("late cues", timeline.late), ("faults", timeline.faults)):
         yield f"{title}: {len(marks) or 'none'}"
         for mark in marks:
             yield f"  {mark.show_s:9.3f} s  {mark.text}"
     if timeline.cut is not None:
         yield f"log unfinished: {timeline.cut}"
+
+
+def counted(n: int, word: str) -> str:
+    """`1 late cue`, `3 faults`."""
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
 
 
 def _span(start: float | None, end: float | None) -> str:
@@ -273,9 +299,12 @@ def render_png(timeline: Timeline, path: str | Path) -> Path:
                 ax.broken_barh([(run.planned_s, run.expected_s)], (y - 0.42, 0.34),
                                facecolors="#b8c4d6", edgecolors="#6b7a90", linewidth=0.5)
             if run.start_s is not None and run.end_s is not None:
-                colour = "#2f6db5" if run.ended_by == "status" else "#8c6bb1"
-                ax.broken_barh([(run.start_s, max(run.end_s - run.start_s, 0.005))], (y - 0.04, 0.44),
+                colour = "#2f6db5" if run.measured else "#8c6bb1"
+                ax.broken_barh([(run.start_s, max(run.drawn_end_s - run.start_s, 0.005))], (y - 0.04, 0.44),
                                facecolors=colour)
+                if not run.measured and run.end_s > run.drawn_end_s:
+                    ax.hlines(y + 0.18, run.drawn_end_s, run.end_s, colors=colour, linestyles="dotted",
+                              linewidth=1.5)
             if run.late_ms > LATE_MS and run.start_s is not None:
                 ax.plot([run.start_s], [y - 0.04], marker="v", color="#d62728", markersize=9, linestyle="")
         fault_y = len(slots)
@@ -297,14 +326,14 @@ def render_png(timeline: Timeline, path: str | Path) -> Path:
             title += f", {timeline.outcome}"
         if timeline.cut is not None:
             title += " (log unfinished)"
-        title += f"; {len(late)} late cues, {len(faults)} faults"
+        title += f"; {counted(len(late), 'late cue')}, {counted(len(faults), 'fault')}"
         ax.set_title(title)
         from matplotlib.lines import Line2D
         from matplotlib.patches import Patch
 
         handles = [Patch(facecolor="#b8c4d6", edgecolor="#6b7a90", label="planned"),
                    Patch(facecolor="#2f6db5", label="actual (to status: done)"),
-                   Patch(facecolor="#8c6bb1", label="actual (end not polled)"),
+                   Patch(facecolor="#8c6bb1", label="actual (end not polled: expected length)"),
                    Line2D([], [], marker="v", color="#d62728", linestyle="", label="late cue"),
                    Line2D([], [], marker="x", color="#d62728", linestyle="", markeredgewidth=2, label="fault")]
         ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=5, frameon=False,
