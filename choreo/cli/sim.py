@@ -99,10 +99,11 @@ def run(args: argparse.Namespace) -> int:
     server = PtyServer(board, gap_s=options.gap_s or PTY_GAP_S, check_settings=not args.no_settings_check)
     with server:
         path = server.path
-        print(path, flush=True)
-        print(f"choreo sim: simulated RCB-4 on {path}, {options.describe()}; Ctrl-C to stop", file=sys.stderr)
+        # Handlers first: whoever reads the path may signal us at once, and must get exit 0.
         previous = {sig: signal.signal(sig, lambda *_: server.stop()) for sig in (signal.SIGINT, signal.SIGTERM)}
         try:
+            print(path, flush=True)
+            print(f"choreo sim: simulated RCB-4 on {path}, {options.describe()}; Ctrl-C to stop", file=sys.stderr)
             end = server.serve()
         finally:
             for sig, handler in previous.items():

@@ -1,0 +1,301 @@
+"""The link against the simulator, in-process (`sim://`) and over `choreo sim`'s pseudo-terminal.
+
+For every fault kind, in both spellings (every K-th frame, probability with a seed): either the
+right LinkError (naming the frame, what came back and what to check) or a retry that succeeds,
+and every frame and every reply reported to a listener, one reply event per frame written.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+import signal
+import subprocess
+import sys
+import threading
+
+import pytest
+
+from choreo.errors import LinkError
+from choreo.link import Link, RxEvent, TxEvent
+from choreo.protocol import ReplyKind
+from choreo.sim.faults import FaultPlan
+from choreo.sim.board import SimBoard
+from choreo.sim.pty import PtyServer
+
+SIM_TIMEOUT = 0.05  # in-process replies take ~2 ms of simulated wire time
+PTY_TIMEOUT = 0.15  # a pty puts a scheduler between the link and the board: replies take ~1-5 ms
+
+
+class Recorder:
+    """A link listener that keeps every event."""
+
+    def __init__(self) -> None:
+        self.tx: list[TxEvent] = []
+        self.rx: list[RxEvent] = []
+
+    def on_tx(self, event: TxEvent) -> None:
+        self.tx.append(event)
+
+    def on_rx(self, event: RxEvent) -> None:
+        self.rx.append(event)
+
+    def check_paired(self) -> None:
+        """One reply event for every frame written, in order, for the same frame."""
+        assert [e.seq for e in self.tx] == [e.seq for e in self.rx] == list(range(1, len(self.tx) + 1))
+        assert all(t.frame == r.frame for t, r in zip(self.tx, self.rx))
+
+    def failed(self) -> list[int]:
+        return [e.seq for e in self.rx if not e.reply.ok]
+
+
+def workload(link: Link) -> None:
+    """A play and four status polls: frames 1-3 the play sequence, then polls (and retries)."""
+    link.play(3)
+    for _ in range(4):
+        assert link.query_status().kind is ReplyKind.STATUS
+
+
+# What the link makes of a reply each fault damaged, and what its error must say when the fault
+# hits every frame.
+REPLY_KIND = {
+    "drop": ReplyKind.TIMEOUT,
+    "late": ReplyKind.TIMEOUT,
+    "nak": ReplyKind.NAK,
+    "badsum": ReplyKind.INVALID,
+    "short": ReplyKind.INVALID,
+    "junk": ReplyKind.INVALID,
+}
+ERROR_WORDS = {
+    "drop": ["no reply to 'play 3' (stop frame) after 3 tries", "check baud (115200), even parity", "adapter"],
+    "late": ["no reply to 'play 3' (stop frame) after 3 tries", "check baud (115200), even parity"],
+    "nak": ["NAK (04 00 15 19) to 'play 3' (stop frame) after 3 tries", "refused", "check baud"],
+    "badsum": ["invalid reply (04 00 06 f5", "bad checksum", "to 'play 3' (stop frame)", "check baud"],
+    "short": ["invalid reply (04 00", "short reply", "to 'play 3' (stop frame)", "check baud"],
+    "junk": ["invalid reply (ff 00 aa 04 00 06 0a", "junk", "to 'play 3' (stop frame)", "check baud"],
+}
+
+
+def late_ms(timeout: float) -> int:
+    """Later than the link's timeout, but inside its settle wait before the retry."""
+    return int(timeout * 1.5 * 1000)
+
+
+# -- sim:// ------------------------------------------------------------------------------------
+
+
+def open_sim(query: str, recorder: Recorder) -> Link:
+    return Link.open(f"sim://?motion_s=0.1&{query}", timeout=SIM_TIMEOUT, listeners=[recorder])
+
+
+def hit_frames(link: Link) -> list[int]:
+    return [e.number for e in link.port.board.journal if e.kind == "frame" and e.faults]
+
+
+def test_no_faults_every_frame_acked_and_reported():
+    rec = Recorder()
+    with open_sim("", rec) as link:
+        workload(link)
+        assert link.port.board.frames_received == 7
+    rec.check_paired()
+    assert [e.reply.kind for e in rec.rx] == [ReplyKind.ACK] * 3 + [ReplyKind.STATUS] * 4
+    assert all(e.attempt == 1 for e in rec.tx)
+
+
+@pytest.mark.parametrize("kind", sorted(REPLY_KIND))
+def test_sim_fault_on_every_frame_is_the_right_link_error(kind):
+    rec = Recorder()
+    query = f"{kind}=1" + (f"&late_ms={late_ms(SIM_TIMEOUT) * 4}" if kind == "late" else "")
+    with open_sim(query, rec) as link:
+        with pytest.raises(LinkError) as caught:
+            link.play(3)
+        assert link.port.board.frames_received == 3
+    message = str(caught.value)
+    for words in ERROR_WORDS[kind]:
+        assert words in message, message
+    assert caught.value.exit_code == 3
+    rec.check_paired()
+    assert [e.attempt for e in rec.tx] == [1, 2, 3]
+    assert all(e.reply.kind is REPLY_KIND[kind] for e in rec.rx)
+
+
+@pytest.mark.parametrize("kind", sorted(REPLY_KIND))
+def test_sim_fault_every_4th_frame_is_retried_and_succeeds(kind):
+    rec = Recorder()
+    query = "4" + (f"&late_ms={late_ms(SIM_TIMEOUT)}" if kind == "late" else "")
+    with open_sim(f"{kind}={query}", rec) as link:
+        workload(link)
+        hits = hit_frames(link)
+        assert link.port.board.frames_received == len(rec.tx)
+    rec.check_paired()
+    assert hits == [4, 8] and rec.failed() == hits
+    assert all(rec.rx[n - 1].reply.kind is REPLY_KIND[kind] for n in hits)
+    assert [e.attempt for e in rec.tx if e.seq - 1 in hits] == [2, 2]  # the retry of each
+
+
+@pytest.mark.parametrize("kind", sorted(REPLY_KIND))
+@pytest.mark.parametrize("seed", [1, 2])
+def test_sim_fault_at_random_is_retried_or_the_right_error(kind, seed):
+    rec = Recorder()
+    query = f"{kind}=0.3&seed={seed}" + (f"&late_ms={late_ms(SIM_TIMEOUT)}" if kind == "late" else "")
+    with open_sim(query, rec) as link:
+        try:
+            for _ in range(2):
+                workload(link)
+        except LinkError as exc:
+            assert "after 3 tries" in str(exc)
+            assert rec.tx[-1].attempt == 3 and not rec.rx[-1].reply.ok
+        hits = hit_frames(link)
+        assert link.port.board.frames_received == len(rec.tx)
+    rec.check_paired()
+    assert hits and rec.failed() == hits
+    assert all(rec.rx[n - 1].reply.kind is REPLY_KIND[kind] for n in hits)
+
+
+@pytest.mark.parametrize("spelled", ["5", "0.1"])
+def test_sim_port_lost_is_a_link_error_and_the_last_frame_is_reported(spelled):
+    rec = Recorder()
+    with open_sim(f"lose={spelled}&seed=3", rec) as link:
+        with pytest.raises(LinkError) as caught:
+            for _ in range(20):
+                workload(link)
+        lost_at = link.port.board.lost_at_frame
+    message = str(caught.value)
+    assert "lost" in message and "check the cable and the adapter" in message
+    assert re.search(r"while sending '(stop|play 3|restore|status)'", message)
+    rec.check_paired()
+    assert len(rec.tx) == lost_at and (spelled != "5" or lost_at == 5)
+    assert rec.failed() == [lost_at] and "port lost" in (rec.rx[-1].reply.error or "")
+
+
+def test_sim_late_reply_within_the_timeout_is_no_fault():
+    rec = Recorder()
+    with open_sim(f"late=1&late_ms={int(SIM_TIMEOUT * 400)}", rec) as link:
+        link.timeout = link.port.timeout = SIM_TIMEOUT * 2
+        workload(link)
+    rec.check_paired()
+    assert rec.failed() == []
+
+
+# -- choreo sim on a pseudo-terminal -----------------------------------------------------------
+
+
+@contextlib.contextmanager
+def choreo_sim(*args: str):
+    """`choreo sim -v ARGS`: yields (process, path); the -v journal is read back at the end."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "choreo", "sim", "-v", "--motion-s", "0.1", *args],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        path = proc.stdout.readline().strip()
+        assert path.startswith("/"), proc.stderr.read()
+        yield proc, path
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate(timeout=10)
+
+
+def journal_of(proc: subprocess.Popen, stop: bool = True) -> tuple[int, list[int], str]:
+    """Stop the server (or let it end by itself); return (frames received, frames hit, stderr)."""
+    if stop:
+        proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=10)
+    numbers = [int(n) for n in re.findall(r"^\s*[\d.]+ #(\d+) ", err, re.M)]
+    hits = [int(n) for n in re.findall(r"^\s*[\d.]+ #(\d+) .*\[fault: ", err, re.M)]
+    return len(numbers), hits, err
+
+
+def open_pty(path: str, recorder: Recorder) -> Link:
+    return Link.open(path, timeout=PTY_TIMEOUT, listeners=[recorder])
+
+
+@pytest.mark.parametrize("kind", sorted(REPLY_KIND))
+def test_pty_fault_on_every_frame_is_the_right_link_error(kind):
+    rec = Recorder()
+    extra = ["--late-ms", str(late_ms(PTY_TIMEOUT) * 4)] if kind == "late" else []
+    with choreo_sim(f"--{kind}", "1", *extra) as (proc, path):
+        with open_pty(path, rec) as link, pytest.raises(LinkError) as caught:
+            link.play(3)
+        received, hits, _ = journal_of(proc)
+    assert proc.returncode == 0
+    message = str(caught.value)
+    assert message.startswith(f"port {path}:")
+    for words in ERROR_WORDS[kind]:
+        assert words in message, message
+    rec.check_paired()
+    assert received == len(rec.tx) == 3 and hits == [1, 2, 3]
+    assert all(e.reply.kind is REPLY_KIND[kind] for e in rec.rx)
+
+
+@pytest.mark.parametrize("kind", sorted(REPLY_KIND))
+def test_pty_fault_every_4th_frame_is_retried_and_succeeds(kind):
+    rec = Recorder()
+    extra = ["--late-ms", str(late_ms(PTY_TIMEOUT))] if kind == "late" else []
+    with choreo_sim(f"--{kind}", "4", *extra) as (proc, path):
+        with open_pty(path, rec) as link:
+            workload(link)
+        received, hits, _ = journal_of(proc)
+    rec.check_paired()
+    assert received == len(rec.tx)
+    assert hits == [n for n in range(1, received + 1) if n % 4 == 0]
+    assert all(rec.rx[n - 1].reply.kind is REPLY_KIND[kind] for n in hits)
+    assert set(rec.failed()) >= set(hits)  # a loaded machine may add a timeout, never hide a fault
+
+
+def test_pty_port_lost_is_a_link_error_and_the_server_exits_3():
+    rec = Recorder()
+    with choreo_sim("--lose", "5") as (proc, path):
+        with open_pty(path, rec) as link, pytest.raises(LinkError) as caught:
+            workload(link)
+        received, hits, err = journal_of(proc, stop=False)
+    assert proc.returncode == 3 and "fault 'lose' at frame 5" in err
+    assert "lost" in str(caught.value) and "check the cable and the adapter" in str(caught.value)
+    rec.check_paired()
+    assert received == len(rec.tx) == 5 and hits == [5]
+
+
+@contextlib.contextmanager
+def pty_in_process(kind: str, spelled: str, seed: int):
+    """The same server as `choreo sim`, in a thread, so its board's journal can be read."""
+    late_s = late_ms(PTY_TIMEOUT) / 1000
+    board = SimBoard(motion_s=0.1, faults=FaultPlan.parse({kind: spelled}, seed=seed, late_s=late_s))
+    server = PtyServer(board)
+    path = server.open()
+    thread = threading.Thread(target=server.serve, daemon=True)
+    thread.start()
+    try:
+        yield board, path
+    finally:
+        server.stop()
+        thread.join(5)
+        server.close()
+
+
+@pytest.mark.parametrize("kind", sorted(REPLY_KIND))
+def test_pty_fault_at_random_is_retried_or_the_right_error(kind):
+    rec = Recorder()
+    with pty_in_process(kind, "0.25", seed=3) as (board, path):
+        with open_pty(path, rec) as link:
+            try:
+                workload(link)
+                workload(link)
+            except LinkError as exc:
+                assert "after 3 tries" in str(exc)
+                assert rec.tx[-1].attempt == 3 and not rec.rx[-1].reply.ok
+        hits = [e.number for e in board.journal if e.kind == "frame" and e.faults]
+        assert board.frames_received == len(rec.tx)
+    rec.check_paired()
+    assert hits and set(rec.failed()) >= set(hits)
+    assert all(rec.rx[n - 1].reply.kind is REPLY_KIND[kind] for n in hits)
+
+
+def test_pty_port_lost_at_random():
+    rec = Recorder()
+    with pty_in_process("lose", "0.2", seed=6) as (board, path):
+        with open_pty(path, rec) as link, pytest.raises(LinkError, match="lost"):
+            for _ in range(10):
+                workload(link)
+    rec.check_paired()
+    assert board.lost and len(rec.tx) == board.lost_at_frame == board.frames_received
