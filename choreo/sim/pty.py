@@ -119,6 +119,7 @@ class PtyServer:
         master, wake_r = self._master, self._wake[0]
         while True:
             now = time.monotonic()
+            self.board.running(now)  # a motion that has ended is journalled (and shown by -v) now
             self.line.poll(now)
             self._unsent += self.line.take(now, 1 << 16)
             self._flush(master)
@@ -137,8 +138,8 @@ class PtyServer:
                 self._receive(master)
 
     def _timeout(self, now: float) -> float:
-        wake = self.line.next_event()
-        return _MAX_WAIT_S if wake is None else min(max(wake - now, 0.0), _MAX_WAIT_S)
+        times = [t for t in (self.line.next_event(), self.board.motion_end()) if t is not None]
+        return min(max(min(times) - now, 0.0), _MAX_WAIT_S) if times else _MAX_WAIT_S
 
     def _receive(self, master: int) -> None:
         try:
