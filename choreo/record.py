@@ -1,10 +1,15 @@
 """The run log: every frame, reply, step and warning of a run, as MCAP with JSON messages.
 
 The recorder is a listener of the link (frames and replies) and of the runner (steps and log
-lines). It is on the hot path of every frame, so it only serialises and appends; a background
-thread closes the current chunk and flushes the file every half second, so a killed run loses
-at most that much and a linear reader can read the rest. The file is created exclusively: a
-log is never overwritten.
+lines). It is on the hot path of every frame, and the worst place on that path is the stretch
+between a cue's due time and its first byte: the runner reports the step's start and the link
+reports the frame (with its timestamp, taken just before the write) before the write itself.
+So a frame, a step event or a log line is only queued there (one deque append, no lock that the
+flusher could hold); the queue is serialised and written when a reply has come back (`on_rx`:
+the frame is out, and the next one waits for this reply anyway), or by the background thread
+that closes the current chunk and flushes the file every half second, so a killed run loses at
+most that much and a linear reader can read the rest. Messages keep the order they were
+reported in. The file is created exclusively: a log is never overwritten.
 """
 
 from __future__ import annotations
@@ -17,11 +22,13 @@ import socket
 import sys
 import threading
 import time
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from importlib import resources
 from pathlib import Path
-from typing import IO, TYPE_CHECKING
+from typing import IO, TYPE_CHECKING, Any
 
 from mcap.writer import CompressionType, Writer
 
@@ -96,8 +103,58 @@ def _iso(ns: int) -> str:
     return datetime.fromtimestamp(ns / 1e9, timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
+# One encoder for every message: json.dumps with non-default separators builds a new encoder on
+# each call, a third of the cost of serialising a frame.
+_encode = json.JSONEncoder(separators=(",", ":")).encode
+
+
 def _dumps(message: dict) -> bytes:
-    return json.dumps(message, separators=(",", ":")).encode()
+    return _encode(message).encode()
+
+
+def _tx_message(event: TxEvent) -> dict:
+    tag = event.tag
+    return {
+        "seq": event.seq,
+        "step": tag.step if tag else None,
+        "label": tag.label if tag else None,
+        "kind": event.frame.kind.value,
+        "motion": event.frame.motion,
+        "attempt": event.attempt,
+        "hex": event.frame.hex,
+    }
+
+
+def _rx_message(event: RxEvent) -> dict:
+    reply = event.reply
+    return {
+        "seq": event.seq,
+        "kind": reply.kind.value,
+        "hex": reply.hex,
+        "latency_ms": round(event.latency_s * 1e3, 4),
+        "executing": reply.executing,
+        "error": reply.error,
+    }
+
+
+def _step_message(event: StepEvent) -> dict:
+    return event.message()
+
+
+def _log_message(entry: tuple[int, str, int]) -> dict:
+    level, message, time_ns = entry
+    return {
+        "timestamp": {"sec": time_ns // 1_000_000_000, "nsec": time_ns % 1_000_000_000},
+        "level": level,
+        "message": message,
+        "name": "choreo",
+        "file": "",
+        "line": 0,
+    }
+
+
+# A reported event waiting to be written: (topic, log time, how to make its message, the event).
+_Pending = tuple[str, int, Callable[[Any], dict], Any]
 
 
 class Recorder:
@@ -109,7 +166,8 @@ class Recorder:
         self._lock = threading.Lock()
         self._dirty = False
         self._closed = False
-        self.messages = 0
+        self._pending: deque[_Pending] = deque()  # appended by reporters, drained under the lock
+        self.messages = 0  # messages written so far (queued ones not yet counted)
         try:
             self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
             self._writer.start(profile="", library=f"choreo {__version__}")
@@ -137,48 +195,32 @@ class Recorder:
     # -- listeners -------------------------------------------------------------------------
 
     def on_tx(self, event: TxEvent) -> None:
-        tag = event.tag
-        self._write(TX_TOPIC, event.time_ns, {
-            "seq": event.seq,
-            "step": tag.step if tag else None,
-            "label": tag.label if tag else None,
-            "kind": event.frame.kind.value,
-            "motion": event.frame.motion,
-            "attempt": event.attempt,
-            "hex": event.frame.hex,
-        })
+        """Queued only: the frame has not been written yet (see the module's docstring)."""
+        self._pending.append((TX_TOPIC, event.time_ns, _tx_message, event))
 
     def on_rx(self, event: RxEvent) -> None:
-        reply = event.reply
-        self._write(RX_TOPIC, event.time_ns, {
-            "seq": event.seq,
-            "kind": reply.kind.value,
-            "hex": reply.hex,
-            "latency_ms": round(event.latency_s * 1e3, 4),
-            "executing": reply.executing,
-            "error": reply.error,
-        })
+        """The reply is in: write it and everything queued before it."""
+        self._pending.append((RX_TOPIC, event.time_ns, _rx_message, event))
+        with self._lock:
+            self._write_pending()
 
     def on_step(self, event: StepEvent) -> None:
-        self._write(STEP_TOPIC, event.time_ns, event.message())
+        """Queued only: a step's start comes just before its first frame."""
+        self._pending.append((STEP_TOPIC, event.time_ns, _step_message, event))
 
     def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
+        """Queued only: a late-cue warning comes just before the cue's first frame."""
         time_ns = time.time_ns() if time_ns is None else time_ns
-        self._write(LOG_TOPIC, time_ns, {
-            "timestamp": {"sec": time_ns // 1_000_000_000, "nsec": time_ns % 1_000_000_000},
-            "level": level,
-            "message": message,
-            "name": "choreo",
-            "file": "",
-            "line": 0,
-        })
+        self._pending.append((LOG_TOPIC, time_ns, _log_message, (level, message, time_ns)))
 
-    def _write(self, topic: str, time_ns: int, message: dict) -> None:
-        data = _dumps(message)
-        with self._lock:
+    def _write_pending(self) -> None:
+        """Serialise and add every queued message, in order; the caller holds the lock."""
+        pending = self._pending
+        while pending:
+            topic, time_ns, make, event = pending.popleft()
             if self._closed:
-                return
-            self._writer.add_message(self._channels[topic], log_time=time_ns, data=data,
+                continue
+            self._writer.add_message(self._channels[topic], log_time=time_ns, data=_dumps(make(event)),
                                      publish_time=time_ns, sequence=self.messages)
             self.messages += 1
             self._dirty = True
@@ -192,7 +234,10 @@ class Recorder:
     def flush(self) -> None:
         """Close the chunk in progress and hand it to the OS: a SIGKILL now loses nothing."""
         with self._lock:
-            if self._closed or not self._dirty:
+            if self._closed:
+                return
+            self._write_pending()
+            if not self._dirty:
                 return
             try:
                 self._writer.flush()
@@ -208,8 +253,9 @@ class Recorder:
         if self._flusher.is_alive() and self._flusher is not threading.current_thread():
             self._flusher.join(timeout=2)
         with self._lock:
-            self._closed = True
             try:
+                self._write_pending()
+                self._closed = True
                 if result is not None:
                     self._writer.add_metadata(RESULT_METADATA_NAME, result)
                 self._writer.finish()
@@ -218,6 +264,7 @@ class Recorder:
             except OSError as exc:
                 raise LogError(f"log {self.path}: cannot finish writing: {exc.strerror or exc}") from None
             finally:
+                self._closed = True
                 self._file.close()
 
     def __enter__(self) -> Recorder:
