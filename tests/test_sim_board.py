@@ -486,3 +486,24 @@ def test_right_settings_at_another_board_baud():
 def test_transmission_helpers():
     t = Transmission(b"ab", (1.0, 2.0))
     assert (t.start, t.end) == (1.0, 2.0)
+
+
+def test_looking_at_the_board_changes_nothing():
+    b = board(motion_s=1.0)
+    play(b, 3, 0.0)
+    assert b.running(5.0) is None and b.config(5.0) == 0x8721  # as it will be by then
+    assert b.running(0.5) == 3 and b.config(0.5) == 0x8723  # as it is now
+    assert status_low(b, 0.5) == 0x23  # a frame at 0.5 is still in order
+    b.advance(2.0)
+    assert [e.kind for e in b.journal][-1] == "motion"
+    with pytest.raises(ValueError, match="in order"):
+        b.receive(STATUS, 1.5)
+
+
+def test_noise_closed_by_a_gap_after_someone_looked_at_the_board():
+    b = board()
+    line = Line(b, gap_s=0.01)
+    line.send(b"\x00\x0c", 1.0)
+    b.config(9.0)
+    line.poll(9.0)
+    assert line.take(9.0, 8) == p.nak(0x0C)

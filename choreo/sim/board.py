@@ -160,24 +160,25 @@ class SimBoard:
         return self.durations.get(slot, self.motion_s)
 
     def config(self, now: float) -> int:
-        """The config word at RAM 0x0000 as of `now`."""
-        self._advance(now)
-        return self.ram[0] | self.ram[1] << 8
+        """The config word at RAM 0x0000 as of `now` (a look: changes nothing)."""
+        word = self.ram[0] | self.ram[1] << 8
+        return word & ~RUN_BIT if self._ended_by(now) else word
 
     def running(self, now: float) -> int | None:
-        """The slot whose motion is running at `now`, or None."""
-        self._advance(now)
-        return self._running.slot if self._running else None
+        """The slot whose motion is running at `now`, or None (a look: changes nothing)."""
+        if self._running is None or self._ended_by(now):
+            return None
+        return self._running.slot
 
     def motion_end(self) -> float | None:
         """When the running motion will end (board time), or None."""
         return self._running.ends if self._running else None
 
-    def _advance(self, now: float) -> None:
-        """Bring the model up to `now`: a motion whose time is over ends and clears the run bit.
+    def advance(self, now: float) -> None:
+        """Let time pass up to `now`: a motion whose time is over ends, clears the run bit and is
+        journalled. Frames do this themselves; a server calls it to journal an end on time.
 
-        The model never goes back in time: a query for an earlier moment than the last frame
-        answers with the current state (frames themselves must come in order, see `receive`).
+        The board's time only moves forward: an earlier `now` changes nothing.
         """
         if now <= self._now:
             return
@@ -187,6 +188,9 @@ class SimBoard:
             self._running = None
             self.ram[0] &= ~RUN_BIT & 0xFF
             self._record(JournalEntry("motion", run.ends, note=f"motion {run.slot} ended, run bit cleared"))
+
+    def _ended_by(self, now: float) -> bool:
+        return self._running is not None and now >= self._running.ends
 
     # -- frames ------------------------------------------------------------------------------
 
@@ -201,7 +205,7 @@ class SimBoard:
             raise ValueError(f"the simulated port was lost at frame {self.lost_at_frame}")
         if now < self._now:
             raise ValueError(f"frame at {now} arrived before the board's time {self._now}: frames come in order")
-        self._advance(now)
+        self.advance(now)
         data = bytes(data)
         self.frames_received += 1
         number = self.frames_received

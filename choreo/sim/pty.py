@@ -119,8 +119,8 @@ class PtyServer:
         master, wake_r = self._master, self._wake[0]
         while True:
             now = time.monotonic()
-            self.board.running(now)  # a motion that has ended is journalled (and shown by -v) now
-            self.line.poll(now)
+            self.line.poll(now)  # first: what a gap closed happened before `now`
+            self.board.advance(now)  # a motion that has ended is journalled (shown by -v) on time
             self._unsent += self.line.take(now, 1 << 16)
             self._flush(master)
             if self.board.lost:
