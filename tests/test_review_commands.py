@@ -33,8 +33,8 @@ SHOW = """\
 version: 1
 name: review
 motions:
-  wave: {number: 3, duration: 0.3}
-  bow: {number: 5, duration: 0.2}
+  wave: {number: 3, duration: 0.33}   # not a multiple of the 50 ms poll: no poll falls on an end
+  bow: {number: 5, duration: 0.22}
 steps:
   - play: wave
     label: start
@@ -151,7 +151,7 @@ def test_summary_of_a_complete_run(logs, capsys):
     tx = Counter(m["kind"] for m in topics["/rcb4/tx"])
     assert "(complete)" in field(out, "log")
     assert "review" in field(out, "show") and "sha256" in field(out, "show")
-    assert "sim://?durations=3:0.3,5:0.2 at 115200 baud" in field(out, "run")
+    assert "sim://?durations=3:0.33,5:0.22 at 115200 baud" in field(out, "run")
     assert field(out, "outcome").startswith("outcome   done (exit 0)")
     assert "6 run: 6 done, 1 late, 0 failed" in field(out, "steps")
     assert f"{sum(tx.values())} sent (stop 3, play 3, restore 3, status {tx['status']}); 0 retries" in field(out, "frames")
@@ -160,7 +160,7 @@ def test_summary_of_a_complete_run(logs, capsys):
     assert "(3 plays, 1 over 1 ms)" in field(out, "cues")
     plays = [line for line in out.splitlines() if " motion " in line and " step " in line]
     assert len(plays) == 3
-    for line, expected in zip(plays, (0.3, 0.2, 0.3)):
+    for line, expected in zip(plays, (0.33, 0.22, 0.33)):
         measured = float(line.rsplit(":", 1)[1].strip().split()[0])
         assert expected - 0.01 <= measured <= expected + 0.12, line  # to the status poll that saw it end
 
@@ -256,7 +256,7 @@ def test_timeline_text_planned_against_actual(logs, capsys):
     rows = [line for line in out.splitlines() if "|" in line and line.split()[0] != "step"]
     assert [r.split()[0] for r in rows] == ["0", "2", "4"]
     assert "motion 3 wave" in rows[0] and "motion 5 bow" in rows[1]
-    assert "0.000-0.300" in rows[0]  # planned from the attached show's durations
+    assert "0.000-0.330" in rows[0]  # planned from the attached show's durations
     assert "!" in rows[1] and "#" in rows[1]  # the overrun cue, started late
     late = out.split("late cues: ", 1)[1].splitlines()
     assert late[0] == "1" and "step 2 'late-bow' started" in late[1]
@@ -346,7 +346,7 @@ def test_replay_of_a_clean_run_matches(logs, capsys, tmp_path):
     assert code == 0, err
     frames = len(mcap_topics(logs.complete)["/rcb4/tx"])
     assert f"replayed {frames} frames: {frames} same, 0 differ" in out
-    assert "sim://?durations=3:0.3,5:0.2" in err
+    assert "sim://?durations=3:0.33,5:0.22" in err
     replayed = mcap_topics(new_log)
     recorded = mcap_topics(logs.complete)
     assert [m["hex"] for m in replayed["/rcb4/tx"]] == [m["hex"] for m in recorded["/rcb4/tx"]]

@@ -232,8 +232,9 @@ class LogReader:
             name, pos = _string(body, pos)
             media_type, pos = _string(body, pos)
             (size,) = struct.unpack_from("<Q", body, pos)
-            self.attachments.append(Attachment(name, media_type, struct.unpack_from("<Q", body, 0)[0],
-                                               start + 9 + pos + 8, size))
+            attachment = Attachment(name, media_type, struct.unpack_from("<Q", body, 0)[0], start + 9 + pos + 8, size)
+            if attachment not in self.attachments:  # a second pass over the log meets it again
+                self.attachments.append(attachment)
         elif opcode == OP_SCHEMA:
             self._schema(body, 0)
         elif opcode == OP_CHANNEL:

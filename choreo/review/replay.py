@@ -37,10 +37,17 @@ class Difference:
     recorded: dict
     replayed: dict
 
+    @property
+    def timing(self) -> bool:
+        """Both are good status replies that disagree only on whether the motion is still
+        executing: a poll that fell on the motion's end, not a fault on the line."""
+        return self.recorded.get("kind") == self.replayed.get("kind") == "status"
+
     def __str__(self) -> str:
         where = f"step {self.step} " if self.step is not None else ""
+        note = " (timing: a poll at the motion's end)" if self.timing else ""
         return (f"{self.show_s:9.3f} s  #{self.seq} {where}{self.frame}: recorded "
-                f"{_said(self.recorded)}, replay {_said(self.replayed)}")
+                f"{_said(self.recorded)}, replay {_said(self.replayed)}{note}")
 
 
 def _said(reply: dict) -> str:
@@ -57,9 +64,10 @@ class ReplayReport:
     frames: int = 0
     same: int = 0
     different: int = 0
+    timing: int = 0  # of the differences, status polls that fell on a motion's end
     unmatched: int = 0  # frames whose recorded reply is missing (a cut log)
     differences: list[Difference] = field(default_factory=list)
-    max_lag_ms: float = 0.0  # how far behind its recorded time (scaled) a frame left at worst
+    max_lag_ms: float = 0.0  # how far behind its recorded show time (scaled) a frame left at worst
     cut: Cut | None = None
     show_note: str | None = None  # why the simulator runs without the show's durations
 
@@ -165,16 +173,26 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
     recorded_clock = ShowClock(reader)
     zero_mono: float | None = None  # replay's monotonic time of recorded show time 0
     first_s = 0.0
+    last: tuple[float, float] | None = None  # the last event: (recorded show s, replay monotonic)
     pending: dict[int, tuple[dict, dict, float]] = {}  # recorded seq -> (tx, replayed reply, show s)
 
     def due(show_s: float) -> None:
-        nonlocal zero_mono, first_s
+        """Wait for an event's time: its recorded show time, and never closer to the event before
+        it than it was recorded. The replay's own exchanges can put it a few ms behind (a play
+        sequence is three frames, each waiting for its reply); keeping the recorded gaps then keeps
+        a status poll as far from the restore that started the motion as it was, so the board
+        answers it the same way."""
+        nonlocal zero_mono, first_s, last
         if zero_mono is None:
             first_s = show_s  # start at once, whatever show time the recording starts at
             zero_mono = time.monotonic()
         target = zero_mono + (show_s - first_s) / speed
+        if last is not None:
+            target = max(target, last[1] + (show_s - last[0]) / speed)
         clock.sleep_until(target)
-        lag_ms = (time.monotonic() - target) * 1e3
+        now = time.monotonic()
+        last = (show_s, now)
+        lag_ms = (now - (zero_mono + (show_s - first_s) / speed)) * 1e3
         if lag_ms > report.max_lag_ms:
             report.max_lag_ms = lag_ms
 
