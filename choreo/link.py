@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Protocol
 
 from choreo import protocol
@@ -28,6 +28,7 @@ BAUD_RATES = (115200, 625000, 1250000)
 DEFAULT_TIMEOUT_S = 0.2
 DEFAULT_TRIES = 3
 QUIET_S = 0.01  # after a bad reply, the line counts as settled once this long passes with no byte
+MAX_STALE = 3  # late replies to earlier frames set aside while waiting for one frame's reply
 
 
 @dataclass(frozen=True)
@@ -161,7 +162,7 @@ class Link:
         failure: tuple[Frame, Reply] | None = None
         for attempt in range(1, self.tries + 1):
             for frame in frames:
-                reply = self.send(frame, attempt, tag)
+                reply = self.send(frame, attempt, tag, what=f"play {motion}")
                 if not reply.ok:
                     failure = (frame, reply)
                     self._settle(reply)
@@ -187,7 +188,7 @@ class Link:
 
     # -- one try ---------------------------------------------------------------------------
 
-    def send(self, frame: Frame, attempt: int = 1, tag: Tag | None = None) -> Reply:
+    def send(self, frame: Frame, attempt: int = 1, tag: Tag | None = None, what: str | None = None) -> Reply:
         """Write one frame, read and judge its reply; no retry.
 
         Port loss is a LinkError; a stop request (`should_stop`) is Interrupted, before the write.
@@ -206,7 +207,7 @@ class Link:
             reply = self._read_reply(frame)
         except PortLost as exc:
             self._report(seq, frame, protocol.timeout(), sent, tag, error=f"port lost: {exc}")
-            raise LinkError(f"port {self.name}: lost{_during(tag)} while sending '{frame}' "
+            raise LinkError(f"port {self.name}:{_where(tag)} lost while sending '{what or frame}' "
                             f"({frame.kind.value} frame): {exc}: check the cable and the adapter") from None
         self._report(seq, frame, reply, sent, tag)
         return reply
@@ -221,22 +222,34 @@ class Link:
             listener.on_rx(event)
 
     def _read_reply(self, frame: Frame) -> Reply:
-        """Size byte first (a NAK to a status query is 4 bytes, not 5), then the rest."""
-        first = self._read(1)
-        if not first:
-            return protocol.timeout()
-        size = first[0]
-        if size not in frame.reply_sizes:
-            junk = first + self._drain(QUIET_S)
-            return protocol.invalid(junk, f"junk: size byte {size:02x} is not a reply to a "
-                                          f"{frame.kind.value} frame")
-        data = first + self._read(size - 1)
-        if len(data) < size:
-            return protocol.invalid(data, f"short reply: {len(data)} of {size} bytes before the timeout")
-        return protocol.parse_reply(frame, data)
+        """Size byte first (a NAK to a status query is 4 bytes, not 5), then the rest.
+
+        A well-formed reply to another command is a late answer to an earlier frame: it is set
+        aside (and logged with the reply) and the read goes on for this frame's own answer.
+        """
+        stale = b""
+        for _ in range(MAX_STALE + 1):
+            first = self._read(1)
+            if not first:
+                return replace(protocol.timeout(), stale=stale)
+            size = first[0]
+            if size not in (protocol.TYPE1_REPLY_SIZE, protocol.STATUS_REPLY_SIZE):
+                junk = first + self._drain(QUIET_S)
+                return replace(protocol.invalid(junk, f"junk: size byte {size:02x} is not a reply "
+                                                      f"to a {frame.kind.value} frame"), stale=stale)
+            data = first + self._read(size - 1)
+            if len(data) < size:
+                return replace(protocol.invalid(data, f"short reply: {len(data)} of {size} bytes "
+                                                      "before the timeout"), stale=stale)
+            if not protocol.is_stale(frame, data):
+                return replace(protocol.parse_reply(frame, data), stale=stale)
+            stale += data
+        return replace(protocol.invalid(b"", f"only stale replies ({protocol.hexbytes(stale)})"), stale=stale)
 
     def _write(self, data: bytes) -> None:
+        """One write call for the whole frame, after dropping any stray bytes already received."""
         try:
+            self.port.reset_input_buffer()
             self.port.write(data)
         except OSError as exc:  # serial.SerialException is an OSError
             raise PortLost(_reason(exc)) from None
@@ -289,9 +302,8 @@ class Link:
             ReplyKind.TIMEOUT: "no reply",
             ReplyKind.NAK: f"NAK ({reply.hex})",
         }.get(reply.kind, f"an invalid reply ({reply.hex}: {reply.error})")
-        where = f" {tag}:" if tag and tag.step is not None else ""
         tries = f"{self.tries} tries" if self.tries != 1 else "1 try"
-        return LinkError(f"port {self.name}:{where} {came} to '{what}' ({frame.kind.value} frame) "
+        return LinkError(f"port {self.name}:{_where(tag)} {came} to '{what}' ({frame.kind.value} frame) "
                          f"after {tries}: {self._hint(reply)}")
 
     def _hint(self, reply: Reply) -> str:
@@ -303,5 +315,6 @@ class Link:
         return f"{settings}, the cable, and that no other program talks on the port"
 
 
-def _during(tag: Tag | None) -> str:
-    return f" during {tag}" if tag and tag.step is not None else ""
+def _where(tag: Tag | None) -> str:
+    """` step 4 'spin':` in an error line, when the frame belongs to a show step."""
+    return f" {tag}:" if tag and tag.step is not None else ""

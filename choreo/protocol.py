@@ -154,8 +154,12 @@ def status_frame() -> Frame:
 
 
 def play_sequence(motion: int) -> tuple[Frame, Frame, Frame]:
-    """Steps 1-3 of the document: stop and save, CALL the slot, restore. Sent as one unit."""
-    return stop_frame(), play_frame(motion), restore_frame()
+    """Steps 1-3 of the document: stop and save, CALL the slot, restore. Sent as one unit.
+
+    All three carry the motion, so a log of the stop or restore frame says what it was for.
+    """
+    play = play_frame(motion)
+    return Frame(FrameKind.STOP, _STOP, play.motion), play, Frame(FrameKind.RESTORE, _RESTORE, play.motion)
 
 
 def frame_for(kind: FrameKind | str, motion: int | None = None) -> Frame:
@@ -185,6 +189,7 @@ class Reply:
     executing: bool | None = None
     status: int | None = None  # the config word read by a status query
     error: str | None = None
+    stale: bytes = b""  # well-formed replies to earlier frames, read and set aside before this one
 
     @property
     def hex(self) -> str:
@@ -211,6 +216,24 @@ def timeout(data: bytes = b"") -> Reply:
     return Reply(ReplyKind.TIMEOUT, bytes(data), error="no complete reply before the timeout")
 
 
+def is_stale(frame: Frame, data: bytes) -> bool:
+    """A well-formed reply that cannot answer `frame`: a late answer to an earlier frame.
+
+    The protocol has no sequence numbers; a reply that arrives after its frame was given up on
+    would otherwise be taken for the answer to the next frame and shift every reply after it.
+    """
+    data = bytes(data)
+    if len(data) not in (TYPE1_REPLY_SIZE, STATUS_REPLY_SIZE) or data[0] != len(data):
+        return False
+    if checksum(data[:-1]) != data[-1]:
+        return False
+    if data[1] != frame.command or len(data) not in frame.reply_sizes:
+        return True
+    # A status query is answered with the status or a NAK, never an ACK: an ACK is a late
+    # answer to an earlier write (the restore, say).
+    return frame.kind is FrameKind.STATUS and len(data) == TYPE1_REPLY_SIZE and data[2] == ACK_BYTE
+
+
 def parse_reply(frame: Frame, data: bytes) -> Reply:
     """Judge the bytes read for a frame by size byte, command byte and checksum, then meaning."""
     data = bytes(data)
@@ -227,6 +250,8 @@ def parse_reply(frame: Frame, data: bytes) -> Reply:
     if len(data) == STATUS_REPLY_SIZE:
         word = data[2] | data[3] << 8
         return Reply(ReplyKind.STATUS, data, executing=data[2] == EXECUTING_BYTE, status=word)
+    if data[2] == ACK_BYTE and frame.kind is FrameKind.STATUS:
+        return invalid(data, "an ACK where the status was expected")
     if data[2] == ACK_BYTE:
         return Reply(ReplyKind.ACK, data)
     if data[2] == NAK_BYTE:

@@ -134,6 +134,7 @@ def _rx_message(event: RxEvent) -> dict:
         "latency_ms": round(event.latency_s * 1e3, 4),
         "executing": reply.executing,
         "error": reply.error,
+        "stale": reply.stale.hex(" ") if reply.stale else None,
     }
 
 

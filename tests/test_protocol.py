@@ -106,6 +106,7 @@ def test_status_reply_says_executing_only_for_0x23():
         (p.status_frame(), "05 0c 23 87 bb", "command 0c"),
         (p.status_frame(), "06 00 23 87 00 b0", "6-byte reply"),
         (p.status_frame(), "ff 04 00 06 0a", "size byte"),
+        (p.status_frame(), "04 00 06 0a", "an ACK where the status was expected"),
     ],
 )
 def test_invalid_replies_carry_a_reason(frame, reply, reason):
@@ -133,3 +134,19 @@ def test_describe_frames_and_replies():
     assert p.describe_reply(bytes.fromhex("04 0c 06 16")) == "ACK"
     assert p.describe_reply(bytes.fromhex("04 00 15 19")) == "NAK"
     assert p.describe_reply(bytes.fromhex("05 00 23 87 af")) == "status 0x23: executing"
+
+
+@pytest.mark.parametrize(
+    "frame,reply,stale",
+    [
+        (p.play_frame(1), "04 00 06 0a", True),  # a MOV's ACK while a CALL waits
+        (p.stop_frame(), "04 0c 06 16", True),  # a CALL's ACK while a MOV waits
+        (p.stop_frame(), "05 00 23 87 af", True),  # a status while a write waits
+        (p.status_frame(), "04 00 06 0a", True),  # a write's ACK while a status waits
+        (p.status_frame(), "04 00 15 19", False),  # a NAK answers a status query
+        (p.stop_frame(), "04 00 06 0a", False),
+        (p.play_frame(1), "04 00 06 0b", False),  # not well-formed: invalid, not stale
+    ],
+)
+def test_stale_replies_are_well_formed_answers_to_another_frame(frame, reply, stale):
+    assert p.is_stale(frame, bytes.fromhex(reply)) is stale

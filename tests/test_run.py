@@ -145,6 +145,8 @@ def test_full_log_contents(tmp_path):
     assert all(m["kind"] in ("ack", "status") and m["latency_ms"] > 0 for m in log.rx)
     assert {m["kind"] for m in log.tx} == {"stop", "play", "restore", "status"}
     assert [m["motion"] for m in log.tx if m["kind"] == "play"] == [3, 7, 7]
+    assert [m["motion"] for m in log.tx[:3]] == [3, 3, 3]  # stop, play, restore of motion 3
+    assert {m["motion"] for m in log.tx if m["kind"] == "status"} == {None}
     assert all(m["attempt"] == 1 for m in log.tx)
     assert [m["step"] for m in log.tx[:3]] == [0, 0, 0] and log.tx[0]["label"] == "first"
     for index in range(5):
@@ -200,7 +202,7 @@ FAULT_SHOW = """
         ("badsum=1", ["invalid reply", "bad checksum", "'play 3'"]),
         ("junk=1", ["invalid reply", "junk"]),
         ("short=1", ["'play 3'"]),
-        ("late=1&late_ms=400", ["no reply to 'play 3' (stop frame) after 3 tries"]),
+        ("late=1&late_ms=1000", ["no reply to 'play 3' (stop frame) after 3 tries"]),
         ("lose=2", ["lost", "step 0 'wave'", "check the cable"]),
     ],
 )
