@@ -431,3 +431,31 @@ def test_dance_runs_on_a_fresh_checkout_and_writes_a_valid_log(tmp_path):
     log = read_log(log_path)
     assert log.metadata["choreo.result"]["outcome"] == "done"
     assert len(log.rx) == len(log.tx) > 26 * 3 // 2
+
+
+def test_progress_is_a_plain_line_a_step_off_a_terminal_and_silent_with_quiet(tmp_path, capsys):
+    show = write_show(tmp_path, WIRE_SHOW)
+    assert main(["run", str(show), "--no-log"]) == 0
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("[")]
+    assert len(lines) == 5
+    assert lines[0].endswith("] step 0 'first' (1/5): play 3 (wave)")
+    assert lines[1].endswith("] step 1 (2/5): wait until motion 3 is done (timeout 60 s)")
+    assert main(["run", str(show), "--no-log", "--quiet"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_live_progress_line_redraws_in_place(tmp_path):
+    import io
+
+    from choreo.cli.run import Progress
+
+    session = Session.prepare(RunRequest(str(write_show(tmp_path, WIRE_SHOW)), no_log=True))
+    out = io.StringIO()
+    progress = Progress(session, out, live=True, quiet=False)
+    with session:
+        session.run([progress])
+    progress.finish()
+    text = out.getvalue()
+    assert text.count("\r") >= 5 and "step 4 'last' (5/5): play 7 (bow)" in text
+    assert "[" in text and "/0.3 s" in text
+    assert text.endswith("\r")  # the line is cleared at the end

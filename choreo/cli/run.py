@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import threading
+import time
 from typing import TextIO
 
 from choreo.errors import Interrupted
@@ -45,9 +47,11 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         _say_setup(session, out)
     progress = Progress(session, out, live=out.isatty(), quiet=args.quiet)
-    with _StopOnSignals() as stop, session:
-        result = session.run([progress], stop)
-    progress.finish()
+    try:
+        with _StopOnSignals() as stop, session:
+            result = session.run([progress], stop)
+    finally:
+        progress.finish()
     if not args.quiet or result.outcome != "done":
         late = f", {result.late_steps} late" if result.late_steps else ""
         print(f"{result.outcome}: {result.steps_run} steps in {result.show_s:.3f} s{late}", file=out)
@@ -59,10 +63,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _say_setup(session, out: TextIO) -> None:
-    if session.port_source == "simulator":
-        where = "the built-in simulator (no --port given and the show names no robot.port)"
-    else:
-        where = f"{session.port_source}"
+    where = {
+        "simulator": "the built-in simulator (no --port given and the show names no robot.port)",
+        "show": "the show's robot.port",
+    }.get(session.port_source, "the command line")
     print(f"port: {session.port} at {session.baud} baud, from {where}", file=out)
     first = f" from step {session.start}" if session.start else ""
     print(f"show: {session.show.name}: {len(session.plan.steps)} steps{first}, "
@@ -95,16 +99,28 @@ class _StopOnSignals:
 
 
 class Progress:
-    """The run on screen: a live line on a terminal, a plain line a step otherwise."""
+    """The run on screen: a live line on a terminal, a plain line a step otherwise.
+
+    The live line is redrawn by its own thread every quarter second, so the show time moves
+    during long waits; it only formats and writes, off the runner's path.
+    """
+
+    REDRAW_S = 0.25
 
     def __init__(self, session, out: TextIO, *, live: bool, quiet: bool) -> None:
         self.first = session.start
         self.total = len(session.plan.steps) - session.start
         self.estimated = session.plan.estimated_s
         self.out = out
-        self.live = live
+        self.live = live and not quiet
         self.quiet = quiet
         self._width = 0
+        self._lock = threading.Lock()
+        self._current = ""  # the step part of the live line
+        self._zero: float | None = None  # monotonic time of the show clock's zero
+        self._done = threading.Event()
+        if self.live:
+            threading.Thread(target=self._redraw_loop, name="choreo-progress", daemon=True).start()
 
     def on_step(self, event) -> None:
         if self.quiet or event.event != "start":
@@ -112,26 +128,42 @@ class Progress:
         step = event.step
         label = f" '{step.label}'" if step.label else ""
         where = f"step {step.index}{label} ({step.index - self.first + 1}/{self.total})"
-        clock = f"{event.actual_s:.2f}/{self.estimated:.1f} s"
-        if self.live:
-            done = int(20 * (step.index - self.first + 1) / max(self.total, 1))
-            line = f"{where}: {step.describe()}  {clock} [{'#' * done}{'-' * (20 - done)}]"
-            self.out.write("\r" + line.ljust(self._width))
-            self._width = len(line)
-            self.out.flush()
-        else:
+        if not self.live:
             print(f"[{event.actual_s:8.3f} s] {where}: {step.describe()}", file=self.out)
+            return
+        with self._lock:
+            self._zero = time.monotonic() - event.actual_s
+            self._current = f"{where}: {step.describe()}"
+            self._draw()
+
+    def _redraw_loop(self) -> None:
+        while not self._done.wait(self.REDRAW_S):
+            with self._lock:
+                if self._current:
+                    self._draw()
+
+    def _draw(self) -> None:
+        show_s = time.monotonic() - self._zero if self._zero is not None else 0.0
+        done = min(20, int(20 * show_s / self.estimated)) if self.estimated > 0 else 20
+        line = f"{self._current}  {show_s:.1f}/{self.estimated:.1f} s [{'#' * done}{'-' * (20 - done)}]"
+        self.out.write("\r" + line.ljust(self._width))
+        self._width = len(line)
+        self.out.flush()
 
     def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
-        if level < 3 or (self.quiet and level < 4):
-            return
-        self._clear()
-        word = {3: "warning", 4: "error"}.get(level, "note")
-        if level < 4:  # errors reach the user as the command's final line
-            print(f"{word}: {message}", file=self.out)
+        if level < 3 or level >= 4 or self.quiet:
+            return  # errors reach the user once, as the command's final line
+        with self._lock:
+            self._clear()
+            print(f"warning: {message}", file=self.out)
+            if self._current:
+                self._draw()
 
     def finish(self) -> None:
-        self._clear()
+        self._done.set()
+        with self._lock:
+            self._current = ""
+            self._clear()
 
     def _clear(self) -> None:
         if self.live and self._width:
