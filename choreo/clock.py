@@ -8,11 +8,14 @@ offset taken at the start. Cue timing uses the same monotonic clock.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 # The last stretch before a cue is spun, not slept: sleep() on a loaded machine overshoots by
 # up to a millisecond or more, and a cue's first byte must leave within 1 ms of its time.
 SPIN_S = 0.002
+# Background work (writing the log) runs only before a sleep with at least this much to spare.
+IDLE_S = 0.01
 
 
 @dataclass
@@ -35,10 +38,12 @@ class RunClock:
     def to_wall_ns(self, mono_s: float) -> int:
         return self.wall_anchor_ns + round(mono_s * 1e9) - self.mono_anchor_ns
 
-    def sleep_until(self, deadline: float, should_stop=lambda: False, slice_s: float = 0.05) -> bool:
+    def sleep_until(self, deadline: float, should_stop: Callable[[], bool] = lambda: False,
+                    slice_s: float = 0.05, on_idle: Callable[[], None] | None = None) -> bool:
         """Sleep until a monotonic deadline, spinning the last SPIN_S; False if told to stop.
 
-        Sleeps in slices so that a stop request (Ctrl-C) is seen within `slice_s`.
+        Sleeps in slices so that a stop request (Ctrl-C) is seen within `slice_s`. Before each
+        slice with more than IDLE_S to spare, `on_idle` runs: the time to write the log.
         """
         while True:
             if should_stop():
@@ -47,5 +52,10 @@ class RunClock:
             if left <= 0:
                 return True
             if left > SPIN_S:
+                if on_idle is not None and left > IDLE_S:
+                    on_idle()
+                    left = deadline - time.monotonic()
+                    if left <= SPIN_S:
+                        continue
                 time.sleep(min(left - SPIN_S, slice_s))
             # else: spin until the deadline

@@ -195,20 +195,31 @@ class Link:
         """
         if self.should_stop():
             raise Interrupted(f"stopped before sending '{frame}'")
+        try:
+            self._drop_stray_input()
+        except PortLost as exc:
+            raise self._lost(exc, frame, tag, what) from None
         self._seq += 1
         seq = self._seq
-        sent = time.monotonic_ns()
+        sent = time.monotonic_ns()  # the frame's time: just before the write
+        lost: PortLost | None = None
+        try:
+            self._write(frame.data)
+        except PortLost as exc:
+            lost = exc
+        # Listeners hear of the frame once it is out: their work never delays a cue's first byte.
         self.last_tx_mono = sent / 1e9
         event = TxEvent(seq, frame, attempt, self.clock.wall_ns(sent), tag)
         for listener in self.listeners:
             listener.on_tx(event)
-        try:
-            self._write(frame.data)
-            reply = self._read_reply(frame)
-        except PortLost as exc:
-            self._report(seq, frame, protocol.timeout(), sent, tag, error=f"port lost: {exc}")
-            raise LinkError(f"port {self.name}:{_where(tag)} lost while sending '{what or frame}' "
-                            f"({frame.kind.value} frame): {exc}: check the cable and the adapter") from None
+        if lost is None:
+            try:
+                reply = self._read_reply(frame)
+            except PortLost as exc:
+                lost = exc
+        if lost is not None:
+            self._report(seq, frame, protocol.timeout(), sent, tag, error=f"port lost: {lost}")
+            raise self._lost(lost, frame, tag, what) from None
         self._report(seq, frame, reply, sent, tag)
         return reply
 
@@ -246,10 +257,16 @@ class Link:
             stale += data
         return replace(protocol.invalid(b"", f"only stale replies ({protocol.hexbytes(stale)})"), stale=stale)
 
-    def _write(self, data: bytes) -> None:
-        """One write call for the whole frame, after dropping any stray bytes already received."""
+    def _drop_stray_input(self) -> None:
+        """Bytes already waiting before a frame goes out cannot be its reply."""
         try:
             self.port.reset_input_buffer()
+        except OSError as exc:
+            raise PortLost(_reason(exc)) from None
+
+    def _write(self, data: bytes) -> None:
+        """One write call for the whole frame: the board drops a frame with gaps in it."""
+        try:
             self.port.write(data)
         except OSError as exc:  # serial.SerialException is an OSError
             raise PortLost(_reason(exc)) from None
@@ -296,6 +313,10 @@ class Link:
         except (OSError, PortLost) as exc:
             raise LinkError(f"port {self.name}: lost while recovering from a bad reply: {_reason(exc)}: "
                             "check the cable and the adapter") from None
+
+    def _lost(self, exc: PortLost, frame: Frame, tag: Tag | None, what: str | None) -> LinkError:
+        return LinkError(f"port {self.name}:{_where(tag)} lost while sending '{what or frame}' "
+                         f"({frame.kind.value} frame): {exc}: check the cable and the adapter")
 
     def _failed(self, what: str, frame: Frame, reply: Reply, tag: Tag | None) -> LinkError:
         came = {

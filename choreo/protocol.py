@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import Enum
+from functools import lru_cache
 
 from choreo.errors import MotionRangeError
 
@@ -158,8 +159,14 @@ def play_sequence(motion: int) -> tuple[Frame, Frame, Frame]:
 
     All three carry the motion, so a log of the stop or restore frame says what it was for.
     """
+    return _play_sequence(check_motion(motion))
+
+
+@lru_cache(maxsize=MOTION_SLOTS)
+def _play_sequence(motion: int) -> tuple[Frame, Frame, Frame]:
+    # Built once per slot: a cue's frames are ready before its due time, not made after it.
     play = play_frame(motion)
-    return Frame(FrameKind.STOP, _STOP, play.motion), play, Frame(FrameKind.RESTORE, _RESTORE, play.motion)
+    return Frame(FrameKind.STOP, _STOP, motion), play, Frame(FrameKind.RESTORE, _RESTORE, motion)
 
 
 def frame_for(kind: FrameKind | str, motion: int | None = None) -> Frame:

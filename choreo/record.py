@@ -1,15 +1,14 @@
 """The run log: every frame, reply, step and warning of a run, as MCAP with JSON messages.
 
 The recorder is a listener of the link (frames and replies) and of the runner (steps and log
-lines). It is on the hot path of every frame, and the worst place on that path is the stretch
-between a cue's due time and its first byte: the runner reports the step's start and the link
-reports the frame (with its timestamp, taken just before the write) before the write itself.
-So a frame, a step event or a log line is only queued there (one deque append, no lock that the
-flusher could hold); the queue is serialised and written when a reply has come back (`on_rx`:
-the frame is out, and the next one waits for this reply anyway), or by the background thread
-that closes the current chunk and flushes the file every half second, so a killed run loses at
-most that much and a linear reader can read the rest. Messages keep the order they were
-reported in. The file is created exclusively: a log is never overwritten.
+lines). It must not cost the show its timing: a frame is reported just before it is written,
+often right at a cue's due time, and the next frame may be due right after a reply. So every
+report is only queued (one deque append, no lock); the queue is serialised and written when the
+runner has time to spare (`on_idle`, called before it sleeps), which also hands the file to the
+OS every quarter second. A background thread flushes a run that never idles (back-to-back
+frames), so a killed run loses at most half a second and a linear reader can read the rest.
+Messages keep the order they were reported in. The file is created exclusively: a log is never
+overwritten.
 """
 
 from __future__ import annotations
@@ -168,7 +167,9 @@ class Recorder:
         self._dirty = False
         self._closed = False
         self._pending: deque[_Pending] = deque()  # appended by reporters, drained under the lock
-        self.messages = 0  # messages written so far (queued ones not yet counted)
+        self._flush_every_s = flush_every_s
+        self._flushed = time.monotonic()
+        self._written = 0  # messages added to the file so far (their MCAP sequence numbers)
         try:
             self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
             self._writer.start(profile="", library=f"choreo {__version__}")
@@ -193,6 +194,11 @@ class Recorder:
                                                  data=schema_text(filename))
         return self._writer.register_channel(topic=topic, message_encoding="json", schema_id=schema_id)
 
+    @property
+    def messages(self) -> int:
+        """Messages reported so far, written or still queued."""
+        return self._written + len(self._pending)
+
     # -- listeners -------------------------------------------------------------------------
 
     def on_tx(self, event: TxEvent) -> None:
@@ -200,10 +206,8 @@ class Recorder:
         self._pending.append((TX_TOPIC, event.time_ns, _tx_message, event))
 
     def on_rx(self, event: RxEvent) -> None:
-        """The reply is in: write it and everything queued before it."""
+        """Queued only: the next frame may be due right after this reply."""
         self._pending.append((RX_TOPIC, event.time_ns, _rx_message, event))
-        with self._lock:
-            self._write_pending()
 
     def on_step(self, event: StepEvent) -> None:
         """Queued only: a step's start comes just before its first frame."""
@@ -222,29 +226,44 @@ class Recorder:
             if self._closed:
                 continue
             self._writer.add_message(self._channels[topic], log_time=time_ns, data=_dumps(make(event)),
-                                     publish_time=time_ns, sequence=self.messages)
-            self.messages += 1
+                                     publish_time=time_ns, sequence=self._written)
+            self._written += 1
             self._dirty = True
 
     # -- durability ------------------------------------------------------------------------
 
-    def _flush_loop(self, every_s: float) -> None:
-        while not self._stop.wait(every_s):
-            self.flush()
-
-    def flush(self) -> None:
-        """Close the chunk in progress and hand it to the OS: a SIGKILL now loses nothing."""
+    def on_idle(self) -> None:
+        """The runner has time to spare (it is about to sleep): write what is queued, and
+        hand the file to the OS if the last time was a while ago."""
         with self._lock:
             if self._closed:
                 return
             self._write_pending()
-            if not self._dirty:
-                return
-            try:
-                self._writer.flush()
-            except OSError:
-                return  # the disk failed under us; close() will report it
-            self._dirty = False
+            if time.monotonic() - self._flushed >= self._flush_every_s / 2:
+                self._flush_locked()
+
+    def _flush_loop(self, every_s: float) -> None:
+        """The safety net: a run that never idles (back-to-back frames) is flushed from here."""
+        while not self._stop.wait(every_s / 2):
+            if time.monotonic() - self._flushed >= every_s / 2:
+                self.flush()
+
+    def flush(self) -> None:
+        """Close the chunk in progress and hand it to the OS: a SIGKILL now loses nothing."""
+        with self._lock:
+            if not self._closed:
+                self._write_pending()
+                self._flush_locked()
+
+    def _flush_locked(self) -> None:
+        self._flushed = time.monotonic()
+        if not self._dirty:
+            return
+        try:
+            self._writer.flush()
+        except OSError:
+            return  # the disk failed under us; close() will report it
+        self._dirty = False
 
     def close(self, result: dict[str, str] | None = None) -> None:
         """Finish the file (summary, indexes, footer). Safe to call twice."""

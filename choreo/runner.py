@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -103,7 +103,8 @@ class Runner:
 
     def __init__(self, plan: Plan, link: Link, *, clock: RunClock | None = None,
                  listeners: Iterable[RunListener] = (), start: int = 0, on_abort: int | None = None,
-                 stop: StopRequest | None = None, poll_s: float = POLL_S) -> None:
+                 stop: StopRequest | None = None, poll_s: float = POLL_S,
+                 on_idle: Callable[[], None] | None = None) -> None:
         self.plan = plan
         self.link = link
         self.clock = clock or link.clock
@@ -112,6 +113,7 @@ class Runner:
         self.on_abort = on_abort
         self.stop = stop or StopRequest()
         self.poll_s = poll_s
+        self.on_idle = on_idle  # background work (the recorder's writes) done while waiting
         self._zero = 0.0
         self._last_play_done: float | None = None  # monotonic time the last restore was answered
         self._last_motion: int | None = None
@@ -134,12 +136,15 @@ class Runner:
             return self._abort()
         return RunResult("done", self._run, self._late, self.show_time())
 
+    def _sleep_until(self, deadline: float) -> bool:
+        return self.clock.sleep_until(deadline, self.stop, on_idle=self.on_idle)
+
     def show_time(self) -> float:
         return time.monotonic() - self._zero
 
     def _run_step(self, step: PlannedStep, cursor: float) -> float:
         due = max(step.at, cursor) if step.at is not None else cursor
-        if not self.clock.sleep_until(self._zero + due, self.stop):
+        if not self._sleep_until(self._zero + due):
             raise Interrupted(self.stop.reason)
         started = self.show_time()
         # A cue is measured against its own time: one the show has already overrun (a motion
@@ -182,7 +187,7 @@ class Runner:
             return due
         if step.kind is StepKind.WAIT:
             end = due + (step.seconds or 0.0)
-            if not self.clock.sleep_until(self._zero + end, self.stop):
+            if not self._sleep_until(self._zero + end):
                 raise Interrupted(self.stop.reason)
             return end
         return self._wait_done(step, tag) - self._zero
@@ -194,7 +199,7 @@ class Runner:
         first = self._last_play_done + self.poll_s if self._last_play_done is not None else started
         due = max(first, started)
         while True:
-            if not self.clock.sleep_until(due, self.stop):
+            if not self._sleep_until(due):
                 raise Interrupted(self.stop.reason)
             reply = self.link.query_status(tag)
             if not reply.executing:

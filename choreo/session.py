@@ -136,7 +136,8 @@ class Session:
         assert self.link is not None, "open the session first (with session:)"
         everyone = ([self.recorder] if self.recorder else []) + list(listeners)
         runner = Runner(self.plan, self.link, clock=self.clock, listeners=everyone, start=self.start,
-                        on_abort=self.show.on_abort, stop=stop)
+                        on_abort=self.show.on_abort, stop=stop,
+                        on_idle=self.recorder.on_idle if self.recorder else None)
         self.result = runner.run()
         return self.result
 
@@ -160,7 +161,7 @@ def with_show_durations(url: str, show: Show, plan: Plan) -> str:
     if "?" not in ours:
         return url
     query = ours.split("?", 1)[1]
-    return f"{url}&{query}" if "?" in url else f"{url.rstrip('/')}?{query}"
+    return f"{url}&{query}" if "?" in url else f"sim://?{query}"
 
 
 def _start_index(plan: Plan, ref: str | None) -> int:

@@ -459,3 +459,32 @@ def test_live_progress_line_redraws_in_place(tmp_path):
     assert text.count("\r") >= 5 and "step 4 'last' (5/5): play 7 (bow)" in text
     assert "[" in text and "/0.3 s" in text
     assert text.endswith("\r")  # the line is cleared at the end
+
+
+@pytest.mark.parametrize("given,expected", [
+    ("sim://", "sim://?durations=3:0.2,7:0.1"),
+    ("sim://?drop=5", "sim://?drop=5&durations=3:0.2,7:0.1"),
+    ("sim://?motion_s=2", "sim://?motion_s=2"),  # the user chose the durations
+    ("loop://", "loop://"),
+])
+def test_a_sim_port_given_on_the_command_line_keeps_the_shows_durations(tmp_path, given, expected):
+    session = Session.prepare(RunRequest(str(write_show(tmp_path, WIRE_SHOW)), port=given, no_log=True))
+    assert session.port == expected
+
+
+def test_recording_waits_for_idle_time_and_loses_nothing(tmp_path):
+    """Frames reported during back-to-back plays are queued, then all written, in order."""
+    show = write_show(tmp_path, """
+        version: 1
+        name: burst
+        steps:
+          - play: 1
+          - play: 2
+          - play: 3
+          - play: 4
+    """)
+    log_path = tmp_path / "burst.mcap"
+    assert main(["run", str(show), "--log", str(log_path), "-q"]) == 0
+    log = read_log(log_path)
+    assert [m["motion"] for m in log.tx if m["kind"] == "play"] == [1, 2, 3, 4]
+    assert [m["seq"] for m in log.rx] == list(range(1, 13))
