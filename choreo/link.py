@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Protocol
 from choreo import protocol
 from choreo.clock import RunClock
 from choreo.errors import Interrupted, LinkError
-from choreo.protocol import Frame, Reply, ReplyKind
+from choreo.protocol import Frame, FrameKind, Reply, ReplyKind
 
 if TYPE_CHECKING:
     import serial
@@ -28,6 +28,7 @@ BAUD_RATES = (115200, 625000, 1250000)
 DEFAULT_TIMEOUT_S = 0.2
 DEFAULT_TRIES = 3
 QUIET_S = 0.01  # after a bad reply, the line counts as settled once this long passes with no byte
+STATUS_SPACING_S = 0.05  # the board refreshes its status every 50 ms: never query faster
 MAX_STALE = 3  # late replies to earlier frames set aside while waiting for one frame's reply
 
 
@@ -65,6 +66,14 @@ class RxEvent:
     time_ns: int
     latency_s: float
     tag: Tag | None
+
+
+@dataclass(frozen=True)
+class Played:
+    """How a play sequence went: tries it took, and when the one that worked began (monotonic)."""
+
+    tries: int
+    began: float
 
 
 class LinkListener(Protocol):
@@ -129,6 +138,7 @@ class Link:
         # no further frame goes out (the runner sets it; Ctrl-C sets the runner's).
         self.should_stop: Callable[[], bool] = lambda: False
         self.last_tx_mono = 0.0  # monotonic time of the last write: polls are spaced from it
+        self._last_status_mono = float("-inf")  # the last status query's write
         self._seq = 0
 
     @classmethod
@@ -156,19 +166,28 @@ class Link:
 
     # -- the sequences a show uses ---------------------------------------------------------
 
-    def play(self, motion: int, tag: Tag | None = None) -> None:
-        """Stop, CALL the slot, restore; a failure anywhere retries the whole sequence."""
+    def play(self, motion: int, tag: Tag | None = None) -> Played:
+        """Stop, CALL the slot, restore; a failure anywhere retries the whole sequence.
+
+        The sequence is one unit for a stop request too: it is checked before the stop frame
+        only, because a sequence cut after its stop frame leaves the board's program halted.
+        Returns how many tries it took and when the sequence that worked began.
+        """
         frames = protocol.play_sequence(motion)
+        if self.should_stop():
+            raise Interrupted(f"stopped before 'play {motion}'")
         failure: tuple[Frame, Reply] | None = None
         for attempt in range(1, self.tries + 1):
             for frame in frames:
                 reply = self.send(frame, attempt, tag, what=f"play {motion}")
+                if frame is frames[0]:
+                    began = self.last_tx_mono
                 if not reply.ok:
                     failure = (frame, reply)
                     self._settle(reply)
                     break
             else:
-                return
+                return Played(attempt, began)
         assert failure is not None
         raise self._failed(f"play {motion}", *failure, tag)
 
@@ -180,6 +199,8 @@ class Link:
         """One frame, retried alone until the board accepts it or the tries run out."""
         reply = protocol.timeout()
         for attempt in range(1, self.tries + 1):
+            if self.should_stop():
+                raise Interrupted(f"stopped before sending '{frame}'")
             reply = self.send(frame, attempt, tag)
             if reply.ok:
                 return reply
@@ -191,14 +212,17 @@ class Link:
     def send(self, frame: Frame, attempt: int = 1, tag: Tag | None = None, what: str | None = None) -> Reply:
         """Write one frame, read and judge its reply; no retry.
 
-        Port loss is a LinkError; a stop request (`should_stop`) is Interrupted, before the write.
+        Port loss is a LinkError. Bytes already waiting (a late reply to an earlier frame) are
+        read to the end and kept with this frame's reply as stale, never cut in half. A status
+        query goes out no sooner than STATUS_SPACING_S after the one before, retries included:
+        the board only refreshes its status that often.
         """
-        if self.should_stop():
-            raise Interrupted(f"stopped before sending '{frame}'")
         try:
-            self._drop_stray_input()
+            stray = self._stray_input()
         except PortLost as exc:
             raise self._lost(exc, frame, tag, what) from None
+        if frame.kind is FrameKind.STATUS:
+            self.clock.sleep_until(self._last_status_mono + STATUS_SPACING_S)
         self._seq += 1
         seq = self._seq
         sent = time.monotonic_ns()  # the frame's time: just before the write
@@ -209,6 +233,8 @@ class Link:
             lost = exc
         # Listeners hear of the frame once it is out: their work never delays a cue's first byte.
         self.last_tx_mono = sent / 1e9
+        if frame.kind is FrameKind.STATUS:
+            self._last_status_mono = self.last_tx_mono
         event = TxEvent(seq, frame, attempt, self.clock.wall_ns(sent), tag)
         for listener in self.listeners:
             listener.on_tx(event)
@@ -220,6 +246,8 @@ class Link:
         if lost is not None:
             self._report(seq, frame, protocol.timeout(), sent, tag, error=f"port lost: {lost}")
             raise self._lost(lost, frame, tag, what) from None
+        if stray:
+            reply = replace(reply, stale=stray + reply.stale)
         self._report(seq, frame, reply, sent, tag)
         return reply
 
@@ -257,12 +285,14 @@ class Link:
             stale += data
         return replace(protocol.invalid(b"", f"only stale replies ({protocol.hexbytes(stale)})"), stale=stale)
 
-    def _drop_stray_input(self) -> None:
-        """Bytes already waiting before a frame goes out cannot be its reply."""
+    def _stray_input(self) -> bytes:
+        """Bytes already waiting before a frame goes out cannot be its reply: read them to the
+        end (the board must finish a reply before it takes the next frame) and set them aside."""
         try:
-            self.port.reset_input_buffer()
+            waiting = self.port.in_waiting
         except OSError as exc:
             raise PortLost(_reason(exc)) from None
+        return self._drain(QUIET_S) if waiting else b""
 
     def _write(self, data: bytes) -> None:
         """One write call for the whole frame: the board drops a frame with gaps in it."""

@@ -160,9 +160,10 @@ _Pending = tuple[str, int, Callable[[Any], dict], Any]
 class Recorder:
     """Writes one run's MCAP log; a LinkListener and a runner listener at once."""
 
-    def __init__(self, path: str | Path, info: RunInfo, *, flush_every_s: float = FLUSH_EVERY_S) -> None:
-        self.path = Path(path)
-        self._file = _create_exclusive(self.path)
+    def __init__(self, path: str | Path, info: RunInfo, *, flush_every_s: float = FLUSH_EVERY_S,
+                 unique: bool = False) -> None:
+        self._file, self.path = _create_exclusive(Path(path), unique)
+        self.failure: str | None = None  # why the file could not be written, once it could not
         self._lock = threading.Lock()
         self._dirty = False
         self._closed = False
@@ -221,26 +222,33 @@ class Recorder:
     def _write_pending(self) -> None:
         """Serialise and add every queued message, in order; the caller holds the lock."""
         pending = self._pending
-        while pending:
-            topic, time_ns, make, event = pending.popleft()
-            if self._closed:
-                continue
-            self._writer.add_message(self._channels[topic], log_time=time_ns, data=_dumps(make(event)),
-                                     publish_time=time_ns, sequence=self._written)
-            self._written += 1
-            self._dirty = True
+        try:
+            while pending and self.failure is None:
+                topic, time_ns, make, event = pending.popleft()
+                self._writer.add_message(self._channels[topic], log_time=time_ns,
+                                         data=_dumps(make(event)), publish_time=time_ns,
+                                         sequence=self._written)
+                self._written += 1
+                self._dirty = True
+        except OSError as exc:  # a chunk reached the disk and the disk said no
+            self._failed(exc)
 
     # -- durability ------------------------------------------------------------------------
 
     def on_idle(self) -> None:
         """The runner has time to spare (it is about to sleep): write what is queued, and
-        hand the file to the OS if the last time was a while ago."""
+        hand the file to the OS if the last time was a while ago.
+
+        A log that can no longer be written stops the run here (LogError): a run is recorded or
+        it does not go on, as a log that cannot be opened stops it before the robot moves.
+        """
         with self._lock:
-            if self._closed:
-                return
-            self._write_pending()
-            if time.monotonic() - self._flushed >= self._flush_every_s / 2:
-                self._flush_locked()
+            if not self._closed:
+                self._write_pending()
+                if time.monotonic() - self._flushed >= self._flush_every_s / 2:
+                    self._flush_locked()
+        if self.failure is not None:
+            raise LogError(f"log {self.path}: cannot write: {self.failure}: the run was stopped")
 
     def _flush_loop(self, every_s: float) -> None:
         """The safety net: a run that never idles (back-to-back frames) is flushed from here."""
@@ -257,35 +265,51 @@ class Recorder:
 
     def _flush_locked(self) -> None:
         self._flushed = time.monotonic()
-        if not self._dirty:
+        if not self._dirty or self.failure is not None:
             return
         try:
             self._writer.flush()
-        except OSError:
-            return  # the disk failed under us; close() will report it
+        except OSError as exc:
+            self._failed(exc)
+            return
         self._dirty = False
 
+    def _failed(self, exc: OSError) -> None:
+        if self.failure is None:
+            self.failure = exc.strerror or str(exc)
+        self._pending.clear()
+
     def close(self, result: dict[str, str] | None = None) -> None:
-        """Finish the file (summary, indexes, footer). Safe to call twice."""
+        """Finish the file (summary, indexes, footer). Safe to call twice.
+
+        A log that already failed is closed quietly (its error was raised where it happened);
+        one that fails only now raises one LogError.
+        """
         if self._closed:
             return
         self._stop.set()
         if self._flusher.is_alive() and self._flusher is not threading.current_thread():
             self._flusher.join(timeout=2)
         with self._lock:
+            failed_before = self.failure is not None
             try:
                 self._write_pending()
-                self._closed = True
-                if result is not None:
-                    self._writer.add_metadata(RESULT_METADATA_NAME, result)
-                self._writer.finish()
-                self._file.flush()
-                os.fsync(self._file.fileno())
+                if self.failure is None:
+                    if result is not None:
+                        self._writer.add_metadata(RESULT_METADATA_NAME, result)
+                    self._writer.finish()
+                    self._file.flush()
+                    os.fsync(self._file.fileno())
             except OSError as exc:
-                raise LogError(f"log {self.path}: cannot finish writing: {exc.strerror or exc}") from None
+                self._failed(exc)
             finally:
                 self._closed = True
-                self._file.close()
+                try:
+                    self._file.close()
+                except OSError as exc:
+                    self._failed(exc)
+        if self.failure is not None and not failed_before:
+            raise LogError(f"log {self.path}: cannot finish writing: {self.failure}")
 
     def __enter__(self) -> Recorder:
         return self
@@ -294,17 +318,21 @@ class Recorder:
         self.close()
 
 
-def _create_exclusive(path: Path) -> IO[bytes]:
-    """Create the log file, refusing to overwrite one that exists."""
+def _create_exclusive(path: Path, unique: bool = False) -> tuple[IO[bytes], Path]:
+    """Create the log file, never overwriting one; with `unique`, a taken name gets -2, -3..."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:  # a file where a folder should be is a FileExistsError too
         raise LogError(f"log {path}: cannot create its folder {path.parent}: "
                        f"{exc.strerror or exc}") from None
-    try:
-        return open(path, "xb")
-    except FileExistsError:
-        raise LogError(f"log {path}: already exists: choreo never overwrites a log; "
-                       "give another --log path or remove that file") from None
-    except OSError as exc:
-        raise LogError(f"log {path}: cannot create: {exc.strerror or exc}") from None
+    candidates = [path] + ([path.with_name(f"{path.stem}-{n}{path.suffix}") for n in range(2, 100)]
+                           if unique else [])
+    for candidate in candidates:
+        try:
+            return open(candidate, "xb"), candidate
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise LogError(f"log {candidate}: cannot create: {exc.strerror or exc}") from None
+    raise LogError(f"log {path}: already exists: choreo never overwrites a log; "
+                   "give another --log path or remove that file")

@@ -17,7 +17,7 @@ from typing import Protocol
 
 from choreo.clock import RunClock
 from choreo.errors import Interrupted, LinkError
-from choreo.link import Link, RxEvent, Tag, TxEvent
+from choreo.link import Link, Played, RxEvent, Tag, TxEvent
 from choreo.show.model import Plan, PlannedStep, StepKind
 
 POLL_S = 0.05  # the board refreshes its status every 50 ms: never poll faster
@@ -117,6 +117,7 @@ class Runner:
         self._zero = 0.0
         self._last_play_done: float | None = None  # monotonic time the last restore was answered
         self._last_motion: int | None = None
+        self._played = Played(1, 0.0)  # how the last play sequence went
         self._late = 0
         self._run = 0
 
@@ -160,28 +161,45 @@ class Runner:
             cue = f" (cue at {step.at:g} s)" if step.at is not None else ""
             self._log(WARNING, f"{step_ref(step)}{cue} started {late_ms:.1f} ms late")
         outcome = "failed"
+        slip_ms = 0.0
         try:
             end = self._do(step, due)
             outcome = "ok"
+            if step.kind is StepKind.PLAY:
+                slip_ms = self._slip(step, planned, already_late=late_ms > LATE_MS)
             return end
         except WaitTimeout:
             outcome = "timeout"
             raise
-        except Interrupted:
+        except (Interrupted, KeyboardInterrupt):
             outcome = "aborted"
             raise
         except LinkError as exc:
             self._log(ERROR, str(exc))
             raise
         finally:
-            self._emit(StepEvent(step, "end", planned, self.show_time(), self._now_ns(), 0.0, outcome))
+            self._emit(StepEvent(step, "end", planned, self.show_time(), self._now_ns(), slip_ms, outcome))
+
+    def _slip(self, step: PlannedStep, planned: float, already_late: bool) -> float:
+        """How late the motion really started: retries delay the sequence that worked.
+
+        Reported (and counted late, once) when the delay comes from retries; the end event
+        carries it so the log says when the motion began, not only when the step did.
+        """
+        played = self._played
+        slip_ms = (played.began - self._zero - planned) * 1e3
+        if played.tries > 1 and slip_ms > LATE_MS and not already_late:
+            self._late += 1
+            self._log(WARNING, f"{step_ref(step)}: motion {step.motion} started {slip_ms:.1f} ms "
+                               f"late ({played.tries} tries)")
+        return slip_ms
 
     def _do(self, step: PlannedStep, due: float) -> float:
         """Carry out a step; returns when the next step is due on the show clock."""
         tag = Tag(step.index, step.label)
         if step.kind is StepKind.PLAY:
             assert step.motion is not None
-            self.link.play(step.motion, tag)
+            self._played = self.link.play(step.motion, tag)
             self._last_play_done = time.monotonic()
             self._last_motion = step.motion
             return due
@@ -218,7 +236,7 @@ class Runner:
     def _abort(self) -> RunResult:
         """No more show frames; play the show's abort motion if it has one."""
         self._log(WARNING, f"show {self.stop.reason} at {self.show_time():.3f} s")
-        if self.on_abort is not None:
+        if self.on_abort is not None and self._run:  # a robot the show never moved stays as it is
             self._log(INFO, f"playing abort motion {self.on_abort}")
             self.link.should_stop = lambda: False
             try:

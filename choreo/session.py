@@ -8,9 +8,10 @@ run's outcome in its metadata.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from urllib.parse import urlencode
+from urllib.parse import parse_qsl, urlencode
 
 from choreo.clock import RunClock
 from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError
@@ -47,6 +48,7 @@ class Session:
     timeout: float
     tries: int
     log_path: Path | None
+    unique_log: bool = False  # a default log name already taken gets a suffix instead of a refusal
     clock: RunClock = field(default_factory=RunClock)
     recorder: object | None = None
     link: Link | None = None
@@ -62,26 +64,30 @@ class Session:
         plan = compile_plan(show)
         robot = show.robot
         start = _start_index(plan, request.from_step)
-        if request.port:
-            port, source = with_show_durations(request.port, show, plan), "command line"
-        elif robot.port:
-            port, source = robot.port, "show"
-        else:
-            port, source = simulator_url(show, plan), "simulator"
         baud = _pick(request.baud, robot.baud, DEFAULT_BAUD)
         if baud not in BAUD_RATES:
             raise UsageError(f"baud {baud}: the RCB-4 runs at {', '.join(map(str, BAUD_RATES))}")
         timeout = float(_pick(request.timeout, robot.timeout, DEFAULT_TIMEOUT_S))
         retries = int(_pick(request.retries, robot.retries, DEFAULT_TRIES - 1))
-        if timeout <= 0 or retries < 0:
-            raise UsageError("--timeout must be > 0 seconds and --retries >= 0")
+        check_timeout(timeout)
+        if not 0 <= retries <= MAX_RETRIES:
+            raise UsageError(f"--retries {retries}: give 0..{MAX_RETRIES} retries after a failed try")
+        if request.port is not None:
+            if not request.port.strip():
+                raise UsageError("--port: empty; give a device (/dev/ttyUSB0, COM3) or a URL (sim://)")
+            port, source = with_show_durations(request.port, show, plan, baud), "command line"
+        elif robot.port:
+            port, source = robot.port, "show"
+        else:
+            port, source = simulator_url(show, plan, baud), "simulator"
         log_path = None
         if not request.no_log:
             from choreo.record import default_log_path
 
             log_path = Path(request.log_path) if request.log_path else default_log_path(
                 show.name, request.log_dir)
-        return cls(show, plan, start, port, source, baud, timeout, retries + 1, log_path)
+        return cls(show, plan, start, port, source, baud, timeout, retries + 1, log_path,
+                   unique_log=request.log_path is None)
 
     # -- opening and closing ---------------------------------------------------------------
 
@@ -99,7 +105,8 @@ class Session:
 
             info = RunInfo(self.show.path, self.show.name, self.show.source, self.port, self.baud,
                            self.clock.wall_anchor_ns)
-            self.recorder = Recorder(self.log_path, info)
+            self.recorder = Recorder(self.log_path, info, unique=self.unique_log)
+            self.log_path = self.recorder.path
         try:
             self.link = Link.open(self.port, self.baud, timeout=self.timeout, tries=self.tries,
                                   clock=self.clock, listeners=[self.recorder] if self.recorder else [])
@@ -142,26 +149,47 @@ class Session:
         return self.result
 
 
-def simulator_url(show: Show, plan: Plan) -> str:
-    """`sim://` with the show's motion durations, so `wait: done` behaves as on the robot."""
-    durations = {}
-    for motion in plan.motions_used() + ([show.on_abort] if show.on_abort is not None else []):
-        durations[motion] = show.duration_of(motion) or DEFAULT_MOTION_S
-    if not durations:
-        return "sim://"
-    spec = ",".join(f"{m}:{d:g}" for m, d in sorted(durations.items()))
-    return "sim://?" + urlencode({"durations": spec}, safe=":,")
+def simulator_url(show: Show, plan: Plan, baud: int = DEFAULT_BAUD) -> str:
+    """`sim://` with the show's motion durations (so `wait: done` behaves as on the robot) and
+    the run's baud (a board at another baud would not answer)."""
+    return with_show_durations("sim://", show, plan, baud)
 
 
-def with_show_durations(url: str, show: Show, plan: Plan) -> str:
-    """`--port sim://?drop=5` still runs the show's motions for their expected durations."""
-    if not url.lower().startswith("sim://") or "durations=" in url or "motion_s=" in url:
+def with_show_durations(url: str, show: Show, plan: Plan, baud: int = DEFAULT_BAUD) -> str:
+    """A `sim://` port gets what its URL does not say: the show's durations and the run's baud.
+
+    `--port 'sim://?drop=5'` then still runs the show's motions for their expected lengths; a
+    URL that sets `durations`, `motion_s` or `baud` itself is left to say so.
+    """
+    if not url.lower().startswith("sim://"):
         return url
-    ours = simulator_url(show, plan)
-    if "?" not in ours:
+    base, _, query = url.partition("?")
+    given = dict(parse_qsl(query, keep_blank_values=True))
+    added: dict[str, str] = {}
+    if "durations" not in given and "motion_s" not in given:
+        durations = {}
+        for motion in plan.motions_used() + ([show.on_abort] if show.on_abort is not None else []):
+            durations[motion] = show.duration_of(motion) or DEFAULT_MOTION_S
+        if durations:
+            added["durations"] = ",".join(f"{m}:{d:g}" for m, d in sorted(durations.items()))
+    if "baud" not in given and baud != DEFAULT_BAUD:
+        added["baud"] = str(baud)
+    if not added:
         return url
-    query = ours.split("?", 1)[1]
-    return f"{url}&{query}" if "?" in url else f"sim://?{query}"
+    extra = urlencode(added, safe=":,")
+    return f"{url}&{extra}" if query else f"sim://?{extra}"
+
+
+MAX_TIMEOUT_S = 10.0
+MAX_RETRIES = 10
+
+
+def check_timeout(timeout: float) -> float:
+    """A reply timeout a run can live with: a number of seconds, 0 < t <= 10."""
+    if not math.isfinite(timeout) or not 0 < timeout <= MAX_TIMEOUT_S:
+        raise UsageError(f"--timeout {timeout:g}: give the seconds to wait for a reply, "
+                         f"more than 0 and at most {MAX_TIMEOUT_S:g}")
+    return timeout
 
 
 def _start_index(plan: Plan, ref: str | None) -> int:

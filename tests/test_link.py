@@ -75,7 +75,7 @@ def test_play_sends_three_frames_each_after_its_reply():
     assert port.written == [f.data for f in p.play_sequence(3)]
     assert [e.reply.kind for e in events.rx] == [p.ReplyKind.ACK] * 3
     assert [e.seq for e in events.tx] == [e.seq for e in events.rx] == [1, 2, 3]
-    assert port.flushes >= 3  # stray input dropped before every write
+    assert port.flushes == 0  # nothing thrown away: input is only ever read
 
 
 def test_a_nak_to_a_status_query_is_read_as_four_bytes():
@@ -152,3 +152,19 @@ def test_port_lost_is_a_link_error_with_an_rx_for_the_frame():
     with pytest.raises(LinkError, match="step 1: lost while sending 'play 4' \\(stop frame\\)"):
         link.play(4, Tag(1))
     assert events.rx[0].reply.error.startswith("port lost")
+
+
+def test_bytes_waiting_before_a_write_are_read_whole_and_kept_as_stale():
+    link, port, events = link_for(RUNNING)
+    port.buffer += ACK_MOV  # a late reply that arrived before the query went out
+    reply = link.query_status()
+    assert reply.executing is True and reply.stale == ACK_MOV
+    assert port.flushes == 0
+
+
+def test_status_queries_are_never_closer_than_50_ms_even_when_retried():
+    link, port, events = link_for(p.nak(p.CMD_MOV), p.nak(p.CMD_MOV), IDLE)
+    link.query_status()
+    times = [e.time_ns for e in events.tx]
+    assert len(times) == 3
+    assert min(b - a for a, b in zip(times, times[1:])) >= 50_000_000

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from choreo import protocol as p
@@ -46,23 +48,37 @@ def runner_for(tmp_path, body: str, stop: StopRequest, frames: Frames) -> Runner
     return Runner(compile_plan(show), link, on_abort=show.on_abort, stop=stop)
 
 
-def test_stop_lets_the_frame_in_flight_finish_then_sends_only_the_abort_motion(tmp_path):
+def test_stop_mid_sequence_finishes_the_sequence_then_sends_only_the_abort_motion(tmp_path):
     stop = StopRequest()
     frames = Frames(stop, stop_at=1)  # Ctrl-C while the first stop frame is on the wire
     runner = runner_for(tmp_path, SHOW, stop, frames)
     result = runner.run()
     assert result.outcome == "aborted"
-    assert [f.hex for f in frames.sent] == [p.stop_frame().hex, *[f.hex for f in p.play_sequence(0)]]
+    # the play in flight is one unit (cut after its stop frame, the board's program would be
+    # left halted); then no show frame, only the abort motion
+    assert [f.hex for f in frames.sent] == [f.hex for f in p.play_sequence(3) + p.play_sequence(0)]
     board = runner.link.port.board
-    assert [e.reply is not None for e in board.journal if e.kind == "frame"] == [True] * 4
+    assert [e.reply is not None for e in board.journal if e.kind == "frame"] == [True] * 6
 
 
-def test_a_show_without_abort_motion_sends_nothing_after_the_stop(tmp_path):
+def test_a_show_without_abort_motion_sends_nothing_after_the_sequence_in_flight(tmp_path):
     stop = StopRequest()
     frames = Frames(stop, stop_at=4)  # during the second play's stop frame
-    runner = runner_for(tmp_path, SHOW.replace("    on_abort: home\n", ""), stop, frames)
+    body = SHOW.replace("    on_abort: home\n", "") + "      - wait: 0.05\n"
+    runner = runner_for(tmp_path, body, stop, frames)
     assert runner.run().outcome == "aborted"
-    assert [f.kind.value for f in frames.sent] == ["stop", "play", "restore", "stop"]
+    assert [f.kind.value for f in frames.sent] == ["stop", "play", "restore"] * 2
+    board = runner.link.port.board
+    assert board.config(time.monotonic()) & 0x02  # the program runs (motion 4): not left halted
+
+
+def test_a_stop_before_any_step_sends_nothing_at_all(tmp_path):
+    stop = StopRequest()
+    stop.request("interrupted (test)")
+    frames = Frames()
+    runner = runner_for(tmp_path, SHOW, stop, frames)
+    assert runner.run().outcome == "aborted"
+    assert frames.sent == []  # not even the abort motion: the show never moved the robot
 
 
 def test_the_runner_sends_exactly_the_plan(tmp_path):

@@ -43,35 +43,54 @@ def run(args: argparse.Namespace) -> int:
                          no_log=args.no_log, from_step=args.from_step, timeout=args.timeout,
                          retries=args.retries)
     session = Session.prepare(request)
-    out = sys.stderr
-    if not args.quiet:
-        _say_setup(session, out)
-    progress = Progress(session, out, live=out.isatty(), quiet=args.quiet)
+    say = _Say(sys.stderr, quiet=args.quiet)
+    say(_port_line(session))
+    first = f" from step {session.start}" if session.start else ""
+    say(f"show: {session.show.name}: {len(session.plan.steps)} steps{first}, "
+        f"about {session.plan.estimated_s:.1f} s")
+    progress = Progress(session, sys.stderr, live=sys.stderr.isatty(), quiet=args.quiet)
     try:
         with _StopOnSignals() as stop, session:
+            say(f"log: {session.log_path}" if session.log_path else "log: off (--no-log)")
             result = session.run([progress], stop)
     finally:
         progress.finish()
-    if not args.quiet or result.outcome != "done":
-        late = f", {result.late_steps} late" if result.late_steps else ""
-        print(f"{result.outcome}: {result.steps_run} steps in {result.show_s:.3f} s{late}", file=out)
-        if session.log_path:
-            print(f"log: {session.log_path}", file=out)
+    say.quiet = args.quiet and result.outcome == "done"
+    late = f", {result.late_steps} late" if result.late_steps else ""
+    say(f"{result.outcome}: {result.steps_run} steps in {result.show_s:.3f} s{late}")
+    if session.log_path:
+        say(f"log: {session.log_path}")
     if result.outcome != "done":
         raise Interrupted(f"show {stop.reason}")
     return 0
 
 
-def _say_setup(session, out: TextIO) -> None:
+class _Say:
+    """Lines for the user on stderr; a closed pipe or terminal never stops the show."""
+
+    def __init__(self, out: TextIO, quiet: bool) -> None:
+        self.out = out
+        self.quiet = quiet
+
+    def __call__(self, line: str) -> None:
+        if self.quiet:
+            return
+        try:
+            print(line, file=self.out, flush=True)
+        except (OSError, ValueError):
+            self.quiet = True
+
+
+def _port_line(session) -> str:
     where = {
         "simulator": "the built-in simulator (no --port given and the show names no robot.port)",
         "show": "the show's robot.port",
     }.get(session.port_source, "the command line")
-    print(f"port: {session.port} at {session.baud} baud, from {where}", file=out)
-    first = f" from step {session.start}" if session.start else ""
-    print(f"show: {session.show.name}: {len(session.plan.steps)} steps{first}, "
-          f"about {session.plan.estimated_s:.1f} s", file=out)
-    print(f"log: {session.log_path}" if session.log_path else "log: off (--no-log)", file=out)
+    return f"port: {session.port} at {session.baud} baud, from {where}"
+
+
+# Ctrl-C, `kill`, and a closed terminal or SSH session (SIGHUP) all stop the show the same way.
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 class _StopOnSignals:
@@ -83,14 +102,14 @@ class _StopOnSignals:
 
         self.stop = StopRequest()
         self._previous = {}
-        for signum in (signal.SIGINT, signal.SIGTERM):
+        for signum in STOP_SIGNALS:
             self._previous[signum] = signal.signal(signum, self._handle)
         return self.stop
 
     def _handle(self, signum, frame) -> None:
         if self.stop():
             raise KeyboardInterrupt
-        name = "interrupted (Ctrl-C)" if signum == signal.SIGINT else "stopped (SIGTERM)"
+        name = "interrupted (Ctrl-C)" if signum == signal.SIGINT else f"stopped ({signal.Signals(signum).name})"
         self.stop.request(name)
 
     def __exit__(self, *exc_info) -> None:
@@ -129,7 +148,7 @@ class Progress:
         label = f" '{step.label}'" if step.label else ""
         where = f"step {step.index}{label} ({step.index - self.first + 1}/{self.total})"
         if not self.live:
-            print(f"[{event.actual_s:8.3f} s] {where}: {step.describe()}", file=self.out)
+            self._write(f"[{event.actual_s:8.3f} s] {where}: {step.describe()}\n")
             return
         with self._lock:
             self._zero = time.monotonic() - event.actual_s
@@ -146,16 +165,25 @@ class Progress:
         show_s = time.monotonic() - self._zero if self._zero is not None else 0.0
         done = min(20, int(20 * show_s / self.estimated)) if self.estimated > 0 else 20
         line = f"{self._current}  {show_s:.1f}/{self.estimated:.1f} s [{'#' * done}{'-' * (20 - done)}]"
-        self.out.write("\r" + line.ljust(self._width))
+        self._write("\r" + line.ljust(self._width))
         self._width = len(line)
-        self.out.flush()
+
+    def _write(self, text: str) -> None:
+        """The screen is not the show: a closed pipe or terminal silences progress, nothing more."""
+        if self.out is None:
+            return
+        try:
+            self.out.write(text)
+            self.out.flush()
+        except (OSError, ValueError):
+            self.out = None
 
     def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
         if level < 3 or level >= 4 or self.quiet:
             return  # errors reach the user once, as the command's final line
         with self._lock:
             self._clear()
-            print(f"warning: {message}", file=self.out)
+            self._write(f"warning: {message}\n")
             if self._current:
                 self._draw()
 
@@ -167,6 +195,5 @@ class Progress:
 
     def _clear(self) -> None:
         if self.live and self._width:
-            self.out.write("\r" + " " * self._width + "\r")
-            self.out.flush()
+            self._write("\r" + " " * self._width + "\r")
             self._width = 0
