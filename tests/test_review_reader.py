@@ -69,9 +69,14 @@ def test_a_log_cut_anywhere_yields_a_prefix_and_says_where(synthetic, tmp_path):
     data = synthetic.read_bytes()
     cut_file = tmp_path / "cut.mcap"
     previous = 0
-    offsets = list(range(0, len(data), 997)) + [len(data) - 1, len(data) - 30, 9, 8, 7]
+    header_end = len(MAGIC) + 9 + struct.unpack_from("<Q", data, len(MAGIC) + 1)[0]
+    offsets = list(range(0, len(data), 997)) + [len(data) - 1, len(data) - 30, header_end, header_end + 1]
     for offset in sorted(offsets):
         cut_file.write_bytes(data[:offset])
+        if offset < header_end:  # not even a header: not a cut log, not a log at all
+            with pytest.raises(LogError, match="not an MCAP file"):
+                LogReader(cut_file)
+            continue
         messages, reader = read_all(cut_file)
         assert messages == full[:len(messages)], offset
         assert reader.cut is not None and not reader.complete, offset
@@ -156,8 +161,89 @@ def test_not_mcap_missing_and_empty_files(tmp_path):
         LogReader(tmp_path / "nope.mcap")
     empty = tmp_path / "empty.mcap"
     empty.write_bytes(b"")
-    messages, reader = read_all(empty)
-    assert messages == [] and "before it wrote anything" in reader.cut.reason
+    with pytest.raises(LogError, match=r"^log .*empty.mcap: not an MCAP file \(empty\)$"):
+        LogReader(empty)
+    short = tmp_path / "short.mcap"
+    for data in (MAGIC[:5], MAGIC, MAGIC + b"\x01\x10"):
+        short.write_bytes(data)
+        with pytest.raises(LogError, match=rf"not an MCAP file \(only {len(data)} bytes: too short"):
+            LogReader(short)
+    short.write_bytes(MAGIC + _record(0x06, b"\x00" * 40))
+    with pytest.raises(LogError, match="not followed by a header record"):
+        LogReader(short)
+
+
+def test_empty_and_short_files_are_exit_2_with_one_line(tmp_path, capsys):
+    from choreo.cli import main
+
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    for command in ("summary", "frames", "timeline"):
+        assert main(["log", command, str(empty)]) == 2
+        captured = capsys.readouterr()
+        assert captured.out == "" and captured.err == f"log {empty}: not an MCAP file (empty)\n"
+
+
+def test_a_header_and_nothing_else_is_a_cut_log(synthetic, tmp_path, capsys):
+    """A valid header cut right after it is a run killed early: reviewed, exit 0."""
+    from choreo.cli import main
+
+    data = synthetic.read_bytes()
+    header_end = len(MAGIC) + 9 + struct.unpack_from("<Q", data, len(MAGIC) + 1)[0]
+    path = tmp_path / "header.mcap"
+    path.write_bytes(data[:header_end])
+    assert main(["log", "summary", str(path)]) == 0
+    assert "UNFINISHED" in capsys.readouterr().out
+
+
+def _damage(data: bytes) -> tuple[bytes, int]:
+    """The reviewer's case: an ACK's bytes changed inside a chunk (04 00 06 0a -> 04 00 06 15)."""
+    at = data.index(b'"hex":"04 00 06 0a"', len(data) // 3)
+    return data[:at] + b'"hex":"04 00 06 15"' + data[at + len(b'"hex":"04 00 06 0a"'):], at
+
+
+def test_a_damaged_chunk_ends_the_read_there_and_says_which(synthetic, tmp_path):
+    data, at = _damage(synthetic.read_bytes())
+    path = tmp_path / "damaged.mcap"
+    path.write_bytes(data)
+    with open(path, "rb") as f, pytest.raises(Exception, match="(?i)crc validation failed"):  # mcap's own reader refuses it
+        list(NonSeekingReader(f, validate_crcs=True).iter_messages())
+    full = mcap_messages(synthetic)
+    messages, reader = read_all(path)
+    assert 0 < len(messages) < len(full) and messages == full[:len(messages)]
+    assert b'"04 00 06 15"' not in b"".join(d for _, _, d in messages)  # nothing from the bad chunk
+    cut = reader.cut
+    assert cut is not None and cut.damaged and cut.state == "damaged" and not reader.complete
+    assert cut.offset < at < cut.offset + 64 * 1024 + 100
+    assert f"the chunk at byte {cut.offset:,} is damaged (its CRC is 0x" in str(cut)
+    whole, damaged = summarize(synthetic), summarize(path)
+    assert damaged.replies["ack"] < whole.replies["ack"]
+
+
+def test_summary_of_a_damaged_log_is_exit_0_and_says_damaged(synthetic, tmp_path, capsys):
+    from choreo.cli import main
+
+    path = tmp_path / "damaged.mcap"
+    path.write_bytes(_damage(synthetic.read_bytes())[0])
+    assert main(["log", "summary", str(path)]) == 0
+    out = capsys.readouterr().out
+    first = out.splitlines()[0]
+    assert "(complete)" not in first and "(DAMAGED: the chunk at byte " in first
+    assert "outcome   unknown" in out
+    assert main(["log", "frames", str(path)]) == 0
+    assert capsys.readouterr().out.splitlines()[-1].startswith("log damaged: the chunk at byte")
+
+
+def test_a_chunk_without_a_crc_is_not_checked(tmp_path):
+    """CRC 0 means the writer computed none (the spec's rule): not damage."""
+    path = tmp_path / "nocrc.mcap"
+    records = _record(0x03, struct.pack("<H", 1) + _string("choreo.Tx") + _string("jsonschema") + _string(""))
+    records += _record(0x04, struct.pack("<HH", 1, 1) + _string("/rcb4/tx") + _string("json") + b"\0\0\0\0")
+    records += _record(0x05, struct.pack("<HIQQ", 1, 0, 5, 5) + b'{"seq":1}')
+    chunk = struct.pack("<QQQI", 5, 5, len(records), 0) + _string("") + struct.pack("<Q", len(records)) + records
+    path.write_bytes(MAGIC + _record(0x01, _string("") + _string("x")) + _record(0x06, chunk))
+    messages, reader = read_all(path)
+    assert messages == [("/rcb4/tx", 5, b'{"seq":1}')] and not reader.cut.damaged
 
 
 def test_decode_takes_what_json_takes():

@@ -130,7 +130,7 @@ def run_timeline(args: argparse.Namespace) -> int:
         timeline = build(reader)
     if args.png:
         path = render_png(timeline, args.png)
-        cut = f" (log unfinished: {timeline.cut.reason})" if timeline.cut else ""
+        cut = f" (log {timeline.cut.state}: {timeline.cut.reason})" if timeline.cut else ""
         _print_all([f"timeline: {path}: {counted(len(timeline.runs), 'motion')}, "
                     f"{counted(len(timeline.late), 'late cue')}, {counted(len(timeline.faults), 'fault')}{cut}"])
         return 0
@@ -163,7 +163,7 @@ def run_export(args: argparse.Namespace) -> int:
         cut = reader.cut
     written = ", ".join(value for _, value in targets if value != "-")
     if written:
-        note = f" (log unfinished: {cut.reason})" if cut else ""
+        note = f" (log {cut.state}: {cut.reason})" if cut else ""
         print(f"exported {count} frames to {written}{note}", file=sys.stderr)
     return 0
 
@@ -193,7 +193,7 @@ def run_replay(args: argparse.Namespace) -> int:
         report = replay(args.log, port=args.port, speed=args.speed, baud=args.baud, timeout=args.timeout,
                         log_path=args.new_log, on_difference=differs, on_start=started)
         unmatched = f", {report.unmatched} with no recorded reply" if report.unmatched else ""
-        cut = f"; the recorded log is unfinished: {report.cut.reason}" if report.cut else ""
+        cut = f"; the recorded log is {report.cut.state}: {report.cut.reason}" if report.cut else ""
         timing = f" ({report.timing} of them status polls at a motion's end)" if report.timing else ""
         out.write(f"replayed {report.frames} frames: {report.same} same, {report.different} differ{timing}"
                   f"{unmatched}; frames left up to {report.max_lag_ms:.1f} ms after their recorded time"

@@ -164,7 +164,7 @@ def frame_lines(reader: LogReader, step: int | None = None, kind: str | None = N
             except (KeyError, TypeError, ValueError, AttributeError) as exc:
                 raise reader.not_choreo(TX_TOPIC, exchange.seq, exc) from None
     if reader.cut is not None:
-        yield f"log unfinished: {reader.cut}"
+        yield f"log {reader.cut.state}: {reader.cut}"
     if not shown:
         wanted = " and ".join(x for x in (f"step {step}" if step is not None else "",
                                          f"kind {kind}" if kind else "") if x)

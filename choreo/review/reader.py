@@ -13,6 +13,11 @@ small reads and a dataclass the generic reader spends on it. Messages come out a
 `(topic, log_time_ns, data)`; `decode` turns the JSON data into a dict only where a command needs
 the fields.
 
+A chunk whose records do not match its CRC (a disk or a copy damaged the file after the run wrote
+it) is treated like a cut: the messages before it are intact and are reviewed, and `cut` says
+which chunk is damaged (`Cut.damaged`). Reading past it would mix trusted and untrusted bytes,
+and a reviewer would rather see less than see a wrong reply.
+
 Spec: https://mcap.dev/spec (records used here: Header, Footer, Schema, Channel, Message, Chunk,
 Attachment, Metadata, Data End; everything else is skipped, as the spec allows).
 """
@@ -22,6 +27,7 @@ from __future__ import annotations
 import json
 import os
 import struct
+import zlib
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -70,11 +76,17 @@ def decode(data: bytes) -> dict:
 
 @dataclass(frozen=True)
 class Cut:
-    """Where an unfinished log stops, and why: what a reviewer of a killed run needs to know."""
+    """Where an unfinished or damaged log stops, and why: what a reviewer of a killed run needs to know."""
 
     offset: int  # bytes of the file that could be read
     size: int  # the file's size
     reason: str
+    damaged: bool = False  # the file goes on, but a record in it is corrupt (a CRC mismatch)
+
+    @property
+    def state(self) -> str:
+        """One word for a status line: the log is `unfinished` (killed run) or `damaged`."""
+        return "damaged" if self.damaged else "unfinished"
 
     def __str__(self) -> str:
         if self.offset >= self.size:
@@ -121,7 +133,6 @@ class LogReader:
         self.footer = False  # Data End, the footer and the closing magic are all there
         self.messages_read = 0
         self._schemas: dict[int, str] = {}
-        self._head_cut: Cut | None = None
         self._data_start = 0
         try:
             self._file: IO[bytes] | None = open(self.path, "rb", buffering=256 * 1024)
@@ -195,17 +206,30 @@ class LogReader:
         return LogError(f"log {self.path}: {what}")
 
     def _read_head(self) -> None:
-        """Magic, header, and every record before the first message (metadata, attachments)."""
+        """Magic, header, and every record before the first message (metadata, attachments).
+
+        A file without a whole Header record after the magic is not a log, not a cut one: the
+        recorder writes the header, the show and the metadata before the first frame, so even a
+        run killed at once leaves more than that. Reporting it as an "unfinished run" would send
+        a user looking for a run that never was.
+        """
         f = self._file
         assert f is not None
         magic = f.read(len(MAGIC))
-        if magic != MAGIC:
-            if len(magic) < len(MAGIC) and MAGIC.startswith(magic):
-                self._head_cut = self.cut = Cut(len(magic), self._size, "the file ends inside the "
-                                                "MCAP magic: the run was killed before it wrote anything")
-                return
+        if magic != MAGIC and not (len(magic) < len(MAGIC) and MAGIC.startswith(magic)):
             raise self._fail("not an MCAP file (it does not start with the MCAP magic bytes); "
                              "choreo logs are the .mcap files `choreo run` writes")
+        head = f.read(RECORD_HEAD.size)
+        if len(magic) < len(MAGIC) or len(head) < RECORD_HEAD.size:
+            raise self._too_short()
+        opcode, length = RECORD_HEAD.unpack(head)
+        if opcode != OP_HEADER:
+            raise self._fail(f"not an MCAP file (the MCAP magic is not followed by a header record, "
+                             f"but by opcode 0x{opcode:02x}); choreo logs are the .mcap files "
+                             "`choreo run` writes")
+        if length > self._size - len(MAGIC) - RECORD_HEAD.size:
+            raise self._too_short()
+        self._top_level(opcode, f.read(length), len(MAGIC))
         while True:
             start = f.tell()
             head = f.read(RECORD_HEAD.size)
@@ -218,6 +242,12 @@ class LogReader:
                 return
             body = f.read(length)
             self._top_level(opcode, body, start)
+
+    def _too_short(self) -> LogError:
+        if not self._size:
+            return self._fail("not an MCAP file (empty)")
+        return self._fail(f"not an MCAP file (only {self._size} bytes: too short to hold an MCAP header; "
+                          "a `choreo run` log starts with its header, metadata and show)")
 
     def _top_level(self, opcode: int, body: bytes, start: int) -> None:
         """A record outside chunks other than a message: note what a review needs from it."""
@@ -262,9 +292,7 @@ class LogReader:
         f = self._file
         if f is None:
             raise self._fail("the log is closed")
-        self.cut, self.footer, self.messages_read = self._head_cut, False, 0
-        if self._head_cut is not None:
-            return
+        self.cut, self.footer, self.messages_read = None, False, 0
         f.seek(self._data_start)
         read = f.read
         size = self._size
@@ -290,7 +318,11 @@ class LogReader:
                     return
                 body = read(length)
                 if opcode == OP_CHUNK:
-                    records, first, last = self._chunk_records(body, start)
+                    try:
+                        records, first, last = self._chunk_records(body, start)
+                    except _Damaged as exc:
+                        self.cut = Cut(start, size, str(exc), damaged=True)
+                        return
                     for message in self._in_chunk(records, first, last, routes, wanted):
                         count += 1
                         yield message
@@ -358,17 +390,38 @@ class LogReader:
         return topic, log_time, buf[pos + 22:pos + length]
 
     def _chunk_records(self, body: bytes, start: int) -> tuple[bytes, int, int]:
-        """The records of a whole chunk: the buffer, and where they start and end in it."""
-        _, _, uncompressed_size, _, name_length = CHUNK_HEAD.unpack_from(body, 0)
-        compression = body[CHUNK_HEAD.size:CHUNK_HEAD.size + name_length].decode()
-        pos = CHUNK_HEAD.size + name_length
-        (records_length,) = struct.unpack_from("<Q", body, pos)
+        """The records of a whole chunk: the buffer, and where they start and end in it.
+
+        Checked against the chunk's CRC where the writer gave one (0 means none): crc32 runs in
+        C at gigabytes a second, a few percent of the time a message costs the commands.
+        """
+        try:
+            _, _, uncompressed_size, crc, name_length = CHUNK_HEAD.unpack_from(body, 0)
+            compression = body[CHUNK_HEAD.size:CHUNK_HEAD.size + name_length].decode()
+            pos = CHUNK_HEAD.size + name_length
+            (records_length,) = struct.unpack_from("<Q", body, pos)
+        except (struct.error, UnicodeDecodeError):
+            raise _Damaged(start, "its header does not parse") from None
         pos += 8
         end = pos + records_length
+        if end > len(body):
+            raise _Damaged(start, f"its records claim {records_length:,} bytes, the chunk holds "
+                                  f"{len(body) - pos:,}")
         if not compression:
-            return body, pos, min(end, len(body))
-        data = self._decompress(compression, body[pos:end], uncompressed_size, start)
-        return data, 0, len(data)
+            data, first, last = body, pos, end
+        else:
+            try:
+                data = self._decompress(compression, body[pos:end], uncompressed_size, start)
+            except LogError:
+                raise
+            except Exception as exc:  # the compressors' own error types: the bytes are corrupt
+                raise _Damaged(start, f"its {compression} data does not decompress ({exc})") from None
+            first, last = 0, len(data)
+        if crc:
+            actual = zlib.crc32(memoryview(data)[first:last])
+            if actual != crc:
+                raise _Damaged(start, f"its CRC is 0x{crc:08x} but its records' is 0x{actual:08x}")
+        return data, first, last
 
     def _decompress(self, compression: str, data: bytes, size: int, start: int) -> bytes:
         """zstd or lz4 chunks, with the libraries the mcap package uses, where installed."""
@@ -439,6 +492,15 @@ class LogReader:
                            "the run was killed while closing its log")
             return
         self.footer = True
+
+
+class _Damaged(Exception):
+    """A chunk whose bytes are not the ones written: ends the read like a cut, saying which."""
+
+    def __init__(self, start: int, detail: str) -> None:
+        super().__init__(f"the chunk at byte {start:,} is damaged ({detail}): the file changed after "
+                         "the run wrote it (disk or copy); what comes before that chunk is intact "
+                         "and reviewed, nothing after it is read")
 
 
 def _string(buf: bytes, pos: int) -> tuple[str, int]:

@@ -339,7 +339,7 @@ def render(summary: Summary) -> Iterable[str]:
     if summary.complete:
         state = "complete"
     elif summary.cut is not None:
-        state = f"UNFINISHED: {summary.cut}"
+        state = f"{summary.cut.state.upper()}: {summary.cut}"
     elif summary.result is None:
         state = "UNFINISHED: the run recorded no result (it did not close its log)"
     else:

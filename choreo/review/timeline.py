@@ -259,7 +259,7 @@ def render_text(timeline: Timeline) -> Iterator[str]:
         for mark in marks:
             yield f"  {mark.show_s:9.3f} s  {mark.text}"
     if timeline.cut is not None:
-        yield f"log unfinished: {timeline.cut}"
+        yield f"log {timeline.cut.state}: {timeline.cut}"
 
 
 def counted(n: int, word: str) -> str:
@@ -325,7 +325,7 @@ def render_png(timeline: Timeline, path: str | Path) -> Path:
         if timeline.outcome:
             title += f", {timeline.outcome}"
         if timeline.cut is not None:
-            title += " (log unfinished)"
+            title += f" (log {timeline.cut.state})"
         title += f"; {counted(len(late), 'late cue')}, {counted(len(faults), 'fault')}"
         ax.set_title(title)
         from matplotlib.lines import Line2D
