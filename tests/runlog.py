@@ -123,5 +123,19 @@ def log_has_steps(path: Path, count: int) -> bool:
     return len(log.steps) >= count
 
 
-def interrupt(process: subprocess.Popen, signum: int = signal.SIGINT) -> None:
-    process.send_signal(signum)
+class SimPty:
+    """`choreo sim` on a pseudo-terminal for the length of a `with`: its device path, then a clean stop."""
+
+    def __init__(self, *options: str) -> None:
+        self.options = options
+
+    def __enter__(self) -> str:
+        self.process = start_choreo("sim", *self.options)
+        path = self.process.stdout.readline().strip()
+        assert path.startswith("/dev/"), self.process.stderr.read()
+        return path
+
+    def __exit__(self, *exc_info: object) -> None:
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+        self.process.communicate(timeout=10)

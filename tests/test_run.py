@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import signal
 import sys
+from contextlib import nullcontext
 from pathlib import Path
 
 import pytest
@@ -16,7 +17,8 @@ import serial
 from choreo import protocol as p
 from choreo.cli import main
 from choreo.session import RunRequest, Session
-from runlog import choreo, log_has_steps, read_log, read_log_linear, start_choreo, wait_for, write_show
+from runlog import (SimPty, choreo, log_has_steps, read_log, read_log_linear, start_choreo, wait_for,
+                    write_show)
 
 STOP = p.stop_frame().hex
 RESTORE = p.restore_frame().hex
@@ -330,14 +332,17 @@ STOP_SHOW = """
 """
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
-def test_signal_stops_plays_abort_motion_and_closes_the_log(tmp_path, signum):
+@pytest.mark.parametrize("transport", ["sim", "pty"])
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_signal_stops_plays_abort_motion_and_closes_the_log(tmp_path, signum, transport):
     show = write_show(tmp_path, STOP_SHOW)
     log_path = tmp_path / "stop.mcap"
-    process = start_choreo("run", str(show), "--log", str(log_path))
-    assert wait_for(lambda: log_has_steps(log_path, 5))  # in the 20 s wait
-    process.send_signal(signum)
-    _, err = process.communicate(timeout=10)
+    with SimPty("--durations", "0:0.1,1:0.1") if transport == "pty" else nullcontext() as pty:
+        port = ["--port", pty] if pty else []
+        process = start_choreo("run", str(show), "--log", str(log_path), *port)
+        assert wait_for(lambda: log_has_steps(log_path, 5))  # in the 20 s wait
+        process.send_signal(signum)
+        _, err = process.communicate(timeout=10)
     assert process.returncode == 130, err
     log = read_log(log_path)
     plays = [m for m in log.tx if m["kind"] == "play"]
@@ -346,6 +351,7 @@ def test_signal_stops_plays_abort_motion_and_closes_the_log(tmp_path, signum):
     assert log.metadata["choreo.result"]["outcome"] == "aborted"
     assert log.steps[-1]["outcome"] == "aborted"
     assert "aborted" in err
+    assert all(m["kind"] in ("ack", "status") for m in log.rx)
 
 
 def test_second_ctrl_c_leaves_at_once_with_the_log_closed(tmp_path):
@@ -488,3 +494,194 @@ def test_recording_waits_for_idle_time_and_loses_nothing(tmp_path):
     log = read_log(log_path)
     assert [m["motion"] for m in log.tx if m["kind"] == "play"] == [1, 2, 3, 4]
     assert [m["seq"] for m in log.rx] == list(range(1, 13))
+
+
+# -- review findings: each pinned down ---------------------------------------------------------
+
+def test_every_logged_message_matches_its_schema(tmp_path):
+    import json
+
+    import jsonschema
+
+    show = write_show(tmp_path, WIRE_SHOW)
+    log_path = tmp_path / "schemas.mcap"
+    assert main(["run", str(show), "--port", "sim://?nak=4", "--log", str(log_path), "-q"]) == 0
+    log = read_log(log_path)
+    schemas_dir = Path(__file__).parent.parent / "schemas"
+    files = {"/rcb4/tx": "log.tx.schema.json", "/rcb4/rx": "log.rx.schema.json",
+             "/choreo/step": "log.step.schema.json", "/choreo/log": "foxglove.Log.schema.json"}
+    checked = 0
+    for topic, name in files.items():
+        validator = jsonschema.Draft202012Validator(json.loads((schemas_dir / name).read_text()))
+        for message in log.topic(topic):
+            message = {k: v for k, v in message.items() if k != "_log_time"}
+            validator.validate(message)
+            checked += 1
+    assert checked == len(log.tx) + len(log.rx) + len(log.steps) + len(log.logs) and log.logs
+
+
+@pytest.mark.parametrize("query", ["nak=5", "drop=6", "junk=5"])
+def test_polls_stay_50_ms_apart_through_faults_and_retries(tmp_path, query):
+    show = write_show(tmp_path, """
+        version: 1
+        name: polls
+        motions:
+          slow: {number: 2, duration: 0.6}
+        steps:
+          - play: slow
+          - wait: done
+    """)
+    log_path = tmp_path / "polls.mcap"
+    assert main(["run", str(show), "--port", f"sim://?{query}", "--timeout", "0.05",
+                 "--log", str(log_path), "-q"]) == 0
+    log = read_log(log_path)
+    polls = [m["_log_time"] for m in log.tx if m["kind"] == "status"]
+    assert any(m["attempt"] > 1 for m in log.tx if m["kind"] == "status")
+    assert min(b - a for a, b in zip(polls, polls[1:])) >= 50_000_000
+
+
+def test_a_play_delayed_by_retries_is_reported_late(tmp_path):
+    show = write_show(tmp_path, """
+        version: 1
+        name: slip
+        steps:
+          - play: 2
+          - play: 1
+            at: 0.1
+            label: cue
+    """)
+    log_path = tmp_path / "slip.mcap"
+    # frame 5 is the cue's CALL: no reply, a timeout and a settle, then its sequence again
+    assert main(["run", str(show), "--port", "sim://?drop=5", "--timeout", "0.05",
+                 "--log", str(log_path), "-q"]) == 0
+    log = read_log(log_path)
+    start, end = (m for m in log.steps if m["label"] == "cue")
+    assert start["late_ms"] < 50 <= end["late_ms"]  # on time to start, late to really begin
+    assert any("'cue': motion 1 started" in m["message"] and "(2 tries)" in m["message"] for m in log.logs)
+    assert log.metadata["choreo.result"]["late_steps"] == "1"
+
+
+def test_the_built_in_simulator_runs_at_the_shows_baud(tmp_path):
+    show = write_show(tmp_path, "version: 1\nrobot: {baud: 1250000}\nsteps:\n  - play: 1\n")
+    assert main(["run", str(show), "--no-log", "-q"]) == 0
+    assert main(["run", str(show), "--baud", "625000", "--no-log", "-q"]) == 0
+
+
+@pytest.mark.parametrize("argv,words", [
+    (["--timeout", "inf"], "--timeout inf"),
+    (["--timeout", "nan"], "--timeout nan"),
+    (["--timeout", "0"], "more than 0"),
+    (["--retries", "-1"], "--retries -1"),
+    (["--retries", "11"], "0..10"),
+    (["--port", ""], "--port: empty"),
+    (["--baud", "9600"], "baud 9600"),
+])
+def test_bad_run_arguments_are_exit_2_before_anything_opens(tmp_path, capsys, argv, words):
+    show = write_show(tmp_path, WIRE_SHOW)
+    assert main(["run", str(show), "--log", str(tmp_path / "never.mcap"), *argv]) == 2
+    assert words in capsys.readouterr().err
+    assert not (tmp_path / "never.mcap").exists()
+
+
+def test_default_log_names_never_collide(tmp_path):
+    show = write_show(tmp_path, "version: 1\nname: quick\nsteps:\n  - play: 1\n")
+    for _ in range(3):
+        done = choreo("run", str(show), "-q", cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+    logs = sorted((tmp_path / "runs").glob("quick-*.mcap"))
+    assert len(logs) == 3  # the same second gets -2, -3: never refused, never overwritten
+
+
+def test_a_closed_output_pipe_does_not_stop_the_show(tmp_path):
+    show = write_show(tmp_path, WIRE_SHOW)
+    log_path = tmp_path / "pipe.mcap"
+    process = start_choreo("run", str(show), "--log", str(log_path))
+    process.stderr.close()  # `choreo run ... 2>&1 | head -1`
+    process.stdout.close()
+    assert process.wait(timeout=30) == 0
+    log = read_log(log_path)
+    assert log.metadata["choreo.result"]["outcome"] == "done"
+    assert [m["motion"] for m in log.tx if m["kind"] == "play"] == [3, 7, 7]
+
+
+def test_a_log_disk_that_fills_up_stops_the_run_with_one_line(tmp_path):
+    import resource
+    import subprocess
+
+    show = write_show(tmp_path, """
+        version: 1
+        name: full
+        motions:
+          long: {number: 2, duration: 3}
+        steps:
+          - play: long
+          - wait: done
+    """)
+    log_path = tmp_path / "full.mcap"
+    limit = 16 * 1024  # the header, schemas and show fit; three seconds of polls do not
+
+    def small_files() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    from runlog import REPO, _env
+
+    done = subprocess.run([sys.executable, "-m", "choreo", "run", str(show), "--log", str(log_path), "-q"],
+                          capture_output=True, text=True, env=_env(), cwd=REPO, timeout=60,
+                          preexec_fn=small_files)
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr
+    (line,) = done.stderr.strip().splitlines()
+    assert line.startswith(f"log {log_path}: cannot write: File too large: the run was stopped")
+    log, _ = read_log_linear(log_path)  # what fit is readable
+    assert log.tx[:3] and log.tx[0]["kind"] == "stop"
+
+
+def test_choreo_ports_marks_kondo_adapters(monkeypatch, capsys):
+    from types import SimpleNamespace
+
+    from serial.tools import list_ports
+
+    ports = [SimpleNamespace(device="/dev/ttyUSB0", description="Dual USB Adapter HS", vid=0x165C, pid=0x0008),
+             SimpleNamespace(device="/dev/ttyS0", description="n/a", vid=None, pid=None)]
+    monkeypatch.setattr(list_ports, "comports", lambda: ports)
+    assert main(["ports"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out == ["/dev/ttyS0  n/a", "/dev/ttyUSB0  Dual USB Adapter HS USB 165C:0008  <- Kondo adapter"]
+
+
+@pytest.mark.parametrize("fault,words", [
+    ("--drop", "no reply to 'play 3' (stop frame) after 3 tries"),
+    ("--nak", "NAK (04 00 15 19) to 'play 3' (stop frame) after 3 tries"),
+    ("--badsum", "bad checksum"),
+])
+def test_fault_paths_over_a_pty(tmp_path, capsys, fault, words):
+    show = write_show(tmp_path, FAULT_SHOW)
+    log_path = tmp_path / "pty-fault.mcap"
+    with SimPty(fault, "1") as path:
+        code = main(["run", str(show), "--port", path, "--timeout", "0.05", "--log", str(log_path), "-q"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 3 and len(err) == 1 and words in err[0] and err[0].startswith(f"port {path}:")
+    assert read_log(log_path).metadata["choreo.result"]["exit_code"] == "3"
+
+
+def test_polls_and_cues_over_a_pty(tmp_path):
+    show = write_show(tmp_path, """
+        version: 1
+        name: pty-timing
+        motions:
+          slow: {number: 2, duration: 0.4}
+        steps:
+          - play: slow
+          - wait: done
+          - play: 4
+            at: 0.7
+            label: cue
+    """)
+    log_path = tmp_path / "pty-timing.mcap"
+    with SimPty("--durations", "2:0.4", "--nak", "5") as path:
+        assert main(["run", str(show), "--port", path, "--log", str(log_path), "-q"]) == 0
+    log = read_log(log_path)
+    polls = [m["_log_time"] for m in log.tx if m["kind"] == "status"]
+    assert len(polls) >= 4 and min(b - a for a, b in zip(polls, polls[1:])) >= 50_000_000
+    cue = next(m for m in log.tx if m["label"] == "cue")
+    assert cue["_log_time"] - log.steps[0]["_log_time"] >= 700_000_000
