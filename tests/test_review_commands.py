@@ -387,6 +387,57 @@ def test_replay_refuses_a_bad_speed_and_a_bad_port(logs, capsys, tmp_path):
         assert reader.complete and reader.result["outcome"] == "failed"
 
 
+@pytest.mark.parametrize("speed", ["2", "10"])
+def test_replay_of_a_clean_run_is_clean_at_any_speed(logs, capsys, tmp_path, speed):
+    """The simulator's motions run `speed` times faster too: every poll falls where it did."""
+    code, out, err = cli(capsys, "replay", str(logs.complete), "--log", str(tmp_path / "r.mcap"),
+                         "--speed", speed, "--strict")
+    frames = len(mcap_topics(logs.complete)["/rcb4/tx"])
+    assert code == 0, out
+    assert f"replayed {frames} frames: {frames} same, 0 differ" in out
+    durations = {"2": "3:0.165,5:0.11", "10": "3:0.033,5:0.022"}[speed]
+    assert f"sim://?durations={durations}&motion_s=" in err and "note:" not in err
+
+
+def test_speed_scales_a_sim_board_and_nothing_else():
+    from choreo.review.replay import at_speed
+
+    assert at_speed("sim://?durations=3:0.33,5:0.22", 1) == "sim://?durations=3:0.33,5:0.22"
+    assert at_speed("sim://?durations=3:0.33&drop=5", 2) == \
+        "sim://?durations=3:0.165&drop=5&motion_s=0.5&reply_ms=0.1&wire=0"
+    assert at_speed("sim://?motion_s=2&wire=1", 4) == "sim://?motion_s=0.5&wire=1&reply_ms=0.05"
+    assert at_speed("sim://", 0.5) == "sim://?motion_s=2&reply_ms=0.4"
+    assert at_speed("/dev/ttyUSB0", 2) == "/dev/ttyUSB0"
+    assert at_speed("sim://?bogus=1", 2) == "sim://?bogus=1"  # the link says what is wrong with it
+
+
+def test_replay_on_a_sim_at_another_baud_gives_the_board_that_baud(logs, capsys, tmp_path):
+    code, out, err = cli(capsys, "replay", str(logs.complete), "--log", str(tmp_path / "r.mcap"),
+                         "--baud", "625000", "-q")
+    assert code == 0, err
+    frames = len(mcap_topics(logs.complete)["/rcb4/tx"])
+    assert f"{frames} same, 0 differ" in out
+    with LogReader(tmp_path / "r.mcap") as reader:
+        assert reader.run_info["baud"] == "625000" and "baud=625000" in reader.run_info["port"]
+
+
+@pytest.mark.parametrize("option, value, says", [
+    ("--baud", "9600", "--baud 9600: the RCB-4 runs at 115200, 625000, 1250000 baud"),
+    ("--timeout", "0", "--timeout 0: give the seconds to wait for a reply"),
+    ("--timeout", "nan", "--timeout nan: give the seconds"),
+    ("--timeout", "inf", "--timeout inf: give the seconds"),
+    ("--timeout", "11", "--timeout 11: give the seconds"),
+    ("--speed", "nan", "--speed nan: give a speed above 0"),
+    ("--speed", "inf", "--speed inf: give a speed above 0"),
+    ("--speed", "-2", "--speed -2: give a speed above 0"),
+])
+def test_replay_refuses_what_the_board_or_a_clock_cannot_do(logs, capsys, tmp_path, option, value, says):
+    new_log = tmp_path / "r.mcap"
+    code, out, err = cli(capsys, "replay", str(logs.complete), "--log", str(new_log), option, value)
+    assert code == 2 and out == "" and err.startswith(says) and len(err.splitlines()) == 1
+    assert not new_log.exists()  # refused before anything was opened
+
+
 def test_not_a_log_is_exit_2_with_one_line(logs, capsys):
     show = logs.directory / "review.yaml"
     for argv in (["log", "summary", str(show)], ["log", "frames", str(show)], ["replay", str(show)]):

@@ -72,10 +72,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     replay.add_argument("--port", help="where to send the frames (default: sim://, set up from the "
                         "show attached to the log; a real robot only if you name its port)")
     replay.add_argument("--speed", type=float, default=1.0, metavar="X",
-                        help="timing factor: 2 plays twice as fast (default 1, the recorded timing)")
-    replay.add_argument("--baud", type=int, help="baud rate (default: the recorded run's for --port, "
-                        "115200 for the simulator)")
-    replay.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for a reply (default 0.2)")
+                        help="timing factor above 0: 2 plays twice as fast, and a sim:// board runs its "
+                        "motions twice as fast too (default 1, the recorded timing)")
+    replay.add_argument("--baud", type=int, help="115200, 625000 or 1250000 (default: the recorded run's "
+                        "for --port, 115200 for the simulator)")
+    replay.add_argument("--timeout", type=float, metavar="S",
+                        help="seconds to wait for a reply, more than 0 and at most 10 (default 0.2)")
     replay.add_argument("--log", dest="new_log", metavar="PATH",
                         help="the replay's own log (default runs/<show>-replay-<UTC time>.mcap)")
     replay.add_argument("--strict", action="store_true", help="exit 1 if any reply differs")
@@ -182,6 +184,8 @@ def run_replay(args: argparse.Namespace) -> int:
         if not args.quiet:
             note = f" (simulator without the show's durations: {report.show_note})" if report.show_note else ""
             print(f"replay: {report.source} on {report.port} at speed {report.speed:g}{note}", file=sys.stderr)
+            if report.speed_note:
+                print(f"note: {report.speed_note}", file=sys.stderr)
             print(f"log: {report.log_path}", file=sys.stderr)
 
     with _stdout() as out:

@@ -7,15 +7,21 @@ steps re-timed to the replay's clock), so it can be reviewed with the same comma
 
 The default port is the built-in simulator, set up from the show attached to the log (its
 motions run as long as the show says) - never the robot the show names: a replay moves a real
-robot only when `--port` says so.
+robot only when `--port` says so. At `--speed X` a `sim://` board runs its motions X times
+faster too, so a status poll falls on the same side of a motion's end as it did in the run and a
+clean log replays clean at any speed. Only the motions' lengths are scaled: a frame's wire time,
+the board's reply delay and the link's reply timeout are the line's, and a replay cannot make a
+frame shorter. A robot (or `choreo sim` on a pty) runs its motions at their own speed.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from urllib.parse import parse_qsl, urlencode
 
 from choreo.errors import ChoreoError, UsageError
 from choreo.review.attached import AttachedShow, attached_show
@@ -71,25 +77,101 @@ class ReplayReport:
     cut: Cut | None = None
     show_note: str | None = None  # why the simulator runs without the show's durations
 
+    @property
+    def speed_note(self) -> str | None:
+        """Why replies may differ at a motion's end: only a `sim://` board runs faster."""
+        if self.speed == 1 or _is_sim(self.port):
+            return None
+        return (f"{self.port} runs its motions at their own speed, not {self.speed:g}x: "
+                "status polls near a motion's end may differ")
 
-def default_port(show: AttachedShow) -> str:
-    """`sim://` with the attached show's motion durations, or plain `sim://`."""
+
+def default_port(show: AttachedShow, baud: int | None = None) -> str:
+    """`sim://` with the attached show's motion durations (and a baud other than 115200), or
+    plain `sim://`."""
     if show.show is None or show.plan is None:
-        return "sim://"
+        return _with_baud("sim://", baud)
     from choreo.session import simulator_url
 
-    return simulator_url(show.show, show.plan)
+    return _with_baud(simulator_url(show.show, show.plan, baud) if baud else
+                      simulator_url(show.show, show.plan), baud)
 
 
-def _with_durations(url: str, show: AttachedShow) -> str:
+def _with_durations(url: str, show: AttachedShow, baud: int | None = None) -> str:
     """`--port sim://?drop=5`: still the show's durations (as `choreo run` does)."""
     if show.show is None or show.plan is None:
+        return _with_baud(url, baud)
+    from choreo.session import with_show_durations
+
+    return _with_baud(with_show_durations(url, show.show, show.plan, baud) if baud else
+                      with_show_durations(url, show.show, show.plan), baud)
+
+
+def _is_sim(url: str) -> bool:
+    return url.lower().startswith("sim://")
+
+
+def _with_baud(url: str, baud: int | None) -> str:
+    """A `sim://` board answers only at its own baud: give it the replay's, unless the URL does."""
+    from choreo.link import DEFAULT_BAUD
+
+    if not _is_sim(url) or baud is None or baud == DEFAULT_BAUD:
         return url
+    base, _, query = url.partition("?")
+    pairs = parse_qsl(query, keep_blank_values=True)
+    if any(name == "baud" for name, _ in pairs):
+        return url
+    return f"{base}?{urlencode([*pairs, ('baud', str(baud))], safe=':,')}"
+
+
+def at_speed(url: str, speed: float) -> str:
+    """A `sim://` URL whose board runs `speed` times faster: every slot's duration (`durations`),
+    the default for the others (`motion_s`) and the board's reply delay (`reply_ms`) divided by
+    the speed, and, faster than 1, bytes that take no wire time (`wire=0`).
+
+    Without it a replay at speed 10 polls a motion ten times sooner after its start than the run
+    did, finds it still executing where the run found it over, and `--strict` fails a clean log.
+    The wire cannot run 10 times faster (the board has three bauds), and a 19-byte frame's
+    1.7 ms at 115200 baud would be 17 ms of the run's time at speed 10: off is far closer to the
+    run's timing than on. A URL that sets `wire` itself keeps it; one the simulator would refuse
+    is left as it is, for the link to say what is wrong with it.
+    """
+    if speed == 1 or not _is_sim(url):
+        return url
+    from choreo.sim.options import parse_query
+
+    base, _, query = url.partition("?")
     try:
-        from choreo.session import with_show_durations
-    except ImportError:
+        options = parse_query(query)
+    except ValueError:
         return url
-    return with_show_durations(url, show.show, show.plan)
+    scaled = {"motion_s": f"{options.motion_s / speed:.9g}",
+              "reply_ms": f"{options.reply_s * 1e3 / speed:.9g}"}
+    if options.durations:
+        scaled["durations"] = ",".join(f"{slot}:{seconds / speed:.9g}"
+                                       for slot, seconds in sorted(options.durations.items()))
+    if speed > 1 and "wire=" not in query:
+        scaled["wire"] = "0"
+    pairs = [(name, scaled.pop(name, value)) for name, value in parse_qsl(query, keep_blank_values=True)]
+    pairs += list(scaled.items())
+    return f"{base}?{urlencode(pairs, safe=':,')}"
+
+
+MAX_SPEED = 1000.0
+
+
+def check_options(speed: float, baud: int | None, timeout: float | None) -> None:
+    """Refuse what would make a meaningless replay, before anything is opened (UsageError, exit 2)."""
+    from choreo.link import BAUD_RATES
+    from choreo.session import check_timeout
+
+    if not (math.isfinite(speed) and 0 < speed <= MAX_SPEED):
+        raise UsageError(f"--speed {speed:g}: give a speed above 0 and at most {MAX_SPEED:g} "
+                         "(1 is the recorded timing, 2 twice as fast)")
+    if baud is not None and baud not in BAUD_RATES:
+        raise UsageError(f"--baud {baud}: the RCB-4 runs at {', '.join(map(str, BAUD_RATES))} baud")
+    if timeout is not None:
+        check_timeout(timeout)
 
 
 @dataclass
@@ -112,18 +194,18 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
     LinkError (exit 3) if the port fails; a LogError if `source` is not a log or the new log
     cannot be written. A cut log replays as far as it goes.
     """
-    if not speed > 0:
-        raise UsageError(f"--speed {speed:g}: give a speed above 0 (1 is the recorded timing, 2 twice as fast)")
+    check_options(speed, baud, timeout)
     from choreo.clock import RunClock
-    from choreo.link import DEFAULT_BAUD, DEFAULT_TIMEOUT_S, Link
+    from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, Link
     from choreo.record import Recorder, RunInfo, default_log_path
 
     with LogReader(source) as reader:
         show = attached_show(reader)
-        url = _with_durations(port, show) if port else default_port(show)
         recorded_baud = reader.run_info.get("baud", "")
         if baud is None:
-            baud = int(recorded_baud) if port and recorded_baud.isdigit() else DEFAULT_BAUD
+            recorded = int(recorded_baud) if recorded_baud.isdigit() else None
+            baud = recorded if port and recorded in BAUD_RATES else DEFAULT_BAUD
+        url = at_speed(_with_durations(port, show, baud) if port else default_port(show, baud), speed)
         name = reader.run_info.get("show") or reader.path.stem
         clock = RunClock()
         new_log = Path(log_path) if log_path else default_log_path(f"{name}-replay", log_dir)
@@ -141,7 +223,8 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
             try:
                 if on_start is not None:
                     on_start(report)
-                _replay_frames(reader, link, recorder, clock, speed, report, on_difference)
+                _replay_frames(reader, link, recorder, clock, speed, report, on_difference,
+                               status_spacing=_status_spacing(link, url, speed))
             finally:
                 link.close()
             report.cut = reader.cut
@@ -164,8 +247,31 @@ def _elapsed(clock) -> float:
     return (time.monotonic_ns() - clock.mono_anchor_ns) / 1e9
 
 
+def _status_spacing(link, url: str, speed: float) -> Callable[[], None] | None:
+    """What lets a faster replay poll a `sim://` board as often as the speed asks.
+
+    The link spaces status queries 50 ms apart, the rate a real board refreshes its status. A
+    replay at speed X polls X times as often on purpose (its motions run X times faster), and the
+    simulator answers its live state, so its spacing is 50 ms / X; a robot keeps the 50 ms. The
+    link has no setting for it: this moves its last query's time back before each query
+    (and does nothing to a link that no longer keeps one).
+    """
+    from choreo import link as link_module
+
+    spacing = getattr(link_module, "STATUS_SPACING_S", None)
+    if speed <= 1 or not _is_sim(url) or spacing is None or not hasattr(link, "_last_status_mono"):
+        return None
+    shift = spacing * (1 - 1 / speed)
+
+    def before_status() -> None:
+        link._last_status_mono -= shift
+
+    return before_status
+
+
 def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, report: ReplayReport,
-                   on_difference: Callable[[Difference], None] | None) -> None:
+                   on_difference: Callable[[Difference], None] | None,
+                   status_spacing: Callable[[], None] | None = None) -> None:
     """The recorded frames, each at its show time / speed; replies compared as they come."""
     from choreo.link import Tag
     from choreo.protocol import Frame, FrameKind
@@ -219,6 +325,8 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
                     pending.pop(message["seq"])
                     report.unmatched += 1
                 due(show_s)
+                if status_spacing is not None and kind is FrameKind.STATUS:
+                    status_spacing()
                 reply = link.send(frame, message.get("attempt", 1), Tag(message.get("step"), message.get("label")))
                 report.frames += 1
                 replayed = {"kind": reply.kind.value, "hex": reply.hex, "executing": reply.executing,
