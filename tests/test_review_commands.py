@@ -306,6 +306,47 @@ def test_timeline_png_without_matplotlib_says_how_to_get_it(logs, capsys, monkey
     assert not (tmp_path / "x.png").exists()
 
 
+@pytest.mark.parametrize("command", ["timeline", "export"])
+def test_an_output_that_cannot_be_written_is_one_line_exit_2(logs, capsys, tmp_path, command):
+    """Same rule for --png and --csv/--json: a missing folder is refused, never created."""
+    pytest.importorskip("matplotlib")
+    option, flag = ("--png", "timeline --png") if command == "timeline" else ("--csv", "log export --csv")
+    missing = tmp_path / "no" / "such" / "dir" / "out.x"
+    for target, says in (
+            (missing, f"cannot write: folder {missing.parent} does not exist (create it first)"),
+            (Path("/proc/x.png"), "cannot write: No such file or directory"),
+            (logs.complete / "x.png", f"cannot write: folder {logs.complete} is not a folder (create it first)")):
+        code, out, err = cli(capsys, "log", command, str(logs.complete), option, str(target))
+        assert code == 2 and out == "", err
+        assert err == f"{flag} {target}: {says}\n"
+    assert not (tmp_path / "no").exists()
+
+
+def test_an_output_that_fills_the_disk_is_one_line_and_leaves_the_device_alone(logs, capsys):
+    if not Path("/dev/full").exists():
+        pytest.skip("no /dev/full here")
+    code, _, err = cli(capsys, "log", "export", str(logs.complete), "--csv", "/dev/full")
+    assert code == 2 and err == "log export --csv /dev/full: cannot write: No space left on device\n"
+    assert Path("/dev/full").exists()
+
+
+def test_a_picture_not_finished_is_not_left_behind(tmp_path, capsys):
+    """The log turns out not to be choreo's after the PNG was opened: no empty PNG remains."""
+    pytest.importorskip("matplotlib")
+    from mcap.writer import Writer
+
+    path = tmp_path / "foreign.mcap"
+    with open(path, "wb") as f:
+        writer = Writer(f)
+        writer.start()
+        tx = writer.register_channel("/rcb4/tx", "json", writer.register_schema("choreo.Tx", "jsonschema", b"{}"))
+        writer.add_message(tx, log_time=2, publish_time=2, data=b'{"kind": "play"}')
+        writer.finish()
+    code, _, err = cli(capsys, "log", "timeline", str(path), "--png", str(tmp_path / "t.png"))
+    assert code == 2 and "is not a choreo /rcb4/tx message" in err
+    assert not (tmp_path / "t.png").exists()
+
+
 # -- export ------------------------------------------------------------------------------------
 
 

@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import stat
 import sys
 from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
-from typing import TextIO
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
+from typing import IO, TextIO
 
 from choreo.errors import UsageError
 
@@ -126,17 +128,29 @@ def run_frames(args: argparse.Namespace) -> int:
 
 def run_timeline(args: argparse.Namespace) -> int:
     from choreo.review.reader import LogReader
-    from choreo.review.timeline import build, counted, render_png, render_text
+    from choreo.review.timeline import build, render_text
 
+    if args.png:
+        return _timeline_png(args.log, args.png)
     with LogReader(args.log) as reader:
         timeline = build(reader)
-    if args.png:
-        path = render_png(timeline, args.png)
-        cut = f" (log {timeline.cut.state}: {timeline.cut.reason})" if timeline.cut else ""
-        _print_all([f"timeline: {path}: {counted(len(timeline.runs), 'motion')}, "
-                    f"{counted(len(timeline.late), 'late cue')}, {counted(len(timeline.faults), 'fault')}{cut}"])
-        return 0
     _print_all(render_text(timeline))
+    return 0
+
+
+def _timeline_png(log: str, png: str) -> int:
+    """Check what can fail fast (the log's head, matplotlib, the output file), then read and draw."""
+    from choreo.review.reader import LogReader
+    from choreo.review.timeline import build, counted, render_png, require_matplotlib
+
+    with LogReader(log) as reader:
+        require_matplotlib()
+        with _output(png, "timeline --png", binary=True) as out:
+            timeline = build(reader)
+            render_png(timeline, out)
+    cut = f" (log {timeline.cut.state}: {timeline.cut.reason})" if timeline.cut else ""
+    _print_all([f"timeline: {png}: {counted(len(timeline.runs), 'motion')}, "
+                f"{counted(len(timeline.late), 'late cue')}, {counted(len(timeline.faults), 'fault')}{cut}"])
     return 0
 
 
@@ -149,19 +163,12 @@ def run_export(args: argparse.Namespace) -> int:
         raise UsageError("log export: say where: --csv FILE and/or --json FILE ('-' for stdout)")
     if sum(1 for _, value in targets if value == "-") > 1:
         raise UsageError("log export: only one of --csv and --json can go to stdout ('-')")
-    with LogReader(args.log) as reader, _stdout():
-        files = []
-        try:
-            sinks = []
-            for name, value in targets:
-                out = sys.stdout if value == "-" else _create(value)
-                if out is not sys.stdout:
-                    files.append(out)
-                sinks.append(CsvSink(out) if name == "csv" else JsonSink(out))
-            count = export(reader, sinks)
-        finally:
-            for file in files:
-                file.close()
+    with LogReader(args.log) as reader, _stdout(), ExitStack() as files:
+        sinks = []
+        for name, value in targets:
+            out = sys.stdout if value == "-" else files.enter_context(_output(value, f"log export --{name}"))
+            sinks.append(CsvSink(out) if name == "csv" else JsonSink(out))
+        count = export(reader, sinks)
         cut = reader.cut
     written = ", ".join(value for _, value in targets if value != "-")
     if written:
@@ -170,11 +177,47 @@ def run_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _create(path: str) -> TextIO:
+@contextmanager
+def _output(path: str, command: str, binary: bool = False) -> Iterator[IO]:
+    """An output file, created before the log is read, every failure one line (exit 2).
+
+    A folder that does not exist is refused, not made: a mistyped folder would otherwise become a
+    tree of new folders somewhere the user does not look. A file this command created and could
+    not finish (the disk filled, the log turned out not to be choreo's) is removed, never left
+    half written; anything that was there before (a device such as /dev/stdout) is left alone.
+    """
+    target = Path(path)
+    if not target.parent.is_dir():
+        what = "is not a folder" if target.parent.exists() else "does not exist"
+        raise UsageError(f"{command} {path}: cannot write: folder {target.parent} {what} (create it first)")
+    created = not os.path.lexists(target)
     try:
-        return open(path, "w", encoding="utf-8", newline="")
+        file = open(target, "wb") if binary else open(target, "w", encoding="utf-8", newline="")
     except OSError as exc:
-        raise UsageError(f"log export: cannot write {path}: {exc.strerror or exc}") from None
+        raise UsageError(f"{command} {path}: cannot write: {exc.strerror or exc}") from None
+    finished = False
+    try:
+        yield file
+        file.close()
+        finished = True
+    except OSError as exc:
+        raise UsageError(f"{command} {path}: cannot write: {exc.strerror or exc}") from None
+    finally:
+        if not finished:
+            _discard(file, target if created else None)
+
+
+def _discard(file: IO, created: Path | None) -> None:
+    """Close an output that failed; remove it if this command made it as a regular file."""
+    try:
+        file.close()
+    except OSError:
+        pass
+    try:
+        if created is not None and stat.S_ISREG(os.lstat(created).st_mode):
+            created.unlink()
+    except OSError:
+        pass
 
 
 def run_replay(args: argparse.Namespace) -> int:

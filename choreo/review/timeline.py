@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
+from typing import BinaryIO
 
 from choreo.errors import ChoreoError
 from choreo.review.attached import AttachedShow, attached_show
@@ -276,17 +276,27 @@ def _span(start: float | None, end: float | None) -> str:
 # -- picture -----------------------------------------------------------------------------------
 
 
-def render_png(timeline: Timeline, path: str | Path) -> Path:
-    """Draw the timeline to a PNG: a row a motion slot, planned bars above actual ones."""
+def require_matplotlib() -> None:
+    """PlotUnavailable (exit 2, how to get it) before any file is made or any log read."""
     try:
         import matplotlib
 
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot  # noqa: F401
     except ImportError:
         raise PlotUnavailable("timeline --png needs matplotlib: pip install 'choreo[plot]' "
                               "(or pip install matplotlib); the text timeline works without it") from None
-    path = Path(path)
+
+
+def render_png(timeline: Timeline, out: BinaryIO) -> None:
+    """Draw the timeline as a PNG into `out`: a row a motion slot, planned bars above actual ones.
+
+    Takes an open file, not a path: the command opens its output before it reads the log, so a
+    path it cannot write is one line at once, never a long read and then a traceback.
+    """
+    require_matplotlib()
+    import matplotlib.pyplot as plt
+
     slots = sorted({r.motion for r in timeline.runs})
     row = {motion: i for i, motion in enumerate(slots)}
     names = {r.motion: r.title() for r in timeline.runs}
@@ -339,11 +349,6 @@ def render_png(timeline: Timeline, path: str | Path) -> Path:
         ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=5, frameon=False,
                   fontsize="small")
         fig.tight_layout()
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fig.savefig(path, format="png")
-        except OSError as exc:
-            raise ChoreoError(f"timeline --png {path}: cannot write: {exc.strerror or exc}") from None
+        fig.savefig(out, format="png")
     finally:
         plt.close(fig)
-    return path
