@@ -54,6 +54,7 @@ CHANNELS = {
 METADATA_NAME = "choreo"
 RESULT_METADATA_NAME = "choreo.result"
 FLUSH_EVERY_S = 0.5
+BATCH = 16  # messages the background flusher writes before it lets the runner have the GIL
 CHUNK_SIZE = 64 * 1024
 
 # foxglove.Log levels
@@ -219,11 +220,13 @@ class Recorder:
         time_ns = time.time_ns() if time_ns is None else time_ns
         self._pending.append((LOG_TOPIC, time_ns, _log_message, (level, message, time_ns)))
 
-    def _write_pending(self) -> None:
-        """Serialise and add every queued message, in order; the caller holds the lock."""
+    def _write_pending(self, limit: int | None = None) -> None:
+        """Serialise and add queued messages (all, or `limit`), in order; the caller holds the lock."""
         pending = self._pending
+        left = len(pending) if limit is None else limit
         try:
-            while pending and self.failure is None:
+            while pending and self.failure is None and left > 0:
+                left -= 1
                 topic, time_ns, make, event = pending.popleft()
                 self._writer.add_message(self._channels[topic], log_time=time_ns,
                                          data=_dumps(make(event)), publish_time=time_ns,
@@ -251,10 +254,20 @@ class Recorder:
             raise LogError(f"log {self.path}: cannot write: {self.failure}: the run was stopped")
 
     def _flush_loop(self, every_s: float) -> None:
-        """The safety net: a run that never idles (back-to-back frames) is flushed from here."""
+        """The safety net: a run that never idles (back-to-back frames) is flushed from here.
+
+        It writes in small batches and yields between them: the runner thread, waking for a
+        reply, must not wait for this thread to finish a long stretch of work under the GIL.
+        """
         while not self._stop.wait(every_s / 2):
-            if time.monotonic() - self._flushed >= every_s / 2:
-                self.flush()
+            if time.monotonic() - self._flushed < every_s / 2:
+                continue
+            while self._pending and not self._closed:
+                with self._lock:
+                    if not self._closed:
+                        self._write_pending(limit=BATCH)
+                time.sleep(0)
+            self.flush()
 
     def flush(self) -> None:
         """Close the chunk in progress and hand it to the OS: a SIGKILL now loses nothing."""
