@@ -49,20 +49,23 @@ def run(args: argparse.Namespace) -> int:
     say(f"show: {session.show.name}: {len(session.plan.steps)} steps{first}, "
         f"about {session.plan.estimated_s:.1f} s")
     progress = Progress(session, sys.stderr, live=sys.stderr.isatty(), quiet=args.quiet)
+    signals = _StopOnSignals()
     try:
-        with _StopOnSignals() as stop, session:
+        with signals as stop, session:
             say(f"log: {session.log_path}" if session.log_path else "log: off (--no-log)")
             result = session.run([progress], stop)
+        progress.finish()
+        say.quiet = args.quiet and result.outcome == "done"
+        late = f", {result.late_steps} late" if result.late_steps else ""
+        say(f"{result.outcome}: {result.steps_run} steps in {result.show_s:.3f} s{late}")
+        if session.log_path:
+            say(f"log: {session.log_path}")
+        if result.outcome != "done":
+            raise Interrupted(f"show {stop.reason}")
+        return 0
     finally:
         progress.finish()
-    say.quiet = args.quiet and result.outcome == "done"
-    late = f", {result.late_steps} late" if result.late_steps else ""
-    say(f"{result.outcome}: {result.steps_run} steps in {result.show_s:.3f} s{late}")
-    if session.log_path:
-        say(f"log: {session.log_path}")
-    if result.outcome != "done":
-        raise Interrupted(f"show {stop.reason}")
-    return 0
+        signals.restore()
 
 
 class _Say:
@@ -97,11 +100,13 @@ class _StopOnSignals:
     """First Ctrl-C or SIGTERM: finish the frame in flight, play the abort motion, close the log.
     Second: leave at once (the log is still closed on the way out)."""
 
+    def __init__(self) -> None:
+        self._previous: dict = {}
+
     def __enter__(self):
         from choreo.runner import StopRequest
 
         self.stop = StopRequest()
-        self._previous = {}
         for signum in STOP_SIGNALS:
             self._previous[signum] = signal.signal(signum, self._handle)
         return self.stop
@@ -113,6 +118,12 @@ class _StopOnSignals:
         self.stop.request(name)
 
     def __exit__(self, *exc_info) -> None:
+        # The run is over and its log closed: a late Ctrl-C must not cut the last lines short
+        # or kill the process by signal, so signals are ignored until `restore`.
+        for signum in self._previous:
+            signal.signal(signum, signal.SIG_IGN)
+
+    def restore(self) -> None:
         for signum, handler in self._previous.items():
             signal.signal(signum, handler)
 
