@@ -9,6 +9,7 @@ run's outcome in its metadata.
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode
@@ -95,7 +96,7 @@ class Session:
         try:
             self._open()
         except BaseException:
-            self.__exit__(*_exc_info())
+            self.__exit__(*sys.exc_info())
             raise
         return self
 
@@ -206,9 +207,3 @@ def _start_index(plan: Plan, ref: str | None) -> int:
 
 def _pick(*values):
     return next(v for v in values if v is not None)
-
-
-def _exc_info():
-    import sys
-
-    return sys.exc_info()
