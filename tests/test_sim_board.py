@@ -18,8 +18,11 @@ ACK_CALL = bytes.fromhex("040c0616")
 
 
 def board(**kwargs) -> SimBoard:
+    """An ideal board for exact tests of the motion model: no wire time, no reply delay and a
+    live status (the 50 ms refresh has tests of its own, below)."""
     kwargs.setdefault("wire", False)
     kwargs.setdefault("reply_delay_s", 0.0)
+    kwargs.setdefault("refresh_s", 0.0)
     return SimBoard(**kwargs)
 
 
@@ -178,11 +181,20 @@ def test_reply_times_at_1250000_baud():
     assert sent.end == pytest.approx(4 * 11 / 1250000)
 
 
-def test_replies_queue_on_the_line_when_frames_come_faster_than_replies():
+def test_a_frame_that_arrives_while_the_board_is_still_replying_is_not_answered():
     b = SimBoard(reply_delay_s=0.0)
     first = b.receive(STATUS, 0.0)
-    second = b.receive(STATUS, 0.0001)
-    assert second.start == pytest.approx(first.end + 11 / 115200)
+    assert b.receive(STATUS, 0.0001) is None  # written without reading the reply
+    assert b.frames_received == 1 and b.ignored == 1
+    entry = b.journal[-1]
+    assert entry.kind == "ignored" and "arrived while the board was still replying" in entry.note
+    assert "ignored: MOV RAM->COM 0x0000 x2: status query arrived while the board was still replying" \
+        in entry.line()
+    bt = 11 / 115200
+    # Its first byte must not arrive before the reply's last: 9 more bytes make the frame's end.
+    assert b.receive(STATUS, first.end + (len(STATUS) - 1) * bt - 1e-9) is None
+    assert b.receive(STATUS, first.end + (len(STATUS) - 1) * bt + 1e-9) is not None
+    assert b.frames_received == 2 and b.ignored == 2
 
 
 def test_without_wire_time_bytes_arrive_with_the_reply_delay_only():
@@ -260,15 +272,17 @@ def test_every_frame_with_k_1():
     assert [reply(b, STATUS, float(i)) for i in range(3)] == [None, None, None]
 
 
-def test_late_reply_comes_late_ms_after_it_was_due_and_the_next_queues_behind_it():
+def test_late_reply_comes_late_ms_after_it_was_due_and_a_frame_meanwhile_is_not_answered():
     b = board(faults=FaultPlan.parse({"late": "1"}, late_s=0.25), wire=True, reply_delay_s=0.0002)
     sent = b.receive(STATUS, 1.0)
     assert sent.start == pytest.approx(1.0 + 0.0002 + 0.25 + 11 / 115200)
     b2 = board(faults=FaultPlan.parse({"late": "2"}, late_s=0.5))
     b2.receive(STATUS, 0.0)
     late = b2.receive(STATUS, 0.1)
-    after = b2.receive(STATUS, 0.2)
-    assert late.start == pytest.approx(0.6) and after.start >= late.end
+    assert late.start == pytest.approx(0.6)
+    assert b2.receive(STATUS, 0.2) is None  # the board is still replying (late) to frame 2
+    assert b2.journal[-1].kind == "ignored" and b2.frames_received == 2
+    assert b2.receive(STATUS, 0.7).data == p.ram_reply(b"\x02\x00")  # frame 3: not late
 
 
 @pytest.mark.parametrize("kind", ["drop", "nak"])
@@ -507,3 +521,138 @@ def test_noise_closed_by_a_gap_after_someone_looked_at_the_board():
     b.config(9.0)
     line.poll(9.0)
     assert line.take(9.0, 8) == p.nak(0x0C)
+
+
+# -- the 50 ms status refresh ------------------------------------------------------------------
+
+
+def refreshing(**kwargs) -> SimBoard:
+    """The default board's status refresh (50 ms from power-on at t=0), otherwise ideal."""
+    kwargs.setdefault("refresh_s", 0.05)
+    return board(**kwargs)
+
+
+def test_the_status_read_shows_the_config_as_of_the_last_50_ms_tick():
+    b = refreshing(motion_s=0.3)
+    play(b, 3, 1.01)  # between the ticks at 1.00 and 1.05
+    assert b.config(1.01) == 0x8723  # the write took effect at once
+    assert status_low(b, 1.01) == 0x02  # the read still shows the tick at 1.00: power-on config
+    assert status_low(b, 1.049) == 0x02
+    assert status_low(b, 1.05) == 0x23  # the tick at 1.05 saw the motion
+    assert b.status(1.2) == 0x8723
+    # The motion ends at 1.31; the tick at 1.30 was before it, the one at 1.35 after it.
+    assert status_low(b, 1.31) == 0x23 and b.running(1.31) is None
+    assert status_low(b, 1.349) == 0x23
+    assert status_low(b, 1.35) == 0x21
+    assert "as of the refresh at 1.350000" in b.journal[-1].note
+
+
+def test_polls_within_one_refresh_period_return_the_same_stale_value():
+    b = refreshing(motion_s=0.1)
+    play(b, 1, 0.0)  # at the tick at 0.0 itself: the tick saw the board before the frames
+    lows = [status_low(b, t) for t in (0.0, 0.02, 0.049)]
+    assert lows == [0x02, 0x02, 0x02]
+    assert [status_low(b, t) for t in (0.05, 0.099, 0.1, 0.149, 0.15)] == [0x23, 0x23, 0x21, 0x21, 0x21]
+
+
+def test_a_motion_end_shows_at_most_one_period_late_whatever_the_phase():
+    for k in range(10):
+        start = 2.0 + k * 0.0071
+        b = refreshing(motion_s=0.2)
+        play(b, 0, start)
+        t = start + 0.2
+        while status_low(b, t) == 0x23:
+            t += 0.001
+        assert start + 0.2 <= t <= start + 0.2 + 0.05 + 1e-9
+
+
+def test_the_stop_frame_changes_the_config_at_once_but_the_read_waits_for_the_tick():
+    b = refreshing(motion_s=5.0)
+    play(b, 1, 0.0)
+    assert status_low(b, 0.5) == 0x23
+    assert reply(b, STOP, 0.51) == ACK_MOV
+    assert b.running(0.51) is None and b.config(0.51) == 0x8721
+    assert status_low(b, 0.52) == 0x23  # as of the tick at 0.50
+    assert status_low(b, 0.55) == 0x21
+
+
+def test_refresh_ticks_count_from_power_on():
+    b = refreshing(motion_s=1.0, power_on=100.02)
+    play(b, 1, 100.03)
+    assert status_low(b, 100.069) == 0x02  # ticks at 100.02, 100.07, ...
+    assert status_low(b, 100.07) == 0x23
+
+
+def test_only_the_config_word_is_refresh_delayed():
+    b = refreshing()
+    assert reply(b, p.mov_write(0x0000, b"\x21\x87\x55\x66"), 0.01) == ACK_MOV
+    assert reply(b, p.mov_read(0x0000, 4), 0.02) == p.ram_reply(b"\x02\x00\x55\x66")
+    assert reply(b, p.mov_read(0x0001, 2), 0.03) == p.ram_reply(b"\x00\x55")
+    assert reply(b, p.mov_read(0x0000, 4), 0.05) == p.ram_reply(b"\x21\x87\x55\x66")
+
+
+def test_refresh_zero_is_live_and_a_negative_period_is_refused():
+    b = refreshing(refresh_s=0.0)
+    play(b, 1, 0.01)
+    assert status_low(b, 0.01) == 0x23
+    with pytest.raises(ValueError, match="refresh"):
+        SimBoard(refresh_s=-0.05)
+
+
+def test_the_default_board_refreshes_every_50_ms():
+    assert SimBoard().refresh_s == 0.05
+    assert parse_query("").refresh_s == 0.05
+    assert parse_query("refresh_ms=20").board().refresh_s == pytest.approx(0.02)
+    assert parse_query("refresh_ms=0").board().refresh_s == 0.0
+    with pytest.raises(ValueError, match="refresh_ms"):
+        parse_query("refresh_ms=-1")
+    assert "status every 50 ms" in parse_query("").describe()
+
+
+# -- the return-address stack ------------------------------------------------------------------
+
+
+def test_a_call_re_sent_without_a_stop_frame_pushes_a_second_return_address():
+    seen = []
+    b = board(on_entry=seen.append)
+    assert reply(b, STOP, 0.0) == ACK_MOV
+    assert reply(b, p.play_frame(3).data, 0.0) == ACK_CALL
+    assert b.stack_depth == 1 and b.stack_faults == 0
+    assert reply(b, p.play_frame(3).data, 0.1) == ACK_CALL  # still ACKed: the board gives no sign
+    assert b.stack_depth == 2 and b.stack_faults == 1 and b.armed == 3
+    stack = [e for e in b.journal if e.kind == "stack"]
+    assert len(stack) == 1 and stack[0].at == 0.1 and stack[0].number == 3
+    assert "second return address pushed: CALL re-sent without a stop frame" in stack[0].note
+    assert [e.kind for e in seen][-2:] == ["frame", "stack"]  # after the frame that caused it
+    assert "stack: second return address pushed" in stack[0].line()
+    reply(b, p.play_frame(4).data, 0.2)
+    assert b.stack_faults == 2
+
+
+def test_the_stop_frame_empties_the_return_stack():
+    b = board(motion_s=0.1)
+    for i in range(5):
+        play(b, i, float(i))
+    assert b.stack_faults == 0 and b.stack_depth == 1  # the last play's CALL
+    assert reply(b, STOP, 9.0) == ACK_MOV
+    assert b.stack_depth == 0 and "return stack (1) emptied" in b.journal[-1].note
+    reply(b, p.play_frame(1).data, 9.1)
+    assert b.stack_depth == 1 and b.stack_faults == 0
+
+
+def test_a_motion_that_ended_does_not_allow_a_call_without_a_stop():
+    b = board(motion_s=0.1)
+    play(b, 1, 0.0)
+    assert b.running(1.0) is None
+    reply(b, p.play_frame(2).data, 1.0)
+    reply(b, RESTORE, 1.0)
+    assert b.stack_faults == 1
+
+
+@pytest.mark.parametrize("kind", ["drop", "nak"])
+def test_a_call_the_board_never_executed_pushes_nothing(kind):
+    b = board(faults=FaultPlan.parse({kind: "2"}))
+    reply(b, STOP, 0.0)
+    reply(b, p.play_frame(3).data, 0.0)  # frame 2: hit, not executed
+    reply(b, p.play_frame(3).data, 0.0)
+    assert b.stack_depth == 1 and b.stack_faults == 0

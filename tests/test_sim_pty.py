@@ -103,6 +103,7 @@ def test_choreo_sim_serves_the_four_frames_and_exits_0_on_sigterm():
             assert exchange(port, stop) == p.ack(p.CMD_MOV)
             assert exchange(port, play) == p.ack(p.CMD_CALL)
             assert exchange(port, restore) == p.ack(p.CMD_MOV)
+            time.sleep(0.06)  # the status is refreshed every 50 ms: sooner may still show the old one
             assert p.parse_reply(STATUS, exchange(port, STATUS)).executing
             deadline = time.monotonic() + 3
             while p.parse_reply(STATUS, exchange(port, STATUS)).executing:

@@ -49,6 +49,7 @@ def test_the_four_frames_play_a_motion_that_ends(port):
     assert exchange(port, stop) == p.ack(p.CMD_MOV)
     assert exchange(port, play) == p.ack(p.CMD_CALL)
     assert exchange(port, restore) == p.ack(p.CMD_MOV)
+    time.sleep(0.06)  # the status is refreshed every 50 ms: sooner may still show the old one
     verdict = p.parse_reply(STATUS, exchange(port, STATUS))
     assert verdict.kind is p.ReplyKind.STATUS and verdict.executing
     deadline = time.monotonic() + 2.0
@@ -65,7 +66,7 @@ def test_durations_per_slot_in_the_url():
     with open_sim("motion_s=5&durations=2:0.05") as port:
         for frame in p.play_sequence(2):
             exchange(port, frame)
-        time.sleep(0.08)
+        time.sleep(0.05 + 0.06)  # the motion, then a status refresh (every 50 ms) after its end
         assert not p.parse_reply(STATUS, exchange(port, STATUS)).executing
 
 
@@ -252,3 +253,53 @@ def test_lose_makes_every_read_and_write_fail_from_that_frame_on(spelled):
             with pytest.raises(serial.SerialException, match="port lost"):
                 action()
     assert port.board.frames_received == lost_at
+
+
+# -- one reply at a time, and the return-address stack ------------------------------------------
+
+
+def test_a_frame_written_before_the_last_reply_was_read_gets_no_reply():
+    """The errata: the reply must be read before the next frame is sent. Wire time on (the
+    default): the second frame's first byte reaches the board while it is still replying."""
+    with open_sim(timeout=0.05) as port:
+        assert port.board.wire
+        port.write(STATUS.data)
+        port.write(STATUS.data)  # back to back, without reading the first reply
+        assert read_all_quiet(port) == IDLE  # one reply, to the first frame only
+        board = port.board
+        assert board.frames_received == 1 and board.ignored == 1
+        entry = [e for e in board.journal if e.kind == "ignored"][0]
+        assert "arrived while the board was still replying" in entry.note and entry.data == STATUS.data
+        assert exchange(port, STATUS) == IDLE  # read, then write: answered again
+        assert board.frames_received == 2
+
+
+def test_a_whole_play_sequence_written_at_once_loses_the_call_and_plays_nothing():
+    """The CALL arrives while the stop frame's ACK is going out; the restore comes after it and
+    is answered: two ACKs, as a careless client expects, and no motion."""
+    with open_sim(timeout=0.05) as port:
+        port.write(b"".join(f.data for f in p.play_sequence(3)))
+        assert read_all_quiet(port) == p.ack(p.CMD_MOV) * 2
+        board = port.board
+        assert board.frames_received == 2 and board.ignored == 1
+        assert [e.data for e in board.journal if e.kind == "ignored"] == [p.play_frame(3).data]
+        assert board.running(time.monotonic()) is None and board.stack_depth == 0
+
+
+def test_a_raw_call_call_pair_pushes_a_second_return_address():
+    with open_sim() as port:
+        stop, play, _ = p.play_sequence(3)
+        assert exchange(port, stop) == p.ack(p.CMD_MOV)
+        assert exchange(port, play) == p.ack(p.CMD_CALL)
+        assert port.board.stack_faults == 0
+        assert exchange(port, play) == p.ack(p.CMD_CALL)  # re-sent alone: ACKed all the same
+        assert port.board.stack_faults == 1
+        assert [e.kind for e in port.board.journal][-1] == "stack"
+
+
+def read_all_quiet(port: serial.SerialBase) -> bytes:
+    """Everything that arrives until a read times out."""
+    got = b""
+    while more := port.read(64):
+        got += more
+    return got

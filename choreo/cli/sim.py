@@ -19,11 +19,15 @@ The first line of standard output is the device path alone (e.g. /dev/pts/4); th
 answers frames there until Ctrl-C (SIGINT) or SIGTERM, and exits 0. Point any serial program at
 the path, e.g. `choreo run --port /dev/pts/4 shows/dance.yaml`, at the board's baud, 8 data
 bits, even parity, 1 stop bit; a client set otherwise gets no reply, as from a real board.
+As on a real board, read each reply before writing the next frame (a frame that arrives while
+the board is still replying gets no reply), and poll the status no faster than every 50 ms
+(it is refreshed that often: --refresh-ms).
 
 Faults (each K or P, several allowed): --lose closes the pty (the port is lost) and the server
 exits 3 with a line on stderr; --drop: no reply (the frame had no effect); --nak: a NAK (no
 effect); --badsum: the reply with a wrong checksum; --short: half the reply; --junk: ff 00 aa
-before the reply; --late: the reply --late-ms later than due (default 500). Examples:
+before the reply; --late: the reply --late-ms later than due (default 500); a frame sent
+before that reply has arrived gets no reply. Examples:
 --drop 5 drops frames 5, 10, 15...; --drop 0.2 drops each frame with probability 0.2.
 The same options work in a sim:// URL: sim://?motion_s=0.5&drop=5&durations=3:2.5,7:1.2
 """
@@ -44,6 +48,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--durations", metavar="SLOT:S,...", help="per-slot durations, e.g. 3:2.5,7:1.2 (others: --motion-s)"
     )
     board.add_argument("--reply-ms", metavar="MS", help="delay before each reply, ms (default 0.2)")
+    board.add_argument(
+        "--refresh-ms", metavar="MS",
+        help="status refresh period: a status query shows the board as of the last refresh, "
+             "every MS ms from start (default 50; 0: live)",
+    )
     board.add_argument(
         "--no-wire", action="store_true", help="bytes take no time (default: 11 bits a byte at the baud)"
     )
@@ -95,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         def on_entry(entry):  # type: ignore[no-untyped-def]
             print(entry.line(start), file=sys.stderr, flush=True)
 
-    board = options.board(on_entry=on_entry)
+    board = options.board(on_entry=on_entry, power_on=start)
     server = PtyServer(board, gap_s=options.gap_s or PTY_GAP_S, check_settings=not args.no_settings_check)
     with server:
         path = server.path

@@ -11,9 +11,20 @@ What it models, following the spec and its errata:
   "ROM program run", set).
 - MOV COM->RAM writes the literal bytes; MOV RAM->COM answers `05 00 LO HI SUM`-style
   (`ram_reply`) with the bytes read. A write that touches the program counter (RAM 0x0002-0x0004,
-  as the stop frame does) forgets an armed slot: the board would resume at the written address.
+  as the stop frame does) resets the program: it forgets an armed slot (the board would resume
+  at the written address) and empties the return-address stack.
+- Status refresh: the board updates the motion execution status only every `refresh_s` (50 ms)
+  of board time, counted from power-on (`power_on`, the board's creation). A read of the config
+  word (RAM 0x0000-0x0001, what the status query reads) returns the word as of the last refresh
+  tick, so a motion's end shows up to 50 ms late, a query sent less than 50 ms after the restore
+  may still see the word from before it, and two queries within one period get the same value.
+  Writes change the real word at once; only the read is stale. A tick at the very instant a
+  frame arrives sees the board as it was before the frame. `refresh_s` 0: reads are live.
 - CALL of a slot's start address arms that slot. A CALL of any other address is ACKed and arms
-  nothing (the real board would just jump there).
+  nothing (the real board would just jump there). Every CALL pushes a return address: a CALL
+  while one is already pushed (a second CALL with no stop frame between, as a client re-sending
+  a CALL alone would) is journalled as a `stack` event and counted in `stack_faults`. It is
+  still ACKed and arms its slot: the real board gives no sign either.
 - A write that sets the config run bit (the restore frame, 0x8723) starts the armed motion, which
   runs for its slot's duration; while it runs, the status read shows the config low byte 0x23.
   When it ends, the board clears the run bit (0x8721: low byte 0x21).
@@ -24,6 +35,11 @@ What it models, following the spec and its errata:
   address outside the modelled RAM gets a NAK `04 CMD 15 SUM`. Bytes that cannot be a frame at
   all (a size byte below 3 or above 128) get a NAK with the command byte that followed, or 00.
 - ACK check (`04 fe 06 08`) is answered with the same 4 bytes, as the real board does.
+- One reply at a time: a frame (or a burst of noise) whose first byte arrives before the board
+  has put the last byte of its previous reply on the wire (still waiting out its reply delay,
+  a `late` fault's delay included, or still transmitting) is not answered, not executed and not
+  counted: it is journalled as `ignored`. The errata: the reply must be read before the next
+  frame is sent. (A real board may then stop answering altogether; that is not modelled.)
 
 Wire time: a reply's first byte starts `reply_delay_s` after the frame's last byte arrived (and
 not before the board finished sending its previous reply: one serial line, in order), and each
@@ -33,6 +49,7 @@ carries, per byte, the time it has fully arrived at the client.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -49,6 +66,7 @@ BOARD_BAUDS = (115200, 625000, 1250000)
 DEFAULT_BAUD = 115200
 DEFAULT_REPLY_DELAY_S = 0.0002
 DEFAULT_MOTION_S = 1.0
+DEFAULT_REFRESH_S = 0.05  # the spec: the controller updates the execution status every 50 ms
 CMD_ACK_CHECK = 0xFE
 
 
@@ -74,7 +92,9 @@ class JournalEntry:
 
     kind: `frame` (a frame or a burst of noise the board answered or ignored), `partial`
     (an incomplete frame dropped after an inter-byte gap), `ignored` (bytes sent with the wrong
-    line settings, which a real board cannot read), `motion` (a motion ended by itself).
+    line settings, which a real board cannot read, or a frame that arrived while the board was
+    still replying), `motion` (a motion ended by itself), `stack` (a CALL pushed a second
+    return address).
     """
 
     kind: str
@@ -111,6 +131,7 @@ class _Outcome:
     reply: bytes
     note: str
     command: int
+    events: tuple[JournalEntry, ...] = ()  # journalled after the frame itself
 
 
 @dataclass(eq=False)
@@ -121,6 +142,8 @@ class SimBoard:
     reply_delay_s: float = DEFAULT_REPLY_DELAY_S
     motion_s: float = DEFAULT_MOTION_S
     durations: Mapping[int, float] = field(default_factory=dict)
+    refresh_s: float = DEFAULT_REFRESH_S  # status refresh period; 0: a status read is live
+    power_on: float = 0.0  # board time of power-on: refresh ticks are power_on + k * refresh_s
     faults: FaultPlan = field(default_factory=FaultPlan)
     wire: bool = True  # emulate 11 bits a byte at `baud`; False: bytes take no time
     journal_size: int = 100_000
@@ -131,6 +154,8 @@ class SimBoard:
             raise ValueError(f"baud {self.baud}: an RCB-4 runs at {', '.join(map(str, BOARD_BAUDS))}")
         if self.reply_delay_s < 0:
             raise ValueError(f"reply delay must be >= 0, not {self.reply_delay_s}")
+        if not self.refresh_s >= 0:
+            raise ValueError(f"status refresh period must be >= 0 s, not {self.refresh_s}")
         self.durations = dict(self.durations)
         for slot, seconds in [(None, self.motion_s), *self.durations.items()]:
             if seconds < 0:
@@ -143,11 +168,16 @@ class SimBoard:
         self.frames_received = 0
         self.lost = False
         self.lost_at_frame: int | None = None
+        self.ignored = 0  # frames not answered: they came while the board was still replying
+        self.stack_depth = 0  # return addresses pushed by CALLs since the last stop frame
+        self.stack_faults = 0  # CALLs that pushed a second return address
         self.journal: deque[JournalEntry] = deque(maxlen=self.journal_size)
         self._running: _Running | None = None
         self._injector = FaultInjector(self.faults)
-        self._tx_free = float("-inf")  # when the board's transmit line is idle again
+        self._tx_free = float("-inf")  # when the board's last reply byte is on the wire
         self._now = float("-inf")
+        self._tick = 0  # the last refresh tick taken (0: the one at power-on)
+        self._shown = POWER_ON_CONFIG  # the config word a status read returns until the next tick
 
     # -- time and state ----------------------------------------------------------------------
 
@@ -163,6 +193,16 @@ class SimBoard:
         """The config word at RAM 0x0000 as of `now` (a look: changes nothing)."""
         word = self.ram[0] | self.ram[1] << 8
         return word & ~RUN_BIT if self._ended_by(now) else word
+
+    def status(self, now: float) -> int:
+        """The config word a status read at `now` would return: as of the last refresh tick
+        (a look: changes nothing; for `now` at or after the board's time)."""
+        if self.refresh_s <= 0:
+            return self.config(now)
+        tick = self._tick_index(now)
+        if tick <= self._tick or now < self._now:
+            return self._shown
+        return self._config_at(self._tick_time(tick))
 
     def running(self, now: float) -> int | None:
         """The slot whose motion is running at `now`, or None (a look: changes nothing)."""
@@ -182,6 +222,11 @@ class SimBoard:
         """
         if now <= self._now:
             return
+        if self.refresh_s > 0:
+            tick = self._tick_index(now)
+            if tick > self._tick:  # nothing was written since `_now`: the word at the tick is known
+                self._shown = self._config_at(self._tick_time(tick))
+                self._tick = tick
         self._now = now
         run = self._running
         if run is not None and now >= run.ends:
@@ -192,14 +237,30 @@ class SimBoard:
     def _ended_by(self, now: float) -> bool:
         return self._running is not None and now >= self._running.ends
 
+    def _config_at(self, at: float) -> int:
+        """The config word at `at`, no later than the next frame (RAM as it is, less a motion end)."""
+        word = self.ram[0] | self.ram[1] << 8
+        return word & ~RUN_BIT if self._ended_by(at) else word
+
+    def _tick_index(self, now: float) -> int:
+        # The nanosecond of slack keeps exact tick times (0.15 / 0.05) on their tick.
+        return math.floor((now - self.power_on) / self.refresh_s + 1e-9)
+
+    def _tick_time(self, tick: int) -> float:
+        return self.power_on + tick * self.refresh_s
+
     # -- frames ------------------------------------------------------------------------------
 
-    def receive(self, data: bytes, now: float) -> Transmission | None:
+    def receive(self, data: bytes, now: float, first: float | None = None) -> Transmission | None:
         """Take one frame (or one burst of noise) whose last byte arrived at `now`.
 
+        `first`: when its first byte had arrived; by default, the bytes came back to back
+        (`now` less the wire time of all but one). A frame whose first byte came before the
+        board's previous reply was all on the wire is not answered (journalled as `ignored`).
+
         Returns what the board sends back, timed, or None when it sends nothing (a `drop` or
-        `lose` fault). After a `lose` fault, `lost` is True and every later frame is refused
-        with a ValueError: the transport must stop using the port.
+        `lose` fault, or an ignored frame). After a `lose` fault, `lost` is True and every later
+        frame is refused with a ValueError: the transport must stop using the port.
         """
         if self.lost:
             raise ValueError(f"the simulated port was lost at frame {self.lost_at_frame}")
@@ -207,12 +268,23 @@ class SimBoard:
             raise ValueError(f"frame at {now} arrived before the board's time {self._now}: frames come in order")
         self.advance(now)
         data = bytes(data)
+        if first is None:
+            first = now - max(len(data) - 1, 0) * self.byte_time
+        if first < self._tx_free:
+            self.ignored += 1
+            self._record(JournalEntry(
+                "ignored", now, data,
+                note=f"{_described(data)} arrived while the board was still replying "
+                     f"(its reply ends at {self._tx_free:.6f}): not answered",
+            ))
+            return None
         self.frames_received += 1
         number = self.frames_received
         kinds = self._injector.decide(number)
+        events: tuple[JournalEntry, ...] = ()
         if NOT_EXECUTED.isdisjoint(kinds):
             outcome = self._execute(data, now)
-            reply, command, note = outcome.reply, outcome.command, outcome.note
+            reply, command, note, events = outcome.reply, outcome.command, outcome.note, outcome.events
         else:  # the frame never reached the board, or the board refused it
             reply, command, note = b"", _command_byte(data), _described(data) + ": not executed"
         damage = self._injector.damage(kinds, command, reply)
@@ -231,6 +303,8 @@ class SimBoard:
                 faults=kinds, note=note,
             )
         )
+        for event in events:
+            self._record(event)
         return sent
 
     def note(self, kind: str, at: float, data: bytes, text: str) -> None:
@@ -261,7 +335,7 @@ class SimBoard:
             return _Outcome(p.nak(data[1]), f"{exc}: NAK", data[1])
         cmd = command.command
         if cmd == p.CMD_CALL and command.address is not None:
-            return self._call(command)
+            return self._call(command, data, now)
         if command.move_type == p.MOV_COM_TO_RAM:
             return self._write(command, now)
         if command.move_type == p.MOV_RAM_TO_COM:
@@ -270,12 +344,22 @@ class SimBoard:
             return _Outcome(p.ack(cmd), "ACK check: ACK", cmd)
         return _Outcome(p.nak(cmd), f"command {cmd:02x} is not modelled: NAK", cmd)
 
-    def _call(self, command: p.Command) -> _Outcome:
+    def _call(self, command: p.Command, data: bytes, now: float) -> _Outcome:
         address = command.address or 0
         slot = p.slot_of_address(address)
         self.armed = slot
         what = f"motion {slot} armed" if slot is not None else "not a slot start, nothing armed"
-        return _Outcome(p.ack(p.CMD_CALL), f"CALL 0x{address:06x}: {what}", p.CMD_CALL)
+        events: tuple[JournalEntry, ...] = ()
+        self.stack_depth += 1
+        if self.stack_depth > 1:
+            self.stack_faults += 1
+            what += f", return stack depth {self.stack_depth}"
+            events = (JournalEntry(
+                "stack", now, data, number=self.frames_received,
+                note=f"second return address pushed: CALL re-sent without a stop frame "
+                     f"(depth {self.stack_depth}, stack fault {self.stack_faults})",
+            ),)
+        return _Outcome(p.ack(p.CMD_CALL), f"CALL 0x{address:06x}: {what}", p.CMD_CALL, events)
 
     def _write(self, command: p.Command, now: float) -> _Outcome:
         address, payload = command.address or 0, command.payload
@@ -289,9 +373,13 @@ class SimBoard:
         self.ram[address : address + len(payload)] = payload
         written = range(address, address + len(payload))
         notes = [f"RAM 0x{address:04x} <- {p.hexbytes(payload)}"]
-        if any(a in written for a in PROGRAM_COUNTER) and self.armed is not None:
-            notes.append(f"program counter rewritten, motion {self.armed} disarmed")
-            self.armed = None
+        if any(a in written for a in PROGRAM_COUNTER):
+            if self.armed is not None:
+                notes.append(f"program counter rewritten, motion {self.armed} disarmed")
+                self.armed = None
+            if self.stack_depth:
+                notes.append(f"program counter rewritten, return stack ({self.stack_depth}) emptied")
+                self.stack_depth = 0
         if 0 in written:
             notes.append(self._config_written(bool(was_running), now))
         return _Outcome(p.ack(p.CMD_MOV), ", ".join(n for n in notes if n), p.CMD_MOV)
@@ -319,11 +407,17 @@ class SimBoard:
             return _Outcome(
                 p.nak(p.CMD_MOV), f"read of {count} bytes at 0x{address:04x} is not possible: NAK", p.CMD_MOV
             )
-        data = bytes(self.ram[address : address + count])
+        data = bytearray(self.ram[address : address + count])
+        if self.refresh_s > 0:  # the config word as of the last refresh tick
+            shown = self._shown.to_bytes(2, "little")
+            for a in range(address, min(address + count, 2)):
+                data[a - address] = shown[a]
+        data = bytes(data)
         what = f"RAM 0x{address:04x} x{count} -> {p.hexbytes(data)}"
         if address == 0 and count >= 1:
             state = "executing" if data[0] == p.EXECUTING_BYTE else "not executing"
-            what += f" (status: {state})"
+            as_of = f", as of the refresh at {self._tick_time(self._tick):.6f}" if self.refresh_s > 0 else ""
+            what += f" (status: {state}{as_of})"
         return _Outcome(p.ram_reply(data), what, p.CMD_MOV)
 
 

@@ -11,8 +11,8 @@ Kinds (what the client sees for the frame the fault hits):
 - ``short``: only the first half of the reply (2 bytes of a 4-byte ACK). The frame took effect.
 - ``junk``: three garbage bytes (``ff 00 aa``) before the reply. The frame took effect.
 - ``late``: the reply comes ``late_ms`` (default 500 ms, longer than a link's usual timeout)
-  after it was due. The frame took effect. The serial line stays in order: replies to frames sent
-  meanwhile queue behind the late one, as they would behind a board that was busy.
+  after it was due. The frame took effect. The board is still replying until the late reply's
+  last byte is on the wire: a frame sent meanwhile is not answered (see ``SimBoard.receive``).
 
 Spelling (the same in a ``sim://`` query and on the ``choreo sim`` command line): the value is
 either a whole number K >= 1, meaning every K-th frame (frames K, 2K, 3K... counted from 1 over

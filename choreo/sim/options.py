@@ -10,6 +10,7 @@ with dashes on the command line (`--motion-s 0.5 --drop 5`), and both go through
 | motion_s | how long every motion runs, seconds | 1.0 |
 | durations | per-slot durations, `SLOT:SECONDS,...` (`3:2.5,7:1.2`) | none |
 | reply_ms | the board's delay between a frame's last byte and its reply | 0.2 |
+| refresh_ms | status refresh period: a status read shows the config as of the last tick; 0: live | 50 |
 | wire | 1: bytes take 11 bit times at the baud; 0: bytes take no time | 1 |
 | gap_ms | an inter-byte gap longer than this drops a partial frame | 0.15 (sim://), 20 (pty) |
 | seed | seed of the random faults | 0 |
@@ -24,10 +25,17 @@ from dataclasses import dataclass, field
 from urllib.parse import parse_qsl
 
 from choreo.protocol import MOTION_SLOTS
-from choreo.sim.board import BOARD_BAUDS, DEFAULT_BAUD, DEFAULT_MOTION_S, DEFAULT_REPLY_DELAY_S, SimBoard
+from choreo.sim.board import (
+    BOARD_BAUDS,
+    DEFAULT_BAUD,
+    DEFAULT_MOTION_S,
+    DEFAULT_REFRESH_S,
+    DEFAULT_REPLY_DELAY_S,
+    SimBoard,
+)
 from choreo.sim.faults import DEFAULT_LATE_S, FAULT_KINDS, FaultPlan
 
-SETTINGS = ("baud", "motion_s", "durations", "reply_ms", "wire", "gap_ms", "seed", "late_ms")
+SETTINGS = ("baud", "motion_s", "durations", "reply_ms", "refresh_ms", "wire", "gap_ms", "seed", "late_ms")
 OPTION_NAMES: tuple[str, ...] = SETTINGS + FAULT_KINDS
 
 
@@ -39,15 +47,17 @@ class SimOptions:
     motion_s: float = DEFAULT_MOTION_S
     durations: Mapping[int, float] = field(default_factory=dict)
     reply_s: float = DEFAULT_REPLY_DELAY_S
+    refresh_s: float = DEFAULT_REFRESH_S
     wire: bool = True
     gap_s: float | None = None  # None: the transport's own default
     faults: FaultPlan = field(default_factory=FaultPlan)
 
     def board(self, **kwargs: object) -> SimBoard:
-        """A fresh board with these options (kwargs: `on_entry`, `journal_size`)."""
+        """A fresh board with these options (kwargs: `on_entry`, `journal_size`, `power_on`)."""
         return SimBoard(
             baud=self.baud,
             reply_delay_s=self.reply_s,
+            refresh_s=self.refresh_s,
             motion_s=self.motion_s,
             durations=dict(self.durations),
             faults=self.faults,
@@ -56,10 +66,11 @@ class SimOptions:
         )
 
     def describe(self) -> str:
-        """One line for a banner: `115200 baud 8E1, motions 1 s, no faults`."""
+        """One line for a banner: `115200 baud 8E1, motions 1 s, status every 50 ms, no faults`."""
         slots = ", ".join(f"{slot}: {sec:g} s" for slot, sec in sorted(self.durations.items()))
         motions = f"motions {self.motion_s:g} s" + (f" ({slots})" if slots else "")
-        return f"{self.baud} baud 8E1, {motions}, {self.faults.describe()}"
+        status = f"status every {self.refresh_s * 1000:g} ms" if self.refresh_s > 0 else "status live"
+        return f"{self.baud} baud 8E1, {motions}, {status}, {self.faults.describe()}"
 
 
 def parse_query(query: str) -> SimOptions:
@@ -90,6 +101,7 @@ def parse_options(values: Mapping[str, str]) -> SimOptions:
         motion_s=_parsed(values, "motion_s", _seconds, DEFAULT_MOTION_S),
         durations=_parsed(values, "durations", parse_durations, {}),
         reply_s=_parsed(values, "reply_ms", _milliseconds, DEFAULT_REPLY_DELAY_S),
+        refresh_s=_parsed(values, "refresh_ms", _milliseconds, DEFAULT_REFRESH_S),
         wire=_parsed(values, "wire", _flag, True),
         gap_s=_parsed(values, "gap_ms", _positive_milliseconds, None),
         faults=plan,

@@ -13,6 +13,9 @@ stream:
   than `gap_s` between two bytes drops an incomplete frame (the real board's gap is about
   150 us). A first byte that cannot be a size (below 3, above 128) starts a burst of noise that
   ends at the next such gap; the board answers it with a NAK.
+- One reply at a time: the board does not answer a frame that starts arriving before its
+  previous reply is all on the wire (see `SimBoard.receive`); a client must read each reply
+  before it writes the next frame.
 - Line settings: bytes sent with other settings than the board's (baud, 8 data bits, even
   parity, 1 stop bit) are garbage to a real board, which then never answers; the line drops them
   and notes why in the board's journal.
@@ -66,6 +69,7 @@ class Unit:
     kind: str
     data: bytes
     at: float  # when the board acts on it: its last byte, or the end of the gap that closed it
+    first: float | None = None  # when its first byte had fully arrived
 
 
 class Framer:
@@ -77,6 +81,7 @@ class Framer:
         self.gap_s = gap_s
         self._buf = bytearray()
         self._last = 0.0
+        self._first = 0.0
         self._noise = False
 
     def push(self, byte: int, at: float, byte_time: float) -> list[Unit]:
@@ -86,10 +91,11 @@ class Framer:
             units.append(self._close())
         if not self._buf:
             self._noise = not 3 <= byte <= MAX_FRAME_SIZE
+            self._first = at
         self._buf.append(byte)
         self._last = at
         if not self._noise and len(self._buf) == self._buf[0]:
-            units.append(Unit("frame", bytes(self._buf), at))
+            units.append(Unit("frame", bytes(self._buf), at, self._first))
             self._buf.clear()
         return units
 
@@ -104,7 +110,7 @@ class Framer:
         return None
 
     def _close(self) -> Unit:
-        unit = Unit("noise" if self._noise else "partial", bytes(self._buf), self._last + self.gap_s)
+        unit = Unit("noise" if self._noise else "partial", bytes(self._buf), self._last + self.gap_s, self._first)
         self._buf.clear()
         return unit
 
@@ -187,6 +193,6 @@ class Line:
                 "without a byte: dropped (write each frame in one write call)",
             )
             return
-        sent = self.board.receive(unit.data, unit.at)
+        sent = self.board.receive(unit.data, unit.at, unit.first)
         if sent is not None:
             self._out.extend(zip(sent.times, sent.data))

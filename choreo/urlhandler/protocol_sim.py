@@ -5,15 +5,17 @@ open one; anything that talks to a pyserial port (the link, a test) then talks t
 model exactly as to a real board over a USB adapter, without hardware or threads.
 
 URL: `sim://` followed by an optional query with the options of `choreo.sim.options`
-(`baud`, `motion_s`, `durations`, `reply_ms`, `wire`, `gap_ms`, `seed`, `late_ms` and the fault
+(`baud`, `motion_s`, `durations`, `reply_ms`, `refresh_ms`, `wire`, `gap_ms`, `seed`, `late_ms` and the fault
 kinds `lose`, `drop`, `nak`, `badsum`, `short`, `junk`, `late`). An unknown option or a bad value
 raises ValueError naming it.
 
 Faithful where it matters: the board answers only a port set to its baud with 8 data bits, even
 parity and 1 stop bit (a real board cannot read anything else), replies arrive byte by byte on
 the board's schedule (wire time and reply delay), `reset_input_buffer` drops only what has
-already arrived, and after a `lose` fault every read and write raises `SerialException`, as an
-unplugged adapter does. The board is on `port.board`, its line on `port.line`.
+already arrived, a frame written before the previous reply has all arrived is not answered,
+the status refreshes every 50 ms of the board's time from the port's opening (its power-on), and
+after a `lose` fault every read and write raises `SerialException`, as an unplugged adapter
+does. The board is on `port.board`, its line on `port.line`.
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ class Serial(SerialBase):
         if self._port is None:
             raise SerialException("Port must be configured before it can be used.")
         self.options = self.from_url(self._port)
-        self.board = self.options.board()
+        self.board = self.options.board(power_on=time.monotonic())
         self.line = Line(self.board, self.options.gap_s or REAL_GAP_S)
         self.is_open = True
         self._reconfigure_port()
