@@ -126,8 +126,9 @@ def _with_baud(url: str, baud: int | None) -> str:
 
 def at_speed(url: str, speed: float) -> str:
     """A `sim://` URL whose board runs `speed` times faster: every slot's duration (`durations`),
-    the default for the others (`motion_s`) and the board's reply delay (`reply_ms`) divided by
-    the speed, and, faster than 1, bytes that take no wire time (`wire=0`).
+    the default for the others (`motion_s`), the board's reply delay (`reply_ms`) and its status
+    refresh (`refresh_ms`, where the simulator has one) divided by the speed, and, faster than 1,
+    bytes that take no wire time (`wire=0`).
 
     Without it a replay at speed 10 polls a motion ten times sooner after its start than the run
     did, finds it still executing where the run found it over, and `--strict` fails a clean log.
@@ -147,6 +148,9 @@ def at_speed(url: str, speed: float) -> str:
         return url
     scaled = {"motion_s": f"{options.motion_s / speed:.9g}",
               "reply_ms": f"{options.reply_s * 1e3 / speed:.9g}"}
+    refresh_s = getattr(options, "refresh_s", None)  # the board's status refresh, where it has one
+    if refresh_s is not None:
+        scaled["refresh_ms"] = f"{refresh_s * 1e3 / speed:.9g}"
     if options.durations:
         scaled["durations"] = ",".join(f"{slot}:{seconds / speed:.9g}"
                                        for slot, seconds in sorted(options.durations.items()))
