@@ -162,7 +162,9 @@ def test_summary_of_a_complete_run(logs, capsys):
     assert len(plays) == 3
     for line, expected in zip(plays, (0.33, 0.22, 0.33)):
         measured = float(line.rsplit(":", 1)[1].strip().split()[0])
-        assert expected - 0.01 <= measured <= expected + 0.12, line  # to the status poll that saw it end
+        # To the status poll that saw it end: up to one 50 ms poll period, plus up to one 50 ms
+        # status refresh of the board (the simulator's too), plus scheduling.
+        assert expected - 0.01 <= measured <= expected + 0.17, line
 
 
 def test_summary_of_a_run_with_faults(logs, capsys):
