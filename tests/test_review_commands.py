@@ -364,8 +364,9 @@ def test_export_csv_and_json_one_row_a_frame(logs, capsys, tmp_path):
         assert record["seq"] == tx["seq"] == rx["seq"] == int(row["seq"])
         assert (record["frame"], record["attempt"], record["tx_hex"], record["step"]) == (
             tx["kind"], tx["attempt"], tx["hex"], tx["step"])
-        assert (record["reply"], record["rx_hex"], record["latency_ms"], record["executing"], record["error"]) == (
-            rx["kind"], rx["hex"], rx["latency_ms"], rx["executing"], rx["error"])
+        assert (record["reply"], record["rx_hex"], record["latency_ms"], record["executing"], record["error"],
+                record["stale"]) == (rx["kind"], rx["hex"], rx["latency_ms"], rx["executing"], rx["error"],
+                                     rx["stale"])
         assert row["reply"] == rx["kind"] and row["tx_hex"] == tx["hex"]
         assert record["rx_time_ns"] >= record["tx_time_ns"]
     assert {"NAK", "ACK"} <= {r["reply_meaning"] for r in records}

@@ -294,3 +294,57 @@ def test_a_message_choreo_did_not_write_is_one_clear_line(tmp_path, capsys):
     # frames and export show what is there, field by field, and leave the other topics alone
     assert main(["log", "frames", str(path)]) == 0
     assert "not a frame" in capsys.readouterr().out
+
+
+def _log_with_stale_replies(path: Path) -> None:
+    """A run log, written by choreo's Recorder, whose second and fourth replies came after late
+    replies to earlier frames (one, then two) that the link set aside."""
+    from dataclasses import replace
+
+    from choreo import protocol
+    from choreo.link import RxEvent, Tag, TxEvent
+    from choreo.record import Recorder, RunInfo
+
+    start = 1_790_000_000_000_000_000
+    recorder = Recorder(path, RunInfo("s.yaml", "stale", b"version: 1\n", "sim://", 115200, start))
+    ack = protocol.Reply(protocol.ReplyKind.ACK, protocol.ack(protocol.CMD_MOV))
+    status = protocol.ram_reply(bytes((0x23, 0x87)))
+    stale = [b"", protocol.ack(protocol.CMD_MOV), b"", protocol.ack(protocol.CMD_CALL) + status]
+    for seq, late in enumerate(stale, 1):
+        frame = protocol.play_sequence(3)[0]
+        t = start + seq * 10_000_000
+        recorder.on_tx(TxEvent(seq, frame, 1, t, Tag(0, None)))
+        recorder.on_rx(RxEvent(seq, frame, replace(ack, stale=late), t + 1_000_000, 0.001, Tag(0, None)))
+    recorder.close({"outcome": "done"})
+
+
+def test_stale_replies_are_exported_shown_and_counted(tmp_path, capsys):
+    import csv
+    import io
+
+    from choreo.cli import main
+
+    path = tmp_path / "stale.mcap"
+    _log_with_stale_replies(path)
+    assert main(["log", "export", str(path), "--csv", "-", "--json", str(tmp_path / "f.json")]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    records = json.loads((tmp_path / "f.json").read_text())
+    assert [r["stale"] for r in rows] == ["", "04 00 06 0a", "", "04 0c 06 16 05 00 23 87 af"]
+    assert [r["stale"] for r in records] == [None, "04 00 06 0a", None, "04 0c 06 16 05 00 23 87 af"]
+    assert main(["log", "frames", str(path)]) == 0
+    rx = [line for line in capsys.readouterr().out.splitlines() if "  rx  " in line]
+    assert rx[0].endswith("ACK")
+    assert rx[1].endswith("ACK (set aside a late reply: 04 00 06 0a)")
+    assert rx[3].endswith("ACK (set aside 2 late replies: 04 0c 06 16, 05 00 23 87 af)")
+    assert main(["log", "summary", str(path)]) == 0
+    replies = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("replies"))
+    assert replies.startswith("replies   ACK 4, NAK 0, status 0, timeout 0, invalid 0; stale 3 ")
+
+
+def test_stale_bytes_that_are_not_replies_stay_together():
+    from choreo.review.summary import stale_replies
+
+    assert stale_replies(None) == [] and stale_replies("") == []
+    assert stale_replies("04 00 06 0a 05 00 23 87 af") == ["04 00 06 0a", "05 00 23 87 af"]
+    assert stale_replies("ff 00 01") == ["ff 00 01"]  # noise waiting on the line, as logged
+    assert stale_replies("04 00 06 0a 02 99") == ["04 00 06 0a", "02 99"]

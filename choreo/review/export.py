@@ -18,7 +18,7 @@ from choreo.review.reader import LogReader
 COLUMNS = (
     "seq",
     "tx_time_ns", "tx_show_s", "step", "label", "frame", "motion", "attempt", "tx_hex", "frame_meaning",
-    "rx_time_ns", "rx_show_s", "reply", "rx_hex", "latency_ms", "executing", "error", "reply_meaning",
+    "rx_time_ns", "rx_show_s", "reply", "rx_hex", "latency_ms", "executing", "error", "stale", "reply_meaning",
 )
 
 
@@ -44,6 +44,7 @@ def row(exchange: Exchange) -> dict:
         "latency_ms": rx.get("latency_ms"),
         "executing": rx.get("executing"),
         "error": rx.get("error"),
+        "stale": rx.get("stale"),  # late replies to earlier frames set aside before this one, as hex
         "reply_meaning": reply_meaning(rx) if exchange.rx else None,
     }
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from choreo.protocol import describe_frame, describe_reply
 from choreo.review.reader import LogReader, decode
-from choreo.review.summary import RX_TOPIC, STEP_TOPIC, TX_TOPIC, show_zero_ns
+from choreo.review.summary import RX_TOPIC, STEP_TOPIC, TX_TOPIC, show_zero_ns, stale_replies
 
 class ShowClock:
     """Wall-clock log times to show-clock seconds.
@@ -118,6 +118,15 @@ def reply_meaning(rx: dict) -> str:
         return f"not hex: {rx.get('hex')!r}"
 
 
+def stale_note(rx: dict) -> str:
+    """` (set aside a late reply: 04 00 06 0a)` after a reply that came with late ones, or ``."""
+    replies = stale_replies(rx.get("stale"))
+    if not replies:
+        return ""
+    what = "a late reply" if len(replies) == 1 else f"{len(replies)} late replies"
+    return f" (set aside {what}: {', '.join(replies)})"
+
+
 def matches(exchange: Exchange, step: int | None, kind: str | None) -> bool:
     """`--step N` and `--kind K`: K names a frame kind or a reply kind; either side matching
     keeps the pair, so `--kind nak` shows each refused frame with its NAK."""
@@ -144,7 +153,7 @@ def lines(exchange: Exchange) -> Iterator[str]:
     if rx is not None:
         latency = f"{rx.get('latency_ms', 0):.3f} ms"
         yield (f"{_time(exchange.rx_s)}  rx  #{exchange.seq:<6} {latency:<9} {rx.get('kind', '?'):<8} "
-               f"{rx.get('hex', ''):<56} {reply_meaning(rx)}")
+               f"{rx.get('hex', ''):<56} {reply_meaning(rx)}{stale_note(rx)}")
     elif tx is not None:
         yield f"{'':10}  rx  #{exchange.seq:<6} {'':9} {'-':<8} {'':56} no reply in the log (it ends here)"
 

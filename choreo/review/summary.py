@@ -144,6 +144,7 @@ class Summary:
     retries: int = 0  # frames sent again (attempt > 1)
     replies: dict[str, int] = field(default_factory=dict)  # rx kind -> count
     unanswered: int = 0  # frames with no reply in the log (a cut log)
+    stale: int = 0  # late replies to earlier frames, read and set aside before a frame's own reply
     latency: Distribution = field(default_factory=Distribution)  # ms, replies that came back
     lateness: Distribution = field(default_factory=Distribution)  # ms, play step starts (the cues)
     plays: list[Play] = field(default_factory=list)  # the first LISTED_PLAYS
@@ -160,6 +161,31 @@ class Summary:
     @property
     def show_name(self) -> str:
         return self.run.get("show") or self.path.stem
+
+
+def stale_replies(stale: str | None) -> list[str]:
+    """The late replies in an rx message's `stale` hex, one hex string each.
+
+    The link keeps them as one run of bytes; an RCB-4 reply starts with its own length, which
+    splits them back into the replies a reviewer can match with earlier frames. Bytes that do not
+    split that way (noise that was waiting on the line) stay together, as logged.
+    """
+    if not stale:
+        return []
+    try:
+        data = bytes.fromhex(stale)
+    except ValueError:
+        return [stale]
+    replies: list[str] = []
+    pos = 0
+    while pos < len(data):
+        length = data[pos]
+        if length < 4 or pos + length > len(data):  # an ACK, the shortest reply, is 4 bytes
+            replies.append(data[pos:].hex(" "))
+            break
+        replies.append(data[pos:pos + length].hex(" "))
+        pos += length
+    return replies
 
 
 def summarize(path: str | Path) -> Summary:
@@ -184,7 +210,7 @@ def summarize_reader(reader: LogReader) -> Summary:
     outcomes = {"ok": 0, "failed": 0, "timeout": 0, "aborted": 0}
     zero = show_zero_ns(reader)
     zero_from_step = False
-    retries = late = started = 0
+    retries = late = started = stale = 0
     pending_seq = -1  # the tx waiting for its rx
     last_time = None
     # motion tracking: play -> restore ACKed -> running until a status says not executing
@@ -209,6 +235,8 @@ def summarize_reader(reader: LogReader) -> Summary:
                 seq = m["seq"]
                 if seq == pending_seq:
                     pending_seq = -1
+                if m.get("stale"):  # null in every clean exchange; absent in older logs
+                    stale += len(stale_replies(m["stale"]))
                 if kind == "status":
                     key = round(m["latency_ms"] * 1000)
                     latency[key] = latency.get(key, 0) + 1
@@ -294,6 +322,7 @@ def summarize_reader(reader: LogReader) -> Summary:
     summary.frames = frames
     summary.replies = replies
     summary.retries = retries
+    summary.stale = stale
     summary.latency = Distribution(latency)
     summary.lateness = Distribution(lateness)
     summary.steps_run = started
@@ -374,7 +403,7 @@ def render(summary: Summary) -> Iterable[str]:
     yield f"frames    {summary.frames_sent} sent ({kinds}); {summary.retries} retries"
     replies = ", ".join(f"{k.upper() if k in ('ack', 'nak') else k} {n}" for k, n in summary.replies.items())
     unanswered = f"; {summary.unanswered} unanswered (log cut)" if summary.unanswered else ""
-    yield f"replies   {replies}{unanswered}"
+    yield f"replies   {replies}; stale {summary.stale} (late replies to earlier frames, set aside){unanswered}"
     lat = summary.latency
     yield (f"latency   min {_ms(lat.min)}, median {_ms(lat.median)}, p99 {_ms(lat.p99)}, "
            f"max {_ms(lat.max)} ({len(lat)} replies)")
