@@ -209,6 +209,18 @@ def test_every_fault_kind_on_the_pty(kind, expected, spelled):
     assert got == [expected if i in hits else IDLE for i in range(6)]
 
 
+def test_a_frame_sent_before_the_last_reply_was_read_gets_no_reply_on_the_pty():
+    board = SimBoard()
+    with in_process(board) as (server, path, _):
+        with serial.Serial(path, 115200, parity="E", timeout=0.3) as port:
+            port.write(STATUS.data + STATUS.data)  # one write: the server reads both at once
+            assert port.read(10) == IDLE  # one reply; the read ends at its timeout
+            assert exchange(port, STATUS) == IDLE  # written after the reply was read: answered
+    assert board.frames_received == 2 and board.ignored == 1
+    assert [e.kind for e in board.journal] == ["frame", "ignored", "frame"]
+    assert "arrived while the board was still replying" in board.journal[1].note
+
+
 def test_late_on_the_pty():
     board = SimBoard(faults=FaultPlan.parse({"late": "1"}, late_s=0.1))
     with in_process(board) as (server, path, _):
@@ -270,10 +282,11 @@ def test_command_line_options_mirror_the_url_query():
 
     args = build_parser().parse_args(
         ["sim", "--motion-s", "0.5", "--durations", "3:2.5,7:1.2", "--baud", "625000", "--reply-ms", "0.3",
-         "--drop", "5", "--late", "0.1", "--late-ms", "250", "--seed", "4", "--no-wire", "--gap-ms", "30"]
+         "--refresh-ms", "20", "--drop", "5", "--late", "0.1", "--late-ms", "250", "--seed", "4", "--no-wire", "--gap-ms", "30"]
     )
     from_cli = parse_options(options_from_args(args))
     from_url = parse_query(
-        "motion_s=0.5&durations=3:2.5,7:1.2&baud=625000&reply_ms=0.3&drop=5&late=0.1&late_ms=250&seed=4&wire=0&gap_ms=30"
+        "motion_s=0.5&durations=3:2.5,7:1.2&baud=625000&reply_ms=0.3&refresh_ms=20&drop=5&late=0.1&late_ms=250"
+        "&seed=4&wire=0&gap_ms=30"
     )
-    assert from_cli == from_url
+    assert from_cli == from_url and from_cli.refresh_s == pytest.approx(0.02)

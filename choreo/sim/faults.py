@@ -16,7 +16,8 @@ Kinds (what the client sees for the frame the fault hits):
 
 Spelling (the same in a ``sim://`` query and on the ``choreo sim`` command line): the value is
 either a whole number K >= 1, meaning every K-th frame (frames K, 2K, 3K... counted from 1 over
-every frame the board received; for ``lose``, only frame K), or a probability 0 < P < 1 written
+every frame the board received, which leaves out frames it ignored because it was still
+replying; for ``lose``, only frame K), or a probability 0 < P < 1 written
 with a decimal point, meaning each frame independently with probability P, drawn from a random
 generator seeded with ``seed`` (default 0), so a run is repeatable. ``drop=5`` drops frames 5, 10,
 15...; ``drop=0.2`` drops a fifth of them at random; ``drop=1`` drops every frame. ``1.0`` and
