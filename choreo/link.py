@@ -29,7 +29,8 @@ DEFAULT_TIMEOUT_S = 0.2
 DEFAULT_TRIES = 3
 QUIET_S = 0.01  # after a bad reply, the line counts as settled once this long passes with no byte
 STATUS_SPACING_S = 0.05  # the board refreshes its status every 50 ms: never query faster
-MAX_STALE = 3  # late replies to earlier frames set aside while waiting for one frame's reply
+MAX_STALE = 3
+SYNC_TRIES = 3  # ACK checks after a timeout: one may reach a board still sending a late reply  # late replies to earlier frames set aside while waiting for one frame's reply
 
 
 @dataclass(frozen=True)
@@ -184,12 +185,13 @@ class Link:
                     began = self.last_tx_mono
                 if not reply.ok:
                     failure = (frame, reply)
-                    self._settle(reply)
                     break
             else:
                 return Played(attempt, began)
+            if attempt < self.tries and not self._settle(reply, tag):
+                raise self._failed(f"play {motion}", frame, reply, tag, attempt, silent=True)
         assert failure is not None
-        raise self._failed(f"play {motion}", *failure, tag)
+        raise self._failed(f"play {motion}", *failure, tag, self.tries)
 
     def query_status(self, tag: Tag | None = None) -> Reply:
         """Ask whether a motion is executing; the reply's `executing` says."""
@@ -204,8 +206,9 @@ class Link:
             reply = self.send(frame, attempt, tag)
             if reply.ok:
                 return reply
-            self._settle(reply)
-        raise self._failed(str(frame), frame, reply, tag)
+            if attempt < self.tries and not self._settle(reply, tag):
+                raise self._failed(str(frame), frame, reply, tag, attempt, silent=True)
+        raise self._failed(str(frame), frame, reply, tag, self.tries)
 
     # -- one try ---------------------------------------------------------------------------
 
@@ -326,36 +329,53 @@ class Link:
             else:
                 time.sleep(min(0.001, quiet_s))
 
-    def _settle(self, reply: Reply) -> None:
-        """Before a retry, let a late or stray reply arrive and throw it away.
+    def _settle(self, reply: Reply, tag: Tag | None) -> bool:
+        """Before a retry, make sure no late reply is still coming; False if the line stays dead.
 
-        The protocol has no sequence numbers: a late ACK read as the answer to the retry would
-        shift every reply after it by one. After a timeout the late reply may still be on its
-        way, so wait up to one more timeout for the line to go quiet; after a bad reply a short
+        The protocol has no sequence numbers, and a late ACK to a restore is byte for byte an
+        ACK to a stop: taken for the retried stop frame's answer, it would send the CALL with
+        no stop before it (a second return address on the board). So after a timeout the link
+        sends the ACK check, whose reply is unique, and reads up to it: every late reply has
+        then arrived (set aside as stale) and the board is listening. After a bad reply a short
         quiet spell is enough.
         """
         try:
-            if reply.kind is ReplyKind.TIMEOUT:
-                self._drain(quiet_s=self.timeout, limit_s=self.timeout)
-            else:
+            if reply.kind is not ReplyKind.TIMEOUT:
                 self._drain(quiet_s=QUIET_S)
-            self.port.reset_input_buffer()
-        except (OSError, PortLost) as exc:
-            raise LinkError(f"port {self.name}: lost while recovering from a bad reply: {_reason(exc)}: "
+                return True
+        except PortLost as exc:
+            raise LinkError(f"port {self.name}: lost while recovering from a bad reply: {exc}: "
                             "check the cable and the adapter") from None
+        try:
+            self._drain(quiet_s=self.timeout, limit_s=self.timeout)  # most late replies come now
+        except PortLost as exc:
+            raise LinkError(f"port {self.name}: lost while waiting for a late reply: {exc}: "
+                            "check the cable and the adapter") from None
+        sync = protocol.sync_frame()
+        for attempt in range(1, SYNC_TRIES + 1):
+            if self.send(sync, attempt, tag, what="sync").kind is ReplyKind.ACK:
+                return True
+        return False
 
     def _lost(self, exc: PortLost, frame: Frame, tag: Tag | None, what: str | None) -> LinkError:
         return LinkError(f"port {self.name}:{_where(tag)} lost while sending '{what or frame}' "
                          f"({frame.kind.value} frame): {exc}: check the cable and the adapter")
 
-    def _failed(self, what: str, frame: Frame, reply: Reply, tag: Tag | None) -> LinkError:
+    def _failed(self, what: str, frame: Frame, reply: Reply, tag: Tag | None, tries: int,
+                silent: bool = False) -> LinkError:
+        """The one line a user reads: the step, the frame, what came back, what to check.
+
+        `silent`: the board did not answer the ACK checks after a timeout either, so the
+        remaining tries were not spent on a line that is not answering at all.
+        """
         came = {
             ReplyKind.TIMEOUT: "no reply",
             ReplyKind.NAK: f"NAK ({reply.hex})",
         }.get(reply.kind, f"an invalid reply ({reply.hex}: {reply.error})")
-        tries = f"{self.tries} tries" if self.tries != 1 else "1 try"
+        count = f"{tries} tries" if tries != 1 else "1 try"
+        after = f"{count} and {SYNC_TRIES} unanswered ACK checks" if silent else count
         return LinkError(f"port {self.name}:{_where(tag)} {came} to '{what}' ({frame.kind.value} frame) "
-                         f"after {tries}: {self._hint(reply)}")
+                         f"after {after}: {self._hint(reply)}")
 
     def _hint(self, reply: Reply) -> str:
         settings = f"check baud ({self.baud}), even parity"

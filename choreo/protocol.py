@@ -21,6 +21,7 @@ MAX_FRAME_SIZE = 128
 
 CMD_MOV = 0x00
 CMD_CALL = 0x0C
+CMD_ACK_CHECK = 0xFE  # `04 fe 06 08`: the board answers with the same bytes
 MOV_COM_TO_RAM = 0x02
 MOV_RAM_TO_COM = 0x20
 
@@ -80,6 +81,7 @@ class FrameKind(str, Enum):
     PLAY = "play"
     RESTORE = "restore"
     STATUS = "status"
+    SYNC = "sync"  # the ACK check, sent by the link after a timeout to learn the line is idle
 
 
 @dataclass(frozen=True)
@@ -136,6 +138,7 @@ def slot_of_address(address: int) -> int | None:
 _STOP = mov_write(CONFIG_ADDRESS, _le(SUSPENDED_CONFIG, 2) + _le(SUSPEND_PROGRAM_COUNTER, 3) + bytes(7))
 _RESTORE = mov_write(CONFIG_ADDRESS, _le(RESUMED_CONFIG, 2))
 _STATUS = mov_read(CONFIG_ADDRESS, 2)
+_SYNC = build_frame(CMD_ACK_CHECK, bytes((ACK_BYTE,)))
 
 
 def stop_frame() -> Frame:
@@ -152,6 +155,12 @@ def restore_frame() -> Frame:
 
 def status_frame() -> Frame:
     return Frame(FrameKind.STATUS, _STATUS)
+
+
+def sync_frame() -> Frame:
+    """The ACK check: its reply is the only one with command byte FE, so reading it back proves
+    that every late reply before it has arrived and the board is listening again."""
+    return Frame(FrameKind.SYNC, _SYNC)
 
 
 def play_sequence(motion: int) -> tuple[Frame, Frame, Frame]:
@@ -317,6 +326,8 @@ def describe_frame(data: bytes) -> str:
         cmd = parse_command(data)
     except ValueError as exc:
         return f"not a frame: {exc}"
+    if bytes(data) == _SYNC:
+        return "ACK check"
     if cmd.command == CMD_CALL:
         slot = slot_of_address(cmd.address or 0)
         what = f"motion {slot}" if slot is not None else "not a motion slot"

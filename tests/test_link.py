@@ -17,6 +17,7 @@ from choreo.link import Link, Tag
 ACK_MOV = p.ack(p.CMD_MOV)
 ACK_CALL = p.ack(p.CMD_CALL)
 RUNNING = p.ram_reply(bytes.fromhex("2387"))
+SYNC_ACK = p.sync_frame().data  # the board answers the ACK check with the same 4 bytes
 IDLE = p.ram_reply(bytes.fromhex("2187"))
 
 
@@ -102,9 +103,12 @@ def test_a_late_ack_is_never_taken_for_a_status():
 
 
 def test_an_ack_alone_to_a_status_query_is_not_an_answer():
-    link, _, events = link_for(ACK_MOV, ACK_MOV, ACK_MOV)
-    with pytest.raises(LinkError, match="to 'status' \\(status frame\\) after 3 tries"):
+    # each ACK is set aside as stale, the read times out, an ACK check clears the line, retry
+    link, _, events = link_for(ACK_MOV, SYNC_ACK, ACK_MOV, SYNC_ACK, ACK_MOV)
+    with pytest.raises(LinkError, match="no reply to 'status' \\(status frame\\) after 3 tries: "):
         link.query_status()
+    assert [e.frame.kind.value for e in events.tx] == ["status", "sync", "status", "sync", "status"]
+    assert all(e.reply.stale == ACK_MOV for e in events.rx if e.frame.kind is p.FrameKind.STATUS)
 
 
 def test_a_failed_play_is_retried_from_its_stop_frame():
@@ -136,9 +140,21 @@ def test_no_reply_error_names_frame_and_what_to_check():
     with pytest.raises(LinkError) as failure:
         link.play(3)
     assert str(failure.value) == (
-        "port scripted: no reply to 'play 3' (stop frame) after 3 tries: check baud (115200), "
-        "even parity, and the adapter (5 V inverted logic without Kondo's USB adapter)")
-    assert len(events.tx) == len(events.rx) == 3
+        "port scripted: no reply to 'play 3' (stop frame) after 1 try and 3 unanswered ACK checks: "
+        "check baud (115200), even parity, and the adapter (5 V inverted logic without Kondo's USB "
+        "adapter)")
+    assert [e.frame.kind.value for e in events.tx] == ["stop", "sync", "sync", "sync"]
+    assert len(events.rx) == 4
+
+
+def test_after_a_timeout_an_ack_check_reads_every_late_reply_before_the_retry():
+    # The stop frame's ACK is late: it arrives behind the first ACK check and is set aside; the
+    # sequence then starts again from its stop frame, never with a CALL alone.
+    link, port, events = link_for(b"", ACK_MOV + SYNC_ACK, ACK_MOV, ACK_CALL, ACK_MOV)
+    played = link.play(2)
+    assert played.tries == 2
+    assert [e.frame.kind.value for e in events.tx] == ["stop", "sync", "stop", "play", "restore"]
+    assert events.rx[1].reply.kind is p.ReplyKind.ACK and events.rx[1].reply.stale == ACK_MOV
 
 
 def test_port_lost_is_a_link_error_with_an_rx_for_the_frame():

@@ -199,12 +199,13 @@ FAULT_SHOW = """
 @pytest.mark.parametrize(
     "query,words",
     [
-        ("drop=1", ["no reply to 'play 3' (stop frame) after 3 tries", "check baud (115200), even parity"]),
+        ("drop=1", ["no reply to 'play 3' (stop frame) after 1 try and 3 unanswered ACK checks",
+                    "check baud (115200), even parity"]),
         ("nak=1", ["NAK (04 00 15 19) to 'play 3' (stop frame) after 3 tries"]),
         ("badsum=1", ["invalid reply", "bad checksum", "'play 3'"]),
         ("junk=1", ["invalid reply", "junk"]),
         ("short=1", ["'play 3'"]),
-        ("late=1&late_ms=1000", ["no reply to 'play 3' (stop frame) after 3 tries"]),
+        ("late=1&late_ms=1000", ["no reply to 'play 3' (stop frame) after 1 try and 3 unanswered"]),
         ("lose=2", ["lost", "step 0 'wave'", "check the cable"]),
     ],
 )
@@ -251,8 +252,11 @@ def test_transient_fault_is_retried_and_logged(tmp_path, query):
     log = read_log(log_path)
     bad = [m for m in log.rx if m["kind"] not in ("ack", "status")]
     assert bad and bad[0]["seq"] == 5, "the fault shows in the log"
-    assert [m["kind"] for m in log.tx[3:8]] == ["stop", "play", "stop", "play", "restore"]
-    assert [m["attempt"] for m in log.tx[3:8]] == [1, 1, 2, 2, 2]
+    frames = [m for m in log.tx if m["kind"] != "sync"]  # ACK checks follow a timeout
+    assert [m["kind"] for m in frames[3:8]] == ["stop", "play", "stop", "play", "restore"]
+    assert [m["attempt"] for m in frames[3:8]] == [1, 1, 2, 2, 2]
+    if "drop" in query or "late" in query:  # the line was proven idle before the retry
+        assert log.tx[5]["kind"] == "sync" and log.rx[5]["kind"] == "ack"
     assert any(m["level"] == 3 for m in log.logs)  # each failed try is a warning
     # the play sequence was retried from its stop frame, never a CALL alone
     for m in log.tx:
@@ -650,7 +654,7 @@ def test_choreo_ports_marks_kondo_adapters(monkeypatch, capsys):
 
 
 @pytest.mark.parametrize("fault,words", [
-    ("--drop", "no reply to 'play 3' (stop frame) after 3 tries"),
+    ("--drop", "no reply to 'play 3' (stop frame) after 1 try and 3 unanswered ACK checks"),
     ("--nak", "NAK (04 00 15 19) to 'play 3' (stop frame) after 3 tries"),
     ("--badsum", "bad checksum"),
 ])
