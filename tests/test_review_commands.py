@@ -389,7 +389,11 @@ def test_replay_of_a_clean_run_matches(logs, capsys, tmp_path):
     code, out, err = cli(capsys, "replay", str(logs.complete), "--log", str(new_log), "--speed", "1")
     assert code == 0, err
     frames = len(mcap_topics(logs.complete)["/rcb4/tx"])
-    assert f"replayed {frames} frames: {frames} same, 0 differ" in out
+    assert f"replayed {frames} frames: " in out
+    # every reply the same, but for a poll at a motion's end the board's status refresh tick
+    # may fall on the other side of (its phase since the port opened is in no log)
+    differs = [line for line in out.splitlines() if line.startswith("differs:")]
+    assert len(differs) <= 1 and all("(timing: " in line for line in differs), out
     assert "sim://?durations=3:0.33,5:0.22" in err
     replayed = mcap_topics(new_log)
     recorded = mcap_topics(logs.complete)
@@ -450,15 +454,18 @@ def live_log(logs) -> Path:
     return path
 
 
-@pytest.mark.parametrize("speed", ["2", "10"])
+@pytest.mark.parametrize("speed", ["1", "2", "10"])
 def test_replay_of_a_clean_run_is_clean_at_any_speed(live_log, capsys, tmp_path, speed):
     """The simulator's motions run `speed` times faster too: every poll falls where it did."""
     code, out, err = cli(capsys, "replay", str(live_log), "--log", str(tmp_path / "r.mcap"),
                          "--speed", speed, "--strict", "--port", _live_sim())
     frames = len(mcap_topics(live_log)["/rcb4/tx"])
     assert code == 0, out
-    assert f"replayed {frames} frames: {frames} same, 0 differ" in out
-    durations = {"2": "3:0.165,5:0.11", "10": "3:0.033,5:0.022"}[speed]
+    assert f"replayed {frames} frames: " in out
+    # none differs, but for a poll a busy machine held back past a motion's end (said, excused)
+    differs = [line for line in out.splitlines() if line.startswith("differs:")]
+    assert all("not the board's doing" in line for line in differs), out
+    durations = {"1": "3:0.33,5:0.22", "2": "3:0.165,5:0.11", "10": "3:0.033,5:0.022"}[speed]
     assert f"durations={durations}" in err and "note:" not in err
 
 
@@ -521,3 +528,29 @@ def test_not_a_log_is_exit_2_with_one_line(logs, capsys):
         assert code == 2 and out == ""
         assert err == f"log {show}: not an MCAP file (it does not start with the MCAP magic bytes); " \
                       "choreo logs are the .mcap files `choreo run` writes\n"
+
+
+def test_a_poll_the_replay_sent_late_is_not_held_against_the_board(live_log, capsys, tmp_path, monkeypatch):
+    """A busy machine holds one poll back 8 ms (80 ms of the run at speed 10): it finds the motion
+    over where the run found it executing. Reported, but not a difference --strict fails on."""
+    from choreo.link import Link
+
+    send = Link.send
+    polls = {"n": 0}
+
+    def busy_send(self, frame, *args, **kwargs):
+        if frame.kind.value == "status":
+            polls["n"] += 1
+            if polls["n"] == 3:  # the wave's third poll: it was still executing in the run
+                time.sleep(0.008)
+        return send(self, frame, *args, **kwargs)
+
+    monkeypatch.setattr(Link, "send", busy_send)
+    code, out, _ = cli(capsys, "replay", str(live_log), "--log", str(tmp_path / "r.mcap"), "--speed", "10",
+                       "--strict", "--port", _live_sim())
+    differs = [line for line in out.splitlines() if line.startswith("differs:")]
+    assert code == 0, out
+    assert differs and all("the replay sent this poll" in line and "not the board's doing" in line
+                           for line in differs)  # that poll, and the ones kept as far behind it
+    n = len(differs)
+    assert f"{n} differ ({n} of them status polls at a motion's end, {n} sent late by the replay)" in out

@@ -241,9 +241,10 @@ def run_replay(args: argparse.Namespace) -> int:
                         log_path=args.new_log, on_difference=differs, on_start=started)
         unmatched = f", {report.unmatched} with no recorded reply" if report.unmatched else ""
         cut = f"; the recorded log is {report.cut.state}: {report.cut.reason}" if report.cut else ""
-        timing = f" ({report.timing} of them status polls at a motion's end)" if report.timing else ""
+        late = f", {report.replay_late} sent late by the replay" if report.replay_late else ""
+        timing = f" ({report.timing} of them status polls at a motion's end{late})" if report.timing else ""
         out.write(f"replayed {report.frames} frames: {report.same} same, {report.different} differ{timing}"
                   f"{unmatched}; frames left up to {report.max_lag_ms:.1f} ms after their recorded time"
                   f"{cut}\n")
         out.write(f"log: {report.log_path}\n")
-    return 1 if args.strict and report.different else 0
+    return 1 if args.strict and report.board_differences else 0

@@ -27,7 +27,7 @@ from choreo.errors import ChoreoError, UsageError
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import ShowClock, reply_meaning
 from choreo.review.reader import Cut, LogReader, decode
-from choreo.review.summary import RX_TOPIC, STEP_TOPIC, TX_TOPIC
+from choreo.review.summary import LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC
 
 LISTED_DIFFERENCES = 200  # kept in the report; all are counted (and written to the new log)
 
@@ -42,6 +42,7 @@ class Difference:
     show_s: float  # recorded show time of the frame
     recorded: dict
     replayed: dict
+    late_ms: float = 0.0  # how late the replay sent the frame, on the run's clock (ms)
 
     @property
     def timing(self) -> bool:
@@ -49,9 +50,21 @@ class Difference:
         executing: a poll that fell on the motion's end, not a fault on the line."""
         return self.recorded.get("kind") == self.replayed.get("kind") == "status"
 
+    @property
+    def replay_late(self) -> bool:
+        """The replay itself sent this poll late (a busy machine: at speed 10, 0.3 ms is 3 ms of
+        the run), and it found over a motion the run found still executing: the replay's timing,
+        not the board's answer. A poll sent on time that differs is never excused."""
+        return (self.timing and self.recorded.get("executing") is True
+                and self.replayed.get("executing") is False and self.late_ms > LATE_MS)
+
     def __str__(self) -> str:
         where = f"step {self.step} " if self.step is not None else ""
-        note = " (timing: a poll at the motion's end)" if self.timing else ""
+        if self.replay_late:
+            note = (f" (timing: the replay sent this poll {self.late_ms:.1f} ms late on the run's clock, "
+                    "after the motion's end: not the board's doing)")
+        else:
+            note = " (timing: a poll at the motion's end)" if self.timing else ""
         return (f"{self.show_s:9.3f} s  #{self.seq} {where}{self.frame}: recorded "
                 f"{_said(self.recorded)}, replay {_said(self.replayed)}{note}")
 
@@ -71,11 +84,17 @@ class ReplayReport:
     same: int = 0
     different: int = 0
     timing: int = 0  # of the differences, status polls that fell on a motion's end
+    replay_late: int = 0  # of those, polls the replay sent late (`Difference.replay_late`)
     unmatched: int = 0  # frames whose recorded reply is missing (a cut log)
     differences: list[Difference] = field(default_factory=list)
     max_lag_ms: float = 0.0  # how far behind its recorded show time (scaled) a frame left at worst
     cut: Cut | None = None
     show_note: str | None = None  # why the simulator runs without the show's durations
+
+    @property
+    def board_differences(self) -> int:
+        """Differences the board is answerable for: what `--strict` fails on."""
+        return self.different - self.replay_late
 
     @property
     def speed_note(self) -> str | None:
@@ -284,9 +303,11 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
     zero_mono: float | None = None  # replay's monotonic time of recorded show time 0
     first_s = 0.0
     last: tuple[float, float] | None = None  # the last event: (recorded show s, replay monotonic)
-    pending: dict[int, tuple[dict, dict, float]] = {}  # recorded seq -> (tx, replayed reply, show s)
+    restored: tuple[float, float] | None = None  # the last restore: (recorded show s, replay write)
+    # recorded seq -> (tx, replayed reply, show s, how late it left on the run's clock in ms)
+    pending: dict[int, tuple[dict, dict, float, float]] = {}
 
-    def due(show_s: float) -> None:
+    def due(show_s: float) -> float:
         """Wait for an event's time: its recorded show time, and never closer to the event before
         it than it was recorded. The replay's own exchanges can put it a few ms behind (a play
         sequence is three frames, each waiting for its reply); keeping the recorded gaps then keeps
@@ -305,6 +326,7 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
         lag_ms = (now - (zero_mono + (show_s - first_s) / speed)) * 1e3
         if lag_ms > report.max_lag_ms:
             report.max_lag_ms = lag_ms
+        return target
 
     topic, number = None, 0
     try:
@@ -328,14 +350,18 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
                 if message["seq"] in pending:  # its recorded reply never came: nothing to compare
                     pending.pop(message["seq"])
                     report.unmatched += 1
-                due(show_s)
+                target = due(show_s)
                 if status_spacing is not None and kind is FrameKind.STATUS:
                     status_spacing()
                 reply = link.send(frame, message.get("attempt", 1), Tag(message.get("step"), message.get("label")))
                 report.frames += 1
                 replayed = {"kind": reply.kind.value, "hex": reply.hex, "executing": reply.executing,
                             "error": reply.error}
-                pending[message["seq"]] = (message, replayed, show_s)
+                written = getattr(link, "last_tx_mono", target)  # after any wait in the link
+                if kind is FrameKind.RESTORE:
+                    restored = (show_s, written)
+                late_ms = _late_ms(show_s, written, target, restored, speed)
+                pending[message["seq"]] = (message, replayed, show_s, late_ms)
                 if len(pending) > 64:  # replies missing from the recording: do not hold them forever
                     pending.pop(next(iter(pending)))
                     report.unmatched += 1
@@ -343,12 +369,15 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
                 held = pending.pop(message.get("seq"), None)
                 if held is None:
                     continue
-                tx, replayed, show_s = held
+                tx, replayed, show_s, late_ms = held
                 if _same(message, replayed):
                     report.same += 1
                     continue
+                difference = Difference(message["seq"], tx.get("step"), tx.get("kind", "?"), show_s, message,
+                                        replayed, round(late_ms, 3))
                 report.different += 1
-                difference = Difference(message["seq"], tx.get("step"), tx.get("kind", "?"), show_s, message, replayed)
+                report.timing += difference.timing
+                report.replay_late += difference.replay_late
                 if len(report.differences) < LISTED_DIFFERENCES:
                     report.differences.append(difference)
                 recorder.on_log(3, f"replay differs: {difference}", clock.wall_ns())
@@ -357,6 +386,22 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise reader.not_choreo(topic, number, exc) from None
     report.unmatched += len(pending)
+
+
+def _late_ms(show_s: float, written: float, target: float, restored: tuple[float, float] | None,
+             speed: float) -> float:
+    """How late a frame went out, in ms of the run's clock: against the restore that started
+    the running motion (what decides a status poll's answer), else against its own due time.
+
+    Measured from the restore, not from the poll's due time: a step event between them that ran
+    late moves the poll's due time with it, and the poll then looks on time while it fell later
+    in the motion than the run's did.
+    """
+    if restored is not None:
+        behind = (written - restored[1]) - (show_s - restored[0]) / speed
+    else:
+        behind = written - target
+    return max(0.0, behind * 1e3 * speed)
 
 
 def _same(recorded: dict, replayed: dict) -> bool:
