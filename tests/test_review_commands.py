@@ -554,3 +554,26 @@ def test_a_poll_the_replay_sent_late_is_not_held_against_the_board(live_log, cap
                            for line in differs)  # that poll, and the ones kept as far behind it
     n = len(differs)
     assert f"{n} differ ({n} of them status polls at a motion's end, {n} sent late by the replay)" in out
+
+
+def test_summary_counts_late_plays_as_the_run_did(logs, capsys):
+    """A play its retries delayed is late (the runner's count in the log's result); one late at
+    its cue is not counted again when it is retried too."""
+    path = logs.directory / "retried.mcap"
+    done = subprocess.run(_choreo("run", str(logs.directory / "review.yaml"), "--log", str(path), "-q",
+                                  "--port", "sim://?nak=4", "--timeout", "0.05", "--retries", "4"),
+                          cwd=logs.directory, capture_output=True, timeout=30)
+    assert done.returncode == 0, done.stderr
+    code, out, _ = cli(capsys, "log", "summary", str(path))
+    assert code == 0
+    with LogReader(path) as reader:
+        list(reader.messages())
+        run_late = int(reader.result["late_steps"])
+    warnings = [m["message"] for m in mcap_topics(path)["/choreo/log"] if "tries)" in m["message"]]
+    by_retries = f" ({len(warnings)} by retries)" if warnings else ""
+    assert f", {run_late} late{by_retries}, " in field(out, "steps")
+    for name in ("complete", "faulty"):
+        _, out, _ = cli(capsys, "log", "summary", str(getattr(logs, name)))
+        with LogReader(getattr(logs, name)) as reader:
+            list(reader.messages())
+            assert f" {reader.result['late_steps']} late" in field(out, "steps")

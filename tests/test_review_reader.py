@@ -348,3 +348,49 @@ def test_stale_bytes_that_are_not_replies_stay_together():
     assert stale_replies("04 00 06 0a 05 00 23 87 af") == ["04 00 06 0a", "05 00 23 87 af"]
     assert stale_replies("ff 00 01") == ["ff 00 01"]  # noise waiting on the line, as logged
     assert stale_replies("04 00 06 0a 02 99") == ["04 00 06 0a", "02 99"]
+
+
+def _log_with_late_plays(path: Path) -> None:
+    """Four plays as `choreo run` logs them: on time; late at its start and retried (late once);
+    on time but delayed by its retries (late, as the runner counts it, with its warning line);
+    on time with a slow first frame but no retry (not late); then one aborted by a second Ctrl-C."""
+    from choreo import protocol
+    from choreo.link import RxEvent, Tag, TxEvent
+    from choreo.record import WARNING, Recorder, RunInfo
+    from choreo.runner import StepEvent
+    from choreo.show.model import PlannedStep, StepKind
+
+    start = 1_790_000_000_000_000_000
+    recorder = Recorder(path, RunInfo("s.yaml", "late", b"version: 1\n", "sim://", 115200, start))
+    ack = protocol.Reply(protocol.ReplyKind.ACK, protocol.ack(protocol.CMD_MOV))
+    nak = protocol.Reply(protocol.ReplyKind.NAK, protocol.nak(protocol.CMD_MOV), error="NAK")
+    seq = 0
+    # (start late_ms, tries, end late_ms, outcome)
+    plays = [(0.2, 1, 0.3, "ok"), (5.0, 2, 30.0, "ok"), (0.2, 2, 25.0, "ok"), (0.2, 1, 1.5, "ok"),
+             (0.1, 1, 0.0, "aborted")]
+    for index, (late_start, tries, late_end, outcome) in enumerate(plays):
+        step = PlannedStep(index, f"steps[{index}]", StepKind.PLAY, motion=3)
+        t = start + (index + 1) * 100_000_000
+        recorder.on_step(StepEvent(step, "start", index * 0.1, index * 0.1, t, late_start))
+        for attempt in range(1, tries + 1):
+            seq += 1
+            frame = protocol.play_sequence(3)[0]
+            recorder.on_tx(TxEvent(seq, frame, attempt, t + seq, Tag(index, None)))
+            recorder.on_rx(RxEvent(seq, frame, ack if attempt == tries else nak, t + seq + 1, 0.001, Tag(index, None)))
+        if tries > 1 and late_end > 1:
+            recorder.on_log(WARNING, f"step {index}: motion 3 started {late_end:.1f} ms late ({tries} tries)", t + 50)
+        recorder.on_step(StepEvent(step, "end", index * 0.1, index * 0.1 + 0.01, t + 60, late_end, outcome))
+    recorder.close({"outcome": "aborted"})
+
+
+def test_a_play_its_retries_made_late_is_late_once(tmp_path):
+    path = tmp_path / "late.mcap"
+    _log_with_late_plays(path)
+    summary = summarize(path)
+    assert (summary.steps_late, summary.steps_late_by_retries) == (2, 1)
+    assert len(summary.lateness) == 5 and summary.lateness.above(1.0) == 1  # cue lateness: the starts
+    assert (summary.steps_done, summary.steps_aborted, summary.steps_unfinished) == (4, 1, 0)
+    from choreo.review.summary import render
+
+    steps = next(line for line in render(summary) if line.startswith("steps"))
+    assert steps == "steps     5 run: 4 done, 2 late (1 by retries), 0 failed, 1 aborted"

@@ -136,7 +136,9 @@ class Summary:
     duration_s: float | None = None  # show clock at the last message (or the result's, if closed)
     steps_run: int = 0
     steps_done: int = 0
-    steps_late: int = 0  # play steps that started more than LATE_MS after their time (as the runner counts)
+    steps_late: int = 0  # play steps late on stage, counted once each as the runner counts them:
+    # started more than LATE_MS after their time, or (`_slipped`) retries delayed the motion that long
+    steps_late_by_retries: int = 0  # of those, the plays on time whose retries made them late
     steps_failed: int = 0
     steps_aborted: int = 0
     steps_unfinished: int = 0
@@ -206,11 +208,12 @@ def summarize_reader(reader: LogReader) -> Summary:
     replies = dict.fromkeys(REPLY_KINDS, 0)
     latency: dict[int, int] = {}
     lateness: dict[int, int] = {}
-    steps_open: set[int] = set()
+    steps_open: dict[int, bool] = {}  # a step started and not ended -> a play late at its start
+    retried: set[int] = set()  # open steps with a frame sent again
     outcomes = {"ok": 0, "failed": 0, "timeout": 0, "aborted": 0}
     zero = show_zero_ns(reader)
     zero_from_step = False
-    retries = late = started = stale = 0
+    retries = late = late_by_retries = started = stale = 0
     pending_seq = -1  # the tx waiting for its rx
     last_time = None
     # motion tracking: play -> restore ACKed -> running until a status says not executing
@@ -263,6 +266,8 @@ def summarize_reader(reader: LogReader) -> Summary:
                 pending_seq = m["seq"]
                 if m["attempt"] > 1:
                     retries += 1
+                    if m["step"] is not None:
+                        retried.add(m["step"])
                 if kind == "status":
                     status_seq = pending_seq
                     status_ns = log_time
@@ -279,21 +284,27 @@ def summarize_reader(reader: LogReader) -> Summary:
                 index = m["index"]
                 if m["event"] == "start":
                     started += 1
-                    steps_open.add(index)
+                    steps_open[index] = False
                     if m["kind"] == "play":  # a wait starts when the play before it is answered
                         late_ms = m["late_ms"]
                         key = round(late_ms * 1000)
                         lateness[key] = lateness.get(key, 0) + 1
                         if late_ms > LATE_MS:
                             late += 1
+                            steps_open[index] = True
                     if not zero_from_step:
                         # the show clock's zero in wall-clock ns: this start's time minus its show time
                         zero = log_time - round(m["actual_s"] * 1e9)
                         zero_from_step = True
                 else:
-                    steps_open.discard(index)
+                    late_at_start = steps_open.pop(index, False)
                     outcome = m["outcome"]
                     outcomes[outcome] = outcomes.get(outcome, 0) + 1
+                    if index in retried:
+                        retried.discard(index)
+                        if _slipped(m, late_at_start):
+                            late += 1
+                            late_by_retries += 1
             elif topic == LOG_TOPIC:
                 m = decode(data)
                 level = m.get("level", 0)
@@ -327,6 +338,7 @@ def summarize_reader(reader: LogReader) -> Summary:
     summary.lateness = Distribution(lateness)
     summary.steps_run = started
     summary.steps_late = late
+    summary.steps_late_by_retries = late_by_retries
     summary.steps_done = outcomes.get("ok", 0)
     summary.steps_failed = outcomes.get("failed", 0) + outcomes.get("timeout", 0)
     summary.steps_aborted = outcomes.get("aborted", 0)
@@ -337,6 +349,18 @@ def summarize_reader(reader: LogReader) -> Summary:
     elif last_time is not None and zero is not None:
         summary.duration_s = _show_s(last_time, zero)
     return summary
+
+
+def _slipped(end: dict, late_at_start: bool) -> bool:
+    """A play on time at its start whose retries delayed its motion past LATE_MS.
+
+    The runner says so in the play's end event (`late_ms`: how late the play sequence that
+    worked began) and in a warning line; only the event is read, a log line being words for
+    people. A play late at its start is counted there already: never twice. Logs from before
+    the end event carried it have 0 there.
+    """
+    return (end.get("kind") == "play" and end.get("outcome") == "ok" and not late_at_start
+            and (end.get("late_ms") or 0) > LATE_MS)
 
 
 def _show_s(log_time: int, zero: int | None) -> float:
@@ -392,7 +416,8 @@ def render(summary: Summary) -> Iterable[str]:
             yield f"          {error}"
     else:
         yield f"outcome   unknown (no result recorded): {duration} on the show clock up to the last message"
-    steps = (f"steps     {summary.steps_run} run: {summary.steps_done} done, {summary.steps_late} late, "
+    by_retries = f" ({summary.steps_late_by_retries} by retries)" if summary.steps_late_by_retries else ""
+    steps = (f"steps     {summary.steps_run} run: {summary.steps_done} done, {summary.steps_late} late{by_retries}, "
              f"{summary.steps_failed} failed")
     if summary.steps_aborted:
         steps += f", {summary.steps_aborted} aborted"
