@@ -577,3 +577,12 @@ def test_summary_counts_late_plays_as_the_run_did(logs, capsys):
         with LogReader(getattr(logs, name)) as reader:
             list(reader.messages())
             assert f" {reader.result['late_steps']} late" in field(out, "steps")
+
+
+def test_frames_of_the_links_ack_checks(logs, capsys):
+    """After a timeout the link sends the ACK check (tx kind sync): `--kind sync` lists them."""
+    syncs = [m for m in mcap_topics(logs.faulty)["/rcb4/tx"] if m["kind"] == "sync"]
+    code, out, _ = cli(capsys, "log", "frames", str(logs.faulty), "--kind", "sync")
+    assert code == 0
+    tx = [line for line in out.splitlines() if "  tx  " in line]
+    assert len(tx) == len(syncs) and all(" sync " in line for line in tx)

@@ -18,7 +18,7 @@ from typing import IO, TextIO
 
 from choreo.errors import UsageError
 
-FRAME_AND_REPLY_KINDS = ("stop", "play", "restore", "status", "ack", "nak", "timeout", "invalid")
+FRAME_AND_REPLY_KINDS = ("stop", "play", "restore", "status", "sync", "ack", "nak", "timeout", "invalid")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
