@@ -140,6 +140,9 @@ class Link:
         self.should_stop: Callable[[], bool] = lambda: False
         self.last_tx_mono = 0.0  # monotonic time of the last write: polls are spaced from it
         self._last_status_mono = float("-inf")  # the last status query's write
+        # The board refreshes its status every 50 ms. Only a faster simulator (a replay at
+        # --speed X on sim://) may be polled more often.
+        self.status_spacing_s = STATUS_SPACING_S
         self._seq = 0
 
     @classmethod
@@ -225,7 +228,7 @@ class Link:
         except PortLost as exc:
             raise self._lost(exc, frame, tag, what) from None
         if frame.kind is FrameKind.STATUS:
-            self.clock.sleep_until(self._last_status_mono + STATUS_SPACING_S)
+            self.clock.sleep_until(self._last_status_mono + self.status_spacing_s)
         self._seq += 1
         seq = self._seq
         sent = time.monotonic_ns()  # the frame's time: just before the write

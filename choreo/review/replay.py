@@ -243,11 +243,13 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
             recorder.on_log(2, f"replay of {reader.path} at speed {speed:g} on {url}", clock.wall_ns())
             link = Link.open(url, baud, timeout=timeout or DEFAULT_TIMEOUT_S, tries=1, clock=clock,
                              listeners=[recorder])
+            if speed > 1 and _is_sim(url):
+                # its motions and status refresh run `speed` times faster: so may the polls
+                link.status_spacing_s /= speed
             try:
                 if on_start is not None:
                     on_start(report)
-                _replay_frames(reader, link, recorder, clock, speed, report, on_difference,
-                               status_spacing=_status_spacing(link, url, speed))
+                _replay_frames(reader, link, recorder, clock, speed, report, on_difference)
             finally:
                 link.close()
             report.cut = reader.cut
@@ -270,31 +272,8 @@ def _elapsed(clock) -> float:
     return (time.monotonic_ns() - clock.mono_anchor_ns) / 1e9
 
 
-def _status_spacing(link, url: str, speed: float) -> Callable[[], None] | None:
-    """What lets a faster replay poll a `sim://` board as often as the speed asks.
-
-    The link spaces status queries 50 ms apart, the rate a real board refreshes its status. A
-    replay at speed X polls X times as often on purpose (its motions run X times faster), and the
-    simulator answers its live state, so its spacing is 50 ms / X; a robot keeps the 50 ms. The
-    link has no setting for it: this moves its last query's time back before each query
-    (and does nothing to a link that no longer keeps one).
-    """
-    from choreo import link as link_module
-
-    spacing = getattr(link_module, "STATUS_SPACING_S", None)
-    if speed <= 1 or not _is_sim(url) or spacing is None or not hasattr(link, "_last_status_mono"):
-        return None
-    shift = spacing * (1 - 1 / speed)
-
-    def before_status() -> None:
-        link._last_status_mono -= shift
-
-    return before_status
-
-
 def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, report: ReplayReport,
-                   on_difference: Callable[[Difference], None] | None,
-                   status_spacing: Callable[[], None] | None = None) -> None:
+                   on_difference: Callable[[Difference], None] | None) -> None:
     """The recorded frames, each at its show time / speed; replies compared as they come."""
     from choreo.link import Tag
     from choreo.protocol import Frame, FrameKind
@@ -351,8 +330,6 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
                     pending.pop(message["seq"])
                     report.unmatched += 1
                 target = due(show_s)
-                if status_spacing is not None and kind is FrameKind.STATUS:
-                    status_spacing()
                 reply = link.send(frame, message.get("attempt", 1), Tag(message.get("step"), message.get("label")))
                 report.frames += 1
                 replayed = {"kind": reply.kind.value, "hex": reply.hex, "executing": reply.executing,
