@@ -6,7 +6,7 @@ in bounded memory (under 200 MB). This script writes such a log with choreo's ow
 same writer settings as `choreo run`), from a realistic run: play sequences (stop, play, restore),
 `wait: done` status polls every 50 ms, cue waits, the odd retry and warning. Then it times both
 readers in the same process (best of a few runs each) and measures the summary's peak memory in
-a fresh subprocess (ru_maxrss), so the figure is the whole program's, not one allocation's.
+a fresh subprocess (its VmHWM), so the figure is the whole program's, not one allocation's.
 
 `run(quick=False)` returns rows for bench/run.py; `python bench/log_review.py [--quick]` prints them.
 """
@@ -154,15 +154,17 @@ def time_summary(path: Path) -> tuple[float, int]:
 
 def peak_summary_mb(path: Path) -> float:
     """Peak resident memory (MB) of a fresh process that summarises the log."""
+    # VmHWM, the peak of this process image: Linux carries ru_maxrss across exec, so a child
+    # forked from a large benchmark process would report its parent's size.
     code = (
-        "import resource, sys\n"
+        "import sys\n"
         "from choreo.review.summary import summarize\n"
         "summarize(sys.argv[1])\n"
-        "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
+        "print(next(l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM:')))\n"
     )
     done = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True,
                           cwd=ROOT, check=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
-    kib = int(done.stdout.split()[-1])  # Linux: ru_maxrss in KiB
+    kib = int(done.stdout.split()[-1])  # kB
     return kib / 1024
 
 
