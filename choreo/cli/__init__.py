@@ -24,6 +24,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="choreo",
         description="Play stored motions on a Kondo RCB-4 robot from a YAML show file, "
         "byte-exact and on time, and record every frame to an MCAP log.",
+        epilog="Exit codes: 0 done; 2 bad show file or bad arguments (nothing was sent); "
+        "3 the robot link failed; 130 interrupted (Ctrl-C, SIGTERM). "
+        "`choreo COMMAND --help` tells more.",
     )
     parser.add_argument("--version", action="version", version=f"choreo {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")

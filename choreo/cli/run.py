@@ -29,9 +29,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     logs.add_argument("--no-log", action="store_true", help="do not record a log")
     parser.add_argument("--from", dest="from_step", metavar="STEP",
                         help="start at this step (index from `choreo plan`, or label)")
-    parser.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for a reply (default 0.2)")
+    parser.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for a reply, 0 < S <= 10 (default 0.2)")
     parser.add_argument("--retries", type=int, metavar="N",
-                        help="retries of a failed frame or play sequence (default 2: 3 tries)")
+                        help="retries of a failed frame or play sequence, 0..10 (default 2: 3 tries)")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress output")
     parser.set_defaults(handler=run)
 
