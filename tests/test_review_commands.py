@@ -153,7 +153,12 @@ def test_summary_of_a_complete_run(logs, capsys):
     assert "review" in field(out, "show") and "sha256" in field(out, "show")
     assert "sim://?durations=3:0.33,5:0.22 at 115200 baud" in field(out, "run")
     assert field(out, "outcome").startswith("outcome   done (exit 0)")
-    assert "6 run: 6 done, 1 late, 0 failed" in field(out, "steps")
+    # the overrun cue is late by construction; on a loaded machine another play may be too, so
+    # the summary must agree with the run's own count rather than with a fixed 1
+    with LogReader(logs.complete) as reader:
+        list(reader.messages())
+        run_late = int(reader.result["late_steps"])
+    assert run_late >= 1 and f"6 run: 6 done, {run_late} late, 0 failed" in field(out, "steps")
     assert f"{sum(tx.values())} sent (stop 3, play 3, restore 3, status {tx['status']}); 0 retries" in field(out, "frames")
     assert f"ACK 9, NAK 0, status {tx['status']}, timeout 0, invalid 0" in field(out, "replies")
     assert "median" in field(out, "latency") and f"({sum(tx.values())} replies)" in field(out, "latency")
@@ -260,8 +265,8 @@ def test_timeline_text_planned_against_actual(logs, capsys):
     assert "motion 3 wave" in rows[0] and "motion 5 bow" in rows[1]
     assert "0.000-0.330" in rows[0]  # planned from the attached show's durations
     assert "!" in rows[1] and "#" in rows[1]  # the overrun cue, started late
-    late = out.split("late cues: ", 1)[1].splitlines()
-    assert late[0] == "1" and "step 2 'late-bow' started" in late[1]
+    late = out.split("late cues: ", 1)[1]
+    assert int(late.split()[0]) >= 1 and "step 2 'late-bow' started" in late  # by construction
     assert "faults: none" in out
 
 
