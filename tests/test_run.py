@@ -561,7 +561,10 @@ def test_a_play_delayed_by_retries_is_reported_late(tmp_path):
     log = read_log(log_path)
     start, end = (m for m in log.steps if m["label"] == "cue")
     assert start["late_ms"] < 50 <= end["late_ms"]  # on time to start, late to really begin
-    assert any("'cue': motion 1 started" in m["message"] and "(2 tries)" in m["message"] for m in log.logs)
+    warnings = [m["message"] for m in log.logs if "'cue'" in m["message"] and "late" in m["message"]]
+    # "motion 1 started N ms late (2 tries)"; or, if a loaded machine already made the step's
+    # start late, that warning (a step is reported late once)
+    assert len(warnings) == 1 and ("(2 tries)" in warnings[0] or start["late_ms"] > 1)
     assert int(log.metadata["choreo.result"]["late_steps"]) >= 1
 
 
