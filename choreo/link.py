@@ -180,21 +180,18 @@ class Link:
         frames = protocol.play_sequence(motion)
         if self.should_stop():
             raise Interrupted(f"stopped before 'play {motion}'")
-        failure: tuple[Frame, Reply] | None = None
         for attempt in range(1, self.tries + 1):
             for frame in frames:
                 reply = self.send(frame, attempt, tag, what=f"play {motion}")
                 if frame is frames[0]:
                     began = self.last_tx_mono
                 if not reply.ok:
-                    failure = (frame, reply)
                     break
             else:
                 return Played(attempt, began)
             if attempt < self.tries and not self._settle(reply, tag):
                 raise self._failed(f"play {motion}", frame, reply, tag, attempt, silent=True)
-        assert failure is not None
-        raise self._failed(f"play {motion}", *failure, tag, self.tries)
+        raise self._failed(f"play {motion}", frame, reply, tag, self.tries)
 
     def query_status(self, tag: Tag | None = None) -> Reply:
         """Ask whether a motion is executing; the reply's `executing` says."""
