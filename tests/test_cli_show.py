@@ -125,3 +125,12 @@ def test_validate_imports_no_serial_or_mcap():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert done.stdout.splitlines()[-1] == "0 []"
+
+
+def test_validate_says_when_a_show_plays_no_motion(tmp_path, capsys):
+    from choreo.cli import main
+
+    path = tmp_path / "quiet.yaml"
+    path.write_text("version: 1\nsteps:\n  - wait: 1\n")
+    assert main(["validate", str(path)]) == 0
+    assert capsys.readouterr().out == f"{path}: ok, 1 step, no motions, estimated 1.0 s\n"

@@ -58,7 +58,8 @@ def summary_line(show, plan) -> str:  # type: ignore[no-untyped-def]  # model ty
     motions = ", ".join(f"{n} {names[n]}" if n in names else str(n) for n in plan.motions_used())
     late = _late_note(plan)
     steps = f"{len(plan.steps)} step{'s' if len(plan.steps) != 1 else ''}"
-    return f"{show.path}: ok, {steps}, motions {motions}, estimated {_seconds(plan.estimated_s)}{late}"
+    played = f"motions {motions}" if motions else "no motions"
+    return f"{show.path}: ok, {steps}, {played}, estimated {_seconds(plan.estimated_s)}{late}"
 
 
 def run_plan(args: argparse.Namespace) -> int:
