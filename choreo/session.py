@@ -156,8 +156,10 @@ def simulator_url(show: Show, plan: Plan, baud: int = DEFAULT_BAUD) -> str:
     return with_show_durations("sim://", show, plan, baud)
 
 
-def with_show_durations(url: str, show: Show, plan: Plan, baud: int = DEFAULT_BAUD) -> str:
-    """A `sim://` port gets what its URL does not say: the show's durations and the run's baud.
+def with_show_durations(url: str, show: Show | None, plan: Plan | None,
+                        baud: int = DEFAULT_BAUD) -> str:
+    """A `sim://` port gets what its URL does not say: the show's durations (when there is a
+    show) and the run's baud.
 
     `--port 'sim://?drop=5'` then still runs the show's motions for their expected lengths; a
     URL that sets `durations`, `motion_s` or `baud` itself is left to say so.
@@ -167,7 +169,7 @@ def with_show_durations(url: str, show: Show, plan: Plan, baud: int = DEFAULT_BA
     base, _, query = url.partition("?")
     given = dict(parse_qsl(query, keep_blank_values=True))
     added: dict[str, str] = {}
-    if "durations" not in given and "motion_s" not in given:
+    if show is not None and plan is not None and "durations" not in given and "motion_s" not in given:
         durations = {}
         for motion in plan.motions_used() + ([show.on_abort] if show.on_abort is not None else []):
             durations[motion] = show.duration_of(motion) or DEFAULT_MOTION_S

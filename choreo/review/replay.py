@@ -108,39 +108,20 @@ class ReplayReport:
 def default_port(show: AttachedShow, baud: int | None = None) -> str:
     """`sim://` with the attached show's motion durations (and a baud other than 115200), or
     plain `sim://`."""
-    if show.show is None or show.plan is None:
-        return _with_baud("sim://", baud)
-    from choreo.session import simulator_url
-
-    return _with_baud(simulator_url(show.show, show.plan, baud) if baud else
-                      simulator_url(show.show, show.plan), baud)
+    return _with_durations("sim://", show, baud)
 
 
 def _with_durations(url: str, show: AttachedShow, baud: int | None = None) -> str:
-    """`--port sim://?drop=5`: still the show's durations (as `choreo run` does)."""
-    if show.show is None or show.plan is None:
-        return _with_baud(url, baud)
+    """`--port sim://?drop=5`: still the show's durations and the replay's baud (as `choreo run`
+    does: one rule, `session.with_show_durations`)."""
+    from choreo.link import DEFAULT_BAUD
     from choreo.session import with_show_durations
 
-    return _with_baud(with_show_durations(url, show.show, show.plan, baud) if baud else
-                      with_show_durations(url, show.show, show.plan), baud)
+    return with_show_durations(url, show.show, show.plan, baud or DEFAULT_BAUD)
 
 
 def _is_sim(url: str) -> bool:
     return url.lower().startswith("sim://")
-
-
-def _with_baud(url: str, baud: int | None) -> str:
-    """A `sim://` board answers only at its own baud: give it the replay's, unless the URL does."""
-    from choreo.link import DEFAULT_BAUD
-
-    if not _is_sim(url) or baud is None or baud == DEFAULT_BAUD:
-        return url
-    base, _, query = url.partition("?")
-    pairs = parse_qsl(query, keep_blank_values=True)
-    if any(name == "baud" for name, _ in pairs):
-        return url
-    return f"{base}?{urlencode([*pairs, ('baud', str(baud))], safe=':,')}"
 
 
 def at_speed(url: str, speed: float) -> str:
@@ -167,9 +148,7 @@ def at_speed(url: str, speed: float) -> str:
         return url
     scaled = {"motion_s": f"{options.motion_s / speed:.9g}",
               "reply_ms": f"{options.reply_s * 1e3 / speed:.9g}"}
-    refresh_s = getattr(options, "refresh_s", None)  # the board's status refresh, where it has one
-    if refresh_s is not None:
-        scaled["refresh_ms"] = f"{refresh_s * 1e3 / speed:.9g}"
+    scaled["refresh_ms"] = f"{options.refresh_s * 1e3 / speed:.9g}"
     if options.durations:
         scaled["durations"] = ",".join(f"{slot}:{seconds / speed:.9g}"
                                        for slot, seconds in sorted(options.durations.items()))
