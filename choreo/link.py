@@ -29,8 +29,8 @@ DEFAULT_TIMEOUT_S = 0.2
 DEFAULT_TRIES = 3
 QUIET_S = 0.01  # after a bad reply, the line counts as settled once this long passes with no byte
 STATUS_SPACING_S = 0.05  # the board refreshes its status every 50 ms: never query faster
-MAX_STALE = 3
-SYNC_TRIES = 3  # ACK checks after a timeout: one may reach a board still sending a late reply  # late replies to earlier frames set aside while waiting for one frame's reply
+MAX_STALE = 3  # late replies to earlier frames set aside while waiting for one frame's reply
+SYNC_TRIES = 3  # ACK checks after a timeout: one may reach a board still sending a late reply
 
 
 @dataclass(frozen=True)
@@ -143,6 +143,10 @@ class Link:
         # The board refreshes its status every 50 ms. Only a faster simulator (a replay at
         # --speed X on sim://) may be polled more often.
         self.status_spacing_s = STATUS_SPACING_S
+        # Whether any frame of a play sequence reached the board: only then has the show moved
+        # the robot, and only then does a stopped show play its abort motion.
+        self.moved = False
+        self._late_replies = 0  # replies set aside as late during the current frame's tries
         self._seq = 0
 
     @classmethod
@@ -178,20 +182,22 @@ class Link:
         Returns how many tries it took and when the sequence that worked began.
         """
         frames = protocol.play_sequence(motion)
-        if self.should_stop():
-            raise Interrupted(f"stopped before 'play {motion}'")
+        what = f"play {motion}"
+        self._late_replies = 0
         for attempt in range(1, self.tries + 1):
+            self._check_stop(what)
             for frame in frames:
-                reply = self.send(frame, attempt, tag, what=f"play {motion}")
+                reply = self.send(frame, attempt, tag, what=what)
+                self.moved = True
                 if frame is frames[0]:
                     began = self.last_tx_mono
                 if not reply.ok:
                     break
             else:
                 return Played(attempt, began)
-            if attempt < self.tries and not self._settle(reply, tag):
-                raise self._failed(f"play {motion}", frame, reply, tag, attempt, silent=True)
-        raise self._failed(f"play {motion}", frame, reply, tag, self.tries)
+            if attempt < self.tries and not self._settle(reply, tag, what):
+                raise self._failed(what, frame, reply, tag, attempt, silent=True)
+        raise self._failed(what, frame, reply, tag, self.tries)
 
     def query_status(self, tag: Tag | None = None) -> Reply:
         """Ask whether a motion is executing; the reply's `executing` says."""
@@ -200,15 +206,21 @@ class Link:
     def exchange(self, frame: Frame, tag: Tag | None = None) -> Reply:
         """One frame, retried alone until the board accepts it or the tries run out."""
         reply = protocol.timeout()
+        self._late_replies = 0
         for attempt in range(1, self.tries + 1):
-            if self.should_stop():
-                raise Interrupted(f"stopped before sending '{frame}'")
+            self._check_stop(str(frame))
             reply = self.send(frame, attempt, tag)
             if reply.ok:
                 return reply
-            if attempt < self.tries and not self._settle(reply, tag):
+            if attempt < self.tries and not self._settle(reply, tag, str(frame)):
                 raise self._failed(str(frame), frame, reply, tag, attempt, silent=True)
         raise self._failed(str(frame), frame, reply, tag, self.tries)
+
+    def _check_stop(self, what: str) -> None:
+        """A stop request is honoured between exchanges, never inside one: before a frame (or a
+        play sequence's first frame), before each retry and before each ACK check."""
+        if self.should_stop():
+            raise Interrupted(f"stopped before '{what}'")
 
     # -- one try ---------------------------------------------------------------------------
 
@@ -237,7 +249,9 @@ class Link:
         # Listeners hear of the frame once it is out: their work never delays a cue's first byte.
         self.last_tx_mono = sent / 1e9
         if frame.kind is FrameKind.STATUS:
-            self._last_status_mono = self.last_tx_mono
+            # Spaced from when the write returned, not from the time taken before it: a write
+            # delayed by a busy machine must not bring the next query closer on the wire.
+            self._last_status_mono = time.monotonic()
         event = TxEvent(seq, frame, attempt, self.clock.wall_ns(sent), tag)
         for listener in self.listeners:
             listener.on_tx(event)
@@ -251,6 +265,8 @@ class Link:
             raise self._lost(lost, frame, tag, what) from None
         if stray:
             reply = replace(reply, stale=stray + reply.stale)
+        if reply.stale:
+            self._late_replies += 1
         self._report(seq, frame, reply, sent, tag)
         return reply
 
@@ -329,15 +345,16 @@ class Link:
             else:
                 time.sleep(min(0.001, quiet_s))
 
-    def _settle(self, reply: Reply, tag: Tag | None) -> bool:
-        """Before a retry, make sure no late reply is still coming; False if the line stays dead.
+    def _settle(self, reply: Reply, tag: Tag | None, what: str) -> bool:
+        """Before a retry, make sure no late reply is still coming; False if the line is silent.
 
         The protocol has no sequence numbers, and a late ACK to a restore is byte for byte an
         ACK to a stop: taken for the retried stop frame's answer, it would send the CALL with
         no stop before it (a second return address on the board). So after a timeout the link
         sends the ACK check, whose reply is unique, and reads up to it: every late reply has
-        then arrived (set aside as stale) and the board is listening. After a bad reply a short
-        quiet spell is enough.
+        then arrived (set aside as stale) and the board is listening. Any answer to an ACK
+        check, a NAK or a garbled one included, proves the board is there; only silence to
+        every check is a dead line. After a bad reply a short quiet spell is enough.
         """
         try:
             if reply.kind is not ReplyKind.TIMEOUT:
@@ -353,7 +370,12 @@ class Link:
                             "check the cable and the adapter") from None
         sync = protocol.sync_frame()
         for attempt in range(1, SYNC_TRIES + 1):
-            if self.send(sync, attempt, tag, what="sync").kind is ReplyKind.ACK:
+            self._check_stop(what)
+            answer = self.send(sync, attempt, tag, what="sync")
+            if answer.kind in (ReplyKind.ACK, ReplyKind.NAK):
+                return True  # the check's own answer: everything before it has arrived
+            if answer.kind is not ReplyKind.TIMEOUT:
+                self._drain(quiet_s=QUIET_S)  # garbled, but an answer: the line is alive
                 return True
         return False
 
@@ -378,6 +400,10 @@ class Link:
                          f"after {after}: {self._hint(reply)}")
 
     def _hint(self, reply: Reply) -> str:
+        if self._late_replies:
+            return (f"replies came too late ({self._late_replies} set aside after the "
+                    f"{self.timeout:g} s timeout): the board answers slower than --timeout allows; "
+                    "give a longer --timeout, or check the adapter's latency")
         settings = f"check baud ({self.baud}), even parity"
         if reply.kind is ReplyKind.TIMEOUT:
             return f"{settings}, and the adapter (5 V inverted logic without Kondo's USB adapter)"

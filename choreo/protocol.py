@@ -218,7 +218,7 @@ class Reply:
     def describe(self) -> str:
         """What a user reads in an error line: `NAK (04 0c 15 25)`, `nothing`, ..."""
         if self.kind is ReplyKind.TIMEOUT:
-            return f"nothing ({self.hex})" if self.data else "nothing"
+            return f"no complete reply ({self.hex})" if self.data else "no reply"
         if self.kind is ReplyKind.INVALID:
             return f"an invalid reply ({self.hex}): {self.error}"
         return f"{self.kind.value.upper()} ({self.hex})"

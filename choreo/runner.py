@@ -126,7 +126,7 @@ class Runner:
     def run(self) -> RunResult:
         """Play the plan from `start`; LinkError on a fault, RunResult otherwise (done or aborted)."""
         steps = self.plan.steps[self.start:]
-        cursor = steps[0].planned_s if steps else 0.0  # --from: the clock starts at that step's time
+        cursor = self._origin()
         self._zero = time.monotonic() - cursor
         self.link.listeners.append(_RetryReporter(self))
         self.link.should_stop = self.stop
@@ -136,6 +136,14 @@ class Runner:
         except Interrupted:
             return self._abort()
         return RunResult("done", self._run, self._late, self.show_time())
+
+    def _origin(self) -> float:
+        """Where the show clock starts: 0 for a whole show, so that a cue on the first step
+        waits for its time like any other; with --from, the planned time of that step, so a
+        rehearsal starts at once and its later cues keep their places."""
+        if self.start and self.start < len(self.plan.steps):
+            return self.plan.steps[self.start].planned_s
+        return 0.0
 
     def _sleep_until(self, deadline: float) -> bool:
         return self.clock.sleep_until(deadline, self.stop, on_idle=self.on_idle)
@@ -236,7 +244,7 @@ class Runner:
     def _abort(self) -> RunResult:
         """No more show frames; play the show's abort motion if it has one."""
         self._log(WARNING, f"show {self.stop.reason} at {self.show_time():.3f} s")
-        if self.on_abort is not None and self._run:  # a robot the show never moved stays as it is
+        if self.on_abort is not None and self.link.moved:  # a robot the show never moved stays as it is
             self._log(INFO, f"playing abort motion {self.on_abort}")
             self.link.should_stop = lambda: False
             try:

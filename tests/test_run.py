@@ -692,3 +692,33 @@ def test_polls_and_cues_over_a_pty(tmp_path):
     assert len(polls) >= 4 and min(b - a for a, b in zip(polls, polls[1:])) >= 50_000_000
     cue = next(m for m in log.tx if m["label"] == "cue")
     assert cue["_log_time"] - log.steps[0]["_log_time"] >= 700_000_000
+
+
+RETRIED_SHOW = """
+    version: 1
+    name: retries
+    steps:
+      - play: 1
+      - wait: done
+      - play: 2
+"""
+
+
+def test_ctrl_c_during_retries_stops_the_run_at_once(tmp_path):
+    # Every second frame is lost: the play is retried (10 retries, several seconds). SIGINT
+    # while it retries ends the retries after the exchange in flight: exit 130, not exit 3.
+    show = write_show(tmp_path, RETRIED_SHOW)
+    log_path = tmp_path / "retries.mcap"
+    process = start_choreo("run", str(show), "--log", str(log_path), "--port", "sim://?drop=2",
+                           "--retries", "10")
+    assert wait_for(lambda: log_path.exists() and any(
+        m["kind"] == "sync" for m in read_log_linear(log_path)[0].tx), every=0.02)
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=10)
+    assert process.returncode == 130, err
+    assert "after 11 tries" not in err
+    log = read_log(log_path)
+    stopped = next(m for m in log.logs if "interrupted" in m["message"])
+    after = [m for m in log.tx if m["_log_time"] > stopped["_log_time"]]
+    assert after == []  # nothing went out after the stop (the show has no abort motion)
+    assert log.metadata["choreo.result"]["outcome"] == "aborted"

@@ -89,3 +89,76 @@ def test_the_runner_sends_exactly_the_plan(tmp_path):
     assert result.outcome == "done" and result.steps_run == 3
     assert [f.hex for f in frames.sent] == [f.hex for f in p.play_sequence(3) + p.play_sequence(4)]
     assert result.show_s == pytest.approx(0.05, abs=0.05)
+
+
+def test_a_cue_on_the_first_step_waits_for_its_time(tmp_path):
+    # The show clock starts at 0 whatever the first step is: `at: 0.3` on it is 0.3 s away.
+    stop = StopRequest()
+    frames = Frames()
+    body = """
+        version: 1
+        steps:
+          - play: 1
+            at: 0.3
+    """
+    runner = runner_for(tmp_path, body, stop, frames)
+    board = runner.link.port.board
+    started = time.monotonic()
+    runner.run()
+    first = next(e for e in board.journal if e.kind == "frame")
+    assert first.at - started >= 0.3
+
+
+def test_a_cue_on_a_repeat_that_opens_the_show_waits_for_its_time(tmp_path):
+    stop = StopRequest()
+    frames = Frames()
+    body = """
+        version: 1
+        steps:
+          - repeat: 2
+            at: 0.2
+            steps:
+              - play: 1
+              - wait: 0.05
+    """
+    runner = runner_for(tmp_path, body, stop, frames)
+    board = runner.link.port.board
+    started = time.monotonic()
+    runner.run()
+    first = next(e for e in board.journal if e.kind == "frame")
+    assert first.at - started >= 0.2
+
+
+def test_a_show_stopped_before_its_first_play_does_not_play_the_abort_motion(tmp_path):
+    stop = StopRequest()
+    frames = Frames()
+    body = """
+        version: 1
+        motions:
+          home: {number: 0, duration: 0.05}
+        on_abort: home
+        steps:
+          - wait: 0.3
+          - play: 3
+    """
+    runner = runner_for(tmp_path, body, stop, frames)
+    runner.on_idle = lambda: stop.request("interrupted (test)")  # Ctrl-C during the wait
+    result = runner.run()
+    assert result.outcome == "aborted" and result.steps_run == 1
+    assert frames.sent == []  # the robot was never moved: it is left as it is
+
+
+def test_a_stop_during_retries_ends_them_and_plays_the_abort_motion(tmp_path):
+    # The show's play meets silence and is being retried (10 retries); Ctrl-C during the first
+    # ACK check: no further try, then the abort motion, which the board answers.
+    from test_link import ACK_CALL, ACK_MOV, ScriptedPort
+
+    stop = StopRequest()
+    frames = Frames(stop, stop_at=2)  # the ACK check after the first timeout
+    show = load_show(write_show(tmp_path, SHOW))
+    port = ScriptedPort(b"", b"", ACK_MOV, ACK_CALL, ACK_MOV)
+    link = Link(port, timeout=0.01, tries=11, listeners=[frames])
+    result = Runner(compile_plan(show), link, on_abort=show.on_abort, stop=stop).run()
+    assert result.outcome == "aborted"
+    assert [f.kind.value for f in frames.sent] == ["stop", "sync", "stop", "play", "restore"]
+    assert frames.sent[-2].motion == 0  # the abort motion, not a retry of motion 3
