@@ -91,42 +91,32 @@ def test_the_runner_sends_exactly_the_plan(tmp_path):
     assert result.show_s == pytest.approx(0.05, abs=0.05)
 
 
-def test_a_cue_on_the_first_step_waits_for_its_time(tmp_path):
-    # The show clock starts at 0 whatever the first step is: `at: 0.3` on it is 0.3 s away.
-    stop = StopRequest()
-    frames = Frames()
-    body = """
-        version: 1
+FIRST_STEP_CUE = """
+    version: 1
+    steps:
+      - play: 1
+        at: 0.3
+"""
+OPENING_REPEAT_CUE = """
+    version: 1
+    steps:
+      - repeat: 2
+        at: 0.3
         steps:
           - play: 1
-            at: 0.3
-    """
-    runner = runner_for(tmp_path, body, stop, frames)
+          - wait: 0.05
+"""
+
+
+@pytest.mark.parametrize("body", [FIRST_STEP_CUE, OPENING_REPEAT_CUE], ids=["step", "repeat"])
+def test_a_cue_that_opens_the_show_waits_for_its_time(tmp_path, body):
+    # The show clock starts at 0 whatever the first step is: `at: 0.3` on it is 0.3 s away.
+    runner = runner_for(tmp_path, body, StopRequest(), Frames())
     board = runner.link.port.board
     started = time.monotonic()
     runner.run()
     first = next(e for e in board.journal if e.kind == "frame")
     assert first.at - started >= 0.3
-
-
-def test_a_cue_on_a_repeat_that_opens_the_show_waits_for_its_time(tmp_path):
-    stop = StopRequest()
-    frames = Frames()
-    body = """
-        version: 1
-        steps:
-          - repeat: 2
-            at: 0.2
-            steps:
-              - play: 1
-              - wait: 0.05
-    """
-    runner = runner_for(tmp_path, body, stop, frames)
-    board = runner.link.port.board
-    started = time.monotonic()
-    runner.run()
-    first = next(e for e in board.journal if e.kind == "frame")
-    assert first.at - started >= 0.2
 
 
 def test_a_show_stopped_before_its_first_play_does_not_play_the_abort_motion(tmp_path):
