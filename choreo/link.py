@@ -75,6 +75,9 @@ class Played:
 
     tries: int
     began: float
+    # Set when the start frame's reply was lost but the board showed the motion running: the
+    # play counts as done and was not sent again (what was lost, for the run's warning).
+    recovered: str | None = None
 
 
 class LinkListener(Protocol):
@@ -139,6 +142,7 @@ class Link:
         # no further frame goes out (the runner sets it; Ctrl-C sets the runner's).
         self.should_stop: Callable[[], bool] = lambda: False
         self.last_tx_mono = 0.0  # monotonic time of the last write: polls are spaced from it
+        self.last_write_end = 0.0  # when that write returned: the board has the frame by then
         self._last_status_mono = float("-inf")  # the last status query's write
         # The board refreshes its status every 50 ms. Only a faster simulator (a replay at
         # --speed X on sim://) may be polled more often.
@@ -147,6 +151,8 @@ class Link:
         # the robot, and only then does a stopped show play its abort motion.
         self.moved = False
         self._late_replies = 0  # replies set aside as late during the current frame's tries
+        # Bytes read while waiting for the line to go quiet: logged with the next frame's reply.
+        self._set_aside = b""
         self._seq = 0
 
     @classmethod
@@ -191,13 +197,35 @@ class Link:
                 self.moved = True
                 if frame is frames[0]:
                     began = self.last_tx_mono
+                start_sent = self.last_write_end
                 if not reply.ok:
                     break
             else:
                 return Played(attempt, began)
-            if attempt < self.tries and not self._settle(reply, tag, what):
+            if frame is frames[-1] and reply.kind is not ReplyKind.NAK:
+                # The start frame may have been carried out with only its answer lost.
+                if self._started(start_sent, tag, what):
+                    lost = f"the reply to '{what}' ({frame.kind.value} frame) was lost ({reply.describe()})"
+                    return Played(attempt, began, recovered=lost)
+                # The status answer came after any late reply: the line is idle for the retry.
+            elif attempt < self.tries and not self._settle(reply, tag, what):
                 raise self._failed(what, frame, reply, tag, attempt, silent=True)
         raise self._failed(what, frame, reply, tag, self.tries)
+
+    def _started(self, start_sent: float, tag: Tag | None, what: str) -> bool:
+        """Did the start frame whose reply was lost start the motion? Ask the board.
+
+        The board may have carried out the frame and only its answer got lost: sending the
+        sequence again would start the same motion twice. A NAK is a refusal (the frame was
+        not carried out), so only silence or a garbled answer needs asking. The status read
+        waits one status refresh after the start frame, so it cannot show the word from before,
+        and goes out at once after that (no ACK check first: a late ACK cannot be taken for a
+        status, it is set aside), so that only a motion shorter than the reply timeout can end
+        before the board is asked; such a motion counts as not started and is played again.
+        """
+        self._check_stop(what)
+        self.clock.sleep_until(start_sent + self.status_spacing_s)
+        return bool(self.query_status(tag).executing)
 
     def query_status(self, tag: Tag | None = None) -> Reply:
         """Ask whether a motion is executing; the reply's `executing` says."""
@@ -233,7 +261,7 @@ class Link:
         the board only refreshes its status that often.
         """
         try:
-            stray = self._stray_input()
+            stray, self._set_aside = self._set_aside + self._stray_input(), b""
         except PortLost as exc:
             raise self._lost(exc, frame, tag, what) from None
         if frame.kind is FrameKind.STATUS:
@@ -248,10 +276,11 @@ class Link:
             lost = exc
         # Listeners hear of the frame once it is out: their work never delays a cue's first byte.
         self.last_tx_mono = sent / 1e9
+        # Spacing is measured from when the write returned, not from the time taken before it:
+        # a write delayed by a busy machine must not bring the next query closer on the wire.
+        self.last_write_end = time.monotonic()
         if frame.kind is FrameKind.STATUS:
-            # Spaced from when the write returned, not from the time taken before it: a write
-            # delayed by a busy machine must not bring the next query closer on the wire.
-            self._last_status_mono = time.monotonic()
+            self._last_status_mono = self.last_write_end
         event = TxEvent(seq, frame, attempt, self.clock.wall_ns(sent), tag)
         for listener in self.listeners:
             listener.on_tx(event)
@@ -358,13 +387,14 @@ class Link:
         """
         try:
             if reply.kind is not ReplyKind.TIMEOUT:
-                self._drain(quiet_s=QUIET_S)
+                self._set_aside += self._drain(quiet_s=QUIET_S)
                 return True
         except PortLost as exc:
             raise LinkError(f"port {self.name}: lost while recovering from a bad reply: {exc}: "
                             "check the cable and the adapter") from None
         try:
-            self._drain(quiet_s=self.timeout, limit_s=self.timeout)  # most late replies come now
+            # most late replies come now
+            self._set_aside += self._drain(quiet_s=self.timeout, limit_s=self.timeout)
         except PortLost as exc:
             raise LinkError(f"port {self.name}: lost while waiting for a late reply: {exc}: "
                             "check the cable and the adapter") from None
@@ -375,7 +405,7 @@ class Link:
             if answer.kind in (ReplyKind.ACK, ReplyKind.NAK):
                 return True  # the check's own answer: everything before it has arrived
             if answer.kind is not ReplyKind.TIMEOUT:
-                self._drain(quiet_s=QUIET_S)  # garbled, but an answer: the line is alive
+                self._set_aside += self._drain(quiet_s=QUIET_S)  # garbled, but an answer: alive
                 return True
         return False
 

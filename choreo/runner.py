@@ -207,7 +207,7 @@ class Runner:
         tag = Tag(step.index, step.label)
         if step.kind is StepKind.PLAY:
             assert step.motion is not None
-            self._played = self.link.play(step.motion, tag)
+            self._played = self._play(step.motion, tag, step_ref(step))
             self._last_play_done = time.monotonic()
             self._last_motion = step.motion
             return due
@@ -217,6 +217,15 @@ class Runner:
                 raise Interrupted(self.stop.reason)
             return end
         return self._wait_done(step, tag) - self._zero
+
+    def _play(self, motion: int, tag: Tag, where: str) -> Played:
+        """One play sequence; a start whose reply was lost but which the board shows running
+        is a play done (never sent twice), said in a warning."""
+        played = self.link.play(motion, tag)
+        if played.recovered:
+            self._log(WARNING, f"{where}: {played.recovered}, but the board shows motion {motion} "
+                               "running: it was not sent again")
+        return played
 
     def _wait_done(self, step: PlannedStep, tag: Tag) -> float:
         """Poll the status every `poll_s` until the motion is over; the monotonic time it was seen."""
@@ -248,7 +257,7 @@ class Runner:
             self._log(INFO, f"playing abort motion {self.on_abort}")
             self.link.should_stop = lambda: False
             try:
-                self.link.play(self.on_abort, Tag(None, "on_abort"))
+                self._play(self.on_abort, Tag(None, "on_abort"), "on_abort")
             except LinkError as exc:
                 self._log(ERROR, f"abort motion {self.on_abort} failed: {exc}")
                 raise
