@@ -320,7 +320,7 @@ class Link:
             if not first:
                 return replace(protocol.timeout(), stale=stale)
             size = first[0]
-            if size not in (protocol.TYPE1_REPLY_SIZE, protocol.STATUS_REPLY_SIZE):
+            if size not in frame.reply_sizes and size not in protocol.REPLY_SIZES:
                 junk = first + self._drain(QUIET_S)
                 return replace(protocol.invalid(junk, f"junk: size byte {size:02x} is not a reply "
                                                       f"to a {frame.kind.value} frame"), stale=stale)

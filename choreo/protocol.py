@@ -22,6 +22,7 @@ MAX_FRAME_SIZE = 128
 CMD_MOV = 0x00
 CMD_CALL = 0x0C
 CMD_ACK_CHECK = 0xFE  # `04 fe 06 08`: the board answers with the same bytes
+CMD_VERSION = 0xFD  # `03 fd 00`: the board answers its firmware's version text
 MOV_COM_TO_RAM = 0x02
 MOV_RAM_TO_COM = 0x20
 
@@ -36,6 +37,7 @@ SUSPEND_PROGRAM_COUNTER = 0x0003FD
 
 TYPE1_REPLY_SIZE = 4
 STATUS_REPLY_SIZE = 5
+REPLY_SIZES = (TYPE1_REPLY_SIZE, STATUS_REPLY_SIZE)  # what a play sequence or a status query gets
 
 
 def checksum(data: bytes) -> int:
@@ -82,6 +84,8 @@ class FrameKind(str, Enum):
     RESTORE = "restore"
     STATUS = "status"
     SYNC = "sync"  # the ACK check, sent by the link after a timeout to learn the line is idle
+    READ = "read"  # a RAM read that is not the status query (`choreo probe`)
+    VERSION = "version"  # the firmware version query (`choreo probe`)
 
 
 @dataclass(frozen=True)
@@ -103,9 +107,16 @@ class Frame:
     @property
     def reply_sizes(self) -> tuple[int, ...]:
         """Reply sizes the board may answer with: a bad frame gets a 4-byte NAK whatever it asked."""
-        if self.kind is FrameKind.STATUS:
-            return (TYPE1_REPLY_SIZE, STATUS_REPLY_SIZE)
+        if self.kind in (FrameKind.STATUS, FrameKind.READ):
+            return (TYPE1_REPLY_SIZE, self.data[8] + 3)  # MOV RAM->COM: the bytes asked, framed
+        if self.kind is FrameKind.VERSION:
+            return tuple(range(TYPE1_REPLY_SIZE, MAX_FRAME_SIZE + 1))
         return (TYPE1_REPLY_SIZE,)
+
+    @property
+    def answers_with_data(self) -> bool:
+        """A frame whose good answer carries data (a RAM read, the version), not an ACK."""
+        return self.kind in (FrameKind.STATUS, FrameKind.READ, FrameKind.VERSION)
 
     def __str__(self) -> str:
         return f"play {self.motion}" if self.kind is FrameKind.PLAY else self.kind.value
@@ -139,6 +150,7 @@ _STOP = mov_write(CONFIG_ADDRESS, _le(SUSPENDED_CONFIG, 2) + _le(SUSPEND_PROGRAM
 _RESTORE = mov_write(CONFIG_ADDRESS, _le(RESUMED_CONFIG, 2))
 _STATUS = mov_read(CONFIG_ADDRESS, 2)
 _SYNC = build_frame(CMD_ACK_CHECK, bytes((ACK_BYTE,)))
+_VERSION = build_frame(CMD_VERSION, b"")
 
 
 def stop_frame() -> Frame:
@@ -161,6 +173,16 @@ def sync_frame() -> Frame:
     """The ACK check: its reply is the only one with command byte FE, so reading it back proves
     that every late reply before it has arrived and the board is listening again."""
     return Frame(FrameKind.SYNC, _SYNC)
+
+
+def read_frame(address: int, count: int) -> Frame:
+    """Read `count` bytes of RAM (what `choreo probe` asks; it never writes)."""
+    return Frame(FrameKind.READ, mov_read(address, count))
+
+
+def version_frame() -> Frame:
+    """Ask the firmware's version text (`03 fd 00`)."""
+    return Frame(FrameKind.VERSION, _VERSION)
 
 
 def play_sequence(motion: int) -> tuple[Frame, Frame, Frame]:
@@ -245,9 +267,9 @@ def is_stale(frame: Frame, data: bytes) -> bool:
         return False
     if data[1] != frame.command or len(data) not in frame.reply_sizes:
         return True
-    # A status query is answered with the status or a NAK, never an ACK: an ACK is a late
-    # answer to an earlier write (the restore, say).
-    return frame.kind is FrameKind.STATUS and len(data) == TYPE1_REPLY_SIZE and data[2] == ACK_BYTE
+    # A read is answered with its data or a NAK, never an ACK: an ACK is a late answer to an
+    # earlier write (the restore, say).
+    return frame.answers_with_data and len(data) == TYPE1_REPLY_SIZE and data[2] == ACK_BYTE
 
 
 def parse_reply(frame: Frame, data: bytes) -> Reply:
@@ -263,11 +285,13 @@ def parse_reply(frame: Frame, data: bytes) -> Reply:
         return invalid(data, f"bad checksum: {data[-1]:02x}, expected {checksum(data[:-1]):02x}")
     if data[1] != frame.command:
         return invalid(data, f"reply for command {data[1]:02x}, expected {frame.command:02x}")
-    if len(data) == STATUS_REPLY_SIZE:
+    if frame.kind is FrameKind.STATUS and len(data) == STATUS_REPLY_SIZE:
         word = data[2] | data[3] << 8
         return Reply(ReplyKind.STATUS, data, executing=data[2] == EXECUTING_BYTE, status=word)
-    if data[2] == ACK_BYTE and frame.kind is FrameKind.STATUS:
-        return invalid(data, "an ACK where the status was expected")
+    if frame.answers_with_data and len(data) > TYPE1_REPLY_SIZE:
+        return Reply(ReplyKind.STATUS, data)  # the data asked for, framed
+    if data[2] == ACK_BYTE and frame.answers_with_data:
+        return invalid(data, f"an ACK where the {frame.kind.value} answer was expected")
     if data[2] == ACK_BYTE:
         return Reply(ReplyKind.ACK, data)
     if data[2] == NAK_BYTE:
@@ -328,6 +352,8 @@ def describe_frame(data: bytes) -> str:
         return f"not a frame: {exc}"
     if bytes(data) == _SYNC:
         return "ACK check"
+    if bytes(data) == _VERSION:
+        return "version query"
     if cmd.command == CMD_CALL:
         slot = slot_of_address(cmd.address or 0)
         what = f"motion {slot}" if slot is not None else "not a motion slot"

@@ -150,3 +150,18 @@ def test_describe_frames_and_replies():
 )
 def test_stale_replies_are_well_formed_answers_to_another_frame(frame, reply, stale):
     assert p.is_stale(frame, bytes.fromhex(reply)) is stale
+
+
+def test_probe_frames_and_their_answers():
+    version = p.version_frame()
+    assert version.hex == "03 fd 00"
+    answer = p.build_frame(p.CMD_VERSION, b"CB-4 V1.0")
+    assert p.parse_reply(version, answer).kind is p.ReplyKind.STATUS
+    read = p.read_frame(0x0002, 10)
+    assert read.hex == "0a 00 20 00 00 00 02 00 0a 36"  # LAYOUTS.md's 10-byte read at 0x0002
+    assert read.reply_sizes == (4, 13)
+    data = p.ram_reply(bytes.fromhex("4b0400") + bytes(7))
+    assert p.parse_reply(read, data).kind is p.ReplyKind.STATUS
+    assert p.parse_reply(read, p.ack(p.CMD_MOV)).kind is p.ReplyKind.INVALID
+    assert p.is_stale(read, p.ack(p.CMD_MOV))  # an ACK to a read is a late answer to a write
+    assert p.parse_reply(read, p.nak(p.CMD_MOV)).kind is p.ReplyKind.NAK

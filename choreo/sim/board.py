@@ -35,6 +35,7 @@ What it models, following the spec and its errata:
   address outside the modelled RAM gets a NAK `04 CMD 15 SUM`. Bytes that cannot be a frame at
   all (a size byte below 3 or above 128) get a NAK with the command byte that followed, or 00.
 - ACK check (`04 fe 06 08`) is answered with the same 4 bytes, as the real board does.
+- The version query (`03 fd 00`) is answered with `VERSION_TEXT`, framed like any answer.
 - One reply at a time: a frame (or a burst of noise) whose first byte arrives before the board
   has put the last byte of its previous reply on the wire (still waiting out its reply delay,
   a `late` fault's delay included, or still transmitting) is not answered, not executed and not
@@ -68,6 +69,9 @@ DEFAULT_REPLY_DELAY_S = 0.0002
 DEFAULT_MOTION_S = 1.0
 DEFAULT_REFRESH_S = 0.05  # the spec: the controller updates the execution status every 50 ms
 CMD_ACK_CHECK = 0xFE
+# The simulator's answer to the version query. Real firmware answers its own text (JSK's rcb4
+# reads `CB-4 V1.0      090715          ` from an RCB-4mini): this one says what it is.
+VERSION_TEXT = b"RCB-4 simulator (choreo)        "
 
 
 @dataclass(frozen=True)
@@ -342,6 +346,8 @@ class SimBoard:
             return self._read(command)
         if cmd == CMD_ACK_CHECK and command.payload == bytes((p.ACK_BYTE,)):
             return _Outcome(p.ack(cmd), "ACK check: ACK", cmd)
+        if cmd == p.CMD_VERSION and not command.payload:
+            return _Outcome(p.build_frame(p.CMD_VERSION, VERSION_TEXT), "version query", cmd)
         return _Outcome(p.nak(cmd), f"command {cmd:02x} is not modelled: NAK", cmd)
 
     def _call(self, command: p.Command, data: bytes, now: float) -> _Outcome:

@@ -1,0 +1,52 @@
+"""`choreo probe [--port URL]`: which board answers, at what baud, and what it says."""
+
+from __future__ import annotations
+
+import argparse
+
+from choreo.errors import UsageError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "probe",
+        help="find the board's baud and read its version, config word and program counter",
+        description="Send the ACK check at 115200, 625000 and 1250000 baud (even parity) until the "
+        "board answers, then read its version text, config word (decoded) and program counter, and "
+        "say what they suggest about its memory layout (a hint, never a fact). It never writes RAM "
+        "and never sends a CALL: the robot does not move. Exit 3 if nothing answers.",
+    )
+    parser.add_argument("--port", help="pyserial URL or device (default: Kondo's USB adapter when "
+                        "exactly one is plugged in); sim:// probes the built-in simulator")
+    parser.add_argument("--timeout", type=float, metavar="S", default=0.2,
+                        help="seconds to wait for each reply, 0 < S <= 10 (default 0.2)")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from choreo.probe import probe
+    from choreo.session import check_timeout
+
+    check_timeout(args.timeout)
+    port = args.port if args.port is not None else _kondo_adapter()
+    if not port.strip():
+        raise UsageError("--port: empty; give a device (/dev/ttyUSB0, COM3) or a URL (sim://)")
+    for line in probe(port, timeout=args.timeout).lines():
+        print(line)
+    return 0
+
+
+def _kondo_adapter() -> str:
+    """The one Kondo adapter plugged in; otherwise the user must say which port."""
+    from serial.tools import list_ports
+
+    from choreo.cli.ports import KONDO_USB
+
+    ports = list_ports.comports()
+    kondo = [p.device for p in ports if (p.vid, p.pid) == KONDO_USB]
+    if len(kondo) == 1:
+        return kondo[0]
+    found = ", ".join(sorted(p.device for p in ports)) or "none"
+    why = "several Kondo adapters are plugged in" if kondo else "no Kondo adapter (USB 165C:0008) found"
+    raise UsageError(f"probe: {why}: give --port (serial ports: {found}; `choreo ports` lists them, "
+                     "sim:// probes the simulator)")

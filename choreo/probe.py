@@ -1,0 +1,192 @@
+"""`choreo probe`: what board answers on a port, read without changing anything.
+
+It finds the baud the board answers at (the ACK check at each of the RCB-4's bauds, even
+parity), then reads the firmware's version text, the config word (RAM 0x0000) and the 10 bytes
+at RAM 0x0002 (program counter, return address, call depth). It never writes RAM and never sends
+a CALL: probing a robot must not move it. What the program counter suggests about the board's
+memory layout is a hint, never a fact: the same address can mean different things on boards
+written by different Heart to Heart 4 versions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+from choreo import protocol
+from choreo.errors import LinkError
+from choreo.link import BAUD_RATES, DEFAULT_TIMEOUT_S, Link
+from choreo.protocol import ReplyKind
+
+CONFIG_ADDRESS = 0x0000
+COUNTER_ADDRESS = 0x0002  # program counter (3 bytes), return address (3), call depth and flags
+COUNTER_BYTES = 10
+FRAME_PERIODS_MS = (10, 15, 20, 25)  # config bits 5-4
+BAUD_CODES = {0: 115200, 1: 625000, 2: 1250000}  # config bits 7-6 (COM) and 14-13 (ICS)
+MAIN_LOOP_HTH4_1 = 0x0003FD  # HTH4 1.x, and what the document's stop frame writes
+MAIN_LOOP_HTH4_2 = 0x00044B  # HTH4 2.0 and later (Kondo's library writes it)
+FIRST_SLOT_HTH4_22 = 0x0B80
+FIRST_SLOT_SEED = protocol.FIRST_SLOT_ADDRESS
+
+
+@dataclass(frozen=True)
+class ConfigWord:
+    """The board's config word, bit by bit (ERRATA.md: RAM 0x0000, little endian)."""
+
+    word: int
+
+    def bit(self, n: int) -> bool:
+        return bool(self.word >> n & 1)
+
+    @property
+    def frame_ms(self) -> int:
+        return FRAME_PERIODS_MS[self.word >> 4 & 0b11]
+
+    @property
+    def com_baud(self) -> int | None:
+        return BAUD_CODES.get(self.word >> 6 & 0b11)
+
+    @property
+    def ics_baud(self) -> int | None:
+        return BAUD_CODES.get(self.word >> 13 & 0b11)
+
+    def lines(self) -> list[str]:
+        def baud(value: int | None, code: int) -> str:
+            return f"{value} baud" if value else f"unknown code {code:02b}"
+
+        on = {True: "on", False: "off"}
+        return [
+            f"config    0x{self.word:04x}",
+            f"  ROM program run      {on[self.bit(1)]}" + ("" if self.bit(1) else " (the board's program is stopped)"),
+            f"  ICS servo bus        {on[self.bit(0)]}",
+            f"  end-of-move message  {on[self.bit(2)]}",
+            f"  vector jump          {on[self.bit(3)]}",
+            f"  servo frame period   {self.frame_ms} ms",
+            f"  COM baud             {baud(self.com_baud, self.word >> 6 & 3)}",
+            f"  ICS baud             {baud(self.ics_baud, self.word >> 13 & 3)}",
+            f"  green LED            {on[self.bit(15)]}",
+        ]
+
+
+@dataclass(frozen=True)
+class Counter:
+    """The 10 bytes at RAM 0x0002: where the board's program is."""
+
+    data: bytes
+
+    @property
+    def program_counter(self) -> int:
+        return int.from_bytes(self.data[0:3], "little")
+
+    @property
+    def in_call(self) -> bool:
+        """Kondo's rule for 'a motion is running': inside the slots with a return pushed."""
+        return self.program_counter >= FIRST_SLOT_HTH4_22 and any(self.data[3:8])
+
+
+@dataclass
+class BoardInfo:
+    """What the probe read; None where the board did not answer that question."""
+
+    port: str
+    baud: int
+    version: str | None = None
+    config: ConfigWord | None = None
+    counter: Counter | None = None
+    notes: list[str] = field(default_factory=list)
+
+    def hints(self) -> list[str]:
+        """What the readings suggest, each marked as a hint (never a fact)."""
+        hints = []
+        if self.counter is not None:
+            hints += _counter_hints(self.counter)
+        if self.config is not None and self.config.com_baud not in (None, self.baud):
+            hints.append(f"the config word's COM baud bits say {self.config.com_baud} but the board "
+                         f"answered at {self.baud}: the word may not be what the board runs on")
+        return [f"hint: {h}" for h in hints]
+
+    def lines(self) -> list[str]:
+        lines = [f"board     answers on {self.port} at {self.baud} baud, 8E1 (ACK check)"]
+        lines.append(f"version   {self.version!r}" if self.version is not None else "version   not answered")
+        lines += self.config.lines() if self.config else ["config    not answered"]
+        if self.counter is not None:
+            pc = self.counter.program_counter
+            lines.append(f"program   counter 0x{pc:06x}, then {protocol.hexbytes(self.counter.data[3:])}"
+                         f" ({'inside a called motion' if self.counter.in_call else 'not in a call'})")
+        else:
+            lines.append("program   not answered")
+        return lines + self.notes + self.hints()
+
+
+def _counter_hints(counter: Counter) -> list[str]:
+    pc = counter.program_counter
+    choose = "choose with `robot.layout` in the show or `--layout` (README: Board layouts)"
+    if pc == MAIN_LOOP_HTH4_2:
+        return [f"the program is in the main loop at 0x{pc:06x}, where Heart to Heart 4 2.0 and "
+                f"later put it: a board set up with HTH4 2.2 or later uses layout hth4-2.2 (2.0/2.1: "
+                f"seed); {choose}"]
+    if pc == MAIN_LOOP_HTH4_1:
+        return [f"the program counter is 0x{pc:06x}, HTH4 1.x's main loop, which the seed layout's "
+                f"stop frame also writes: the board was set up with HTH4 1.x or last played by a "
+                f"seed-layout show; {choose}"]
+    if counter.in_call:
+        return [f"a motion is running (counter 0x{pc:06x}): "
+                f"{_slot_words(pc, FIRST_SLOT_HTH4_22, 'hth4-2.2')}; "
+                f"{_slot_words(pc, FIRST_SLOT_SEED, 'seed')}; probe again when the robot is still"]
+    return [f"the program counter 0x{pc:06x} is not a main loop choreo knows: no layout hint"]
+
+
+def _slot_words(pc: int, first: int, layout: str) -> str:
+    if pc < first:
+        return f"before {layout}'s first slot"
+    slot, offset = divmod(pc - first, protocol.SLOT_SIZE)
+    return f"{layout}: slot {slot} + {offset} bytes" if slot < protocol.MOTION_SLOTS else f"past {layout}'s slots"
+
+
+def probe(url: str, *, bauds: Iterable[int] = BAUD_RATES, timeout: float = DEFAULT_TIMEOUT_S) -> BoardInfo:
+    """Find the baud that answers, then read what the board says; LinkError if none answers."""
+    tried = []
+    for baud in bauds:
+        link = Link.open(url, baud, timeout=timeout, tries=2)
+        try:
+            if _answers(link):
+                return _read(link, url, baud)
+        finally:
+            link.close()
+        tried.append(str(baud))
+    raise LinkError(f"port {url}: no answer to the ACK check (04 fe 06 08) at {', '.join(tried)} "
+                    "baud, even parity: check that the board is powered, the adapter (Kondo's USB "
+                    "adapter, or 5 V inverted logic without it), the cable, and the parity (8E1)")
+
+
+def _answers(link: Link) -> bool:
+    """Two ACK checks; any well-formed answer means a board listens at this baud."""
+    for attempt in (1, 2):
+        reply = link.send(protocol.sync_frame(), attempt)
+        if reply.kind in (ReplyKind.ACK, ReplyKind.NAK):
+            return True
+    return False
+
+
+def _read(link: Link, url: str, baud: int) -> BoardInfo:
+    info = BoardInfo(url, baud)
+    version = _ask(link, protocol.version_frame(), info, "version")
+    if version is not None:
+        info.version = version[2:-1].decode("ascii", "replace").strip()
+    config = _ask(link, protocol.read_frame(CONFIG_ADDRESS, 2), info, "config word")
+    if config is not None:
+        info.config = ConfigWord(int.from_bytes(config[2:4], "little"))
+    counter = _ask(link, protocol.read_frame(COUNTER_ADDRESS, COUNTER_BYTES), info, "program counter")
+    if counter is not None:
+        info.counter = Counter(counter[2:-1])
+    return info
+
+
+def _ask(link: Link, frame: protocol.Frame, info: BoardInfo, what: str) -> bytes | None:
+    """One question; a board that will not answer it is noted, not an error (the rest may)."""
+    try:
+        reply = link.exchange(frame)
+    except LinkError as exc:
+        info.notes.append(f"note: the {what} was not read: {exc}")
+        return None
+    return reply.data
