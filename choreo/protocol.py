@@ -291,7 +291,7 @@ def parse_reply(frame: Frame, data: bytes) -> Reply:
     if frame.answers_with_data and len(data) > TYPE1_REPLY_SIZE:
         return Reply(ReplyKind.STATUS, data)  # the data asked for, framed
     if data[2] == ACK_BYTE and frame.answers_with_data:
-        return invalid(data, f"an ACK where the {frame.kind.value} answer was expected")
+        return invalid(data, f"an ACK where the {frame.kind.value} was expected")
     if data[2] == ACK_BYTE:
         return Reply(ReplyKind.ACK, data)
     if data[2] == NAK_BYTE:
