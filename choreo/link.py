@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Protocol
 
 from choreo import protocol
 from choreo.clock import RunClock
+from choreo.layouts import SEED, Layout
 from choreo.errors import Interrupted, LinkError
 from choreo.protocol import Frame, FrameKind, Reply, ReplyKind
 
@@ -129,7 +130,8 @@ class Link:
 
     def __init__(self, port: serial.SerialBase, *, name: str | None = None,
                  timeout: float = DEFAULT_TIMEOUT_S, tries: int = DEFAULT_TRIES,
-                 clock: RunClock | None = None, listeners: Iterable[LinkListener] = ()) -> None:
+                 clock: RunClock | None = None, listeners: Iterable[LinkListener] = (),
+                 layout: Layout = SEED) -> None:
         if tries < 1:
             raise ValueError("a link needs at least one try per frame")
         self.port = port
@@ -138,6 +140,8 @@ class Link:
         self.tries = tries
         self.clock = clock or RunClock()
         self.listeners: list[LinkListener] = list(listeners)
+        self.layout = layout
+        self.config: int | None = None  # the board's config word, read at open where the layout needs it
         # Checked before each frame: a stop request lets the frame in flight get its reply, then
         # no further frame goes out (the runner sets it; Ctrl-C sets the runner's).
         self.should_stop: Callable[[], bool] = lambda: False
@@ -158,9 +162,28 @@ class Link:
     @classmethod
     def open(cls, url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TIMEOUT_S,
              tries: int = DEFAULT_TRIES, clock: RunClock | None = None,
-             listeners: Iterable[LinkListener] = (), exclusive: bool = True) -> Link:
+             listeners: Iterable[LinkListener] = (), exclusive: bool = True,
+             layout: Layout = SEED) -> Link:
+        """Open the port; a layout built from the board's config word reads it now (after an
+        ACK check), once, as Kondo's library does."""
         port = open_port(url, baud, timeout=timeout, exclusive=exclusive)
-        return cls(port, name=url, timeout=timeout, tries=tries, clock=clock, listeners=listeners)
+        link = cls(port, name=url, timeout=timeout, tries=tries, clock=clock, listeners=listeners,
+                   layout=layout)
+        if layout.reads_config:
+            try:
+                link.read_config()
+            except BaseException:
+                link.close()
+                raise
+        return link
+
+    def read_config(self) -> int:
+        """The ACK check, then the config word (2 bytes at RAM 0x0000): the word the hth4-2.2
+        suspend and resume frames are made from."""
+        self.exchange(protocol.sync_frame(), Tag(None, "open"))
+        reply = self.exchange(protocol.read_frame(protocol.CONFIG_ADDRESS, 2), Tag(None, "open"))
+        self.config = int.from_bytes(reply.data[2:4], "little")
+        return self.config
 
     @property
     def baud(self) -> int:
@@ -187,7 +210,7 @@ class Link:
         only, because a sequence cut after its stop frame leaves the board's program halted.
         Returns how many tries it took and when the sequence that worked began.
         """
-        frames = protocol.play_sequence(motion)
+        frames = self.layout.play_sequence(motion, self.config, self.baud)
         what = f"play {motion}"
         self._late_replies = 0
         for attempt in range(1, self.tries + 1):
@@ -217,19 +240,20 @@ class Link:
 
         The board may have carried out the frame and only its answer got lost: sending the
         sequence again would start the same motion twice. A NAK is a refusal (the frame was
-        not carried out), so only silence or a garbled answer needs asking. The status read
-        waits one status refresh after the start frame, so it cannot show the word from before,
-        and goes out at once after that (no ACK check first: a late ACK cannot be taken for a
-        status, it is set aside), so that only a motion shorter than the reply timeout can end
-        before the board is asked; such a motion counts as not started and is played again.
+        not carried out), so only silence or a garbled answer needs asking. The layout's read
+        (seed: the status; hth4-2.2: the config word and program state) waits one status refresh
+        after the start frame, so it cannot show the state from before, and goes out at once
+        after that (no ACK check first: a late ACK cannot be taken for a read's answer, it is
+        set aside). Seed only: a motion shorter than the reply timeout can end before the board
+        is asked; it then counts as not started and is played again.
         """
         self._check_stop(what)
         self.clock.sleep_until(start_sent + self.status_spacing_s)
-        return bool(self.query_status(tag).executing)
+        return self.layout.started(self.exchange(self.layout.start_read, tag).data)
 
     def query_status(self, tag: Tag | None = None) -> Reply:
         """Ask whether a motion is executing; the reply's `executing` says."""
-        return self.exchange(protocol.status_frame(), tag)
+        return self.exchange(self.layout.status, tag)
 
     def exchange(self, frame: Frame, tag: Tag | None = None) -> Reply:
         """One frame, retried alone until the board accepts it or the tries run out."""

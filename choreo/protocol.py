@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import Enum
-from functools import lru_cache
 
 from choreo.errors import MotionRangeError
 
@@ -31,6 +30,13 @@ NAK_BYTE = 0x15
 EXECUTING_BYTE = 0x23
 
 CONFIG_ADDRESS = 0x0000
+PROGRAM_COUNTER_ADDRESS = 0x0002  # program counter (3 bytes), return address (3), call depth
+COUNTER_READ_BYTES = 10  # Kondo's library reads this much at 0x0002 to see whether a motion runs
+FIRST_CALLED_ADDRESS = 0x0B80  # no slot of any layout starts lower: a counter at or above is in one
+DEFAULT_BAUD = 115200
+BAUD_CODES = {115200: 0, 625000: 1, 1250000: 2}  # the config word's COM (7-6) and ICS (14-13) codes
+COM_BAUD_SHIFT = 6
+COM_BAUD_MASK = 0b11 << COM_BAUD_SHIFT
 SUSPENDED_CONFIG = 0x8721  # ROM program run bit (bit 1) cleared: the board stops its program
 RESUMED_CONFIG = 0x8723  # run bit set again: the board runs what the CALL pushed
 SUSPEND_PROGRAM_COUNTER = 0x0003FD
@@ -84,6 +90,7 @@ class FrameKind(str, Enum):
     RESTORE = "restore"
     STATUS = "status"
     SYNC = "sync"  # the ACK check, sent by the link after a timeout to learn the line is idle
+    COUNTER = "counter"  # hth4-2.2: the program counter set to the main loop before the CALL
     READ = "read"  # a RAM read that is not the status query (`choreo probe`)
     VERSION = "version"  # the firmware version query (`choreo probe`)
 
@@ -185,19 +192,12 @@ def version_frame() -> Frame:
     return Frame(FrameKind.VERSION, _VERSION)
 
 
-def play_sequence(motion: int) -> tuple[Frame, Frame, Frame]:
-    """Steps 1-3 of the document: stop and save, CALL the slot, restore. Sent as one unit.
+def play_sequence(motion: int) -> tuple[Frame, ...]:
+    """Steps 1-3 of the document: stop and save, CALL the slot, restore (the seed layout at
+    115200 baud; `choreo.layouts` has every layout). Sent as one unit."""
+    from choreo.layouts import SEED
 
-    All three carry the motion, so a log of the stop or restore frame says what it was for.
-    """
-    return _play_sequence(check_motion(motion))
-
-
-@lru_cache(maxsize=MOTION_SLOTS)
-def _play_sequence(motion: int) -> tuple[Frame, Frame, Frame]:
-    # Built once per slot: a cue's frames are ready before its due time, not made after it.
-    play = play_frame(motion)
-    return Frame(FrameKind.STOP, _STOP, motion), play, Frame(FrameKind.RESTORE, _RESTORE, motion)
+    return SEED.play_sequence(motion)
 
 
 def frame_for(kind: FrameKind | str, motion: int | None = None) -> Frame:
@@ -285,9 +285,8 @@ def parse_reply(frame: Frame, data: bytes) -> Reply:
         return invalid(data, f"bad checksum: {data[-1]:02x}, expected {checksum(data[:-1]):02x}")
     if data[1] != frame.command:
         return invalid(data, f"reply for command {data[1]:02x}, expected {frame.command:02x}")
-    if frame.kind is FrameKind.STATUS and len(data) == STATUS_REPLY_SIZE:
-        word = data[2] | data[3] << 8
-        return Reply(ReplyKind.STATUS, data, executing=data[2] == EXECUTING_BYTE, status=word)
+    if frame.kind is FrameKind.STATUS and len(data) > TYPE1_REPLY_SIZE:
+        return _status(frame, data)
     if frame.answers_with_data and len(data) > TYPE1_REPLY_SIZE:
         return Reply(ReplyKind.STATUS, data)  # the data asked for, framed
     if data[2] == ACK_BYTE and frame.answers_with_data:
@@ -297,6 +296,22 @@ def parse_reply(frame: Frame, data: bytes) -> Reply:
     if data[2] == NAK_BYTE:
         return Reply(ReplyKind.NAK, data, error="the board refused the frame (NAK)")
     return invalid(data, f"third byte {data[2]:02x} is neither ACK (06) nor NAK (15)")
+
+
+def _status(frame: Frame, data: bytes) -> Reply:
+    """A status read's answer: what it says about a running motion depends on what was read.
+
+    The config word (2 bytes at 0x0000, the document's query): low byte 0x23 while a motion runs.
+    The program counter (10 bytes at 0x0002, Kondo's rule): a motion runs while the counter is
+    inside the slots and the return address and call depth after it are not all zero.
+    """
+    command = parse_command(frame.data)
+    if command.address == PROGRAM_COUNTER_ADDRESS and len(data) >= 3 + 8:
+        counter = int.from_bytes(data[2:5], "little")
+        running = counter >= FIRST_CALLED_ADDRESS and any(data[5:10])
+        return Reply(ReplyKind.STATUS, data, executing=running, status=counter)
+    word = data[2] | data[3] << 8
+    return Reply(ReplyKind.STATUS, data, executing=data[2] == EXECUTING_BYTE, status=word)
 
 
 def ack(command: int) -> bytes:

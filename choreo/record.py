@@ -82,6 +82,7 @@ class RunInfo:
     port: str
     baud: int
     start_ns: int
+    layout: str = "seed"
 
     def metadata(self) -> dict[str, str]:
         return {
@@ -91,6 +92,7 @@ class RunInfo:
             "show_sha256": hashlib.sha256(self.show_source).hexdigest(),
             "port": self.port,
             "baud": str(self.baud),
+            "layout": self.layout,
             "start_time": _iso(self.start_ns),
             "start_ns": str(self.start_ns),
             "host": socket.gethostname(),

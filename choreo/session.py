@@ -16,6 +16,7 @@ from urllib.parse import parse_qsl, urlencode
 
 from choreo.clock import RunClock
 from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError
+from choreo.layouts import SEED, Layout, layout_named
 from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
 from choreo.runner import ERROR, RunListener, Runner, RunResult, StopRequest
 from choreo.show.model import DEFAULT_MOTION_S, Plan, Show
@@ -33,6 +34,7 @@ class RunRequest:
     from_step: str | None = None
     timeout: float | None = None
     retries: int | None = None
+    layout: str | None = None
     log_dir: str = "runs"
 
 
@@ -49,6 +51,8 @@ class Session:
     timeout: float
     tries: int
     log_path: Path | None
+    layout: Layout = SEED
+    layout_source: str = "default"  # command line | show | default (assumed)
     unique_log: bool = False  # a default log name already taken gets a suffix instead of a refusal
     clock: RunClock = field(default_factory=RunClock)
     recorder: object | None = None
@@ -62,12 +66,13 @@ class Session:
         from choreo.show.plan import compile_plan
 
         show = load_show(request.show_path)
-        plan = compile_plan(show)
         robot = show.robot
-        start = _start_index(plan, request.from_step)
         baud = _pick(request.baud, robot.baud, DEFAULT_BAUD)
         if baud not in BAUD_RATES:
             raise UsageError(f"baud {baud}: the RCB-4 runs at {', '.join(map(str, BAUD_RATES))}")
+        layout, layout_source = _layout(request.layout, robot.layout)
+        plan = compile_plan(show, layout, baud)
+        start = _start_index(plan, request.from_step)
         timeout = float(_pick(request.timeout, robot.timeout, DEFAULT_TIMEOUT_S))
         retries = int(_pick(request.retries, robot.retries, DEFAULT_TRIES - 1))
         check_timeout(timeout)
@@ -76,11 +81,12 @@ class Session:
         if request.port is not None:
             if not request.port.strip():
                 raise UsageError("--port: empty; give a device (/dev/ttyUSB0, COM3) or a URL (sim://)")
-            port, source = with_show_durations(request.port, show, plan, baud), "command line"
+            port, source = request.port, "command line"
         elif robot.port:
             port, source = robot.port, "show"
         else:
-            port, source = simulator_url(show, plan, baud), "simulator"
+            port, source = "sim://", "simulator"
+        port = with_show_durations(port, show, plan, baud, layout)
         log_path = None
         if not request.no_log:
             from choreo.record import default_log_path
@@ -88,7 +94,12 @@ class Session:
             log_path = Path(request.log_path) if request.log_path else default_log_path(
                 show.name, request.log_dir)
         return cls(show, plan, start, port, source, baud, timeout, retries + 1, log_path,
-                   unique_log=request.log_path is None)
+                   layout, layout_source, unique_log=request.log_path is None)
+
+    @property
+    def assumes_layout(self) -> bool:
+        """Nobody said which layout, and a real board is on the port: the run must say so."""
+        return self.layout_source == "default" and not is_simulator(self.port)
 
     # -- opening and closing ---------------------------------------------------------------
 
@@ -105,12 +116,13 @@ class Session:
             from choreo.record import Recorder, RunInfo
 
             info = RunInfo(self.show.path, self.show.name, self.show.source, self.port, self.baud,
-                           self.clock.wall_anchor_ns)
+                           self.clock.wall_anchor_ns, self.layout.name)
             self.recorder = Recorder(self.log_path, info, unique=self.unique_log)
             self.log_path = self.recorder.path
         try:
             self.link = Link.open(self.port, self.baud, timeout=self.timeout, tries=self.tries,
-                                  clock=self.clock, listeners=[self.recorder] if self.recorder else [])
+                                  clock=self.clock, listeners=[self.recorder] if self.recorder else [],
+                                  layout=self.layout)
         except LinkError as exc:
             if self.recorder is not None:
                 self.recorder.on_log(ERROR, str(exc))
@@ -150,21 +162,26 @@ class Session:
         return self.result
 
 
-def simulator_url(show: Show, plan: Plan, baud: int = DEFAULT_BAUD) -> str:
-    """`sim://` with the show's motion durations (so `wait: done` behaves as on the robot) and
-    the run's baud (a board at another baud would not answer)."""
-    return with_show_durations("sim://", show, plan, baud)
+def simulator_url(show: Show, plan: Plan, baud: int = DEFAULT_BAUD, layout: Layout = SEED) -> str:
+    """`sim://` with the show's motion durations (so `wait: done` behaves as on the robot), the
+    run's baud (a board at another baud would not answer) and layout."""
+    return with_show_durations("sim://", show, plan, baud, layout)
+
+
+def is_simulator(url: str) -> bool:
+    return url.lower().startswith("sim://")
 
 
 def with_show_durations(url: str, show: Show | None, plan: Plan | None,
-                        baud: int = DEFAULT_BAUD) -> str:
+                        baud: int = DEFAULT_BAUD, layout: Layout = SEED) -> str:
     """A `sim://` port gets what its URL does not say: the show's durations (when there is a
-    show) and the run's baud.
+    show), the run's baud and the run's layout, wherever the URL came from.
 
     `--port 'sim://?drop=5'` then still runs the show's motions for their expected lengths; a
-    URL that sets `durations`, `motion_s` or `baud` itself is left to say so.
+    URL that sets `durations`, `motion_s`, `baud` or `layout` itself is left to say so (a sim
+    with another layout than the run's shows what a wrong layout does: stray calls).
     """
-    if not url.lower().startswith("sim://"):
+    if not is_simulator(url):
         return url
     base, _, query = url.partition("?")
     given = dict(parse_qsl(query, keep_blank_values=True))
@@ -177,6 +194,8 @@ def with_show_durations(url: str, show: Show | None, plan: Plan | None,
             added["durations"] = ",".join(f"{m}:{d:g}" for m, d in sorted(durations.items()))
     if "baud" not in given and baud != DEFAULT_BAUD:
         added["baud"] = str(baud)
+    if "layout" not in given and layout is not SEED:
+        added["layout"] = layout.name
     if not added:
         return url
     extra = urlencode(added, safe=":,")
@@ -205,6 +224,18 @@ def _start_index(plan: Plan, ref: str | None) -> int:
         known = f"; labels: {', '.join(labels)}" if labels else ""
         raise UsageError(f"--from {ref}: no step with that index (0..{len(plan.steps) - 1}) "
                          f"or label{known}") from None
+
+
+def _layout(given: str | None, in_show: str | None) -> tuple[Layout, str]:
+    """The run's layout and who chose it: `--layout`, the show's robot.layout, else seed."""
+    if given is not None:
+        try:
+            return layout_named(given), "command line"
+        except ValueError as exc:
+            raise UsageError(f"--layout: {exc}") from None
+    if in_show is not None:
+        return layout_named(in_show), "show"
+    return SEED, "default"
 
 
 def _pick(*values):

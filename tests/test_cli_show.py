@@ -59,7 +59,7 @@ def test_validate_reports_every_problem_of_every_file_and_exits_2(tmp_path, caps
 def test_plan_prints_a_line_a_step_and_the_total(capsys):
     assert main(["plan", str(ROOT / "shows" / "dance.yaml")]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0] == f"Dance ({ROOT / 'shows' / 'dance.yaml'})"
+    assert lines[0] == f"Dance ({ROOT / 'shows' / 'dance.yaml'}), layout seed"
     assert lines[1].split() == ["#", "path", "label", "start", "step", "frames"]
     assert len(lines) == 2 + 26 + 1
     first = lines[2]

@@ -378,7 +378,7 @@ def test_trigger_spelling_refuses(text):
 def test_unknown_fault_kind_is_refused():
     with pytest.raises(ValueError, match="unknown fault kind 'melt'"):
         FaultPlan({"melt": Trigger(every=1)})
-    assert set(FAULT_KINDS) == {"lose", "drop", "nak", "badsum", "short", "junk", "late"}
+    assert set(FAULT_KINDS) == {"lose", "drop", "nak", "badsum", "short", "junk", "late", "lose_start"}
 
 
 # -- options -----------------------------------------------------------------------------------
@@ -583,12 +583,16 @@ def test_refresh_ticks_count_from_power_on():
     assert status_low(b, 100.07) == 0x23
 
 
-def test_only_the_config_word_is_refresh_delayed():
+def test_only_the_status_span_is_refresh_delayed():
+    # The config word and the program state (RAM 0x0000-0x000B: what the two layouts' status
+    # reads look at) are shown as of the last tick; RAM beyond it reads live.
     b = refreshing()
     assert reply(b, p.mov_write(0x0000, b"\x21\x87\x55\x66"), 0.01) == ACK_MOV
-    assert reply(b, p.mov_read(0x0000, 4), 0.02) == p.ram_reply(b"\x02\x00\x55\x66")
-    assert reply(b, p.mov_read(0x0001, 2), 0.03) == p.ram_reply(b"\x00\x55")
+    assert reply(b, p.mov_read(0x0000, 4), 0.02) == p.ram_reply(b"\x02\x00\xfd\x03")
+    assert reply(b, p.mov_read(0x0001, 2), 0.03) == p.ram_reply(b"\x00\xfd")
     assert reply(b, p.mov_read(0x0000, 4), 0.05) == p.ram_reply(b"\x21\x87\x55\x66")
+    assert reply(b, p.mov_write(0x0010, b"\x77"), 0.06) == ACK_MOV
+    assert reply(b, p.mov_read(0x0010, 1), 0.07) == p.ram_reply(b"\x77")
 
 
 def test_refresh_zero_is_live_and_a_negative_period_is_refused():

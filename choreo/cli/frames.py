@@ -1,4 +1,4 @@
-"""`choreo frames play N | stop | restore | status`: a frame's bytes, for checking by hand."""
+"""`choreo frames play N | stop | counter | restore | status`: a frame's bytes, for checking by hand."""
 
 from __future__ import annotations
 
@@ -6,31 +6,75 @@ import argparse
 
 from choreo.errors import UsageError
 
+KINDS = ("play", "stop", "counter", "restore", "status")
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "frames",
         help="print an RCB-4 frame as hex bytes",
-        description="Print the exact bytes choreo sends for a frame, lowercase hex on one line.",
+        description="Print the exact bytes choreo sends for a frame, lowercase hex on one line. "
+        "stop and restore are the seed layout's stop-and-save and restore frames (at --baud, "
+        "whose code they carry in the config word's bits 7-6) or hth4-2.2's suspend and resume "
+        "(made from --config, the board's config word); counter is hth4-2.2's program counter write.",
     )
-    parser.add_argument("kind", choices=["play", "stop", "restore", "status"], help="which frame")
+    parser.add_argument("kind", choices=KINDS, help="which frame")
     parser.add_argument("motion", nargs="?", help="motion slot 0..119 (play only)")
+    parser.add_argument("--layout", default="seed", choices=("seed", "hth4-2.2"),
+                        help="the board's memory layout (default seed)")
+    parser.add_argument("--baud", type=int, default=115200, help="115200 (default), 625000 or 1250000")
+    parser.add_argument("--config", metavar="WORD", help="hth4-2.2: the board's config word, e.g. "
+                        "0x821b (default: that one, what an HTH4 2.2+ project saves)")
     parser.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from choreo import protocol
+    from choreo.layouts import layout_named
+    from choreo.protocol import BAUD_CODES
 
-    if args.kind != "play":
-        if args.motion is not None:
-            raise UsageError(f"frames {args.kind}: takes no motion number")
-        print(protocol.frame_for(args.kind).hex)
+    layout = layout_named(args.layout)
+    if args.baud not in BAUD_CODES:
+        raise UsageError(f"--baud {args.baud}: the RCB-4 runs at {', '.join(map(str, BAUD_CODES))}")
+    config = _config(args.config, layout.reads_config)
+    if args.kind == "status":
+        _no_motion(args)
+        print(layout.status.hex)
         return 0
+    motion = _motion(args) if args.kind == "play" else (_no_motion(args) or 0)
+    frames = {frame.kind.value: frame for frame in layout.play_sequence(motion, config, args.baud)}
+    if args.kind not in frames:
+        raise UsageError(f"frames {args.kind}: the {layout.name} layout sends no {args.kind} frame "
+                         f"(it sends {', '.join(frames)})")
+    print(frames[args.kind].hex)
+    return 0
+
+
+def _config(text: str | None, used: bool) -> int | None:
+    if text is None:
+        return None
+    if not used:
+        raise UsageError("--config: the seed layout's frames are fixed; --config is for --layout hth4-2.2")
+    try:
+        word = int(text, 0)
+    except ValueError:
+        word = -1
+    if not 0 <= word <= 0xFFFF:
+        raise UsageError(f"--config {text}: give the 16-bit config word, e.g. 0x821b")
+    return word
+
+
+def _no_motion(args: argparse.Namespace) -> None:
+    if args.motion is not None:
+        raise UsageError(f"frames {args.kind}: takes no motion number")
+
+
+def _motion(args: argparse.Namespace) -> int:
     if args.motion is None:
         raise UsageError("frames play: give a motion number 0..119, e.g. `choreo frames play 3`")
     try:
         motion = int(args.motion, 10)
     except ValueError:
         raise UsageError(f"frames play: motion {args.motion!r} is not a whole number 0..119") from None
-    print(protocol.play_frame(motion).hex)
-    return 0
+    from choreo.protocol import check_motion
+
+    return check_motion(motion)

@@ -11,6 +11,8 @@ from typing import TextIO
 
 from choreo.errors import Interrupted
 
+LAYOUT_CHOICES = ("seed", "hth4-2.2")  # choreo.layouts.LAYOUT_NAMES, without importing it for --help
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -23,6 +25,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--port", help="pyserial URL or device: /dev/ttyUSB0, COM3, socket://, "
                         "rfc2217://, loop://, spy://, sim:// (default: the show's robot.port, else sim://)")
     parser.add_argument("--baud", type=int, help="115200 (default), 625000 or 1250000")
+    parser.add_argument("--layout", choices=LAYOUT_CHOICES, help="the board's memory layout: seed "
+                        "(the document's frames, default) or hth4-2.2 (motions written by Heart to "
+                        "Heart 4 2.2 or later); default: the show's robot.layout, else seed")
     logs = parser.add_mutually_exclusive_group()
     logs.add_argument("--log", metavar="PATH", help="log file (default runs/<show>-<UTC time>.mcap; "
                       "never overwritten)")
@@ -41,10 +46,11 @@ def run(args: argparse.Namespace) -> int:
 
     request = RunRequest(args.show, port=args.port, baud=args.baud, log_path=args.log,
                          no_log=args.no_log, from_step=args.from_step, timeout=args.timeout,
-                         retries=args.retries)
+                         retries=args.retries, layout=args.layout)
     session = Session.prepare(request)
     say = _Say(sys.stderr, quiet=args.quiet)
     say(_port_line(session))
+    say(_layout_line(session))
     first = f" from step {session.start}" if session.start else ""
     say(f"show: {session.show.name}: {len(session.plan.steps)} steps{first}, "
         f"about {session.plan.estimated_s:.1f} s")
@@ -90,6 +96,17 @@ def _port_line(session) -> str:
         "show": "the show's robot.port",
     }.get(session.port_source, "the command line")
     return f"port: {session.port} at {session.baud} baud, from {where}"
+
+
+def _layout_line(session) -> str:
+    layout = session.layout
+    line = f"layout: {layout.name} (motion 0 at 0x{layout.first_slot:04x})"
+    if session.assumes_layout:
+        other = "hth4-2.2" if layout.name == "seed" else "seed"
+        return (f"{line}, assumed: the show names no robot.layout; a board whose motions were "
+                f"written by Heart to Heart 4 2.2 or later needs --layout {other} "
+                "(`choreo probe` hints which)")
+    return line + {"show": ", from the show", "command line": ", from --layout"}.get(session.layout_source, "")
 
 
 # Ctrl-C, `kill`, and a closed terminal or SSH session (SIGHUP) all stop the show the same way.

@@ -87,12 +87,21 @@ def plan_lines(show, plan) -> list[str]:  # type: ignore[no-untyped-def]
     ]
     header = ("#", "path", "label", "start", "step", "frames")
     widths = [max(len(row[i]) for row in [header, *rows]) for i in range(5)]
-    lines = [f"{show.name} ({show.path})"]
+    lines = [f"{show.name} ({show.path}), layout {plan.layout}{_layout_note(plan)}"]
     for row in [header, *rows]:
         cells = [row[0].rjust(widths[0])] + [row[i].ljust(widths[i]) for i in range(1, 5)] + [row[5]]
         lines.append("  ".join(cells))
     lines.append(f"estimated total {_seconds(plan.estimated_s)} ({len(plan.steps)} steps){_late_note(plan)}")
     return lines
+
+
+def _layout_note(plan) -> str:  # type: ignore[no-untyped-def]
+    if plan.layout == "seed":
+        return ""
+    from choreo.layouts import EXAMPLE_CONFIG
+
+    return (f" (suspend and resume shown for config 0x{EXAMPLE_CONFIG:04x}: the run makes them "
+            "from the config word it reads from the board)")
 
 
 def _start(step, digits: int) -> str:  # type: ignore[no-untyped-def]

@@ -43,6 +43,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     board = parser.add_argument_group("board")
     board.add_argument("--baud", metavar="N", help="the board's baud: 115200 (default), 625000, 1250000")
+    board.add_argument("--layout", metavar="L", help="the board's memory layout: seed (default: slots "
+                       "at 0x0BB8) or hth4-2.2 (slots at 0x0B80); a CALL elsewhere is a stray call")
+    board.add_argument("--config", metavar="WORD", help="the config word at power-on, e.g. 0x821b "
+                       "(default 0x0002: only the run bit)")
+    board.add_argument("--baud-switch", action="store_const", const="1", help="a config write whose "
+                       "COM baud bits name another baud switches the board to it (undocumented by "
+                       "Kondo: the worst case)")
     board.add_argument("--motion-s", metavar="S", help="how long each motion runs, seconds (default 1.0)")
     board.add_argument(
         "--durations", metavar="SLOT:S,...", help="per-slot durations, e.g. 3:2.5,7:1.2 (others: --motion-s)"
@@ -71,8 +78,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ("short", "send half the reply"),
         ("junk", "send garbage bytes before the reply"),
         ("late", "reply --late-ms late"),
+        ("lose_start", "no reply to the frame that starts a motion, which still starts "
+                       "(counted over motion starts)"),
     ):
-        faults.add_argument(f"--{kind}", metavar="K|P", help=what)
+        faults.add_argument(f"--{kind.replace('_', '-')}", dest=kind, metavar="K|P", help=what)
     faults.add_argument("--late-ms", metavar="MS", help="how late a --late reply is, ms (default 500)")
     faults.add_argument("--seed", metavar="N", help="seed for faults given as a probability (default 0)")
     parser.add_argument("-v", "--verbose", action="store_true", help="log every frame and reply to stderr")

@@ -792,6 +792,7 @@ def _build_show(file: str, source: bytes, doc: _Doc) -> Show:
         baud=robot.get("baud"),
         timeout=_seconds(robot.get("timeout")),
         retries=robot.get("retries"),
+        layout=robot.get("layout"),
     )
     abort = data.get("on_abort")
     return Show(

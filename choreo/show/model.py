@@ -24,6 +24,7 @@ class RobotSettings:
     baud: int | None = None
     timeout: float | None = None  # seconds to wait for one reply
     retries: int | None = None  # extra tries after a failed one (default 2: 3 tries in all)
+    layout: str | None = None  # the board's memory layout (None: not said; the run assumes seed)
 
 
 @dataclass(frozen=True)
@@ -138,6 +139,7 @@ class Plan:
 
     steps: tuple[PlannedStep, ...]
     estimated_s: float  # estimated total duration on the show clock
+    layout: str = "seed"  # the board layout whose frames the steps carry
 
     def motions_used(self) -> list[int]:
         return sorted({s.motion for s in self.steps if s.kind is StepKind.PLAY and s.motion is not None})

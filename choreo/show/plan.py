@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from choreo import protocol
+from choreo.layouts import Layout, layout_named
 from choreo.show.model import DEFAULT_MOTION_S, Plan, PlannedStep, Repeat, Show, Step, StepKind
 
 _DIGITS = 9  # sums are rounded to the nanosecond so that 0.1 + 0.2 plans as 0.3
@@ -35,14 +36,21 @@ class _Flat:
     at: float | None
 
 
-def compile_plan(show: Show) -> Plan:
-    """The show's steps with repeats expanded, each with its planned start and frames."""
+def compile_plan(show: Show, layout: Layout | None = None, baud: int | None = None) -> Plan:
+    """The show's steps with repeats expanded, each with its planned start and frames.
+
+    The frames are the ones the run sends with `layout` and `baud` (default: the show's
+    robot settings); an hth4-2.2 play's suspend and resume show `layouts.EXAMPLE_CONFIG`, as
+    the run makes them from the config word it reads from the board.
+    """
+    layout = layout or layout_named(show.robot.layout or "seed")
+    baud = baud or show.robot.baud or protocol.DEFAULT_BAUD
     planned: list[PlannedStep] = []
     clock = 0.0  # end of the step before, on the show clock
     last_play: tuple[float, int, float] | None = None  # (start, motion, expected duration)
     waited = True  # whether the last play's end has been waited for already
     sequences: dict[int, tuple[protocol.Frame, ...]] = {}  # frames are immutable: build each once
-    status = (protocol.status_frame(),)
+    status = (layout.status,)
     for index, flat in enumerate(_flatten(show.steps)):
         step = flat.step
         start = max(clock, flat.at or 0.0)  # never rounded below its cue
@@ -52,7 +60,7 @@ def compile_plan(show: Show) -> Plan:
             expected = 0.0
             last_play = (start, motion, _duration(show, motion))
             waited = False
-            frames: tuple[protocol.Frame, ...] = sequences.get(motion) or sequences.setdefault(motion, protocol.play_sequence(motion))
+            frames: tuple[protocol.Frame, ...] = sequences.get(motion) or sequences.setdefault(motion, layout.play_sequence(motion, baud=baud))
         elif step.kind is StepKind.WAIT:
             expected = float(step.seconds or 0.0)
             frames = ()
@@ -78,7 +86,7 @@ def compile_plan(show: Show) -> Plan:
             )
         )
         clock = max(start, _round(start + expected))  # rounding never moves time backwards
-    return Plan(tuple(planned), clock)
+    return Plan(tuple(planned), clock, layout.name)
 
 
 def load_plan(path: str | Path) -> tuple[Show, Plan]:

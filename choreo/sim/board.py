@@ -20,8 +20,14 @@ What it models, following the spec and its errata:
   may still see the word from before it, and two queries within one period get the same value.
   Writes change the real word at once; only the read is stale. A tick at the very instant a
   frame arrives sees the board as it was before the frame. `refresh_s` 0: reads are live.
-- CALL of a slot's start address arms that slot. A CALL of any other address is ACKed and arms
-  nothing (the real board would just jump there). Every CALL pushes a return address: a CALL
+- A layout (`seed` or `hth4-2.2`, `choreo.layouts`) says where its motion slots start. CALL of a
+  slot's start address arms that slot: the program counter (RAM 0x0002-0x0004) moves there and
+  the old counter is pushed as the return address (0x0005-0x0007), the call depth at 0x0008.
+  A CALL of any other address (another layout's slot, say) is ACKed, journalled as a `stray`
+  call (counted in `stray_calls`) and plays nothing (the real board would jump into motion
+  data). When a motion ends, the counter goes back to the return address and the return
+  address and depth are cleared: Kondo's "still running" rule reads exactly that. At power-on
+  the counter is at the layout's main loop and the config word is `power_on_config`. Every CALL pushes a return address: a CALL
   while one is already pushed (a second CALL with no stop frame between, as a client re-sending
   a CALL alone would) is journalled as a `stack` event and counted in `stack_faults`. It is
   still ACKed and arms its slot: the real board gives no sign either.
@@ -34,6 +40,13 @@ What it models, following the spec and its errata:
 - A frame with a bad checksum, a malformed frame, a command the model does not implement, or an
   address outside the modelled RAM gets a NAK `04 CMD 15 SUM`. Bytes that cannot be a frame at
   all (a size byte below 3 or above 128) get a NAK with the command byte that followed, or 00.
+- The status refresh covers RAM 0x0000-0x000B (the config word and the program state, what
+  both layouts' status reads look at): the sources only say the status is refreshed every
+  50 ms, so the cautious model shows the program state as late as the config word.
+- `baud_switch`: a config write whose COM baud bits (7-6) name another baud switches the
+  board to it at once, its ACK included (lost to a client at the old baud). Kondo does not
+  document what a board does; this is the worst case.
+- `lose_start` (a fault): the reply to a frame that starts a motion is lost, the motion starts.
 - ACK check (`04 fe 06 08`) is answered with the same 4 bytes, as the real board does.
 - The version query (`03 fd 00`) is answered with `VERSION_TEXT`, framed like any answer.
 - One reply at a time: a frame (or a burst of noise) whose first byte arrives before the board
@@ -53,15 +66,19 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from choreo import protocol as p
+from choreo.layouts import SEED, Layout
 from choreo.sim.faults import NOT_EXECUTED, FaultInjector, FaultPlan
 
 RAM_SIZE = 0x0400
 POWER_ON_CONFIG = 0x0002
 RUN_BIT = 0x02  # config bit 1: ROM program run
 PROGRAM_COUNTER = range(0x0002, 0x0005)  # where the stop frame saves the program counter
+RETURN_ADDRESS = range(0x0005, 0x0008)  # what a CALL pushes: where the program goes back to
+CALL_DEPTH = 0x0008
+STATUS_SPAN = 0x000C  # RAM the status refresh covers: the config word and the program state
 BITS_PER_BYTE = 11  # start + 8 data + even parity + stop
 BOARD_BAUDS = (115200, 625000, 1250000)
 DEFAULT_BAUD = 115200
@@ -136,6 +153,7 @@ class _Outcome:
     note: str
     command: int
     events: tuple[JournalEntry, ...] = ()  # journalled after the frame itself
+    started: bool = False  # the frame started a motion (what `lose_start` hits)
 
 
 @dataclass(eq=False)
@@ -152,6 +170,11 @@ class SimBoard:
     wire: bool = True  # emulate 11 bits a byte at `baud`; False: bytes take no time
     journal_size: int = 100_000
     on_entry: Callable[[JournalEntry], None] | None = None
+    layout: Layout = SEED  # where its motions start: a CALL anywhere else is a stray call
+    power_on_config: int = POWER_ON_CONFIG  # the config word at power-on
+    # A config write whose COM baud bits name another baud switches the board's speed (the
+    # worst case: Kondo does not document it).
+    baud_switch: bool = False
 
     def __post_init__(self) -> None:
         if self.baud not in BOARD_BAUDS:
@@ -166,8 +189,11 @@ class SimBoard:
                 raise ValueError(f"motion duration must be >= 0 s, not {seconds}")
             if slot is not None and not 0 <= slot < p.MOTION_SLOTS:
                 raise ValueError(f"duration for slot {slot}: slots are 0..{p.MOTION_SLOTS - 1}")
+        if not 0 <= self.power_on_config <= 0xFFFF:
+            raise ValueError(f"config word 0x{self.power_on_config:x} is not 16 bits")
         self.ram = bytearray(RAM_SIZE)
-        self.ram[0:2] = POWER_ON_CONFIG.to_bytes(2, "little")
+        self.ram[0:2] = self.power_on_config.to_bytes(2, "little")
+        self.ram[2:5] = self.layout.main_loop.to_bytes(3, "little")  # the main loop runs
         self.armed: int | None = None
         self.frames_received = 0
         self.lost = False
@@ -175,13 +201,15 @@ class SimBoard:
         self.ignored = 0  # frames not answered: they came while the board was still replying
         self.stack_depth = 0  # return addresses pushed by CALLs since the last stop frame
         self.stack_faults = 0  # CALLs that pushed a second return address
+        self.stray_calls = 0  # CALLs to an address that is not the start of one of the layout's slots
+        self.starts = 0  # motions started (what `lose_start` counts)
         self.journal: deque[JournalEntry] = deque(maxlen=self.journal_size)
         self._running: _Running | None = None
         self._injector = FaultInjector(self.faults)
         self._tx_free = float("-inf")  # when the board's last reply byte is on the wire
         self._now = float("-inf")
         self._tick = 0  # the last refresh tick taken (0: the one at power-on)
-        self._shown = POWER_ON_CONFIG  # the config word a status read returns until the next tick
+        self._shown = bytes(self.ram[:STATUS_SPAN])  # what a status read returns until the next tick
 
     # -- time and state ----------------------------------------------------------------------
 
@@ -201,12 +229,17 @@ class SimBoard:
     def status(self, now: float) -> int:
         """The config word a status read at `now` would return: as of the last refresh tick
         (a look: changes nothing; for `now` at or after the board's time)."""
+        shown = self.status_bytes(now)
+        return shown[0] | shown[1] << 8
+
+    def status_bytes(self, now: float) -> bytes:
+        """RAM 0x0000-0x000B as a status read at `now` would return it (a look)."""
         if self.refresh_s <= 0:
-            return self.config(now)
+            return self._state_at(now)
         tick = self._tick_index(now)
         if tick <= self._tick or now < self._now:
             return self._shown
-        return self._config_at(self._tick_time(tick))
+        return self._state_at(self._tick_time(tick))
 
     def running(self, now: float) -> int | None:
         """The slot whose motion is running at `now`, or None (a look: changes nothing)."""
@@ -228,23 +261,27 @@ class SimBoard:
             return
         if self.refresh_s > 0:
             tick = self._tick_index(now)
-            if tick > self._tick:  # nothing was written since `_now`: the word at the tick is known
-                self._shown = self._config_at(self._tick_time(tick))
+            if tick > self._tick:  # nothing was written since `_now`: the state at the tick is known
+                self._shown = self._state_at(self._tick_time(tick))
                 self._tick = tick
         self._now = now
         run = self._running
         if run is not None and now >= run.ends:
             self._running = None
-            self.ram[0] &= ~RUN_BIT & 0xFF
-            self._record(JournalEntry("motion", run.ends, note=f"motion {run.slot} ended, run bit cleared"))
+            # The program goes back to the return address; `stack_depth` still counts the CALL
+            # (cautious: only a stop frame resets the program, so a CALL with no stop frame
+            # before it is a stack fault even after the motion ended).
+            self.ram[:STATUS_SPAN] = _returned(self.ram[:STATUS_SPAN])
+            self._record(JournalEntry("motion", run.ends, note=f"motion {run.slot} ended, run bit "
+                                                                "cleared, back at the return address"))
 
     def _ended_by(self, now: float) -> bool:
         return self._running is not None and now >= self._running.ends
 
-    def _config_at(self, at: float) -> int:
-        """The config word at `at`, no later than the next frame (RAM as it is, less a motion end)."""
-        word = self.ram[0] | self.ram[1] << 8
-        return word & ~RUN_BIT if self._ended_by(at) else word
+    def _state_at(self, at: float) -> bytes:
+        """RAM 0x0000-0x000B at `at`, no later than the next frame (as it is, less a motion end)."""
+        state = bytes(self.ram[:STATUS_SPAN])
+        return _returned(state) if self._ended_by(at) else state
 
     def _tick_index(self, now: float) -> int:
         # The nanosecond of slack keeps exact tick times (0.15 / 0.05) on their tick.
@@ -289,6 +326,11 @@ class SimBoard:
         if NOT_EXECUTED.isdisjoint(kinds):
             outcome = self._execute(data, now)
             reply, command, note, events = outcome.reply, outcome.command, outcome.note, outcome.events
+            if outcome.started:
+                self.starts += 1
+                if self._injector.start_lost(self.starts):
+                    kinds += ("lose_start",)
+                    reply, note = b"", f"{note}; its reply is lost (lose_start)"
         else:  # the frame never reached the board, or the board refused it
             reply, command, note = b"", _command_byte(data), _described(data) + ": not executed"
         damage = self._injector.damage(kinds, command, reply)
@@ -297,7 +339,7 @@ class SimBoard:
             self.lost_at_frame = number
             note = _described(data) + ": port lost"
         sent = None
-        if damage.reply is not None:
+        if damage.reply:  # b"": the reply was lost on the way (lose_start, a baud switch)
             sent = self._schedule(damage.reply, now + self.reply_delay_s + damage.extra_delay_s)
         self._record(
             JournalEntry(
@@ -352,15 +394,26 @@ class SimBoard:
 
     def _call(self, command: p.Command, data: bytes, now: float) -> _Outcome:
         address = command.address or 0
-        slot = p.slot_of_address(address)
+        slot = self.layout.slot_of(address)
         self.armed = slot
         what = f"motion {slot} armed" if slot is not None else "not a slot start, nothing armed"
         events: tuple[JournalEntry, ...] = ()
+        if slot is None:
+            self.stray_calls += 1
+            events = (JournalEntry(
+                "stray", now, data, number=self.frames_received,
+                note=f"CALL 0x{address:06x} is not the first byte of a {self.layout.name} slot: "
+                     f"it would jump into motion data; nothing played (stray call {self.stray_calls})",
+            ),)
+        else:  # the program will run the slot: the counter moves there, the return is pushed
+            self.ram[RETURN_ADDRESS.start:RETURN_ADDRESS.stop] = self.ram[PROGRAM_COUNTER.start:PROGRAM_COUNTER.stop]
+            self.ram[PROGRAM_COUNTER.start:PROGRAM_COUNTER.stop] = address.to_bytes(3, "little")
         self.stack_depth += 1
+        self.ram[CALL_DEPTH] = min(self.stack_depth, 0xFF)
         if self.stack_depth > 1:
             self.stack_faults += 1
             what += f", return stack depth {self.stack_depth}"
-            events = (JournalEntry(
+            events += (JournalEntry(
                 "stack", now, data, number=self.frames_received,
                 note=f"second return address pushed: CALL re-sent without a stop frame "
                      f"(depth {self.stack_depth}, stack fault {self.stack_faults})",
@@ -386,9 +439,27 @@ class SimBoard:
             if self.stack_depth:
                 notes.append(f"program counter rewritten, return stack ({self.stack_depth}) emptied")
                 self.stack_depth = 0
+        started = False
         if 0 in written:
-            notes.append(self._config_written(bool(was_running), now))
-        return _Outcome(p.ack(p.CMD_MOV), ", ".join(n for n in notes if n), p.CMD_MOV)
+            note = self._config_written(bool(was_running), now)
+            started = " started" in note
+            notes.append(note)
+        outcome = _Outcome(p.ack(p.CMD_MOV), ", ".join(n for n in notes if n), p.CMD_MOV,
+                           started=started)
+        if 0 in written and self.baud_switch:
+            return self._switch_baud(outcome)
+        return outcome
+
+    def _switch_baud(self, outcome: _Outcome) -> _Outcome:
+        """The config's COM baud bits name another baud: from now on the board talks at that one,
+        its answer to this very write included (garbage to a client at the old baud, so none)."""
+        code = (self.ram[0] & p.COM_BAUD_MASK) >> p.COM_BAUD_SHIFT
+        baud = next((b for b, c in p.BAUD_CODES.items() if c == code), None)
+        if baud is None or baud == self.baud:
+            return outcome
+        old, self.baud = self.baud, baud
+        note = f"{outcome.note}, COM baud bits say {baud}: the board switched from {old} baud"
+        return replace(outcome, reply=b"", note=note)
 
     def _config_written(self, was_running: bool, now: float) -> str:
         """React to a write of the config word's low byte: start or stop a motion."""
@@ -414,10 +485,9 @@ class SimBoard:
                 p.nak(p.CMD_MOV), f"read of {count} bytes at 0x{address:04x} is not possible: NAK", p.CMD_MOV
             )
         data = bytearray(self.ram[address : address + count])
-        if self.refresh_s > 0:  # the config word as of the last refresh tick
-            shown = self._shown.to_bytes(2, "little")
-            for a in range(address, min(address + count, 2)):
-                data[a - address] = shown[a]
+        if self.refresh_s > 0:  # the config word and program state as of the last refresh tick
+            for a in range(address, min(address + count, STATUS_SPAN)):
+                data[a - address] = self._shown[a]
         data = bytes(data)
         what = f"RAM 0x{address:04x} x{count} -> {p.hexbytes(data)}"
         if address == 0 and count >= 1:
@@ -425,6 +495,16 @@ class SimBoard:
             as_of = f", as of the refresh at {self._tick_time(self._tick):.6f}" if self.refresh_s > 0 else ""
             what += f" (status: {state}{as_of})"
         return _Outcome(p.ram_reply(data), what, p.CMD_MOV)
+
+
+def _returned(state: bytes) -> bytes:
+    """The program state after a motion ends: run bit cleared, the program counter back at the
+    return address, the return address and call depth cleared."""
+    ram = bytearray(state)
+    ram[0] &= ~RUN_BIT & 0xFF
+    ram[PROGRAM_COUNTER.start:PROGRAM_COUNTER.stop] = ram[RETURN_ADDRESS.start:RETURN_ADDRESS.stop]
+    ram[RETURN_ADDRESS.start:CALL_DEPTH + 1] = bytes(CALL_DEPTH + 1 - RETURN_ADDRESS.start)
+    return bytes(ram)
 
 
 def _command_byte(data: bytes) -> int:

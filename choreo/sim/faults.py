@@ -13,6 +13,9 @@ Kinds (what the client sees for the frame the fault hits):
 - ``late``: the reply comes ``late_ms`` (default 500 ms, longer than a link's usual timeout)
   after it was due. The frame took effect. The board is still replying until the late reply's
   last byte is on the wire: a frame sent meanwhile is not answered (see ``SimBoard.receive``).
+- ``lose_start``: no reply to a frame that starts a motion (the restore or resume with a motion
+  armed), although the motion does start: the case where a client must not play it twice.
+  Counted over motion starts, not frames: ``lose_start=2`` hits the 2nd, 4th... start.
 
 Spelling (the same in a ``sim://`` query and on the ``choreo sim`` command line): the value is
 either a whole number K >= 1, meaning every K-th frame (frames K, 2K, 3K... counted from 1 over
@@ -39,7 +42,11 @@ from dataclasses import dataclass, field
 from choreo.protocol import nak
 
 # Order matters: precedence when several hit one frame, and the order of random draws.
-FAULT_KINDS: tuple[str, ...] = ("lose", "drop", "nak", "badsum", "short", "junk", "late")
+FRAME_FAULTS: tuple[str, ...] = ("lose", "drop", "nak", "badsum", "short", "junk", "late")
+# Counted over the frames that start a motion (a restore or resume with a motion armed), not
+# over every frame: `lose_start=2` loses the reply to every second start.
+START_FAULTS: tuple[str, ...] = ("lose_start",)
+FAULT_KINDS: tuple[str, ...] = FRAME_FAULTS + START_FAULTS
 JUNK = bytes((0xFF, 0x00, 0xAA))  # 0xff is no valid size byte: a careful reader notices at once
 DEFAULT_LATE_S = 0.5
 
@@ -120,7 +127,8 @@ class FaultPlan:
     def describe(self) -> str:
         if not self.triggers:
             return "no faults"
-        parts = [f"{kind} {self.triggers[kind]}" for kind in FAULT_KINDS if kind in self.triggers]
+        parts = [f"{kind} {self.triggers[kind]}".replace(" frame", " start" if kind in START_FAULTS else " frame")
+                 for kind in FAULT_KINDS if kind in self.triggers]
         return ", ".join(parts) + (f" (seed {self.seed})" if self.uses_random else "")
 
     @property
@@ -154,7 +162,7 @@ class FaultInjector:
     def decide(self, number: int) -> tuple[str, ...]:
         """The fault kinds that hit frame `number` (1-based), in `FAULT_KINDS` order."""
         hit = []
-        for kind in FAULT_KINDS:
+        for kind in FRAME_FAULTS:
             trigger = self.plan.triggers.get(kind)
             if trigger is None:
                 continue
@@ -170,6 +178,14 @@ class FaultInjector:
             if trigger.hits(number, draw):
                 hit.append(kind)
         return tuple(hit)
+
+    def start_lost(self, start: int) -> bool:
+        """Whether the reply to the `start`-th motion start (1-based) is lost (`lose_start`)."""
+        trigger = self.plan.triggers.get("lose_start")
+        if trigger is None:
+            return False
+        draw = self._rngs["lose_start"].random() if trigger.probability is not None else None
+        return trigger.hits(start, draw)
 
     def damage(self, kinds: tuple[str, ...], command: int, reply: bytes) -> Damage:
         """Apply the faults that hit a frame to the reply the board would have sent."""

@@ -15,7 +15,11 @@ with dashes on the command line (`--motion-s 0.5 --drop 5`), and both go through
 | gap_ms | an inter-byte gap longer than this drops a partial frame | 0.15 (sim://), 20 (pty) |
 | seed | seed of the random faults | 0 |
 | late_ms | how late a `late` reply is | 500 |
+| layout | the board's memory layout: `seed` or `hth4-2.2` (where its motion slots start) | seed |
+| config | the config word at power-on, e.g. `0x821b` (what an HTH4 2.2+ project saves) | 0x0002 |
+| baud_switch | 1: a config write whose COM baud bits name another baud switches the board to it | 0 |
 | lose, drop, nak, badsum, short, junk, late | faults: K (every K-th frame) or P (probability) | none |
+| lose_start | no reply to the frame that starts a motion (it still starts): K-th start or P | none |
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from urllib.parse import parse_qsl
 
+from choreo.layouts import SEED, Layout, layout_named
 from choreo.protocol import MOTION_SLOTS
 from choreo.sim.board import (
     BOARD_BAUDS,
@@ -31,11 +36,13 @@ from choreo.sim.board import (
     DEFAULT_MOTION_S,
     DEFAULT_REFRESH_S,
     DEFAULT_REPLY_DELAY_S,
+    POWER_ON_CONFIG,
     SimBoard,
 )
 from choreo.sim.faults import DEFAULT_LATE_S, FAULT_KINDS, FaultPlan
 
-SETTINGS = ("baud", "motion_s", "durations", "reply_ms", "refresh_ms", "wire", "gap_ms", "seed", "late_ms")
+SETTINGS = ("baud", "motion_s", "durations", "reply_ms", "refresh_ms", "wire", "gap_ms", "seed", "late_ms",
+            "layout", "config", "baud_switch")
 OPTION_NAMES: tuple[str, ...] = SETTINGS + FAULT_KINDS
 
 
@@ -51,6 +58,9 @@ class SimOptions:
     wire: bool = True
     gap_s: float | None = None  # None: the transport's own default
     faults: FaultPlan = field(default_factory=FaultPlan)
+    layout: Layout = SEED
+    config: int = POWER_ON_CONFIG
+    baud_switch: bool = False
 
     def board(self, **kwargs: object) -> SimBoard:
         """A fresh board with these options (kwargs: `on_entry`, `journal_size`, `power_on`)."""
@@ -62,6 +72,9 @@ class SimOptions:
             durations=dict(self.durations),
             faults=self.faults,
             wire=self.wire,
+            layout=self.layout,
+            power_on_config=self.config,
+            baud_switch=self.baud_switch,
             **kwargs,  # type: ignore[arg-type]
         )
 
@@ -70,7 +83,8 @@ class SimOptions:
         slots = ", ".join(f"{slot}: {sec:g} s" for slot, sec in sorted(self.durations.items()))
         motions = f"motions {self.motion_s:g} s" + (f" ({slots})" if slots else "")
         status = f"status every {self.refresh_s * 1000:g} ms" if self.refresh_s > 0 else "status live"
-        return f"{self.baud} baud 8E1, {motions}, {status}, {self.faults.describe()}"
+        board = f"layout {self.layout.name}, config 0x{self.config:04x}" + (", baud switch" if self.baud_switch else "")
+        return f"{self.baud} baud 8E1, {board}, {motions}, {status}, {self.faults.describe()}"
 
 
 def parse_query(query: str) -> SimOptions:
@@ -105,6 +119,9 @@ def parse_options(values: Mapping[str, str]) -> SimOptions:
         wire=_parsed(values, "wire", _flag, True),
         gap_s=_parsed(values, "gap_ms", _positive_milliseconds, None),
         faults=plan,
+        layout=_parsed(values, "layout", layout_named, SEED),
+        config=_parsed(values, "config", _word, POWER_ON_CONFIG),
+        baud_switch=_parsed(values, "baud_switch", _flag, False),
     )
 
 
@@ -185,6 +202,17 @@ def _whole(text: str) -> int:
         return int(text)
     except ValueError:
         raise ValueError("not a whole number") from None
+
+
+def _word(text: str) -> int:
+    """A 16-bit word, in hex (0x821b) or decimal."""
+    try:
+        value = int(text, 0)
+    except ValueError:
+        raise ValueError("not a 16-bit word (write it like 0x821b)") from None
+    if not 0 <= value <= 0xFFFF:
+        raise ValueError("not a 16-bit word: 0x0000..0xffff")
+    return value
 
 
 def _flag(text: str) -> bool:

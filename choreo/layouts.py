@@ -1,0 +1,168 @@
+"""Board memory layouts: where Heart to Heart 4 put the motions, and the frames that play one.
+
+Heart to Heart 4 (HTH4) writes motions into the board's ROM at addresses that changed between
+its versions, and the frame that plays motion N must CALL the first byte of that motion's slot:
+a CALL a few bytes off jumps into the middle of motion data. A layout is data: the first slot,
+the main loop address, how the stop and start frames are made (from the board's own config word,
+or fixed), and which status read says "still running". Nothing here does I/O.
+
+- `seed`: the source document's frames, byte for byte (slots at 0x0BB8 + N*0x800, one 12-byte
+  write that stops the program, config 0x8723 to run it, status = low byte 0x23 of the config).
+  At 625000 or 1250000 baud its fixed config words carry that baud in bits 7-6: the document's
+  words say 115200, and whether the board switches its speed the moment the word is written is
+  not documented (LAYOUTS.md), so choreo never writes a speed other than the one it talks at.
+- `hth4-2.2`: what Kondo's own library sends for boards written by HTH4 2.2 and later (slots at
+  0x0B80 + N*0x800). Suspend and resume are the board's config word, read once when the port
+  opens, with only bits 0-3 changed; the program counter is set to the main loop 0x00044B; a
+  motion runs while the program counter is inside the slots with a return address pushed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import lru_cache
+
+from choreo import protocol as p
+from choreo.protocol import Frame, FrameKind
+
+DEFAULT_LAYOUT = "seed"
+# The config word a real HTH4 2.2+ project saves (LAYOUTS.md's example): what `choreo plan` and
+# `choreo frames` show for hth4-2.2 when no board has been read.
+EXAMPLE_CONFIG = 0x821B
+RUN_BITS_MASK = 0x000F  # bits 0-3: ICS, program run, end-of-move message, vector jump
+RESUME_SET = 0x000B  # ICS, program run, vector jump
+RESUME_CLEAR = 0x0004  # end-of-move message off
+
+
+def with_baud(word: int, baud: int) -> int:
+    """The config word with its COM baud bits (7-6) set to `baud`'s code."""
+    return (word & ~p.COM_BAUD_MASK) | p.BAUD_CODES[baud] << p.COM_BAUD_SHIFT
+
+
+@dataclass(frozen=True)
+class Layout:
+    """One memory layout (see the module's docstring)."""
+
+    name: str
+    source: str  # where its bytes come from, for `choreo plan` and the README
+    first_slot: int
+    main_loop: int
+    reads_config: bool  # the play sequence is built from the config word read from the board
+    status: Frame  # the read whose answer says whether a motion is still running
+    build: Callable[[Layout, int, int, int], tuple[Frame, ...]]  # (layout, motion, config, baud)
+    # After a start frame whose reply was lost: the read, and whether its answer (the whole
+    # reply) shows the start frame was carried out.
+    start_read: Frame
+    started: Callable[[bytes], bool]
+
+    def slot_address(self, motion: int) -> int:
+        return self.first_slot + p.check_motion(motion) * p.SLOT_SIZE
+
+    def slot_of(self, address: int) -> int | None:
+        """The slot a CALL address starts, or None if it is not the first byte of one."""
+        offset = address - self.first_slot
+        if offset < 0 or offset % p.SLOT_SIZE or offset // p.SLOT_SIZE >= p.MOTION_SLOTS:
+            return None
+        return offset // p.SLOT_SIZE
+
+    def play_sequence(self, motion: int, config: int | None = None,
+                      baud: int = p.DEFAULT_BAUD) -> tuple[Frame, ...]:
+        """The frames that play `motion`, sent as one unit; all carry the motion for the log.
+
+        `config`: the board's config word (hth4-2.2; None: EXAMPLE_CONFIG, for plans).
+        """
+        if baud not in p.BAUD_CODES:
+            raise ValueError(f"baud {baud}: the RCB-4 runs at {', '.join(map(str, p.BAUD_CODES))}")
+        word = EXAMPLE_CONFIG if config is None else config
+        return _sequence(self, p.check_motion(motion), word & 0xFFFF if self.reads_config else 0, baud)
+
+    def play_frame(self, motion: int) -> Frame:
+        return Frame(FrameKind.PLAY, p.call(self.slot_address(motion)), motion)
+
+
+@lru_cache(maxsize=1024)
+def _sequence(layout: Layout, motion: int, config: int, baud: int) -> tuple[Frame, ...]:
+    # Built once per (slot, config, baud): a cue's frames are ready before its due time.
+    return layout.build(layout, motion, config, baud)
+
+
+def _seed_sequence(layout: Layout, motion: int, config: int, baud: int) -> tuple[Frame, ...]:
+    stop = p.mov_write(p.CONFIG_ADDRESS, _le(with_baud(p.SUSPENDED_CONFIG, baud), 2)
+                       + _le(p.SUSPEND_PROGRAM_COUNTER, 3) + bytes(7))
+    restore = p.mov_write(p.CONFIG_ADDRESS, _le(with_baud(p.RESUMED_CONFIG, baud), 2))
+    return (Frame(FrameKind.STOP, stop, motion), layout.play_frame(motion),
+            Frame(FrameKind.RESTORE, restore, motion))
+
+
+def _hth4_sequence(layout: Layout, motion: int, config: int, baud: int) -> tuple[Frame, ...]:
+    suspend = p.mov_write(p.CONFIG_ADDRESS, _le(config & ~RUN_BITS_MASK, 2))
+    counter = p.mov_write(p.PROGRAM_COUNTER_ADDRESS, _le(layout.main_loop, 3) + bytes(7))
+    resume = p.mov_write(p.CONFIG_ADDRESS, _le((config | RESUME_SET) & ~RESUME_CLEAR, 2))
+    return (Frame(FrameKind.STOP, suspend, motion), Frame(FrameKind.COUNTER, counter, motion),
+            layout.play_frame(motion), Frame(FrameKind.RESTORE, resume, motion))
+
+
+def _seed_started(reply: bytes) -> bool:
+    """The config word's low byte is 0x23 only between the restore and the motion's end."""
+    return len(reply) > 2 and reply[2] == p.EXECUTING_BYTE
+
+
+def _hth4_started(reply: bytes) -> bool:
+    """RAM 0x0000-0x000B: the resume not carried out leaves the program halted (run bit clear)
+    with the counter in the called slot and its return address pushed. Any other state means
+    it was: the motion runs (run bit set) or has already ended (back at the return address).
+    Kondo's running rule alone cannot tell: the CALL alone puts the counter in the slot."""
+    ram = reply[2:-1]
+    if len(ram) < 12:
+        return False
+    halted = not ram[0] & 0x02
+    in_slot = int.from_bytes(ram[2:5], "little") >= p.FIRST_CALLED_ADDRESS and any(ram[5:10])
+    return not (halted and in_slot)
+
+
+def _le(value: int, width: int) -> bytes:
+    return value.to_bytes(width, "little")
+
+
+SEED = Layout(
+    name="seed",
+    source="the source document (RoboSavvy, 2012): HTH4 2.0/2.1 slots, HTH4 1.x main loop",
+    first_slot=p.FIRST_SLOT_ADDRESS,
+    main_loop=p.SUSPEND_PROGRAM_COUNTER,
+    reads_config=False,
+    status=p.status_frame(),
+    build=_seed_sequence,
+    start_read=p.status_frame(),
+    started=_seed_started,
+)
+HTH4_22 = Layout(
+    name="hth4-2.2",
+    source="Kondo's Rcb4BaseLib (HTH4 2.2 and later): config word read from the board",
+    first_slot=0x0B80,
+    main_loop=0x00044B,
+    reads_config=True,
+    status=Frame(FrameKind.STATUS, p.mov_read(p.PROGRAM_COUNTER_ADDRESS, p.COUNTER_READ_BYTES)),
+    build=_hth4_sequence,
+    start_read=p.read_frame(p.CONFIG_ADDRESS, 12),
+    started=_hth4_started,
+)
+LAYOUTS: dict[str, Layout] = {layout.name: layout for layout in (SEED, HTH4_22)}
+LAYOUT_NAMES = tuple(LAYOUTS)
+
+
+def layout_named(name: str) -> Layout:
+    """The layout called `name`, or a ValueError that lists the names."""
+    try:
+        return LAYOUTS[name]
+    except KeyError:
+        raise ValueError(f"layout {name!r}: choose {' or '.join(LAYOUT_NAMES)}") from None
+
+
+def layout_of_call(address: int) -> tuple[Layout, int] | None:
+    """Which layout's slot start a CALL address is, with the slot (the log review's words)."""
+    for layout in LAYOUTS.values():
+        slot = layout.slot_of(address)
+        if slot is not None:
+            return layout, slot
+    return None
