@@ -9,6 +9,7 @@ import threading
 import time
 from typing import TextIO
 
+from choreo.__main__ import STOP_SIGNALS
 from choreo.errors import Interrupted
 
 
@@ -92,8 +93,6 @@ def _port_line(session) -> str:
     return f"port: {session.port} at {session.baud} baud, from {where}"
 
 
-# Ctrl-C, `kill`, and a closed terminal or SSH session (SIGHUP) all stop the show the same way.
-STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 class _StopOnSignals:
