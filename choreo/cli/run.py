@@ -101,6 +101,7 @@ class _StopOnSignals:
 
     def __init__(self) -> None:
         self._previous: dict = {}
+        self._signalled = False  # a stop the log asked for is not a first Ctrl-C
 
     def __enter__(self):
         from choreo.runner import StopRequest
@@ -111,8 +112,9 @@ class _StopOnSignals:
         return self.stop
 
     def _handle(self, signum, frame) -> None:
-        if self.stop():
+        if self._signalled:
             raise KeyboardInterrupt
+        self._signalled = True
         name = "interrupted (Ctrl-C)" if signum == signal.SIGINT else f"stopped ({signal.Signals(signum).name})"
         self.stop.request(name)
 
