@@ -1,7 +1,89 @@
-"""`python -m choreo` is the same program as the `choreo` console script."""
+"""The process entry of `choreo` (the console script) and `python -m choreo`.
 
+Kept tiny and import-light on purpose: it runs before anything else of choreo, so it is where
+the process is made safe to run in. Two things cannot wait for the CLI's imports (argparse, the
+library, serial, mcap: tens of milliseconds):
+
+- Standard streams a caller closed (`choreo run show.yaml 2>&-`) are reopened onto /dev/null.
+  Otherwise the next file opened (the run's log) would take descriptor 2, and whatever is
+  written to "stderr" would land in the log.
+- Ctrl-C, SIGTERM and SIGHUP are caught from here on. While choreo loads, a signal is only
+  noted and acted on once it has loaded; from then on it interrupts the command (exit 130,
+  "interrupted"), until `choreo run` installs its own handlers for the show.
+
+What remains is the interpreter's own start-up, before this module runs (README, "Stopping").
+"""
+
+from __future__ import annotations
+
+import os
+import signal
 import sys
 
-from choreo.cli import main
+STANDARD_FDS = (0, 1, 2)
+# Ctrl-C, `kill`, and a closed terminal or SSH session: the same stop.
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
-sys.exit(main())
+
+def main() -> int:
+    """Make the process safe, then hand over to the CLI."""
+    reopen_closed_standard_fds()
+    signals = SignalGuard()
+    signals.install()
+    from choreo.cli import main as cli_main  # a signal now is noted, and acted on in cli_main
+
+    return cli_main(signals=signals)
+
+
+def reopen_closed_standard_fds() -> None:
+    """Give every closed descriptor 0, 1, 2 /dev/null, and Python a stream on it."""
+    for fd in STANDARD_FDS:
+        try:
+            os.fstat(fd)
+        except OSError:
+            null = os.open(os.devnull, os.O_RDWR)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+    for name, fd in (("stdin", 0), ("stdout", 1), ("stderr", 2)):
+        if getattr(sys, name) is None:  # Python found the descriptor closed at start-up
+            mode = "r" if fd == 0 else "w"
+            setattr(sys, name, open(fd, mode, buffering=1 if fd else -1, closefd=False,
+                                    errors="backslashreplace"))
+
+
+class SignalGuard:
+    """The stop signals for a command that is not running a show.
+
+    Noted only (`armed` False) while choreo loads and once the command is over, so that neither
+    an import nor the last lines are cut short; armed, the first signal interrupts the command
+    with KeyboardInterrupt, which the CLI maps to exit 130, and later ones are only noted.
+    """
+
+    def __init__(self) -> None:
+        self.armed = False
+        self.signalled: int | None = None
+
+    def install(self) -> None:
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, self._handle)
+
+    def _handle(self, signum: int, frame: object) -> None:
+        first = self.signalled is None
+        self.signalled = signum
+        if first and self.armed:
+            self.armed = False
+            raise KeyboardInterrupt
+
+    def arm(self) -> None:
+        """From now on a signal interrupts the command; one that came while loading does now."""
+        if self.signalled is not None:
+            raise KeyboardInterrupt
+        self.armed = True
+
+    def disarm(self) -> None:
+        self.armed = False
+
+
+if __name__ == "__main__":
+    sys.exit(main())

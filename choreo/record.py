@@ -9,10 +9,23 @@ OS every quarter second. A background thread flushes a run that never idles (bac
 frames), so a killed run loses at most half a second and a linear reader can read the rest.
 Messages keep the order they were reported in. The file is created exclusively: a log is never
 overwritten.
+
+A run is recorded or it does not go on. The run's start (header, metadata, the show, the
+schemas) is written, flushed and fsync'd before the port opens, and a file that cannot take it
+is removed. Then disk space is kept reserved ahead of the write position (Linux
+fallocate(FALLOC_FL_KEEP_SIZE): the file's size does not change, so a crash still leaves a valid
+MCAP): enough for every message reported but not yet written, the chunk being built, what the
+run may still report once told to stop (the exchange in flight, the abort motion) and the file's
+summary. The room is checked as each message is reported, before the next frame can go out;
+when the reserve cannot grow (a full disk) the run is told to stop, and everything it sent still
+fits. Closing truncates the file to its length, which frees what was left of the reserve. Where
+fallocate is not supported, a write that fails stops the run instead, and what was sent since
+the last write that worked is missing from the log.
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -56,6 +69,18 @@ RESULT_METADATA_NAME = "choreo.result"
 FLUSH_EVERY_S = 0.5
 BATCH = 16  # messages the background flusher writes before it lets the runner have the GIL
 CHUNK_SIZE = 64 * 1024
+
+# The reserve (see the module's docstring). Every figure is a bound with room to spare: a logged
+# message takes about 220 bytes in the file with its index entry; a label or an error line makes
+# one longer, so MESSAGE_BUDGET is what they take on average at worst.
+MESSAGE_BUDGET = 512  # bytes a message may take in the file, its index entries included
+IN_FLIGHT = 256  # messages a run may still report once told to stop: the exchange in flight
+#                  and its retries, the abort motion and its retries, the last steps and warnings
+CHUNK_BUDGET = 512  # bytes each chunk adds: its index in the summary, its message indexes
+CHUNK_BOUND = CHUNK_SIZE * 5 // 4 + MESSAGE_BUDGET  # the chunk being built, with its indexes
+SUMMARY_SLACK = 8 * 1024  # summary beyond the schemas: channels, statistics, indexes, footer, result
+START_SLACK = 4 * 1024  # the start beyond the schemas and the show: header, metadata, channels
+RESERVE_AHEAD = 256 * 1024  # reserved beyond what is needed, so the reserve grows only now and then
 
 # foxglove.Log levels
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
@@ -167,6 +192,9 @@ class Recorder:
                  unique: bool = False) -> None:
         self._file, self.path = _create_exclusive(Path(path), unique)
         self.failure: str | None = None  # why the file could not be written, once it could not
+        self.full: str | None = None  # why the reserve could not grow: the run must stop
+        self.stopped_run = False  # the log asked the run to stop
+        self.on_stop: Callable[[str], None] | None = None  # how to ask (the run's stop request)
         self._lock = threading.Lock()
         self._dirty = False
         self._closed = False
@@ -174,28 +202,55 @@ class Recorder:
         self._flush_every_s = flush_every_s
         self._flushed = time.monotonic()
         self._written = 0  # messages added to the file so far (their MCAP sequence numbers)
+        self._chunks = 0  # chunks closed by a flush so far
+        self._room = sys.maxsize  # messages reported that the reserve is known to hold
+        schemas = {topic: schema_text(filename) for topic, (_, filename) in CHANNELS.items()}
+        self._summary_bytes = sum(map(len, schemas.values())) + SUMMARY_SLACK
+        self._reserve = DiskReserve(self._file.fileno())
+        need = self._summary_bytes + len(info.show_source) + START_SLACK + self._tail_bytes()
         try:
-            self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
-            self._writer.start(profile="", library=f"choreo {__version__}")
-            self._channels = {topic: self._register(topic, *spec) for topic, spec in CHANNELS.items()}
-            self._writer.add_metadata(METADATA_NAME, info.metadata())
-            self._writer.add_attachment(
-                create_time=info.start_ns, log_time=info.start_ns,
-                name=Path(info.show_path).name, media_type="application/yaml", data=info.show_source,
-            )
-            self._writer.flush()
-            self._file.flush()
+            self._grow_reserve(need, need + RESERVE_AHEAD)
+            self._write_start(info, schemas)
         except OSError as exc:
-            self._file.close()
-            raise LogError(f"log {self.path}: cannot write: {exc.strerror or exc}") from None
+            self._discard()
+            raise LogError(f"log {self.path}: cannot write the start of the run: "
+                           f"{exc.strerror or exc}{_space_hint(exc, self.path, need)}"
+                           ) from None
+        self._update_room()
         self._stop = threading.Event()
         self._flusher = threading.Thread(target=self._flush_loop, args=(flush_every_s,),
                                          name="choreo-log-flush", daemon=True)
         self._flusher.start()
 
-    def _register(self, topic: str, schema_name: str, filename: str) -> int:
-        schema_id = self._writer.register_schema(name=schema_name, encoding="jsonschema",
-                                                 data=schema_text(filename))
+    def _write_start(self, info: RunInfo, schemas: dict[str, bytes]) -> None:
+        """Header, schemas, channels, metadata and the show, on the disk before the port opens."""
+        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
+        self._writer.start(profile="", library=f"choreo {__version__}")
+        self._channels = {topic: self._register(topic, CHANNELS[topic][0], schemas[topic])
+                          for topic in CHANNELS}
+        self._writer.add_metadata(METADATA_NAME, info.metadata())
+        self._writer.add_attachment(
+            create_time=info.start_ns, log_time=info.start_ns,
+            name=Path(info.show_path).name, media_type="application/yaml", data=info.show_source,
+        )
+        self._writer.flush()
+        self._file.flush()
+        os.fsync(self._file.fileno())
+
+    def _discard(self) -> None:
+        """A file that could not take the run's start is no log: remove it."""
+        try:
+            self._file.close()
+        except OSError:
+            pass  # the buffered start could not be written either
+        self._reserve.release()
+        try:
+            self.path.unlink()
+        except OSError:
+            pass
+
+    def _register(self, topic: str, schema_name: str, schema: bytes) -> int:
+        schema_id = self._writer.register_schema(name=schema_name, encoding="jsonschema", data=schema)
         return self._writer.register_channel(topic=topic, message_encoding="json", schema_id=schema_id)
 
     @property
@@ -207,20 +262,28 @@ class Recorder:
 
     def on_tx(self, event: TxEvent) -> None:
         """Queued only: the frame has not been written yet (see the module's docstring)."""
-        self._pending.append((TX_TOPIC, event.time_ns, _tx_message, event))
+        self._queue((TX_TOPIC, event.time_ns, _tx_message, event))
 
     def on_rx(self, event: RxEvent) -> None:
         """Queued only: the next frame may be due right after this reply."""
-        self._pending.append((RX_TOPIC, event.time_ns, _rx_message, event))
+        self._queue((RX_TOPIC, event.time_ns, _rx_message, event))
 
     def on_step(self, event: StepEvent) -> None:
         """Queued only: a step's start comes just before its first frame."""
-        self._pending.append((STEP_TOPIC, event.time_ns, _step_message, event))
+        self._queue((STEP_TOPIC, event.time_ns, _step_message, event))
 
     def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
         """Queued only: a late-cue warning comes just before the cue's first frame."""
         time_ns = time.time_ns() if time_ns is None else time_ns
-        self._pending.append((LOG_TOPIC, time_ns, _log_message, (level, message, time_ns)))
+        self._queue((LOG_TOPIC, time_ns, _log_message, (level, message, time_ns)))
+
+    def _queue(self, item: _Pending) -> None:
+        """One append, and one comparison: is the message still inside the reserve? If not, the
+        reserve grows now, or the run is told to stop before its next frame."""
+        self._pending.append(item)
+        if self._written + len(self._pending) > self._room:
+            with self._lock:
+                self._keep_reserve()
 
     def _write_pending(self, limit: int | None = None) -> None:
         """Serialise and add queued messages (all, or `limit`), in order; the caller holds the lock."""
@@ -237,23 +300,68 @@ class Recorder:
                 self._dirty = True
         except OSError as exc:  # a chunk reached the disk and the disk said no
             self._failed(exc)
+        self._keep_reserve()
+
+    # -- the reserve -----------------------------------------------------------------------
+
+    def _tail_bytes(self) -> int:
+        """What the file still needs beyond the messages reported: the chunk being built, what
+        a stopping run still reports, and the summary with one index for each chunk."""
+        return (CHUNK_BOUND + IN_FLIGHT * MESSAGE_BUDGET + self._summary_bytes
+                + CHUNK_BUDGET * (self._chunks + self._file.tell() // CHUNK_SIZE + 2))
+
+    def _update_room(self) -> None:
+        if self._reserve.supported:
+            base = self._file.tell() + self._tail_bytes()
+            self._room = self._written + max(0, self._reserve.end - base) // MESSAGE_BUDGET
+
+    def _keep_reserve(self) -> None:
+        """Grow the reserve when less than half of RESERVE_AHEAD is left; the caller holds the
+        lock. A disk that cannot give more stops the run (what it sent still fits)."""
+        if not self._reserve.supported or self.full or self.failure or self._closed:
+            self._room = sys.maxsize  # nothing left to check: nothing is reserved, or the run is stopping
+            return
+        needed = (self._file.tell() + self._tail_bytes()
+                  + (len(self._pending) + 1) * MESSAGE_BUDGET)
+        if self._reserve.end - needed < RESERVE_AHEAD // 2:
+            try:
+                self._grow_reserve(needed + RESERVE_AHEAD // 16, needed + RESERVE_AHEAD)
+            except OSError as exc:
+                self.full = exc.strerror or str(exc)
+                self._ask_to_stop(f"stopped: the log's disk is full ({self.full})")
+                return
+        self._update_room()
+
+    def _grow_reserve(self, least: int, wanted: int) -> None:
+        """Reserve up to `wanted`, or else `least`; OSError if the disk has not even that."""
+        try:
+            self._reserve.extend_to(wanted)
+        except OSError:
+            self._reserve.extend_to(least)
+
+    def _ask_to_stop(self, reason: str) -> None:
+        if not self.stopped_run and self.on_stop is not None:
+            self.stopped_run = True
+            self.on_stop(reason)
+
+    def check(self) -> None:
+        """LogError if the log failed, or stopped the run: the run's outcome is this error."""
+        if self.failure is not None:
+            raise LogError(f"log {self.path}: cannot write: {self.failure}: the run was stopped")
+        if self.full is not None and self.stopped_run:
+            raise LogError(f"log {self.path}: the disk is full ({self.full}): the run was "
+                           "stopped; the log holds every frame sent")
 
     # -- durability ------------------------------------------------------------------------
 
     def on_idle(self) -> None:
         """The runner has time to spare (it is about to sleep): write what is queued, and
-        hand the file to the OS if the last time was a while ago.
-
-        A log that can no longer be written stops the run here (LogError): a run is recorded or
-        it does not go on, as a log that cannot be opened stops it before the robot moves.
-        """
+        hand the file to the OS if the last time was a while ago."""
         with self._lock:
             if not self._closed:
                 self._write_pending()
                 if time.monotonic() - self._flushed >= self._flush_every_s / 2:
                     self._flush_locked()
-        if self.failure is not None:
-            raise LogError(f"log {self.path}: cannot write: {self.failure}: the run was stopped")
 
     def _flush_loop(self, every_s: float) -> None:
         """The safety net: a run that never idles (back-to-back frames) is flushed from here.
@@ -280,7 +388,9 @@ class Recorder:
 
     def _flush_locked(self) -> None:
         self._flushed = time.monotonic()
-        if not self._dirty or self.failure is not None:
+        # Once the disk is full the run is stopping: its last messages reach the file when it
+        # closes, as one chunk, so no chunk index beyond those the reserve counted is added.
+        if not self._dirty or self.failure is not None or self.full is not None:
             return
         try:
             self._writer.flush()
@@ -288,14 +398,18 @@ class Recorder:
             self._failed(exc)
             return
         self._dirty = False
+        self._chunks += 1
+        self._keep_reserve()
 
     def _failed(self, exc: OSError) -> None:
         if self.failure is None:
             self.failure = exc.strerror or str(exc)
         self._pending.clear()
+        self._ask_to_stop(f"stopped: the log cannot be written ({self.failure})")
 
     def close(self, result: dict[str, str] | None = None) -> None:
-        """Finish the file (summary, indexes, footer). Safe to call twice.
+        """Finish the file (summary, indexes, footer), free what is left of the reserve. Safe to
+        call twice.
 
         A log that already failed is closed quietly (its error was raised where it happened);
         one that fails only now raises one LogError.
@@ -319,18 +433,97 @@ class Recorder:
                 self._failed(exc)
             finally:
                 self._closed = True
-                try:
-                    self._file.close()
-                except OSError as exc:
-                    self._failed(exc)
+                self._release()
         if self.failure is not None and not failed_before:
             raise LogError(f"log {self.path}: cannot finish writing: {self.failure}")
+
+    def _release(self) -> None:
+        """Close the file, cut at its length: the reserve beyond it is freed."""
+        try:
+            self._file.close()
+        except OSError as exc:
+            self._failed(exc)
+        self._reserve.release()
 
     def __enter__(self) -> Recorder:
         return self
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
+
+
+def _space_hint(exc: OSError, path: Path, need: int) -> str:
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return f" (a run needs about {need // 1024} KiB free on {path.parent}; nothing was sent)"
+    return " (nothing was sent)"
+
+
+class DiskReserve:
+    """Disk space held for a file beyond its end (Linux fallocate with FALLOC_FL_KEEP_SIZE).
+
+    The file's size is unchanged, so a linear reader of a crashed run's log finds its last
+    record at the end, not zeros. `supported` is False where the system or the file system
+    cannot reserve: then nothing is reserved and writes themselves find a full disk. It keeps
+    its own descriptor of the file, to free the rest once the file is closed.
+    """
+
+    KEEP_SIZE = 1  # FALLOC_FL_KEEP_SIZE
+    UNSUPPORTED = frozenset({errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL, errno.ENODEV})
+
+    def __init__(self, fd: int) -> None:
+        self.end = 0  # the file's bytes below this offset are held on the disk
+        self._fallocate = _fallocate_function()
+        self._fd = -1
+        if self._fallocate is not None:
+            try:
+                self._fd = os.dup(fd)
+            except OSError:
+                self._fallocate = None  # no descriptor to spare: run unreserved
+        self.supported = self._fallocate is not None
+
+    def extend_to(self, end: int) -> None:
+        """Hold the disk space up to `end`; OSError (ENOSPC, EDQUOT) if the disk has not got it."""
+        if not self.supported or end <= self.end:
+            return
+        if self._fallocate(self._fd, self.KEEP_SIZE, self.end, end - self.end) != 0:
+            import ctypes
+
+            code = ctypes.get_errno()
+            if code not in self.UNSUPPORTED:
+                raise OSError(code, os.strerror(code))
+            self.supported = False
+            return
+        self.end = end
+
+    def release(self) -> None:
+        """Free what is held beyond the file's end (a truncate to its own length). Once only."""
+        if self._fd < 0:
+            return
+        try:
+            if self.end:
+                os.ftruncate(self._fd, os.fstat(self._fd).st_size)
+        except OSError:
+            pass  # nothing more can be done: the space is freed when the file is removed
+        finally:
+            os.close(self._fd)
+            self._fd = -1
+            self.end = 0
+
+
+def _fallocate_function() -> Callable[[int, int, int, int], int] | None:
+    """libc's fallocate, or None where there is none (not Linux, no ctypes)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        function = getattr(libc, "fallocate64", None) or libc.fallocate
+    except (ImportError, OSError, AttributeError):
+        return None
+    function.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int64, ctypes.c_int64]
+    function.restype = ctypes.c_int
+    return function
 
 
 def _create_exclusive(path: Path, unique: bool = False) -> tuple[IO[bytes], Path]:

@@ -153,12 +153,19 @@ class Session:
     # -- running ---------------------------------------------------------------------------
 
     def run(self, listeners: list[RunListener] = (), stop: StopRequest | None = None) -> RunResult:
+        """Play the show; a log that cannot take more stops it like a stop request (the
+        exchange in flight, then the abort motion) and its LogError is the run's outcome."""
         assert self.link is not None, "open the session first (with session:)"
+        stop = stop if stop is not None else StopRequest()
         everyone = ([self.recorder] if self.recorder else []) + list(listeners)
+        if self.recorder is not None:
+            self.recorder.on_stop = stop.request
         runner = Runner(self.plan, self.link, clock=self.clock, listeners=everyone, start=self.start,
                         on_abort=self.show.on_abort, stop=stop,
                         on_idle=self.recorder.on_idle if self.recorder else None)
         self.result = runner.run()
+        if self.recorder is not None:
+            self.recorder.check()
         return self.result
 
 

@@ -11,9 +11,13 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from choreo import __version__
 from choreo.errors import ChoreoError
+
+if TYPE_CHECKING:
+    from choreo.__main__ import SignalGuard
 
 # Command modules, in the order `choreo --help` lists them.
 COMMAND_MODULES = ("run", "show", "frames", "sim", "probe", "log", "ports")
@@ -42,12 +46,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = None) -> int:
+    """Run one command; every error and interruption becomes one message and an exit code here.
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    `signals` (from the process entry, `choreo.__main__`) interrupts the command on Ctrl-C,
+    SIGTERM or SIGHUP while it runs, and no longer once its outcome is being reported.
+    """
     try:
-        return int(args.handler(args) or 0)
+        return _command(argv, signals)
     except ChoreoError as exc:
         for line in exc.lines():
             print(line, file=sys.stderr)
@@ -59,3 +65,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         # The reader of our output went away (`choreo log frames LOG | head`): not an error.
         sys.stderr.close()
         return 0
+
+
+def _command(argv: Sequence[str] | None, signals: SignalGuard | None) -> int:
+    if signals is not None:
+        signals.arm()  # a signal that came while choreo loaded interrupts here
+    try:
+        args = build_parser().parse_args(argv)
+        return int(args.handler(args) or 0)
+    finally:
+        if signals is not None:
+            signals.disarm()

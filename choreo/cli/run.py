@@ -9,6 +9,7 @@ import threading
 import time
 from typing import TextIO
 
+from choreo.__main__ import STOP_SIGNALS
 from choreo.errors import Interrupted
 
 LAYOUT_CHOICES = ("seed", "hth4-2.2")  # choreo.layouts.LAYOUT_NAMES, without importing it for --help
@@ -109,16 +110,13 @@ def _layout_line(session) -> str:
     return line + {"show": ", from the show", "command line": ", from --layout"}.get(session.layout_source, "")
 
 
-# Ctrl-C, `kill`, and a closed terminal or SSH session (SIGHUP) all stop the show the same way.
-STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
-
-
 class _StopOnSignals:
     """First Ctrl-C or SIGTERM: finish the frame in flight, play the abort motion, close the log.
     Second: leave at once (the log is still closed on the way out)."""
 
     def __init__(self) -> None:
         self._previous: dict = {}
+        self._signalled = False  # a stop the log asked for is not a first Ctrl-C
 
     def __enter__(self):
         from choreo.runner import StopRequest
@@ -129,8 +127,9 @@ class _StopOnSignals:
         return self.stop
 
     def _handle(self, signum, frame) -> None:
-        if self.stop():
+        if self._signalled:
             raise KeyboardInterrupt
+        self._signalled = True
         name = "interrupted (Ctrl-C)" if signum == signal.SIGINT else f"stopped ({signal.Signals(signum).name})"
         self.stop.request(name)
 
