@@ -16,7 +16,7 @@ from choreo import __version__
 from choreo.errors import ChoreoError
 
 # Command modules, in the order `choreo --help` lists them.
-COMMAND_MODULES = ("run", "show", "frames", "sim", "log", "ports")
+COMMAND_MODULES = ("run", "show", "importer", "frames", "sim", "log", "ports")
 
 
 def build_parser() -> argparse.ArgumentParser:
