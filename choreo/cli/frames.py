@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from choreo.errors import UsageError
+from choreo.layouts import LAYOUT_NAMES
 
 KINDS = ("play", "stop", "counter", "restore", "status")
 
@@ -20,7 +21,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("kind", choices=KINDS, help="which frame")
     parser.add_argument("motion", nargs="?", help="motion slot 0..119 (play only)")
-    parser.add_argument("--layout", default="seed", choices=("seed", "hth4-2.2"),
+    parser.add_argument("--layout", default="seed", choices=LAYOUT_NAMES,
                         help="the board's memory layout (default seed)")
     parser.add_argument("--baud", type=int, default=115200, help="115200 (default), 625000 or 1250000")
     parser.add_argument("--config", metavar="WORD", help="hth4-2.2: the board's config word, e.g. "

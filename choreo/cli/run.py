@@ -11,8 +11,8 @@ from typing import TextIO
 
 from choreo.__main__ import STOP_SIGNALS
 from choreo.errors import Interrupted
+from choreo.layouts import LAYOUT_NAMES
 
-LAYOUT_CHOICES = ("seed", "hth4-2.2")  # choreo.layouts.LAYOUT_NAMES, without importing it for --help
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -26,7 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--port", help="pyserial URL or device: /dev/ttyUSB0, COM3, socket://, "
                         "rfc2217://, loop://, spy://, sim:// (default: the show's robot.port, else sim://)")
     parser.add_argument("--baud", type=int, help="115200 (default), 625000 or 1250000")
-    parser.add_argument("--layout", choices=LAYOUT_CHOICES, help="the board's memory layout: seed "
+    parser.add_argument("--layout", choices=LAYOUT_NAMES, help="the board's memory layout: seed "
                         "(the document's frames, default) or hth4-2.2 (motions written by Heart to "
                         "Heart 4 2.2 or later); default: the show's robot.layout, else seed")
     logs = parser.add_mutually_exclusive_group()

@@ -32,6 +32,7 @@ import yaml
 from choreo.errors import Problem, ShowError
 from choreo.show.model import (
     DEFAULT_DONE_TIMEOUT_S,
+    MOTION_NAME_FORMAT,
     Motion,
     Repeat,
     RobotSettings,
@@ -454,9 +455,15 @@ def _validator() -> Any:
     """The schema's validator, built once: jsonschema is imported only when a show is checked."""
     global _validator_cache
     if _validator_cache is None:
-        from jsonschema import Draft202012Validator
+        from jsonschema import Draft202012Validator, FormatChecker
 
-        _validator_cache = Draft202012Validator(load_schema())
+        from choreo.show.model import is_motion_name
+
+        # Only our own format: a name's letters are Unicode categories, which the schema's
+        # pattern cannot say portably (editors run it as an ECMAScript regex).
+        formats = FormatChecker(formats=())
+        formats.checks(MOTION_NAME_FORMAT)(is_motion_name)
+        _validator_cache = Draft202012Validator(load_schema(), format_checker=formats)
     return _validator_cache
 
 
@@ -578,6 +585,9 @@ def _simple_problem(path: JsonPath, validator: str, instance: Any, expected: Any
         return f"unsupported format version {_value(instance)}: this choreo reads `version: 1`"
     if validator == "enum" and leaf == "baud":
         return f"baud {_value(instance)} is not one the RCB-4 speaks: 115200, 625000 or 1250000"
+    if validator == "enum" and leaf == "layout":
+        known = " or ".join(f"`{name}`" for name in expected)
+        return f"unknown layout {_value(instance)}: choreo knows {known} (`choreo import` reads a board's layout from its Heart to Heart 4 project)"
     if leaf == "number" and validator in ("minimum", "maximum"):
         return f"motion {_value(instance)} is out of range 0..119"
     if validator == "minimum":

@@ -7,6 +7,7 @@ never looks at YAML; it walks the plan.
 
 from __future__ import annotations
 
+import unicodedata
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -14,6 +15,30 @@ from choreo.protocol import Frame
 
 DEFAULT_MOTION_S = 1.0  # a motion's expected length when the show does not say (the simulator's default)
 DEFAULT_DONE_TIMEOUT_S = 60.0  # `wait: done` gives up after this long unless the step says otherwise
+MOTION_NAME_MAX = 64  # characters; the schema's `maxLength` for a motion name says the same
+MOTION_NAME_FORMAT = "motion-name"  # the schema's `format` for motion names, checked by `is_motion_name`
+
+
+def is_motion_name(name: str) -> bool:
+    """Whether `name` can name a motion: a letter of any script or `_`, then letters, digits, `_`, `-`.
+
+    Heart to Heart 4 users name motions in their own language (`歩く`, `ウェーブ`), so letters are
+    Unicode's (categories L* and Nl, e.g. `々`, `ー`, `〇`); combining marks and decimal digits may
+    follow. Spaces, punctuation (`（`, `・`), symbols (`→`) and control characters may not: a
+    name stays one word that reads the same in a step, a message and a log. Length is the
+    schema's to check (`MOTION_NAME_MAX`), so that a long name gets its own message.
+    """
+    if not name or not (name[0] == "_" or _is_letter(name[0])):
+        return False
+    return all(ch in "_-" or _is_letter(ch) or unicodedata.category(ch) in _NAME_TAIL for ch in name[1:])
+
+
+_NAME_TAIL = frozenset(("Mn", "Mc", "Nd"))  # combining marks, decimal digits
+
+
+def _is_letter(ch: str) -> bool:
+    category = unicodedata.category(ch)
+    return category[0] == "L" or category == "Nl"
 
 
 @dataclass(frozen=True)
@@ -24,7 +49,7 @@ class RobotSettings:
     baud: int | None = None
     timeout: float | None = None  # seconds to wait for one reply
     retries: int | None = None  # extra tries after a failed one (default 2: 3 tries in all)
-    layout: str | None = None  # the board's memory layout (None: not said; the run assumes seed)
+    layout: str | None = None  # one of `choreo.layouts.LAYOUT_NAMES`; None: the show does not say (the run assumes seed)
 
 
 @dataclass(frozen=True)

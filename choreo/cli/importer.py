@@ -1,0 +1,72 @@
+"""`choreo import PROJECT.h4p [-o SHOW.yaml]`: a starter show from a Heart to Heart 4 project.
+
+The module is `importer` because `import` is a Python keyword; the command is `import`. A bad
+project is `ProjectError` (exit 2, one line), mapped by the CLI's `main` like every other error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    command = subparsers.add_parser(
+        "import",
+        help="write a starter show from a Heart to Heart 4 project",
+        description="Read a Heart to Heart 4 project (.h4p) and write a starter show: `name` from "
+        "the project title, `robot.layout` from where the project's slots start in ROM (slot 0 at "
+        "0x0B80: hth4-2.2; 0x0BB8: seed), one `motions:` entry for every slot that holds a motion "
+        "(keyed by its HTH4 name where that is a valid show name, else `motion_N` with the HTH4 "
+        "name as `hth4_name`), and steps that play the first motion and wait until it is done. "
+        "A file that is not such a project, holds no motions or has slot addresses that fit no "
+        "layout is exit status 2 with one line saying why.",
+    )
+    command.add_argument("project", metavar="PROJECT.h4p", help="a Heart to Heart 4 project file")
+    command.add_argument(
+        "-o",
+        "--output",
+        metavar="SHOW.yaml",
+        help="write the show to this file (never overwrites one: exit 2 if it exists); default: standard output",
+    )
+    command.set_defaults(handler=run_import)
+
+
+def run_import(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from choreo.hth4 import read_project
+    from choreo.show.starter import schema_reference, starter_show
+
+    project = read_project(args.project)
+    if args.output is None:
+        _write_stdout(starter_show(project))
+        return 0
+    output = Path(args.output)
+    _write_new(output, starter_show(project, schema_reference(output)))
+    count = len(project.motions)
+    print(f"{output}: {count} motion{'s' if count != 1 else ''}, layout {project.layout}: check it with `choreo plan {output}`")
+    return 0
+
+
+def _write_stdout(text: str) -> None:
+    """UTF-8 whatever the console's encoding: the show is a file, and show files are UTF-8."""
+    buffer = getattr(sys.stdout, "buffer", None)
+    if buffer is None:
+        sys.stdout.write(text)
+        return
+    sys.stdout.flush()
+    buffer.write(text.encode("utf-8"))
+    buffer.flush()
+
+
+def _write_new(path, text: str) -> None:  # type: ignore[no-untyped-def]  # Path: imported lazily
+    from choreo.errors import UsageError
+
+    try:
+        with open(path, "x", encoding="utf-8", newline="\n") as stream:
+            stream.write(text)
+    except FileExistsError:
+        raise UsageError(f"{path}: already exists; `choreo import` never overwrites a file: give another with -o") from None
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot write the show: {exc.strerror or exc}") from None

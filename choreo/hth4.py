@@ -1,0 +1,193 @@
+"""Heart to Heart 4 project files (`.h4p`): which motions a board holds, and where it keeps them.
+
+A project is what the owner of a real board has at hand, and it answers the question a show
+cannot: at which ROM address each motion slot starts, i.e. which layout the board's motions
+were written with. HTH4 2.2 and later put slot 0 at 0x0B80; the source document's frames (the
+`seed` layout) CALL 0x0BB8. Each slot is `SLOT_SIZE` bytes after the one before.
+
+The file is .NET `XmlSerializer` output (UTF-8): root `Rcb4`; `ProjectTitle`; and
+`MotionDataCollection`, one `DictionaryEntry` a slot with `Key` (`M001`..`M120`) and a `Value`
+(`xsi:type="Motion"`) holding `Number` (0-based slot), `Name`, `MotionData` (hex strings, none
+for an unused slot) and `Address` (decimal). Tags are matched by local name, so a namespaced
+file reads the same as a plain one.
+
+The file comes from elsewhere, so it is read defensively: its size is capped, and a DOCTYPE is
+refused before anything in it is expanded (HTH4 never writes one; a DTD is how entity bombs
+and external entities get in).
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+from choreo.errors import UsageError
+from choreo.layouts import LAYOUTS
+from choreo.protocol import MOTION_SLOTS, SLOT_SIZE
+
+# Where each layout puts slot 0 (choreo.layouts is the one place the layouts are defined; the
+# show schema's `robot.layout` enum lists their names too, and a test holds them equal).
+LAYOUT_FIRST_SLOT: dict[str, int] = {layout.name: layout.first_slot for layout in LAYOUTS.values()}
+
+# Real projects are a few hundred KiB to a few MiB; the cap bounds memory and time on a bad file.
+MAX_PROJECT_BYTES = 16 * 1024 * 1024
+
+
+class ProjectError(UsageError):
+    """A file that cannot be imported as a Heart to Heart 4 project (exit 2, one line)."""
+
+
+@dataclass(frozen=True)
+class ProjectSlot:
+    """One `DictionaryEntry` of the project's `MotionDataCollection`."""
+
+    key: str  # HTH4's own label for the slot, `M001`..`M120`
+    number: int  # the slot, 0..119: what a show plays
+    name: str  # as the author typed it in HTH4 (often Japanese); may be empty
+    address: int | None  # the slot's first ROM byte, if the file gives it
+    has_data: bool  # False for an unused slot (empty `MotionData`)
+
+
+@dataclass(frozen=True)
+class Project:
+    """What a show needs from a project: its title, its layout and its motions."""
+
+    path: str
+    title: str | None
+    layout: str  # one of LAYOUT_NAMES, read from the slots' addresses
+    motions: tuple[ProjectSlot, ...]  # the slots that hold motion data, by number
+
+
+def read_project(path: str | Path) -> Project:
+    """The project at `path`; `ProjectError` with one line if it cannot be imported."""
+    name = str(path)
+    try:
+        with open(path, "rb") as stream:
+            data = stream.read(MAX_PROJECT_BYTES + 1)
+    except OSError as exc:
+        raise ProjectError(f"{name}: cannot read the project: {exc.strerror or exc}") from None
+    if len(data) > MAX_PROJECT_BYTES:
+        raise ProjectError(f"{name}: over {MAX_PROJECT_BYTES // (1024 * 1024)} MiB, too big for a Heart to Heart 4 project")
+    return parse_project(data, name)
+
+
+def parse_project(data: bytes, path: str = "<project>") -> Project:
+    """A project from the file's bytes; `path` names it in messages."""
+    root = _parse_xml(data, path)
+    if _local(root.tag) != "Rcb4":
+        raise ProjectError(f"{path}: not a Heart to Heart 4 project: the root element is <{_local(root.tag)}>, not <Rcb4>")
+    collection = _child(root, "MotionDataCollection")
+    if collection is None:
+        raise ProjectError(f"{path}: not a Heart to Heart 4 project: <Rcb4> has no <MotionDataCollection>")
+    slots = _slots(collection, path)
+    motions = tuple(sorted((s for s in slots if s.has_data), key=lambda s: s.number))
+    if not motions:
+        raise ProjectError(f"{path}: no motions: every slot's MotionData is empty (write motions in Heart to Heart 4 and save the project)")
+    title = _text(_child(root, "ProjectTitle")).strip() or None
+    return Project(path, title, layout_of(slots, path), motions)
+
+
+def layout_of(slots: list[ProjectSlot], path: str = "<project>") -> str:
+    """The layout every slot's address fits; `ProjectError` naming the addresses found if none does."""
+    placed = sorted((s for s in slots if s.address is not None), key=lambda s: s.number)
+    if not placed:
+        raise ProjectError(f"{path}: no slot gives its Address, so the board's layout is unknown: set `robot.layout` in the show by hand")
+    first = placed[0]
+    for layout, base in LAYOUT_FIRST_SLOT.items():
+        if first.address != base + first.number * SLOT_SIZE:
+            continue
+        odd = next((s for s in placed if s.address != base + s.number * SLOT_SIZE), None)
+        if odd is None:
+            return layout
+        expected = base + odd.number * SLOT_SIZE
+        raise ProjectError(
+            f"{path}: slot addresses fit no layout choreo knows: slot {first.number} at {_address(first.address)} "
+            f"fits {layout}, but slot {odd.number} is at {_address(odd.address)}, not {_address(expected)}"
+        )
+    known = " or ".join(_address(base + first.number * SLOT_SIZE, layout) for layout, base in LAYOUT_FIRST_SLOT.items())
+    raise ProjectError(
+        f"{path}: slot addresses fit no layout choreo knows: slot {first.number} is at {_address(first.address)}, "
+        f"expected {known}, each slot {SLOT_SIZE} bytes after the last"
+    )
+
+
+# --------------------------------------------------------------------------- XML
+
+
+class _Refused(Exception):
+    """A DOCTYPE: stop before the parser reads its declarations."""
+
+
+class _TreeBuilder(ET.TreeBuilder):
+    def doctype(self, name: str, pubid: str | None, system: str | None) -> None:
+        raise _Refused
+
+
+def _parse_xml(data: bytes, path: str) -> ET.Element:
+    parser = ET.XMLParser(target=_TreeBuilder())
+    try:
+        parser.feed(data)
+        return parser.close()
+    except _Refused:
+        raise ProjectError(f"{path}: the file declares a DOCTYPE, which Heart to Heart 4 never writes: refused (entities could expand without bound)") from None
+    except ET.ParseError as exc:
+        raise ProjectError(f"{path}: not a Heart to Heart 4 project (not XML: {exc})") from None
+
+
+def _local(tag: str) -> str:
+    """`{namespace}Name` and `Name` alike as `Name`."""
+    return tag.rsplit("}", 1)[-1]
+
+
+def _child(element: ET.Element, name: str) -> ET.Element | None:
+    return next((c for c in element if _local(c.tag) == name), None)
+
+
+def _text(element: ET.Element | None) -> str:
+    return (element.text or "") if element is not None else ""
+
+
+# --------------------------------------------------------------------------- slots
+
+
+def _slots(collection: ET.Element, path: str) -> list[ProjectSlot]:
+    """Every slot of the collection, checked: numbers whole, in range and given once."""
+    slots: list[ProjectSlot] = []
+    seen: dict[int, str] = {}
+    for index, entry in enumerate(c for c in collection if _local(c.tag) == "DictionaryEntry"):
+        slot = _slot(entry, index, path)
+        if slot.number in seen:
+            raise ProjectError(f"{path}: slot number {slot.number} is given twice ({seen[slot.number]} and {slot.key})")
+        seen[slot.number] = slot.key
+        slots.append(slot)
+    return slots
+
+
+def _slot(entry: ET.Element, index: int, path: str) -> ProjectSlot:
+    key = _text(_child(entry, "Key")).strip() or f"entry {index + 1}"
+    value = _child(entry, "Value")
+    if value is None:
+        raise ProjectError(f"{path}: slot {key} has no <Value>")
+    number = _whole(value, "Number", key, path)
+    if number is None:
+        raise ProjectError(f"{path}: slot {key} has no <Number>")
+    if not 0 <= number < MOTION_SLOTS:
+        raise ProjectError(f"{path}: slot {key} has Number {number}, outside the board's slots 0..{MOTION_SLOTS - 1}")
+    data = _child(value, "MotionData")
+    has_data = data is not None and any(_text(packet).strip() for packet in data)
+    return ProjectSlot(key, number, _text(_child(value, "Name")), _whole(value, "Address", key, path), has_data)
+
+
+def _whole(value: ET.Element, field: str, key: str, path: str) -> int | None:
+    text = _text(_child(value, field)).strip()
+    if not text:
+        return None
+    if not (text.isascii() and text.isdigit() and len(text) <= 9):
+        raise ProjectError(f"{path}: slot {key} has {field} {text[:20]!r}, not a whole number (up to 9 digits)")
+    return int(text)
+
+
+def _address(address: int | None, layout: str = "") -> str:
+    """`2944 (0x0B80)`: HTH4 writes decimal, addresses are read in hex."""
+    return f"{address} (0x{address:04X}{', ' + layout if layout else ''})" if address is not None else "no address"
