@@ -86,10 +86,16 @@ RESERVE_AHEAD = 256 * 1024  # reserved beyond what is needed, so the reserve gro
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
 
 
+MAX_NAME_BYTES = 200  # of a default log name's show part: 255 less the time, a suffix, `.mcap`
+
+
 def default_log_path(show_name: str, directory: str | Path = "runs", now: datetime | None = None) -> Path:
     """`runs/<show name>-<UTC time>.mcap`, a name that sorts by time and never repeats a run's."""
     now = now or datetime.now(timezone.utc)
     safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in show_name) or "show"
+    # A file name is at most 255 bytes: a long show name is cut (at a character) so that the
+    # time, a `-99` suffix and `.mcap` always fit.
+    safe = safe.encode()[:MAX_NAME_BYTES].decode("utf-8", "ignore")
     return Path(directory) / f"{safe}-{now.strftime('%Y%m%dT%H%M%SZ')}.mcap"
 
 

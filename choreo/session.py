@@ -179,6 +179,17 @@ def is_simulator(url: str) -> bool:
     return url.lower().startswith("sim://")
 
 
+def check_simulator_url(url: str) -> None:
+    """A `sim://` URL's options are arguments: a bad one is exit 2 before anything opens, in
+    `run`, `replay` and `choreo sim` alike, not a port that failed to open (exit 3)."""
+    from choreo.urlhandler.protocol_sim import Serial
+
+    try:
+        Serial.from_url(url)
+    except ValueError as exc:
+        raise UsageError(f"--port {url}: {exc}") from None
+
+
 def with_show_durations(url: str, show: Show | None, plan: Plan | None,
                         baud: int = DEFAULT_BAUD, layout: Layout = SEED) -> str:
     """A `sim://` port gets what its URL does not say: the show's durations (when there is a
@@ -190,6 +201,7 @@ def with_show_durations(url: str, show: Show | None, plan: Plan | None,
     """
     if not is_simulator(url):
         return url
+    check_simulator_url(url)
     base, _, query = url.partition("?")
     given = dict(parse_qsl(query, keep_blank_values=True))
     added: dict[str, str] = {}

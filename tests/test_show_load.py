@@ -155,7 +155,7 @@ def test_missing_file(tmp_path):
 def test_a_directory_is_not_a_show(tmp_path):
     with pytest.raises(ShowError) as info:
         load_show(tmp_path)
-    assert "cannot read the show file" in info.value.lines()[0]
+    assert "not a regular file (a folder)" in info.value.lines()[0]
 
 
 def test_a_huge_file_is_refused_unread(tmp_path):
@@ -376,8 +376,10 @@ def test_unknown_keys_are_located_at_the_key_with_a_suggestion(tmp_path):
         ("version: 1\nsteps: {play: 1}\n", (2, 8, "steps"), "expected a list (`- item` lines), not a mapping"),
         ("version: 1\nsteps: []\n", (2, 8, "steps"), "must not be empty: list at least one step"),
         ("version: 1\nsteps:\n  - play 3\n", (3, 5, "steps[0]"), "expected a mapping (`key: value` lines), not the text 'play 3'"),
-        ("version: 1\nsteps:\n  - play: on\n", (3, 11, "steps[0].play"),
+        ("version: 1\nsteps:\n  - play: true\n", (3, 11, "steps[0].play"),
          "expected a motion number 0..119 or a name from `motions:`, not true (put the word in quotes to mean text)"),
+        ("version: 1\nsteps:\n  - play: on\n", (3, 11, "steps[0].play"),  # YAML 1.2: `on` is text
+         "unknown motion 'on': name it in `motions:` with its slot number, or play the number"),
         ("version: 1\nsteps:\n  - play: 3.5\n", (3, 11, "steps[0].play"),
          "expected a motion number 0..119 or a name from `motions:`, not the number 3.5"),
         ("version: 1\nsteps:\n  - play: ''\n", (3, 11, "steps[0].play"), "the motion name is empty"),

@@ -23,6 +23,9 @@ from __future__ import annotations
 
 import json
 import math
+import re
+import stat
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Union
@@ -146,6 +149,10 @@ def format_path(path: JsonPath) -> str:
 
 def _read(path: Path, report: _Report) -> bytes | None:
     try:
+        mode = path.stat().st_mode
+        if not stat.S_ISREG(mode):  # a FIFO would block the open until a writer came
+            report.add((0, 0), "", f"not a regular file ({_file_kind(mode)}): give a show file")
+            return None
         with path.open("rb") as stream:
             data = stream.read(MAX_BYTES + 1)
     except OSError as exc:
@@ -155,6 +162,12 @@ def _read(path: Path, report: _Report) -> bytes | None:
         report.add((0, 0), "", f"the file is over {MAX_BYTES // 1024} KiB, too big for a show file")
         return None
     return data
+
+
+def _file_kind(mode: int) -> str:
+    kinds = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a named pipe"), (stat.S_ISCHR, "a device"),
+             (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket"))
+    return next((name for test, name in kinds if test(mode)), "not a file")
 
 
 def _decode(data: bytes, report: _Report) -> str | None:
@@ -240,7 +253,6 @@ class _Builder:
         self.documents = 0
         self.first_alias: tuple[_Mark, JsonPath, str] | None = None
         self.more_aliases = 0
-        self.resolver = yaml.resolver.Resolver()
         self.constructor = yaml.constructor.SafeConstructor()
 
     def feed(self, event: yaml.Event) -> None:
@@ -308,7 +320,7 @@ class _Builder:
             if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
                 self._push(_Frame(None, parent.path, is_key=True))
             return
-        name = event.value
+        name = _restore_breaks(event.value)
         first = parent.keys.get(name)
         if first is not None:
             self.report.add(mark, parent.path + (name,), f"duplicate key {name!r} (first given at line {first[0]}): keep one")
@@ -375,8 +387,10 @@ class _Builder:
     def _scalar(self, event: yaml.ScalarEvent, path: JsonPath) -> Any:
         """The scalar's value by YAML's core rules; only plain data tags are accepted."""
         tag = event.tag
-        if tag in (None, "!"):
-            tag = self.resolver.resolve(yaml.ScalarNode, event.value, event.implicit)
+        if tag is None and event.implicit[0]:  # plain: YAML 1.2's core schema, as editors read it
+            return self._core(event, path)
+        if tag in (None, "!"):  # quoted, or the non-specific `!`: a string
+            return _restore_breaks(event.value)
         node = yaml.ScalarNode(tag, event.value)
         construct = {
             _STR: self.constructor.construct_yaml_str,
@@ -400,6 +414,74 @@ class _Builder:
         return value
 
 
+    def _core(self, event: yaml.ScalarEvent, path: JsonPath) -> Any:
+        """A plain scalar by YAML 1.2's core schema; a whole number with a leading zero is refused.
+
+        PyYAML reads YAML 1.1, where `010` is 8 (octal), `1:30` is 90 (base 60) and `yes` is
+        true, while editors and the YAML 1.2 language server read 10, text and text: the same
+        file would mean two things. A wrong slot is the worst error a show runner can make.
+        """
+        text = event.value
+        if _LEADING_ZERO.fullmatch(text):
+            digits = text.lstrip("+-")
+            sign = "-" if text.startswith("-") else ""
+            self.report.add(_mark_of(event), path,
+                            f"{text} is ambiguous: YAML 1.1 reads a leading zero as octal "
+                            f"({sign}{int(digits, 8) if set(digits) <= set('01234567') else 'not octal'}), "
+                            f"YAML 1.2 as decimal ({sign}{int(digits, 10)}): write it without the leading zero")
+            return None
+        value = _core_value(text)
+        if isinstance(value, float) and math.isnan(value):
+            self.report.add(_mark_of(event), path, "not-a-number (.nan) is not allowed here")
+            return None
+        return _restore_breaks(value) if isinstance(value, str) else value
+
+
+# YAML 1.2 core schema (https://yaml.org/spec/1.2.2/#1032-tag-resolution).
+_CORE_NULL = re.compile(r"~|null|Null|NULL|")
+_CORE_TRUE = re.compile(r"true|True|TRUE")
+_CORE_FALSE = re.compile(r"false|False|FALSE")
+_CORE_INT = re.compile(r"[-+]?[0-9]+")
+_CORE_OCT = re.compile(r"0o[0-7]+")
+_CORE_HEX = re.compile(r"0x[0-9a-fA-F]+")
+_CORE_FLOAT = re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?")
+_CORE_INF = re.compile(r"[-+]?\.(inf|Inf|INF)")
+_CORE_NAN = re.compile(r"\.(nan|NaN|NAN)")
+_LEADING_ZERO = re.compile(r"[-+]?0[0-9]+")
+
+
+def _core_value(text: str) -> Any:
+    if _CORE_NULL.fullmatch(text):
+        return None
+    if _CORE_TRUE.fullmatch(text) or _CORE_FALSE.fullmatch(text):
+        return text.lower() == "true"
+    if _CORE_INT.fullmatch(text):
+        return int(text, 10)
+    if _CORE_OCT.fullmatch(text):
+        return int(text[2:], 8)
+    if _CORE_HEX.fullmatch(text):
+        return int(text[2:], 16)
+    if _CORE_FLOAT.fullmatch(text):
+        return float(text)
+    if _CORE_INF.fullmatch(text):
+        return -math.inf if text.startswith("-") else math.inf
+    if _CORE_NAN.fullmatch(text):
+        return math.nan
+    return text
+
+
+# YAML 1.2 has two line breaks, LF and CR; PyYAML (YAML 1.1) also breaks lines at NEL, LS and PS,
+# which shifts every line number after one (editors do not count them) and ends a comment in the
+# middle. They are parsed as stand-ins from Unicode's private use area and put back in text.
+_BREAKS_1_1 = {"\x85": "\ue085", "\u2028": "\ue028", "\u2029": "\ue029"}
+_HIDE_BREAKS = str.maketrans(_BREAKS_1_1)
+_SHOW_BREAKS = str.maketrans({v: k for k, v in _BREAKS_1_1.items()})
+
+
+def _restore_breaks(text: str) -> str:
+    return text.translate(_SHOW_BREAKS)
+
+
 def _tag(tag: str) -> str:
     """A tag as it is written in YAML: `!!python/object`, not `tag:yaml.org,2002:python/object`."""
     return "!!" + tag[len("tag:yaml.org,2002:"):] if tag.startswith("tag:yaml.org,2002:") else tag
@@ -412,6 +494,14 @@ def _is_empty(event: yaml.Event) -> bool:
 def _parse(text: str, report: _Report) -> _Doc | None:
     """The document as data with marks; None (and problems reported) if there is none to check."""
     builder = _Builder(report)
+    stand_in = next((ch for ch in _BREAKS_1_1.values() if ch in text), None)
+    if stand_in is not None:
+        position = text.index(stand_in)
+        line = text.count("\n", 0, position) + 1
+        column = position - (text.rfind("\n", 0, position) + 1) + 1
+        report.add((line, column), "", f"character U+{ord(stand_in):04X} (private use) is not allowed in a show file")
+        return None
+    text = text.translate(_HIDE_BREAKS)
     try:
         try:
             for event in yaml.parse(text, Loader=_Parser):
@@ -673,6 +763,8 @@ def _check_meaning(doc: _Doc, report: _Report) -> None:
     walk = _Walk(doc, report, {})
     walk.motions = {name: entry for name, entry in motions.items() if isinstance(entry, dict) and walk.ok(("motions", name))}
     _check_motion_table(walk)
+    if isinstance(data.get("name"), str) and walk.ok(("name",)):
+        _check_visible(walk, ("name",), data["name"], "the show's name")
     if "on_abort" in data and walk.ok(("on_abort",)):
         _check_motion_ref(walk, ("on_abort",), data["on_abort"])
     steps = data.get("steps")
@@ -757,10 +849,25 @@ def _check_cue(walk: _Walk, step: dict[str, Any], here: JsonPath, looping: bool)
     walk.last_cue = (at, path)
 
 
+def _check_visible(walk: _Walk, path: JsonPath, text: str, what: str) -> bool:
+    """Text that choreo prints (names, labels) holds no control or invisible characters: they
+    would reach terminals and logs raw (an escape sequence, a right-to-left override)."""
+    hidden = next((ch for ch in text if unicodedata.category(ch) in _HIDDEN), None)
+    if hidden is None:
+        return True
+    name = unicodedata.name(hidden, "a control character")
+    walk.report.add(walk.doc.mark(path), path, f"{what} holds U+{ord(hidden):04X} ({name}), which is "
+                                               "invisible or controls the terminal: remove it")
+    return False
+
+
+_HIDDEN = frozenset(("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp"))  # controls, formats, separators
+
+
 def _check_label(walk: _Walk, step: dict[str, Any], here: JsonPath) -> None:
     label = step.get("label")
     path = here + ("label",)
-    if not isinstance(label, str) or not walk.ok(path):
+    if not isinstance(label, str) or not walk.ok(path) or not _check_visible(walk, path, label, "the label"):
         return
     first = walk.labels.get(label)
     if first is not None:

@@ -171,7 +171,7 @@ class Plan:
 
     def find(self, ref: str) -> int:
         """The index of a step named by `--from`: an index or a label. KeyError if none."""
-        if ref.isdigit() and int(ref) < len(self.steps):
+        if ref.isascii() and ref.isdigit() and int(ref) < len(self.steps):  # `１` is a label
             return int(ref)
         for step in self.steps:
             if step.label == ref:
