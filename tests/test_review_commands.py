@@ -515,9 +515,9 @@ def test_replay_on_a_sim_at_another_baud_gives_the_board_that_baud(logs, capsys,
     ("--timeout", "nan", "--timeout nan: give the seconds"),
     ("--timeout", "inf", "--timeout inf: give the seconds"),
     ("--timeout", "11", "--timeout 11: give the seconds"),
-    ("--speed", "nan", "--speed nan: give a speed above 0"),
-    ("--speed", "inf", "--speed inf: give a speed above 0"),
-    ("--speed", "-2", "--speed -2: give a speed above 0"),
+    ("--speed", "nan", "--speed nan: give a speed from 0.01 to 1000"),
+    ("--speed", "inf", "--speed inf: give a speed from 0.01 to 1000"),
+    ("--speed", "-2", "--speed -2: give a speed from 0.01 to 1000"),
 ])
 def test_replay_refuses_what_the_board_or_a_clock_cannot_do(logs, capsys, tmp_path, option, value, says):
     new_log = tmp_path / "r.mcap"

@@ -74,8 +74,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     replay.add_argument("--port", help="where to send the frames (default: sim://, set up from the "
                         "show attached to the log; a real robot only if you name its port)")
     replay.add_argument("--speed", type=float, default=1.0, metavar="X",
-                        help="timing factor above 0: 2 plays twice as fast, and a sim:// board runs its "
+                        help="timing factor, 0.01..1000: 2 plays twice as fast, and a sim:// board runs its "
                         "motions twice as fast too (default 1, the recorded timing)")
+    replay.add_argument("--layout", choices=("seed", "hth4-2.2"),
+                        help="the board layout the simulator models (default: the recorded run's)")
     replay.add_argument("--baud", type=int, help="115200, 625000 or 1250000 (default: the recorded run's "
                         "for --port, 115200 for the simulator)")
     replay.add_argument("--timeout", type=float, metavar="S",
@@ -238,11 +240,12 @@ def run_replay(args: argparse.Namespace) -> int:
                 out.flush()
 
         report = replay(args.log, port=args.port, speed=args.speed, baud=args.baud, timeout=args.timeout,
-                        log_path=args.new_log, on_difference=differs, on_start=started)
+                        log_path=args.new_log, on_difference=differs, on_start=started, layout=args.layout)
         unmatched = f", {report.unmatched} with no recorded reply" if report.unmatched else ""
         cut = f"; the recorded log is {report.cut.state}: {report.cut.reason}" if report.cut else ""
         late = f", {report.replay_late} sent late by the replay" if report.replay_late else ""
-        timing = f" ({report.timing} of them status polls at a motion's end{late})" if report.timing else ""
+        timing = (f" ({report.excused} of them status polls at a motion's end{late})"
+                  if report.excused else "")
         out.write(f"replayed {report.frames} frames: {report.same} same, {report.different} differ{timing}"
                   f"{unmatched}; frames left up to {report.max_lag_ms:.1f} ms after their recorded time"
                   f"{cut}\n")

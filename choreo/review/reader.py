@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import struct
 import zlib
 from collections.abc import Collection, Iterator
@@ -72,6 +73,13 @@ def decode(data: bytes) -> dict:
         return _scan_once(data.decode(), 0)[0]
     except (StopIteration, ValueError, UnicodeDecodeError):
         return json.loads(data)
+
+
+TX_TOPIC = "/rcb4/tx"
+RX_TOPIC = "/rcb4/rx"
+STEP_TOPIC = "/choreo/step"
+LOG_TOPIC = "/choreo/log"
+CHOREO_TOPICS = frozenset((TX_TOPIC, RX_TOPIC, STEP_TOPIC, LOG_TOPIC))
 
 
 @dataclass(frozen=True)
@@ -134,8 +142,12 @@ class LogReader:
         self.messages_read = 0
         self._schemas: dict[int, str] = {}
         self._data_start = 0
+        self._head_cut: Cut | None = None  # a damaged record before the first message
+        self._file: IO[bytes] | None = None
         try:
-            self._file: IO[bytes] | None = open(self.path, "rb", buffering=256 * 1024)
+            if not stat.S_ISREG(os.stat(self.path).st_mode):  # a FIFO would block the open
+                raise LogError(f"log {self.path}: not a regular file: give the .mcap file a run wrote")
+            self._file = open(self.path, "rb", buffering=256 * 1024)
         except OSError as exc:
             raise LogError(f"log {self.path}: cannot open: {exc.strerror or exc}") from None
         try:
@@ -229,7 +241,11 @@ class LogReader:
                              "`choreo run` writes")
         if length > self._size - len(MAGIC) - RECORD_HEAD.size:
             raise self._too_short()
-        self._top_level(opcode, f.read(length), len(MAGIC))
+        try:
+            self._top_level(opcode, f.read(length), len(MAGIC))
+        except (struct.error, ValueError, IndexError):
+            raise self._fail(f"damaged: its MCAP header record (byte {len(MAGIC)}) cannot be read, so "
+                             "nothing in it can be trusted; it is not a log that can be reviewed") from None
         while True:
             start = f.tell()
             head = f.read(RECORD_HEAD.size)
@@ -241,7 +257,32 @@ class LogReader:
                 self._data_start = start
                 return
             body = f.read(length)
-            self._top_level(opcode, body, start)
+            try:
+                self._top_level(opcode, body, start)
+            except (struct.error, ValueError, IndexError) as exc:
+                self._head_damaged(opcode, start, length, exc)
+                return
+
+    def _head_damaged(self, opcode: int, start: int, length: int, exc: Exception) -> None:
+        """A record before the first message does not hold what its header says: the records
+        after it cannot be found, so the read stops there, as at a damaged chunk."""
+        what = {OP_METADATA: "metadata record", OP_ATTACHMENT: "attachment", OP_SCHEMA: "schema",
+                OP_CHANNEL: "channel"}.get(opcode, f"record (opcode 0x{opcode:02x})")
+        self._head_cut = Cut(start, self._size, f"the {what} at byte {start:,} is damaged ({exc or 'too short'}, "
+                             f"{length} bytes): the file changed after the run wrote it; nothing after "
+                             "it is read", damaged=True)
+
+    def _check_choreo(self) -> None:
+        """After a whole read: an MCAP with neither choreo's run metadata nor any of choreo's
+        topics was written by another tool. Reviewing it would report an empty run (exit 0)."""
+        if self.run_info or self.cut is not None or self.library.startswith("choreo"):
+            return  # a choreo log, perhaps cut or damaged before its metadata
+        if any(channel.topic in CHOREO_TOPICS for channel in self.channels.values()):
+            return
+        topics = ", ".join(sorted({c.topic for c in self.channels.values()})[:4]) or "none"
+        raise self._fail(f"not a choreo log: an MCAP file without choreo's run metadata or topics "
+                         f"(its topics: {topics}; written by {self.library or 'another tool'!r}); "
+                         "choreo reviews the .mcap files `choreo run` writes")
 
     def _too_short(self) -> LogError:
         if not self._size:
@@ -262,6 +303,8 @@ class LogReader:
             name, pos = _string(body, pos)
             media_type, pos = _string(body, pos)
             (size,) = struct.unpack_from("<Q", body, pos)
+            if pos + 8 + size > len(body):
+                raise ValueError(f"its data size {size:,} is more than the record holds")
             attachment = Attachment(name, media_type, struct.unpack_from("<Q", body, 0)[0], start + 9 + pos + 8, size)
             if attachment not in self.attachments:  # a second pass over the log meets it again
                 self.attachments.append(attachment)
@@ -287,12 +330,19 @@ class LogReader:
 
         `topics` limits it to those topics (the others are skipped without copying). Ends
         quietly at the end of the file; `cut` then says whether and where it was cut short.
-        Calling it again starts over.
+        Calling it again starts over. A file that turns out not to be a choreo log at all is a
+        LogError at the end.
         """
+        yield from self._messages(topics)
+        self._check_choreo()
+
+    def _messages(self, topics: Collection[str] | None) -> Iterator[Message]:
         f = self._file
         if f is None:
             raise self._fail("the log is closed")
-        self.cut, self.footer, self.messages_read = None, False, 0
+        self.cut, self.footer, self.messages_read = self._head_cut, False, 0
+        if self._head_cut is not None:
+            return  # the records before the first message are damaged: none can be found
         f.seek(self._data_start)
         read = f.read
         size = self._size

@@ -13,12 +13,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from choreo.review.reader import Cut, LogReader, decode
+from choreo.review.reader import LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, Cut, LogReader, decode
 
-TX_TOPIC = "/rcb4/tx"
-RX_TOPIC = "/rcb4/rx"
-STEP_TOPIC = "/choreo/step"
-LOG_TOPIC = "/choreo/log"
 
 LATE_MS = 1.0  # the runner reports a step starting later than this as late
 FRAME_KINDS = ("stop", "play", "restore", "status")
