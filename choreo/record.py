@@ -145,9 +145,15 @@ def _dumps(message: dict) -> bytes:
     return _encode(message).encode()
 
 
+def without_absent(message: dict) -> dict:
+    """The message with its absent (None) fields left out: Foxglove's JSON-schema support takes
+    one type per field and refuses a topic whose schema allows null, so absent means omitted."""
+    return {key: value for key, value in message.items() if value is not None}
+
+
 def _tx_message(event: TxEvent) -> dict:
     tag = event.tag
-    return {
+    return without_absent({
         "seq": event.seq,
         "step": tag.step if tag else None,
         "label": tag.label if tag else None,
@@ -155,12 +161,12 @@ def _tx_message(event: TxEvent) -> dict:
         "motion": event.frame.motion,
         "attempt": event.attempt,
         "hex": event.frame.hex,
-    }
+    })
 
 
 def _rx_message(event: RxEvent) -> dict:
     reply = event.reply
-    return {
+    return without_absent({
         "seq": event.seq,
         "kind": reply.kind.value,
         "hex": reply.hex,
@@ -168,11 +174,11 @@ def _rx_message(event: RxEvent) -> dict:
         "executing": reply.executing,
         "error": reply.error,
         "stale": reply.stale.hex(" ") if reply.stale else None,
-    }
+    })
 
 
 def _step_message(event: StepEvent) -> dict:
-    return event.message()
+    return without_absent(event.message())
 
 
 def _log_message(entry: tuple[int, str, int]) -> dict:

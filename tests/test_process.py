@@ -119,7 +119,7 @@ def test_a_run_with_closed_standard_streams_runs_and_writes_its_log(tmp_path, en
     assert done.returncode == 0
     log = read_log(log_path)  # a whole, valid log: nothing else was written into it
     assert log.metadata["choreo.result"]["outcome"] == "done"
-    assert [m["motion"] for m in log.tx if m["kind"] == "play"] == [1]
+    assert [m.get("motion") for m in log.tx if m["kind"] == "play"] == [1]
 
 
 def test_messages_still_reach_an_open_stderr_when_stdout_is_closed(tmp_path):

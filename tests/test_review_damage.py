@@ -168,7 +168,7 @@ def test_polls_next_to_a_motions_end_are_known_from_the_recording(run_log):
         for topic, _, data in reader.messages(("/rcb4/rx",)):
             message = __import__("json").loads(data)
             if isinstance(message.get("executing"), bool):
-                statuses.append((message["seq"], message["executing"]))
+                statuses.append((message["seq"], message.get("executing")))
     changes = [i for i in range(1, len(statuses)) if statuses[i][1] != statuses[i - 1][1]]
     assert changes and edges == {statuses[i][0] for c in changes for i in (c - 1, c)}
 

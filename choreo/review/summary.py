@@ -235,11 +235,11 @@ def summarize_reader(reader: LogReader) -> Summary:
                 if seq == pending_seq:
                     pending_seq = -1
                 if m.get("stale"):  # null in every clean exchange; absent in older logs
-                    stale += len(stale_replies(m["stale"]))
+                    stale += len(stale_replies(m.get("stale")))
                 if kind == "status":
                     key = round(m["latency_ms"] * 1000)
                     latency[key] = latency.get(key, 0) + 1
-                    if running is not None and seq == status_seq and m["executing"] is False:
+                    if running is not None and seq == status_seq and m.get("executing") is False:
                         finished.append((*running, status_ns - running[3], "status"))
                         running = None
                 elif kind == "ack":
@@ -262,8 +262,8 @@ def summarize_reader(reader: LogReader) -> Summary:
                 pending_seq = m["seq"]
                 if m["attempt"] > 1:
                     retries += 1
-                    if m["step"] is not None:
-                        retried.add(m["step"])
+                    if m.get("step") is not None:
+                        retried.add(m.get("step"))
                 if kind == "status":
                     status_seq = pending_seq
                     status_ns = log_time
@@ -271,7 +271,7 @@ def summarize_reader(reader: LogReader) -> Summary:
                     restore_seq = pending_seq
                     restore_ns = log_time
                 elif kind == "play":
-                    armed = (m["motion"], m["step"], m["label"])
+                    armed = (m.get("motion"), m.get("step"), m.get("label"))
                 elif kind == "stop" and running is not None:
                     finished.append((*running, None, "stop"))
                     running = None
@@ -294,7 +294,7 @@ def summarize_reader(reader: LogReader) -> Summary:
                         zero_from_step = True
                 else:
                     late_at_start = steps_open.pop(index, False)
-                    outcome = m["outcome"]
+                    outcome = m.get("outcome")
                     outcomes[outcome] = outcomes.get(outcome, 0) + 1
                     if index in retried:
                         retried.discard(index)

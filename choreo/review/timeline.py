@@ -162,7 +162,7 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
                         if armed is not None:
                             finish(armed, None, "not started")
                         step = steps.pop(key[0], None) if key[0] is not None else None
-                        armed = _Playing(message["motion"], key[0], message.get("label"),
+                        armed = _Playing(message.get("motion"), key[0], message.get("label"),
                                          step.get("estimated_s") if step else None,
                                          step.get("planned_s") if step else None,
                                          step.get("late_ms", 0.0) if step else 0.0)
