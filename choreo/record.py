@@ -81,6 +81,7 @@ CHUNK_BOUND = CHUNK_SIZE * 5 // 4 + MESSAGE_BUDGET  # the chunk being built, wit
 SUMMARY_SLACK = 8 * 1024  # summary beyond the schemas: channels, statistics, indexes, footer, result
 START_SLACK = 4 * 1024  # the start beyond the schemas and the show: header, metadata, channels
 RESERVE_AHEAD = 256 * 1024  # reserved beyond what is needed, so the reserve grows only now and then
+ROOM_MARGIN = RESERVE_AHEAD // 4 // MESSAGE_BUDGET  # messages short of the room: look at the reserve again
 
 # foxglove.Log levels
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5
@@ -312,7 +313,8 @@ class Recorder:
                 self._dirty = True
         except OSError as exc:  # a chunk reached the disk and the disk said no
             self._failed(exc)
-        self._keep_reserve()
+        if self._written + len(pending) + ROOM_MARGIN > self._room:
+            self._keep_reserve()  # only near the edge: it asks the file where it is (a syscall)
 
     # -- the reserve -----------------------------------------------------------------------
 
