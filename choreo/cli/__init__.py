@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from choreo.__main__ import SignalGuard
 
 # Command modules, in the order `choreo --help` lists them.
-COMMAND_MODULES = ("run", "show", "importer", "frames", "sim", "probe", "log", "ports")
+COMMAND_MODULES = ("run", "show", "importer", "frames", "sim", "probe", "log", "ports", "schema")
 
 
 def build_parser() -> argparse.ArgumentParser:

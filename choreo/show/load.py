@@ -95,9 +95,14 @@ def load_show_bytes(source: bytes, path: str = "<show>") -> Show:
 
 def load_schema() -> dict[str, Any]:
     """The show format's JSON Schema, as shipped inside the package."""
+    return json.loads(schema_path().read_text(encoding="utf-8"))
+
+
+def schema_path() -> Path:
+    """Where the installed show schema is: what an editor's `$schema=` modeline points at."""
     from importlib.resources import files
 
-    return json.loads((files("choreo.schemas") / SCHEMA_FILE).read_text(encoding="utf-8"))
+    return Path(str(files("choreo.schemas") / SCHEMA_FILE)).resolve()
 
 
 # --------------------------------------------------------------------------- problems
