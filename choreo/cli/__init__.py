@@ -8,7 +8,9 @@ and `choreo validate` do not pay for serial, mcap or matplotlib.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
@@ -63,8 +65,34 @@ def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = Non
         return 130
     except BrokenPipeError:
         # The reader of our output went away (`choreo log frames LOG | head`): not an error.
+        _drop_stdout()
         sys.stderr.close()
         return 0
+    except OSError as exc:
+        if not _is_output_error(exc):
+            raise
+        _drop_stdout()
+        print(f"choreo: cannot write the output: {exc.strerror or exc}", file=sys.stderr)
+        return OUTPUT_ERROR_EXIT
+
+
+OUTPUT_ERROR_EXIT = 2  # like a log that cannot be written: the user's output, not the robot
+_OUTPUT_ERRNOS = frozenset((errno.ENOSPC, errno.EIO, errno.EFBIG, getattr(errno, "EDQUOT", errno.ENOSPC)))
+
+
+def _is_output_error(exc: OSError) -> bool:
+    """A write or flush of stdout that failed (it names no file, unlike an open or a read)."""
+    return exc.filename is None and exc.errno in _OUTPUT_ERRNOS
+
+
+def _drop_stdout() -> None:
+    """Point stdout at /dev/null: the interpreter's last flush must not fail a second time."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass
 
 
 def _command(argv: Sequence[str] | None, signals: SignalGuard | None) -> int:
@@ -72,7 +100,9 @@ def _command(argv: Sequence[str] | None, signals: SignalGuard | None) -> int:
         signals.arm()  # a signal that came while choreo loaded interrupts here
     try:
         args = build_parser().parse_args(argv)
-        return int(args.handler(args) or 0)
+        code = int(args.handler(args) or 0)
+        sys.stdout.flush()  # a full output fails here, inside the one place errors are mapped
+        return code
     finally:
         if signals is not None:
             signals.disarm()
