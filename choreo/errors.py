@@ -6,7 +6,15 @@ printed line and an exit status, in one place (`choreo.cli.main`).
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
 from dataclasses import dataclass
+
+
+def did_you_mean(given: str, known: Iterable[str]) -> str:
+    """`: did you mean 'summary'?` when one of `known` is close to `given`, else ''."""
+    close = difflib.get_close_matches(given, list(known), n=1, cutoff=0.6)
+    return f": did you mean '{close[0]}'?" if close else ""
 
 
 class ChoreoError(Exception):

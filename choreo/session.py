@@ -15,7 +15,7 @@ from pathlib import Path
 from urllib.parse import parse_qsl, urlencode
 
 from choreo.clock import RunClock
-from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError
+from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError, did_you_mean
 from choreo.layouts import SEED, Layout, layout_named
 from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
 from choreo.runner import ERROR, RunListener, Runner, RunResult, StopRequest
@@ -240,9 +240,10 @@ def _start_index(plan: Plan, ref: str | None) -> int:
         return plan.find(ref)
     except KeyError:
         labels = [s.label for s in plan.steps if s.label]
-        known = f"; labels: {', '.join(labels)}" if labels else ""
+        shown = ", ".join(labels[:12]) + (", ..." if len(labels) > 12 else "")
+        known = f"; labels: {shown}" if labels else ""
         raise UsageError(f"--from {ref}: no step with that index (0..{len(plan.steps) - 1}) "
-                         f"or label{known}") from None
+                         f"or label{did_you_mean(ref, labels)}{known}") from None
 
 
 def _layout(given: str | None, in_show: str | None) -> tuple[Layout, str]:

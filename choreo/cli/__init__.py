@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from choreo import __version__
+from choreo.cli.parser import ChoreoParser
 from choreo.errors import ChoreoError
 
 if TYPE_CHECKING:
@@ -26,7 +27,7 @@ COMMAND_MODULES = ("run", "show", "importer", "frames", "sim", "probe", "log", "
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ChoreoParser(
         prog="choreo",
         description="Play stored motions on a Kondo RCB-4 robot from a YAML show file, "
         "byte-exact and on time, and record every frame to an MCAP log.",
@@ -45,6 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
                 raise
             continue  # a command group not built yet
         module.register(subparsers)
+    _remember_leaf_parsers(parser)
     return parser
 
 
@@ -76,6 +78,16 @@ def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = Non
         return OUTPUT_ERROR_EXIT
 
 
+def _remember_leaf_parsers(parser: argparse.ArgumentParser) -> None:
+    """Each command's own parser is in its parsed arguments (`args.parser`), so that arguments
+    it does not take are reported with its usage, not the top-level one."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                sub.set_defaults(parser=sub)
+                _remember_leaf_parsers(sub)
+
+
 OUTPUT_ERROR_EXIT = 2  # like a log that cannot be written: the user's output, not the robot
 _OUTPUT_ERRNOS = frozenset((errno.ENOSPC, errno.EIO, errno.EFBIG, getattr(errno, "EDQUOT", errno.ENOSPC)))
 
@@ -99,7 +111,10 @@ def _command(argv: Sequence[str] | None, signals: SignalGuard | None) -> int:
     if signals is not None:
         signals.arm()  # a signal that came while choreo loaded interrupts here
     try:
-        args = build_parser().parse_args(argv)
+        parser = build_parser()
+        args, extra = parser.parse_known_args(argv)
+        if extra:
+            getattr(args, "parser", parser).unknown_arguments(extra)
         code = int(args.handler(args) or 0)
         sys.stdout.flush()  # a full output fails here, inside the one place errors are mapped
         return code

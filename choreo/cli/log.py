@@ -18,7 +18,8 @@ from typing import IO, TextIO
 
 from choreo.errors import UsageError
 
-FRAME_AND_REPLY_KINDS = ("stop", "play", "restore", "status", "sync", "ack", "nak", "timeout", "invalid")
+FRAME_AND_REPLY_KINDS = ("stop", "counter", "play", "restore", "status", "read", "sync",
+                         "ack", "nak", "timeout", "invalid")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
