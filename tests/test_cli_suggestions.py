@@ -36,3 +36,45 @@ def test_an_unknown_option_of_a_subcommand_prints_that_subcommands_usage(capsys)
 def test_from_a_mistyped_label_suggests_the_label(capsys):
     assert main(["run", "shows/dance.yaml", "--from", "grove", "--no-log"]) == 2
     assert "did you mean 'groove'?" in capsys.readouterr().err
+
+
+# -- several logs, the newest log ---------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def two_logs(tmp_path_factory):
+    import os
+    import time
+
+    directory = tmp_path_factory.mktemp("runs")
+    for name in ("older", "newer"):
+        assert main(["run", "shows/minimal.yaml", "--port", "sim://?motion_s=0.05",
+                     "--log", str(directory / f"{name}.mcap"), "-q"]) == 0
+    stamp = time.time()
+    os.utime(directory / "older.mcap", (stamp - 60, stamp - 60))
+    return directory
+
+
+def test_summary_of_several_logs_and_of_a_folder(two_logs, capsys):
+    assert main(["log", "summary", str(two_logs / "older.mcap"), str(two_logs / "newer.mcap")]) == 0
+    out = capsys.readouterr().out
+    heads = [line for line in out.splitlines() if line.startswith("log       ")]
+    assert len(heads) == 2 and "\n\nlog       " in out
+    assert main(["log", "summary", str(two_logs)]) == 0
+    first, second = [line for line in capsys.readouterr().out.splitlines() if line.startswith("log       ")]
+    assert "older.mcap" in first and "newer.mcap" in second
+
+
+def test_summary_goes_on_past_a_bad_log_and_exits_2(two_logs, tmp_path, capsys):
+    bad = tmp_path / "bad.mcap"
+    bad.write_text("not a log")
+    assert main(["log", "summary", str(bad), str(two_logs / "newer.mcap")]) == 2
+    out, err = capsys.readouterr()
+    assert "newer.mcap" in out and err.strip().splitlines()[0].startswith(f"log {bad}: not an MCAP file")
+
+
+def test_latest_prints_the_newest_log(two_logs, tmp_path, capsys):
+    assert main(["log", "latest", str(two_logs)]) == 0
+    assert capsys.readouterr().out.strip() == str(two_logs / "newer.mcap")
+    assert main(["log", "latest", str(tmp_path / "nowhere")]) == 2
+    assert main(["log", "latest", str(tmp_path)]) == 2
+    assert "no .mcap logs" in capsys.readouterr().err

@@ -36,8 +36,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Summarise a run: show, port, duration; steps done, late and failed; frames and "
         "replies by kind; reply latency and cue lateness; each motion's measured duration; "
         "whether the log is complete.")
-    summary.add_argument("log", help="the run's .mcap log")
+    summary.add_argument("log", nargs="+", help="run logs (.mcap), or folders of them (every .mcap in it, "
+                         "oldest first)")
     summary.set_defaults(handler=run_summary)
+
+    latest = commands.add_parser(
+        "latest", help="print the newest log's path",
+        description="Print the path of the newest .mcap log in DIR (default runs/, where `choreo run` "
+        "writes them), for scripts: `choreo log summary \"$(choreo log latest)\"`.")
+    latest.add_argument("dir", nargs="?", default="runs", help="the folder (default runs)")
+    latest.set_defaults(handler=run_latest)
 
     frames = commands.add_parser(
         "frames", help="every frame and reply, one line each, with what it means",
@@ -114,10 +122,46 @@ def _print_all(lines: Iterable[str]) -> None:
 
 
 def run_summary(args: argparse.Namespace) -> int:
+    """One summary a log, a blank line between; a log that cannot be read is one line on stderr
+    and the others are still summarised (exit 2 at the end)."""
+    from choreo.errors import ChoreoError
     from choreo.review.summary import render, summarize
 
-    _print_all(render(summarize(args.log)))
+    failed = 0
+    with _stdout() as out:
+        for number, path in enumerate(_logs_in(args.log)):
+            try:
+                lines = list(render(summarize(path)))
+            except ChoreoError as exc:
+                failed += 1
+                print(str(exc), file=sys.stderr)
+                continue
+            out.write(("\n" if number else "") + "\n".join(lines) + "\n")
+            out.flush()
+    return 2 if failed else 0
+
+
+def run_latest(args: argparse.Namespace) -> int:
+    if not Path(args.dir).is_dir():
+        raise UsageError(f"{args.dir}: no such folder (`choreo run` writes its logs to runs/)")
+    logs = _logs_in([args.dir])
+    print(max(logs, key=lambda p: (p.stat().st_mtime, p.name)))
     return 0
+
+
+def _logs_in(given: list[str]) -> list[Path]:
+    """The logs named, a folder standing for every .mcap in it (oldest first)."""
+    logs: list[Path] = []
+    for name in given:
+        path = Path(name)
+        if path.is_dir():
+            found = sorted(path.glob("*.mcap"), key=lambda p: (p.stat().st_mtime, p.name))
+            if not found:
+                raise UsageError(f"{path}: no .mcap logs in this folder")
+            logs += found
+        else:
+            logs.append(path)
+    return logs
 
 
 def run_frames(args: argparse.Namespace) -> int:
