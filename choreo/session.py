@@ -88,6 +88,8 @@ class Session:
             port, source = "sim://", "simulator"
         port = with_show_durations(port, show, plan, baud, layout)
         log_path = None
+        if request.log_path and not request.no_log:
+            check_output_folder(Path(request.log_path), "--log")
         if not request.no_log:
             from choreo.record import default_log_path
 
@@ -177,6 +179,15 @@ def simulator_url(show: Show, plan: Plan, baud: int = DEFAULT_BAUD, layout: Layo
 
 def is_simulator(url: str) -> bool:
     return url.lower().startswith("sim://")
+
+
+def check_output_folder(path: Path, option: str) -> None:
+    """An output given by name goes into a folder that exists: it is refused, never created (a
+    typo would otherwise scatter files). Only the default log folder, runs/, is made."""
+    folder = path.parent
+    if not folder.is_dir():
+        raise UsageError(f"{option} {path}: the folder {folder} does not exist: create it, or give "
+                         "another path")
 
 
 def check_simulator_url(url: str) -> None:

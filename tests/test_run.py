@@ -316,7 +316,25 @@ def test_unwritable_log_is_exit_2_before_the_robot_moves(tmp_path, capsys):
     blocker.write_text("not a directory")
     assert main(["run", str(show), "--port", "/dev/choreo-no-such-port",
                  "--log", str(blocker / "x.mcap")]) == 2
-    assert "cannot create" in capsys.readouterr().err  # the port was never tried
+    assert "does not exist" in capsys.readouterr().err  # the port was never tried
+
+
+def test_a_log_folder_that_does_not_exist_is_refused_not_created(tmp_path, capsys):
+    show = write_show(tmp_path, WIRE_SHOW)
+    missing = tmp_path / "typo" / "x.mcap"
+    assert main(["run", str(show), "--log", str(missing)]) == 2
+    assert capsys.readouterr().err.strip() == (f"--log {missing}: the folder {missing.parent} does not "
+                                               "exist: create it, or give another path")
+    assert not missing.parent.exists()
+
+
+def test_a_port_that_will_not_open_still_names_its_log(tmp_path, capsys):
+    show = write_show(tmp_path, WIRE_SHOW)
+    log_path = tmp_path / "failed.mcap"
+    assert main(["run", str(show), "--port", "/dev/choreo-no-such-port", "--log", str(log_path)]) == 3
+    err = capsys.readouterr().err.splitlines()
+    assert err[-2] == f"log: {log_path}" and err[-1].startswith("port /dev/choreo-no-such-port: cannot open")
+    assert read_log(log_path).metadata["choreo.result"]["outcome"] == "failed"
 
 
 # -- stopping -------------------------------------------------------------------------------

@@ -7,6 +7,8 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TextIO
 
 from choreo.__main__ import STOP_SIGNALS
@@ -58,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     progress = Progress(session, sys.stderr, live=sys.stderr.isatty(), quiet=args.quiet)
     signals = _StopOnSignals()
     try:
-        with signals as stop, session:
+        with _log_named_on_failure(session, say), signals as stop, session:
             say(f"log: {session.log_path}" if session.log_path else "log: off (--no-log)")
             result = session.run([progress], stop)
         progress.finish()
@@ -73,6 +75,18 @@ def run(args: argparse.Namespace) -> int:
     finally:
         progress.finish()
         signals.restore()
+
+
+@contextmanager
+def _log_named_on_failure(session, say) -> Iterator[None]:  # type: ignore[no-untyped-def]
+    """A run that failed before it said where its log is (the port would not open) still has
+    a log, with the error in it: say where, before the error line."""
+    try:
+        yield
+    except BaseException:
+        if session.recorder is not None and session.link is None:
+            say(f"log: {session.log_path}")
+        raise
 
 
 class _Say:

@@ -218,6 +218,10 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
     cannot be written. A cut log replays as far as it goes.
     """
     check_options(speed, baud, timeout, layout)
+    if log_path is not None:
+        from choreo.session import check_output_folder
+
+        check_output_folder(Path(log_path), "--log")
     from choreo.clock import RunClock
     from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, Link
     from choreo.record import Recorder, RunInfo, default_log_path
