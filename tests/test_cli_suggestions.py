@@ -78,3 +78,24 @@ def test_latest_prints_the_newest_log(two_logs, tmp_path, capsys):
     assert main(["log", "latest", str(tmp_path / "nowhere")]) == 2
     assert main(["log", "latest", str(tmp_path)]) == 2
     assert "no .mcap logs" in capsys.readouterr().err
+
+
+# -- the live line fits the terminal ------------------------------------------------------------
+
+@pytest.mark.parametrize("columns", [200, 80, 60, 40, 30, 20, 12, 8, 2])
+def test_the_live_line_never_fills_the_last_column(columns):
+    from choreo.cli.run import live_line
+
+    step = "step 12 'chorus' (13/26): play 30 (spin_around_twice_and_bow)"
+    line = live_line(step, 12.34, 22.0, columns)
+    assert 0 < len(line) <= max(columns - 1, 1)
+    if columns >= 40:
+        assert "12.3/22.0 s" in line and line.startswith("step 1")
+    if columns >= 80:
+        assert "[" in line  # the bar is there where there is room
+
+
+def test_the_live_line_keeps_its_step_whole_when_it_fits():
+    from choreo.cli.run import live_line
+
+    assert live_line("step 0: play 1", 0.5, 1.0, 80) == "step 0: play 1  0.5/1.0 s [##########----------]"

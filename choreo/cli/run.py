@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
@@ -87,6 +88,25 @@ def _log_named_on_failure(session, say) -> Iterator[None]:  # type: ignore[no-un
         if session.recorder is not None and session.link is None:
             say(f"log: {session.log_path}")
         raise
+
+
+def live_line(step: str, show_s: float, estimated_s: float, columns: int) -> str:
+    """The live line, one character narrower than the terminal (a line that fills the last
+    column wraps on many terminals, and every redraw would then leave a line behind): the show
+    time is kept, then the bar as room allows, then the step, cut with `…`."""
+    width = max(columns - 1, 1)
+    clock = f"{show_s:.1f}/{estimated_s:.1f} s"
+    bar_room = min(20, width - len(clock) - 12)  # keep about ten columns for the step
+    bar = ""
+    if bar_room >= 5:
+        done = min(bar_room, int(bar_room * show_s / estimated_s)) if estimated_s > 0 else bar_room
+        bar = f" [{'#' * done}{'-' * (bar_room - done)}]"
+    tail = f"  {clock}{bar}"
+    room = width - len(tail)
+    if room < 1:
+        return clock[:width]
+    text = step if len(step) <= room else step[:max(room - 1, 0)] + "…"
+    return text + tail
 
 
 class _Say:
@@ -204,10 +224,17 @@ class Progress:
 
     def _draw(self) -> None:
         show_s = time.monotonic() - self._zero if self._zero is not None else 0.0
-        done = min(20, int(20 * show_s / self.estimated)) if self.estimated > 0 else 20
-        line = f"{self._current}  {show_s:.1f}/{self.estimated:.1f} s [{'#' * done}{'-' * (20 - done)}]"
-        self._write("\r" + line.ljust(self._width))
+        columns = self._columns()
+        line = live_line(self._current, show_s, self.estimated, columns)
+        self._write("\r" + line.ljust(min(self._width, columns - 1)))
         self._width = len(line)
+
+    def _columns(self) -> int:
+        """The terminal's width now (it may be resized mid-show); 80 if it cannot be told."""
+        try:
+            return os.get_terminal_size(self.out.fileno()).columns if self.out is not None else 80
+        except (OSError, ValueError, AttributeError):
+            return 80
 
     def _write(self, text: str) -> None:
         """The screen is not the show: a closed pipe or terminal silences progress, nothing more."""
