@@ -186,8 +186,8 @@ def check_output_folder(path: Path, option: str) -> None:
     typo would otherwise scatter files). Only the default log folder, runs/, is made."""
     folder = path.parent
     if not folder.is_dir():
-        raise UsageError(f"{option} {path}: the folder {folder} does not exist: create it, or give "
-                         "another path")
+        what = "is not a folder" if folder.exists() else "does not exist"
+        raise UsageError(f"{option} {path}: cannot write: folder {folder} {what} (create it first)")
 
 
 def check_simulator_url(url: str) -> None:

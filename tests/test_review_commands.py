@@ -383,7 +383,7 @@ def test_export_of_a_killed_run_to_stdout(logs, capsys):
     records = json.loads(out)
     assert len(records) >= 20 and records[0]["frame_meaning"].endswith("stop and save status")
     code, _, err = cli(capsys, "log", "export", str(logs.killed))
-    assert code == 2 and "--csv FILE" in err
+    assert code == 2 and "--csv, --json and/or --jsonl FILE" in err
 
 
 # -- replay ------------------------------------------------------------------------------------

@@ -8,6 +8,7 @@ goes and says where it stops (exit 0): that is the run a reviewer most needs to 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import stat
 import sys
@@ -38,6 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "whether the log is complete.")
     summary.add_argument("log", nargs="+", help="run logs (.mcap), or folders of them (every .mcap in it, "
                          "oldest first)")
+    summary.add_argument("--json", action="store_true", help="one JSON object a log, one a line (JSON Lines)")
     summary.set_defaults(handler=run_summary)
 
     latest = commands.add_parser(
@@ -72,6 +74,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     export.add_argument("log", help="the run's .mcap log")
     export.add_argument("--csv", metavar="FILE", help="write CSV to FILE")
     export.add_argument("--json", metavar="FILE", help="write a JSON array to FILE")
+    export.add_argument("--jsonl", metavar="FILE", help="write JSON Lines (one object a row) to FILE")
     export.set_defaults(handler=run_export)
 
     replay = subparsers.add_parser(
@@ -125,18 +128,21 @@ def run_summary(args: argparse.Namespace) -> int:
     """One summary a log, a blank line between; a log that cannot be read is one line on stderr
     and the others are still summarised (exit 2 at the end)."""
     from choreo.errors import ChoreoError
-    from choreo.review.summary import render, summarize
+    from choreo.review.summary import render, summarize, summary_record
 
     failed = 0
     with _stdout() as out:
         for number, path in enumerate(_logs_in(args.log)):
             try:
-                lines = list(render(summarize(path)))
+                summary = summarize(path)
             except ChoreoError as exc:
                 failed += 1
                 print(str(exc), file=sys.stderr)
                 continue
-            out.write(("\n" if number else "") + "\n".join(lines) + "\n")
+            if args.json:
+                out.write(json.dumps(summary_record(summary), separators=(",", ":")) + "\n")
+            else:
+                out.write(("\n" if number else "") + "\n".join(render(summary)) + "\n")
             out.flush()
     return 2 if failed else 0
 
@@ -202,19 +208,21 @@ def _timeline_png(log: str, png: str) -> int:
 
 
 def run_export(args: argparse.Namespace) -> int:
-    from choreo.review.export import CsvSink, JsonSink, export
+    from choreo.review.export import CsvSink, JsonLinesSink, JsonSink, export
     from choreo.review.reader import LogReader
 
-    targets = [(name, value) for name, value in (("csv", args.csv), ("json", args.json)) if value]
+    targets = [(name, value) for name, value in (("csv", args.csv), ("json", args.json),
+                                                 ("jsonl", args.jsonl)) if value]
     if not targets:
-        raise UsageError("log export: say where: --csv FILE and/or --json FILE ('-' for stdout)")
+        raise UsageError("log export: say where: --csv, --json and/or --jsonl FILE ('-' for stdout)")
     if sum(1 for _, value in targets if value == "-") > 1:
-        raise UsageError("log export: only one of --csv and --json can go to stdout ('-')")
+        raise UsageError("log export: only one of --csv, --json and --jsonl can go to stdout ('-')")
+    sink_of = {"csv": CsvSink, "json": JsonSink, "jsonl": JsonLinesSink}
     with LogReader(args.log) as reader, _stdout(), ExitStack() as files:
         sinks = []
         for name, value in targets:
             out = sys.stdout if value == "-" else files.enter_context(_output(value, f"log export --{name}"))
-            sinks.append(CsvSink(out) if name == "csv" else JsonSink(out))
+            sinks.append(sink_of[name](out))
         count = export(reader, sinks)
         cut = reader.cut
     written = ", ".join(value for _, value in targets if value != "-")
@@ -233,10 +241,10 @@ def _output(path: str, command: str, binary: bool = False) -> Iterator[IO]:
     not finish (the disk filled, the log turned out not to be choreo's) is removed, never left
     half written; anything that was there before (a device such as /dev/stdout) is left alone.
     """
+    from choreo.session import check_output_folder
+
     target = Path(path)
-    if not target.parent.is_dir():
-        what = "is not a folder" if target.parent.exists() else "does not exist"
-        raise UsageError(f"{command} {path}: cannot write: folder {target.parent} {what} (create it first)")
+    check_output_folder(target, command)
     created = not os.path.lexists(target)
     try:
         file = open(target, "wb") if binary else open(target, "w", encoding="utf-8", newline="")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import signal
 import sys
@@ -13,7 +14,7 @@ from contextlib import contextmanager
 from typing import TextIO
 
 from choreo.__main__ import STOP_SIGNALS
-from choreo.errors import Interrupted
+from choreo.errors import ChoreoError, Interrupted
 from choreo.layouts import LAYOUT_NAMES
 
 
@@ -42,16 +43,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--retries", type=int, metavar="N",
                         help="retries of a failed frame or play sequence, 0..10 (default 2: 3 tries)")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress output")
+    parser.add_argument("--json", action="store_true", help="at the end, the run's result and log "
+                        "path as one JSON object on stdout (also when it fails; stderr as without)")
     parser.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    """With --json, a script gets the outcome and the log path on stdout whatever happens, the
+    way it would read them off stderr otherwise."""
+    report = _RunReport(args.show)
+    try:
+        code = _run(args, report)
+    except ChoreoError as exc:
+        report.failed(exc)
+        raise
+    except KeyboardInterrupt:
+        report.failed(Interrupted("show interrupted"), exit_code=130)
+        raise
+    finally:
+        if args.json:
+            _print_json(report.record)
+    return code
+
+
+def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     from choreo.session import RunRequest, Session
 
     request = RunRequest(args.show, port=args.port, baud=args.baud, log_path=args.log,
                          no_log=args.no_log, from_step=args.from_step, timeout=args.timeout,
                          retries=args.retries, layout=args.layout)
     session = Session.prepare(request)
+    report.session = session
     say = _Say(sys.stderr, quiet=args.quiet)
     say(_port_line(session))
     say(_layout_line(session))
@@ -64,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
         with _log_named_on_failure(session, say), signals as stop, session:
             say(f"log: {session.log_path}" if session.log_path else "log: off (--no-log)")
             result = session.run([progress], stop)
+        report.result = result
         progress.finish()
         say.quiet = args.quiet and result.outcome == "done"
         late = f", {result.late_steps} late" if result.late_steps else ""
@@ -76,6 +99,46 @@ def run(args: argparse.Namespace) -> int:
     finally:
         progress.finish()
         signals.restore()
+
+
+class _RunReport:
+    """What `run --json` prints: filled in as the run goes, so a failure still names the log."""
+
+    def __init__(self, show: str) -> None:
+        self.show = show
+        self.session = None
+        self.result = None
+        self.error: str | None = None
+        self.exit_code = 0
+
+    def failed(self, exc: ChoreoError, exit_code: int | None = None) -> None:
+        self.error = " / ".join(exc.lines())
+        self.exit_code = exc.exit_code if exit_code is None else exit_code
+
+    @property
+    def record(self) -> dict:
+        session, result = self.session, self.result
+        record: dict = {"show": self.show, "exit": self.exit_code}
+        if session is not None:
+            record.update(name=session.show.name, port=session.port, baud=session.baud, layout=session.layout.name,
+                          log=str(session.log_path) if session.log_path and session.recorder else None)
+        else:
+            record.update(log=None)
+        if result is not None:
+            record.update(outcome=result.outcome, steps_run=result.steps_run,
+                          late_steps=result.late_steps, show_s=round(result.show_s, 6))
+        else:
+            record.update(outcome="failed")
+        if self.error is not None:
+            record["error"] = self.error
+        return record
+
+
+def _print_json(record: dict) -> None:
+    try:
+        print(json.dumps(record, ensure_ascii=False), flush=True)
+    except BrokenPipeError:
+        pass
 
 
 @contextmanager

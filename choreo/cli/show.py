@@ -8,6 +8,7 @@ for YAML or jsonschema.
 from __future__ import annotations
 
 import argparse
+import json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -19,6 +20,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "Every problem of every file is listed, one a line, with exit status 2.",
     )
     validate.add_argument("shows", nargs="+", metavar="SHOW", help="a show file (YAML)")
+    validate.add_argument("--json", action="store_true", help="one JSON object on stdout: every file, "
+                          "ok with its figures or its problems (exit status as without)")
     validate.set_defaults(handler=run_validate)
 
     plan = subparsers.add_parser(
@@ -29,6 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "the estimated total duration.",
     )
     plan.add_argument("show", metavar="SHOW", help="a show file (YAML)")
+    plan.add_argument("--json", action="store_true", help="the plan as one JSON object on stdout")
     plan.set_defaults(handler=run_plan)
 
 
@@ -38,16 +42,43 @@ def run_validate(args: argparse.Namespace) -> int:
     from choreo.show.plan import compile_plan
 
     problems = []
+    files = []
     for path in args.shows:
         try:
             show = load_show(path)
         except ShowError as exc:
             problems.extend(exc.problems)
+            files.append({"path": path, "ok": False, "problems": [_problem_record(p) for p in exc.problems]})
             continue
-        print(summary_line(show, compile_plan(show)), flush=True)
+        plan = compile_plan(show)
+        if args.json:
+            files.append({"path": path, "ok": True, **_show_record(show, plan)})
+        else:
+            print(summary_line(show, plan), flush=True)
+    if args.json:
+        print(json.dumps({"ok": not problems, "files": files}, ensure_ascii=False))
+        return 2 if problems else 0
     if problems:
         raise ShowError(problems)
     return 0
+
+
+def _problem_record(problem) -> dict:  # type: ignore[no-untyped-def]
+    return {"file": problem.file, "line": problem.line, "column": problem.column,
+            "path": problem.path, "message": problem.message}
+
+
+def _show_record(show, plan) -> dict:  # type: ignore[no-untyped-def]
+    return {"name": show.name, "layout": plan.layout, "steps": len(plan.steps),
+            "motions": plan.motions_used(), "estimated_s": plan.estimated_s}
+
+
+def _plan_record(show, plan) -> dict:  # type: ignore[no-untyped-def]
+    steps = [{"index": step.index, "path": step.path, "label": step.label, "kind": step.kind.value,
+              "start_s": step.planned_s, "cue": step.at, "motion": step.motion,
+              "motion_name": step.motion_name, "seconds": step.seconds, "text": step.describe(),
+              "frames": [frame.hex for frame in step.frames]} for step in plan.steps]
+    return {"path": show.path, **_show_record(show, plan), "plan": steps}
 
 
 def summary_line(show, plan) -> str:  # type: ignore[no-untyped-def]  # model types: imported lazily
@@ -66,6 +97,9 @@ def run_plan(args: argparse.Namespace) -> int:
     from choreo.show.plan import load_plan
 
     show, plan = load_plan(args.show)
+    if args.json:
+        print(json.dumps(_plan_record(show, plan), ensure_ascii=False))
+        return 0
     for line in plan_lines(show, plan):
         print(line)
     return 0

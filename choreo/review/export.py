@@ -97,7 +97,21 @@ class JsonSink:
         self.out.write("\n]\n" if not self.first else "]\n")
 
 
-def export(reader: LogReader, sinks: list[CsvSink | JsonSink]) -> int:
+class JsonLinesSink:
+    """One JSON object a line (JSON Lines): each row is whole as soon as it is written, so a
+    reader can stream it, and a cut output loses only its last line."""
+
+    def __init__(self, out: TextIO) -> None:
+        self.out = out
+
+    def write(self, record: dict) -> None:
+        self.out.write(json.dumps(record, separators=(",", ":")) + "\n")
+
+    def close(self) -> None:
+        pass
+
+
+def export(reader: LogReader, sinks: list[CsvSink | JsonSink | JsonLinesSink]) -> int:
     """Write every frame to every sink; the number of frames written."""
     count = 0
     for record in rows(reader):

@@ -161,6 +161,36 @@ class Summary:
         return self.run.get("show") or self.path.stem
 
 
+def summary_record(summary: Summary) -> dict:
+    """The summary as one JSON object (`choreo log summary --json`): the same figures as the
+    text, in milliseconds and seconds, for scripts."""
+
+    def spread(values: Distribution) -> dict:
+        return {"count": len(values), "min_ms": values.min, "median_ms": values.median,
+                "p99_ms": values.p99, "max_ms": values.max}
+
+    return {
+        "log": str(summary.path),
+        "state": "complete" if summary.complete else (summary.cut.state if summary.cut else "unfinished"),
+        "cut": str(summary.cut) if summary.cut else None,
+        "show": summary.show_name,
+        "run": summary.run,
+        "result": summary.result,
+        "duration_s": summary.duration_s,
+        "steps": {"run": summary.steps_run, "done": summary.steps_done, "late": summary.steps_late,
+                  "late_by_retries": summary.steps_late_by_retries, "failed": summary.steps_failed,
+                  "aborted": summary.steps_aborted, "unfinished": summary.steps_unfinished},
+        "frames": {**summary.frames, "retries": summary.retries},
+        "replies": {**summary.replies, "stale": summary.stale, "unanswered": summary.unanswered},
+        "latency": spread(summary.latency),
+        "cue_lateness": spread(summary.lateness),
+        "motions": [{"motion": m.motion, "plays": m.plays, "measured": m.measured, "median_s": m.median_s}
+                    for m in sorted(summary.motions.values(), key=lambda m: m.motion)],
+        "warnings": summary.warnings,
+        "errors": summary.errors,
+    }
+
+
 def stale_replies(stale: str | None) -> list[str]:
     """The late replies in an rx message's `stale` hex, one hex string each.
 

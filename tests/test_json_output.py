@@ -1,0 +1,114 @@
+"""Machine-readable output (issue 11, item 3): `--json` on validate, plan, log summary and run,
+`log export --jsonl`, so that scripts never parse the human text on stderr."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from choreo.cli import main
+from choreo.errors import ChoreoError
+
+FAST = "sim://?motion_s=0.05"
+
+
+def json_of(capsys, *argv: str, code: int = 0):
+    assert main(list(argv)) == code
+    out = capsys.readouterr().out
+    return json.loads(out)
+
+
+def test_validate_json_lists_every_file_with_its_figures_or_problems(capsys, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("version: 1\nsteps:\n  - play: 400\n")
+    record = json_of(capsys, "validate", "shows/minimal.yaml", str(bad), "--json", code=2)
+    good, broken = record["files"]
+    assert record["ok"] is False
+    assert good == {"path": "shows/minimal.yaml", "ok": True, "name": "minimal", "layout": "seed",
+                    "steps": 2, "motions": [1], "estimated_s": 1.0}
+    assert broken["ok"] is False and broken["path"] == str(bad)
+    problem = broken["problems"][0]
+    assert problem["line"] == 3 and problem["path"].startswith("steps[0]") and "400" in problem["message"]
+
+
+def test_validate_json_of_good_shows_is_ok_and_exit_0(capsys):
+    record = json_of(capsys, "validate", "shows/dance.yaml", "shows/music.yaml", "--json")
+    assert record["ok"] is True and [f["ok"] for f in record["files"]] == [True, True]
+
+
+def test_plan_json_has_every_step_with_its_frames(capsys):
+    record = json_of(capsys, "plan", "shows/minimal.yaml", "--json")
+    play, wait = record["plan"]
+    assert play["kind"] == "play" and play["motion"] == 1 and play["start_s"] == 0.0
+    assert play["frames"][1] == "07 0c b8 13 00 00 de"  # the CALL of slot 1 at 0x0bb8 + 0x800
+    assert wait["kind"] == "wait_done" and wait["seconds"] == 60.0
+    assert record["estimated_s"] == 1.0 and record["steps"] == 2
+
+
+def test_plan_json_of_a_bad_show_prints_nothing_on_stdout(capsys):
+    assert main(["plan", "/nonexistent.yaml", "--json"]) == 2
+    assert capsys.readouterr().out == ""
+
+
+@pytest.fixture(scope="module")
+def a_log(tmp_path_factory) -> Path:
+    log = tmp_path_factory.mktemp("runs") / "run.mcap"
+    assert main(["run", "shows/minimal.yaml", "--port", FAST, "--log", str(log), "-q"]) == 0
+    return log
+
+
+def test_run_json_prints_the_result_and_the_log_path(capsys, tmp_path):
+    log = tmp_path / "r.mcap"
+    record = json_of(capsys, "run", "shows/minimal.yaml", "--port", FAST, "--log", str(log), "--json", "-q")
+    assert record["outcome"] == "done" and record["exit"] == 0 and record["log"] == str(log)
+    assert record["steps_run"] == 2 and record["late_steps"] == 0 and record["show_s"] > 0
+    assert record["layout"] == "seed" and record["port"] == FAST and "error" not in record
+    assert log.exists()
+
+
+def test_run_json_when_the_port_fails_still_names_the_log(capsys, tmp_path):
+    log = tmp_path / "r.mcap"
+    record = json_of(capsys, "run", "shows/minimal.yaml", "--port", str(tmp_path / "no-such-tty"),
+                     "--log", str(log), "--json", code=3)
+    assert record["outcome"] == "failed" and record["exit"] == 3 and record["log"] == str(log)
+    assert "cannot open" in record["error"] and log.exists()
+
+
+def test_run_json_of_a_bad_show_has_no_log(capsys):
+    record = json_of(capsys, "run", "/nonexistent.yaml", "--json", code=2)
+    assert record == {"show": "/nonexistent.yaml", "exit": 2, "log": None, "outcome": "failed",
+                      "error": "/nonexistent.yaml: cannot read the show file: No such file or directory"}
+
+
+def test_log_summary_json_is_one_object_a_log(capsys, a_log):
+    assert main(["log", "summary", str(a_log), str(a_log), "--json"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 2
+    first = json.loads(lines[0])
+    assert first["log"] == str(a_log) and first["state"] == "complete"
+    assert first["result"]["outcome"] == "done" and first["steps"]["run"] == 2
+    assert first["frames"]["play"] == 1 and first["replies"]["ack"] == 3
+    assert first["motions"][0]["motion"] == 1 and first["latency"]["count"] == 5
+
+
+def test_export_jsonl_is_one_object_a_row_like_the_json_array(capsys, a_log, tmp_path):
+    lines_file, array_file = tmp_path / "rows.jsonl", tmp_path / "rows.json"
+    assert main(["log", "export", str(a_log), "--jsonl", str(lines_file), "--json", str(array_file)]) == 0
+    rows = [json.loads(line) for line in lines_file.read_text().splitlines()]
+    assert rows == json.loads(array_file.read_text())
+    assert [row["frame"] for row in rows] == ["stop", "play", "restore", "status", "status"]
+    assert all(row["reply"] for row in rows)
+
+
+def test_export_jsonl_to_stdout(capsys, a_log):
+    assert main(["log", "export", str(a_log), "--jsonl", "-"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines and all(isinstance(json.loads(line), dict) for line in lines)
+
+
+def test_only_one_export_can_go_to_stdout(a_log):
+    with pytest.raises(ChoreoError, match="only one of --csv, --json and --jsonl"):
+        from choreo.cli import _command  # the error itself, before main prints it
+        _command(["log", "export", str(a_log), "--jsonl", "-", "--csv", "-"], None)
