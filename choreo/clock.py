@@ -1,15 +1,24 @@
-"""One monotonic clock for a run, anchored once to the wall clock.
+"""One monotonic clock for a run, anchored once to the wall clock, and the time it reads.
 
 Log times must be wall-clock nanoseconds (Foxglove shows them as dates) but must never jump
 when NTP adjusts the system time mid-show, so every timestamp is the monotonic clock plus one
 offset taken at the start. Cue timing uses the same monotonic clock.
+
+Everything that waits or measures on a run's behalf (the runner, the link, the in-process
+simulator) reads its time from one `TimeSource`: the machine's (`SystemTime`) on stage, or
+`VirtualTime`, where a sleep takes no real time. With the in-process simulator on virtual time
+a 22-second show runs in a fraction of a second and every figure in its log comes out the same
+on a loaded machine as on an idle one: timing logic is tested exactly, not by luck.
 """
 
 from __future__ import annotations
 
+import math
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 # The last stretch before a cue is spun, not slept: sleep() on a loaded machine overshoots by
 # up to a millisecond or more, and a cue's first byte must leave within 1 ms of its time.
@@ -18,21 +27,119 @@ SPIN_S = 0.002
 IDLE_S = 0.01
 
 
+class TimeSource(Protocol):
+    """Monotonic time and sleeping, as a run sees them."""
+
+    virtual: bool
+
+    def now(self) -> float:
+        """Monotonic seconds."""
+
+    def now_ns(self) -> int:
+        """Monotonic nanoseconds."""
+
+    def sleep(self, seconds: float) -> None:
+        """Let `seconds` pass."""
+
+    def spin(self) -> None:
+        """One turn of a busy wait (the last SPIN_S before a cue)."""
+
+    def wall_ns(self) -> int:
+        """Wall-clock nanoseconds, read once to anchor a run's log times."""
+
+
+class SystemTime:
+    """The machine's clocks: what a show on stage runs on."""
+
+    virtual = False
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def now_ns(self) -> int:
+        return time.monotonic_ns()
+
+    def sleep(self, seconds: float) -> None:
+        time.sleep(max(seconds, 0.0))
+
+    def spin(self) -> None:
+        pass
+
+    def wall_ns(self) -> int:
+        return time.time_ns()
+
+
+class VirtualTime:
+    """Time that passes only when something sleeps or spins: no real waiting, same result on
+    any machine. Its wall clock starts at the real one, so logs look like any other run's.
+
+    Only the in-process simulator (`sim://`) can keep up with it: a real port answers in real
+    time, so a session refuses the pair (see `choreo.session`).
+    """
+
+    virtual = True
+    SPIN_NS = 1_000  # a busy-wait turn costs a microsecond
+
+    def __init__(self, start_s: float = 1000.0) -> None:
+        self._ns = round(start_s * 1e9)
+        self._wall_ns = time.time_ns()
+        self._lock = threading.Lock()
+
+    def now(self) -> float:
+        return self._ns / 1e9
+
+    def now_ns(self) -> int:
+        return self._ns
+
+    def sleep(self, seconds: float) -> None:
+        self.advance(seconds)
+
+    def spin(self) -> None:
+        with self._lock:
+            self._ns += self.SPIN_NS
+
+    def advance(self, seconds: float) -> None:
+        """Whole nanoseconds, rounded up: a sleep of any length lets some time pass, so a
+        loop waiting for a deadline always gets there."""
+        if seconds > 0:
+            with self._lock:
+                self._ns += math.ceil(seconds * 1e9)
+
+    def wall_ns(self) -> int:
+        return self._wall_ns + self._ns
+
+
 @dataclass
 class RunClock:
     """Monotonic seconds for scheduling, anchored wall-clock nanoseconds for the log."""
 
-    mono_anchor_ns: int = field(default_factory=time.monotonic_ns)
-    wall_anchor_ns: int = field(default_factory=time.time_ns)
+    source: TimeSource = field(default_factory=SystemTime)
+    mono_anchor_ns: int = -1
+    wall_anchor_ns: int = -1
 
-    @staticmethod
-    def mono() -> float:
-        return time.monotonic()
+    def __post_init__(self) -> None:
+        if self.mono_anchor_ns < 0:
+            self.mono_anchor_ns = self.source.now_ns()
+        if self.wall_anchor_ns < 0:
+            self.wall_anchor_ns = self.source.wall_ns()
+
+    @property
+    def virtual(self) -> bool:
+        return self.source.virtual
+
+    def mono(self) -> float:
+        return self.source.now()
+
+    def mono_ns(self) -> int:
+        return self.source.now_ns()
+
+    def sleep(self, seconds: float) -> None:
+        self.source.sleep(seconds)
 
     def wall_ns(self, mono_ns: int | None = None) -> int:
         """Wall-clock nanoseconds of a monotonic instant (now if not given)."""
         if mono_ns is None:
-            mono_ns = time.monotonic_ns()
+            mono_ns = self.source.now_ns()
         return self.wall_anchor_ns + mono_ns - self.mono_anchor_ns
 
     def to_wall_ns(self, mono_s: float) -> int:
@@ -45,17 +152,19 @@ class RunClock:
         Sleeps in slices so that a stop request (Ctrl-C) is seen within `slice_s`. Before each
         slice with more than IDLE_S to spare, `on_idle` runs: the time to write the log.
         """
+        source = self.source
         while True:
             if should_stop():
                 return False
-            left = deadline - time.monotonic()
+            left = deadline - source.now()
             if left <= 0:
                 return True
             if left > SPIN_S:
                 if on_idle is not None and left > IDLE_S:
                     on_idle()
-                    left = deadline - time.monotonic()
+                    left = deadline - source.now()
                     if left <= SPIN_S:
                         continue
-                time.sleep(min(left - SPIN_S, slice_s))
-            # else: spin until the deadline
+                source.sleep(min(left - SPIN_S, slice_s))
+            else:
+                source.spin()

@@ -10,7 +10,6 @@ could push a second return address on the board.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Protocol
@@ -92,19 +91,29 @@ class PortLost(Exception):
 
 
 def open_port(url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TIMEOUT_S,
-              exclusive: bool = True) -> serial.SerialBase:
-    """Open any pyserial URL (and `sim://`) with the board's line settings, or a LinkError."""
+              exclusive: bool = True, clock: RunClock | None = None) -> serial.SerialBase:
+    """Open any pyserial URL (and `sim://`) with the board's line settings, or a LinkError.
+
+    A port that keeps time itself (the in-process simulator) runs on the run's clock, so its
+    board and the link agree on every instant; on virtual time nothing else can keep up.
+    """
     import serial
 
     from choreo import urlhandler
 
     urlhandler.register()
     try:
-        return serial.serial_for_url(
+        port = serial.serial_for_url(
             url, baudrate=baud, bytesize=serial.EIGHTBITS, parity=serial.PARITY_EVEN,
             stopbits=serial.STOPBITS_ONE, timeout=timeout, write_timeout=max(1.0, timeout),
-            exclusive=exclusive,
+            exclusive=exclusive, do_not_open=True,
         )
+        if hasattr(port, "time_source"):
+            port.time_source = (clock or RunClock()).source
+        elif clock is not None and clock.virtual:
+            raise ValueError("only the in-process simulator (sim://) runs on virtual time")
+        port.open()
+        return port
     except (serial.SerialException, OSError, ValueError) as exc:
         raise LinkError(f"port {url}: cannot open: {_reason(exc)}{_open_hint(exc)}") from None
 
@@ -166,7 +175,8 @@ class Link:
              layout: Layout = SEED) -> Link:
         """Open the port; a layout built from the board's config word reads it now (after an
         ACK check), once, as Kondo's library does."""
-        port = open_port(url, baud, timeout=timeout, exclusive=exclusive)
+        clock = clock or RunClock()
+        port = open_port(url, baud, timeout=timeout, exclusive=exclusive, clock=clock)
         link = cls(port, name=url, timeout=timeout, tries=tries, clock=clock, listeners=listeners,
                    layout=layout)
         if layout.reads_config:
@@ -292,7 +302,7 @@ class Link:
             self.clock.sleep_until(self._last_status_mono + self.status_spacing_s)
         self._seq += 1
         seq = self._seq
-        sent = time.monotonic_ns()  # the frame's time: just before the write
+        sent = self.clock.mono_ns()  # the frame's time: just before the write
         lost: PortLost | None = None
         try:
             self._write(frame.data)
@@ -302,7 +312,7 @@ class Link:
         self.last_tx_mono = sent / 1e9
         # Spacing is measured from when the write returned, not from the time taken before it:
         # a write delayed by a busy machine must not bring the next query closer on the wire.
-        self.last_write_end = time.monotonic()
+        self.last_write_end = self.clock.mono()
         if frame.kind is FrameKind.STATUS:
             self._last_status_mono = self.last_write_end
         event = TxEvent(seq, frame, attempt, self.clock.wall_ns(sent), tag)
@@ -327,7 +337,7 @@ class Link:
                 error: str | None = None) -> None:
         if error is not None:
             reply = Reply(ReplyKind.TIMEOUT, reply.data, error=error)
-        done = time.monotonic_ns()
+        done = self.clock.mono_ns()
         event = RxEvent(seq, frame, reply, self.clock.wall_ns(done), (done - sent_ns) / 1e9, tag)
         for listener in self.listeners:
             listener.on_rx(event)
@@ -381,11 +391,12 @@ class Link:
 
     def _drain(self, quiet_s: float, limit_s: float | None = None) -> bytes:
         """Read and keep whatever arrives until the line has been quiet for `quiet_s`."""
-        limit = time.monotonic() + (self.timeout if limit_s is None else limit_s)
+        clock = self.clock
+        limit = clock.mono() + (self.timeout if limit_s is None else limit_s)
         got = bytearray()
-        last = time.monotonic()
+        last = clock.mono()
         while True:
-            now = time.monotonic()
+            now = clock.mono()
             if now - last >= quiet_s or now >= limit:
                 return bytes(got)
             try:
@@ -394,9 +405,9 @@ class Link:
                 raise PortLost(_reason(exc)) from None
             if waiting:
                 got += self._read(waiting)
-                last = time.monotonic()
+                last = clock.mono()
             else:
-                time.sleep(min(0.001, quiet_s))
+                clock.sleep(min(0.001, quiet_s))
 
     def _settle(self, reply: Reply, tag: Tag | None, what: str) -> bool:
         """Before a retry, make sure no late reply is still coming; False if the line is silent.

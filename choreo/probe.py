@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 from choreo import protocol
 from choreo.errors import LinkError
+from choreo.clock import RunClock, SystemTime, TimeSource
 from choreo.link import BAUD_RATES, DEFAULT_TIMEOUT_S, Link
 from choreo.protocol import ReplyKind
 
@@ -143,11 +144,13 @@ def _slot_words(pc: int, first: int, layout: str) -> str:
     return f"{layout}: slot {slot} + {offset} bytes" if slot < protocol.MOTION_SLOTS else f"past {layout}'s slots"
 
 
-def probe(url: str, *, bauds: Iterable[int] = BAUD_RATES, timeout: float = DEFAULT_TIMEOUT_S) -> BoardInfo:
+def probe(url: str, *, bauds: Iterable[int] = BAUD_RATES, timeout: float = DEFAULT_TIMEOUT_S,
+          time_source: TimeSource | None = None) -> BoardInfo:
     """Find the baud that answers, then read what the board says; LinkError if none answers."""
+    clock = RunClock(time_source or SystemTime())
     tried = []
     for baud in bauds:
-        link = Link.open(url, baud, timeout=timeout, tries=2)
+        link = Link.open(url, baud, timeout=timeout, tries=2, clock=clock)
         try:
             if _answers(link):
                 return _read(link, url, baud)

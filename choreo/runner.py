@@ -10,7 +10,6 @@ listeners (the recorder, the progress display) and sends nothing the show did no
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Protocol
@@ -127,7 +126,7 @@ class Runner:
         """Play the plan from `start`; LinkError on a fault, RunResult otherwise (done or aborted)."""
         steps = self.plan.steps[self.start:]
         cursor = self._origin()
-        self._zero = time.monotonic() - cursor
+        self._zero = self.clock.mono() - cursor
         self.link.listeners.append(_RetryReporter(self))
         self.link.should_stop = self.stop
         try:
@@ -149,7 +148,7 @@ class Runner:
         return self.clock.sleep_until(deadline, self.stop, on_idle=self.on_idle)
 
     def show_time(self) -> float:
-        return time.monotonic() - self._zero
+        return self.clock.mono() - self._zero
 
     def _run_step(self, step: PlannedStep, cursor: float) -> float:
         due = max(step.at, cursor) if step.at is not None else cursor
@@ -208,7 +207,7 @@ class Runner:
         if step.kind is StepKind.PLAY:
             assert step.motion is not None
             self._played = self._play(step.motion, tag, step_ref(step))
-            self._last_play_done = time.monotonic()
+            self._last_play_done = self.clock.mono()
             self._last_motion = step.motion
             return due
         if step.kind is StepKind.WAIT:
@@ -229,7 +228,7 @@ class Runner:
 
     def _wait_done(self, step: PlannedStep, tag: Tag) -> float:
         """Poll the status every `poll_s` until the motion is over; the monotonic time it was seen."""
-        started = time.monotonic()
+        started = self.clock.mono()
         timeout = step.seconds if step.seconds is not None else 60.0
         first = self._last_play_done + self.poll_s if self._last_play_done is not None else started
         due = max(first, started)
@@ -238,7 +237,7 @@ class Runner:
                 raise Interrupted(self.stop.reason)
             reply = self.link.query_status(tag)
             if not reply.executing:
-                return time.monotonic()
+                return self.clock.mono()
             # The next poll is 50 ms after this one really went out, never sooner.
             due = self.link.last_tx_mono + self.poll_s
             if due - started > timeout:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode
 
-from choreo.clock import RunClock
+from choreo.clock import RunClock, SystemTime, TimeSource
 from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError, did_you_mean
 from choreo.layouts import SEED, Layout, layout_named
 from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
@@ -60,8 +60,11 @@ class Session:
     result: RunResult | None = None
 
     @classmethod
-    def prepare(cls, request: RunRequest) -> Session:
-        """Load and check the show and settle the settings; opens nothing."""
+    def prepare(cls, request: RunRequest, time_source: TimeSource | None = None) -> Session:
+        """Load and check the show and settle the settings; opens nothing.
+
+        `time_source`: what the run's clock reads, the machine's time unless given (virtual
+        time drives only the in-process simulator: a real port is then refused at open)."""
         from choreo.show.load import load_show
         from choreo.show.plan import compile_plan
 
@@ -96,7 +99,8 @@ class Session:
             log_path = Path(request.log_path) if request.log_path else default_log_path(
                 show.name, request.log_dir)
         return cls(show, plan, start, port, source, baud, timeout, retries + 1, log_path,
-                   layout, layout_source, unique_log=request.log_path is None)
+                   layout, layout_source, unique_log=request.log_path is None,
+                   clock=RunClock(time_source or SystemTime()))
 
     @property
     def assumes_layout(self) -> bool:

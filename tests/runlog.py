@@ -139,3 +139,20 @@ class SimPty:
         if self.process.poll() is None:
             self.process.send_signal(signal.SIGTERM)
         self.process.communicate(timeout=10)
+
+
+def vmain(argv: list[str]) -> int:
+    """`choreo ARGV` on virtual time: a run or replay on the in-process simulator takes no real
+    time and comes out the same on any machine (a real port is refused)."""
+    from choreo.cli import main
+    from choreo.clock import VirtualTime
+
+    return main(argv, time_source=VirtualTime())
+
+
+def prepare(request):  # type: ignore[no-untyped-def]
+    """`Session.prepare` on virtual time (see `vmain`)."""
+    from choreo.clock import VirtualTime
+    from choreo.session import Session
+
+    return Session.prepare(request, VirtualTime())

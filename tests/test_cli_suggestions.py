@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 
 from choreo.cli import main
+from runlog import vmain
 
 
 def error_of(capsys, *argv: str) -> list[str]:
@@ -34,7 +35,7 @@ def test_an_unknown_option_of_a_subcommand_prints_that_subcommands_usage(capsys)
 
 
 def test_from_a_mistyped_label_suggests_the_label(capsys):
-    assert main(["run", "shows/dance.yaml", "--from", "grove", "--no-log"]) == 2
+    assert vmain(["run", "shows/dance.yaml", "--from", "grove", "--no-log"]) == 2
     assert "did you mean 'groove'?" in capsys.readouterr().err
 
 
@@ -47,7 +48,7 @@ def two_logs(tmp_path_factory):
 
     directory = tmp_path_factory.mktemp("runs")
     for name in ("older", "newer"):
-        assert main(["run", "shows/minimal.yaml", "--port", "sim://?motion_s=0.05",
+        assert vmain(["run", "shows/minimal.yaml", "--port", "sim://?motion_s=0.05",
                      "--log", str(directory / f"{name}.mcap"), "-q"]) == 0
     stamp = time.time()
     os.utime(directory / "older.mcap", (stamp - 60, stamp - 60))

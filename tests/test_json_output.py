@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from choreo.cli import main
+from runlog import vmain
 from choreo.errors import ChoreoError
 
 FAST = "sim://?motion_s=0.05"
@@ -55,7 +56,7 @@ def test_plan_json_of_a_bad_show_prints_nothing_on_stdout(capsys):
 @pytest.fixture(scope="module")
 def a_log(tmp_path_factory) -> Path:
     log = tmp_path_factory.mktemp("runs") / "run.mcap"
-    assert main(["run", "shows/minimal.yaml", "--port", FAST, "--log", str(log), "-q"]) == 0
+    assert vmain(["run", "shows/minimal.yaml", "--port", FAST, "--log", str(log), "-q"]) == 0
     return log
 
 

@@ -14,7 +14,7 @@ from choreo.probe import probe
 from choreo.session import RunRequest, Session
 from choreo.sim.board import SimBoard
 from choreo.sim.faults import FaultPlan
-from runlog import read_log, write_show
+from runlog import prepare, read_log, write_show
 
 SPEC_ROWS = "tests/data/spec_play_frames.txt"
 
@@ -181,7 +181,7 @@ SHOW = """
 
 def run_show(tmp_path, port: str | None = None, **request):
     show = write_show(tmp_path, SHOW)
-    session = Session.prepare(RunRequest(str(show), port=port, log_path=str(tmp_path / "run.mcap"),
+    session = prepare(RunRequest(str(show), port=port, log_path=str(tmp_path / "run.mcap"),
                                          **request))
     with session:
         result = session.run()
@@ -226,7 +226,7 @@ def test_a_run_with_a_mismatched_layout_shows_as_stray_calls(tmp_path, board_lay
 
 def test_the_show_names_the_layout(tmp_path):
     show = write_show(tmp_path, SHOW.replace("name: layouts", "name: layouts\n    robot: {layout: hth4-2.2}"))
-    session = Session.prepare(RunRequest(str(show), no_log=True))
+    session = prepare(RunRequest(str(show), no_log=True))
     assert session.layout is HTH4_22 and session.layout_source == "show"
     assert "layout=hth4-2.2" in session.port
     assert not session.assumes_layout  # a simulator, and the show said it anyway

@@ -22,7 +22,7 @@ from choreo import record
 from choreo.cli import main
 from choreo.errors import LogError
 from choreo.session import RunRequest, Session
-from runlog import REPO, _env, read_log, write_show
+from runlog import vmain, prepare, REPO, _env, read_log, write_show
 
 MANY_PLAYS = """
     version: 1
@@ -83,8 +83,11 @@ def board_frames(session: Session) -> list[str]:
     return [e.data.hex(" ") for e in session.link.port.board.journal if e.kind == "frame"]
 
 
-def run_until_full(show: Path, log_path: Path) -> tuple[Session, LogError]:
-    session = Session.prepare(RunRequest(str(show), port=PORT, log_path=str(log_path)))
+def run_until_full(show: Path, log_path: Path, real_time: bool = False) -> tuple[Session, LogError]:
+    """On real time where the test needs the recorder's background flushes (every 0.25 s of
+    the machine's time) to happen while the show still runs."""
+    request = RunRequest(str(show), port=PORT, log_path=str(log_path))
+    session = Session.prepare(request) if real_time else prepare(request)
     with pytest.raises(LogError) as stopped:
         with session:
             session.run()
@@ -135,7 +138,7 @@ def test_without_fallocate_a_failed_write_still_stops_the_run_in_one_line(tmp_pa
     monkeypatch.setattr(record, "_fallocate_function", lambda: None)
     show = write_show(tmp_path, MANY_PLAYS)
     log_path = tmp_path / "plain.mcap"
-    session, error = run_until_full(show, log_path)
+    session, error = run_until_full(show, log_path, real_time=True)
     assert str(error) == f"log {log_path}: cannot write: No space left on device: the run was stopped"
     assert 10 < sum(1 for f in board_frames(session) if f.startswith("07 0c")) < 2000
 
@@ -143,7 +146,7 @@ def test_without_fallocate_a_failed_write_still_stops_the_run_in_one_line(tmp_pa
 def test_closing_a_log_frees_the_rest_of_its_reserve(tmp_path):
     show = write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n")
     log_path = tmp_path / "small.mcap"
-    session = Session.prepare(RunRequest(str(show), port=PORT, log_path=str(log_path)))
+    session = prepare(RunRequest(str(show), port=PORT, log_path=str(log_path)))
     with session:
         if session.recorder._reserve.supported:
             assert os.stat(log_path).st_blocks * 512 > os.stat(log_path).st_size + 100 * KIB

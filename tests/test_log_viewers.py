@@ -12,7 +12,7 @@ import jsonschema
 import pytest
 
 from choreo.cli import main
-from runlog import read_log, write_show
+from runlog import vmain, read_log, write_show
 
 ROOT = Path(__file__).resolve().parent.parent
 LOG_SCHEMAS = sorted((ROOT / "schemas").glob("log.*.schema.json")) + [ROOT / "schemas" / "foxglove.Log.schema.json"]
@@ -61,7 +61,7 @@ def log(tmp_path_factory):
     directory = tmp_path_factory.mktemp("viewers")
     path = directory / "run.mcap"
     show = write_show(directory, SHOW)
-    assert main(["run", str(show), "--log", str(path), "--port", "sim://?drop=7&motion_s=0.1",
+    assert vmain(["run", str(show), "--log", str(path), "--port", "sim://?drop=7&motion_s=0.1",
                  "--timeout", "0.05", "-q"]) == 0
     return read_log(path)
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from choreo.cli import main
+from runlog import vmain
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -18,7 +19,7 @@ ROOT = Path(__file__).resolve().parent.parent
 @pytest.fixture(scope="module")
 def run_log(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("output") / "run.mcap"
-    assert main(["run", str(ROOT / "shows" / "minimal.yaml"), "--port", "sim://?motion_s=0.1",
+    assert vmain(["run", str(ROOT / "shows" / "minimal.yaml"), "--port", "sim://?motion_s=0.1",
                  "--log", str(path), "-q"]) == 0
     return path
 

@@ -9,7 +9,7 @@ from choreo import protocol as p
 from choreo.cli import main
 from choreo.errors import LinkError
 from choreo.probe import ConfigWord, Counter, _counter_hints, probe
-from runlog import SimPty
+from runlog import SimPty, vmain
 
 
 def test_the_simulator_answers_at_its_own_baud_and_is_only_read():
@@ -59,10 +59,18 @@ def test_a_silent_port_is_a_link_error_naming_every_baud_tried():
 
 
 def test_probe_command_over_a_pty(capsys):
-    with SimPty("--baud", "1250000") as path:
-        assert main(["probe", "--port", path]) == 0
+    """Real time through a real pseudo-terminal: a long timeout, so a loaded machine still passes."""
+    with SimPty() as path:
+        assert main(["probe", "--port", path, "--timeout", "2"]) == 0
     out = capsys.readouterr().out
-    assert f"answers on {path} at 1250000 baud" in out
+    assert f"answers on {path} at 115200 baud" in out
+    assert "COM baud             115200 baud" in out and "hint: the config word's COM baud" not in out
+
+
+def test_probe_finds_a_board_at_another_baud_and_says_its_bits_disagree(capsys):
+    assert vmain(["probe", "--port", "sim://?baud=1250000"]) == 0
+    out = capsys.readouterr().out
+    assert "answers on sim://?baud=1250000 at 1250000 baud" in out
     assert "COM baud             115200 baud" in out
     assert "hint: the config word's COM baud bits say 115200 but the board answered at 1250000" in out
 

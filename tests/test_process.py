@@ -113,7 +113,8 @@ def test_a_run_with_closed_standard_streams_runs_and_writes_its_log(tmp_path, en
     log_path = tmp_path / "closed.mcap"
     if entry == "script" and not SCRIPT.exists():
         pytest.skip("the choreo console script is not installed next to this Python")
-    done = subprocess.run([*ENTRIES[entry], "run", str(show), "--log", str(log_path)], cwd=REPO,
+    done = subprocess.run([*ENTRIES[entry], "run", str(show), "--log", str(log_path),
+                           "--port", "sim://?motion_s=0.05"], cwd=REPO,
                           env=_env(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                           stderr=subprocess.DEVNULL, preexec_fn=_closing(*closed), timeout=60)
     assert done.returncode == 0

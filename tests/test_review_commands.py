@@ -25,6 +25,7 @@ import pytest
 from mcap.reader import NonSeekingReader
 
 from choreo.cli import main
+from runlog import vmain
 from choreo.review.reader import LogReader
 
 REPO = Path(__file__).resolve().parent.parent
@@ -79,26 +80,27 @@ def _choreo(*args: str) -> list[str]:
 
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory) -> Logs:
-    """Run the four shows at once (they take about a second each) and wait for all of them."""
+    """The four runs the review commands read: three on virtual time in-process (the same log,
+    frame for frame and to the nanosecond, on any machine), and one real run killed mid-show."""
     tmp = tmp_path_factory.mktemp("review")
     show = tmp / "review.yaml"
     show.write_text(SHOW)
     long_show = tmp / "long.yaml"
     long_show.write_text(LONG_SHOW)
     paths = {name: tmp / f"{name}.mcap" for name in ("complete", "faulty", "failed", "killed")}
-    run = dict(cwd=tmp, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    procs = {
-        "complete": subprocess.Popen(_choreo("run", str(show), "--log", str(paths["complete"]), "-q"), **run),
-        "faulty": subprocess.Popen(_choreo("run", str(show), "--log", str(paths["faulty"]), "-q",
-                                           "--port", FAULTS, "--timeout", "0.05", "--retries", "4"), **run),
-        "failed": subprocess.Popen(_choreo("run", str(show), "--log", str(paths["failed"]), "-q",
-                                           "--port", "sim://?lose=8"), **run),
-        "killed": subprocess.Popen(_choreo("run", str(long_show), "--log", str(paths["killed"]), "-q"), **run),
-    }
-    _kill_when_logged(procs["killed"], paths["killed"])
-    codes = {name: proc.wait(timeout=30) for name, proc in procs.items()}
-    for proc in procs.values():
-        proc.stderr.close()
+    killed = subprocess.Popen(_choreo("run", str(long_show), "--log", str(paths["killed"]), "-q"),
+                              cwd=tmp, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        codes = {
+            "complete": vmain(["run", str(show), "--log", str(paths["complete"]), "-q"]),
+            "faulty": vmain(["run", str(show), "--log", str(paths["faulty"]), "-q", "--port", FAULTS,
+                             "--timeout", "0.05", "--retries", "4"]),
+            "failed": vmain(["run", str(show), "--log", str(paths["failed"]), "-q", "--port", "sim://?lose=8"]),
+        }
+        _kill_when_logged(killed, paths["killed"])
+    finally:
+        killed.kill()
+    codes["killed"] = killed.wait(timeout=30)
     assert codes["complete"] == 0 and codes["faulty"] == 0, codes
     assert codes["killed"] == -signal.SIGKILL
     return Logs(paths["complete"], paths["faulty"], paths["failed"], paths["killed"], codes["failed"], tmp)
@@ -132,7 +134,7 @@ def mcap_topics(path: Path) -> dict[str, list[dict]]:
 
 
 def cli(capsys, *argv: str) -> tuple[int, str, str]:
-    code = main(list(argv))
+    code = vmain(list(argv))
     captured = capsys.readouterr()
     return code, captured.out, captured.err
 
@@ -453,9 +455,7 @@ def _live_sim() -> str:
 def live_log(logs) -> Path:
     """A clean run of the review show on a live-status simulator."""
     path = logs.directory / "live.mcap"
-    done = subprocess.run(_choreo("run", str(logs.directory / "review.yaml"), "--log", str(path), "-q",
-                                  "--port", _live_sim()), cwd=logs.directory, capture_output=True, timeout=30)
-    assert done.returncode == 0, done.stderr
+    assert vmain(["run", str(logs.directory / "review.yaml"), "--log", str(path), "-q", "--port", _live_sim()]) == 0
     return path
 
 
@@ -536,7 +536,7 @@ def test_not_a_log_is_exit_2_with_one_line(logs, capsys):
 
 
 def test_a_poll_the_replay_sent_late_is_not_held_against_the_board(live_log, capsys, tmp_path, monkeypatch):
-    """A busy machine holds one poll back 8 ms (80 ms of the run at speed 10): it finds the motion
+    """A busy machine holds one poll back 30 ms (300 ms of the run at speed 10): it finds the motion
     over where the run found it executing. Reported, but not a difference --strict fails on."""
     from choreo.link import Link
 
@@ -547,7 +547,7 @@ def test_a_poll_the_replay_sent_late_is_not_held_against_the_board(live_log, cap
         if frame.kind.value == "status":
             polls["n"] += 1
             if polls["n"] == 3:  # the wave's third poll: it was still executing in the run
-                time.sleep(0.008)
+                self.clock.sleep(0.03)
         return send(self, frame, *args, **kwargs)
 
     monkeypatch.setattr(Link, "send", busy_send)

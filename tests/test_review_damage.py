@@ -12,7 +12,7 @@ import pytest
 from choreo.cli import main
 from choreo.review.reader import LogReader
 from choreo.review.replay import Difference, _polls_at_motion_ends, replay
-from runlog import write_show
+from runlog import vmain, write_show
 
 MAGIC = b"\x89MCAP0\r\n"
 COMMANDS = (["log", "summary"], ["log", "frames"], ["log", "timeline"], ["log", "export", "--csv", "-"])
@@ -35,7 +35,7 @@ def run_log(tmp_path_factory) -> Path:
     directory = tmp_path_factory.mktemp("damage")
     show = write_show(directory, SHOW)
     path = directory / "run.mcap"
-    assert main(["run", str(show), "--log", str(path), "-q"]) == 0
+    assert vmain(["run", str(show), "--log", str(path), "-q"]) == 0
     return path
 
 
@@ -124,7 +124,7 @@ def test_an_mcap_of_another_tool_is_not_a_choreo_log(tmp_path, capsys):
         assert code == 2, command
         assert err.strip().endswith("choreo reviews the .mcap files `choreo run` writes"), err
         assert "not a choreo log" in err and "/camera/image" in err
-    assert main(["replay", str(path), "--log", str(tmp_path / "r.mcap")]) == 2
+    assert vmain(["replay", str(path), "--log", str(tmp_path / "r.mcap")]) == 2
     assert "not a choreo log" in capsys.readouterr().err
 
 
@@ -134,7 +134,7 @@ def test_a_named_pipe_given_as_a_log_is_refused_at_once(tmp_path, capsys):
     os.mkfifo(fifo)
     for command, code, err in review_all(fifo, capsys):
         assert code == 2 and "not a regular file" in err
-    assert main(["replay", str(fifo)]) == 2
+    assert vmain(["replay", str(fifo)]) == 2
 
 
 def test_two_replays_in_the_same_second_get_two_logs(run_log, tmp_path, monkeypatch):
@@ -158,7 +158,7 @@ def test_a_clean_log_replays_clean_with_strict(run_log, tmp_path, capsys):
     # board's status refresh (its phase unknown to the log) decides the answer.
     for attempt in range(3):
         new = tmp_path / f"replay{attempt}.mcap"
-        assert main(["replay", str(run_log), "--strict", "--log", str(new)]) == 0, capsys.readouterr()
+        assert vmain(["replay", str(run_log), "--strict", "--log", str(new)]) == 0, capsys.readouterr()
 
 
 def test_polls_next_to_a_motions_end_are_known_from_the_recording(run_log):
@@ -183,7 +183,7 @@ def test_only_a_status_difference_at_a_motions_end_is_excused():
 
 @pytest.mark.parametrize("speed", ["0.001", "1e-9", "0"])
 def test_a_replay_speed_too_slow_to_end_is_refused(run_log, speed, capsys, tmp_path):
-    assert main(["replay", str(run_log), "--speed", speed, "--log", str(tmp_path / "r.mcap")]) == 2
+    assert vmain(["replay", str(run_log), "--speed", speed, "--log", str(tmp_path / "r.mcap")]) == 2
     assert "give a speed from 0.01 to 1000" in capsys.readouterr().err
     assert not (tmp_path / "r.mcap").exists()
 
@@ -191,7 +191,7 @@ def test_a_replay_speed_too_slow_to_end_is_refused(run_log, speed, capsys, tmp_p
 def test_a_replay_of_an_hth4_run_uses_an_hth4_simulator(tmp_path, capsys):
     show = write_show(tmp_path, SHOW)
     log = tmp_path / "hth4.mcap"
-    assert main(["run", str(show), "--layout", "hth4-2.2", "--log", str(log), "-q"]) == 0
+    assert vmain(["run", str(show), "--layout", "hth4-2.2", "--log", str(log), "-q"]) == 0
     report = replay(log, speed=5, log_path=tmp_path / "r.mcap")
     assert "layout=hth4-2.2" in report.port
     assert report.board_differences == 0

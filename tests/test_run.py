@@ -17,7 +17,7 @@ import serial
 from choreo import protocol as p
 from choreo.cli import main
 from choreo.session import RunRequest, Session
-from runlog import (SimPty, choreo, log_has_steps, read_log, read_log_linear, start_choreo, wait_for,
+from runlog import (vmain, prepare, SimPty, choreo, log_has_steps, read_log, read_log_linear, start_choreo, wait_for,
                     write_show)
 
 STOP = p.stop_frame().hex
@@ -42,7 +42,7 @@ WIRE_SHOW = """
 
 
 def run_session(show: Path, **kwargs) -> tuple[Session, int]:
-    session = Session.prepare(RunRequest(str(show), **kwargs))
+    session = prepare(RunRequest(str(show), **kwargs))
     with session:
         session.run()
     return session, 0
@@ -119,7 +119,7 @@ def test_cue_never_starts_early_and_an_overrun_cue_is_reported_late(tmp_path):
             label: overrun
     """)
     log_path = tmp_path / "cue.mcap"
-    assert main(["run", str(show), "--log", str(log_path), "--quiet"]) == 0
+    assert vmain(["run", str(show), "--log", str(log_path), "--quiet"]) == 0
     log = read_log(log_path)
     starts = {m.get("label"): m for m in log.steps if m["event"] == "start"}
     assert starts["cue"]["planned_s"] == 0.3 and starts["cue"]["actual_s"] >= 0.3
@@ -138,7 +138,7 @@ def test_cue_never_starts_early_and_an_overrun_cue_is_reported_late(tmp_path):
 def test_full_log_contents(tmp_path):
     show = write_show(tmp_path, WIRE_SHOW)
     log_path = tmp_path / "full.mcap"
-    assert main(["run", str(show), "--log", str(log_path), "--quiet"]) == 0
+    assert vmain(["run", str(show), "--log", str(log_path), "--quiet"]) == 0
     log = read_log(log_path)
     assert log.schemas == {"/rcb4/tx": "choreo.Tx", "/rcb4/rx": "choreo.Rx",
                            "/choreo/step": "choreo.Step"}  # no warnings: no /choreo/log message
@@ -168,7 +168,7 @@ def test_full_log_contents(tmp_path):
 
 def test_default_port_is_the_simulator_and_says_so(tmp_path, capsys):
     show = write_show(tmp_path, WIRE_SHOW)
-    assert main(["run", str(show), "--no-log"]) == 0
+    assert vmain(["run", str(show), "--no-log"]) == 0
     err = capsys.readouterr().err
     assert "built-in simulator" in err and "sim://?durations=3:0.2,7:0.1" in err
     assert "log: off" in err
@@ -177,10 +177,10 @@ def test_default_port_is_the_simulator_and_says_so(tmp_path, capsys):
 def test_from_label_starts_there_on_that_steps_clock(tmp_path):
     show = write_show(tmp_path, WIRE_SHOW)
     log_path = tmp_path / "from.mcap"
-    assert main(["run", str(show), "--from", "last", "--log", str(log_path), "-q"]) == 0
+    assert vmain(["run", str(show), "--from", "last", "--log", str(log_path), "-q"]) == 0
     log = read_log(log_path)
     assert log.tx_hex() == [STOP, p.play_frame(7).hex, RESTORE]
-    assert main(["run", str(show), "--from", "nowhere", "--no-log", "-q"]) == 2
+    assert vmain(["run", str(show), "--from", "nowhere", "--no-log", "-q"]) == 2
 
 
 # -- faults ---------------------------------------------------------------------------------
@@ -212,7 +212,7 @@ FAULT_SHOW = """
 def test_fault_that_persists_is_exit_3_with_one_clear_line(tmp_path, capsys, query, words):
     show = write_show(tmp_path, FAULT_SHOW)
     log_path = tmp_path / "fault.mcap"
-    code = main(["run", str(show), "--port", f"sim://?{query}", "--timeout", "0.1",
+    code = vmain(["run", str(show), "--port", f"sim://?{query}", "--timeout", "0.1",
                  "--log", str(log_path), "-q"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 3
@@ -247,7 +247,7 @@ RETRY_SHOW = """
 def test_transient_fault_is_retried_and_logged(tmp_path, query):
     show = write_show(tmp_path, RETRY_SHOW)
     log_path = tmp_path / "retry.mcap"
-    assert main(["run", str(show), "--port", f"sim://?{query}", "--timeout", "0.1",
+    assert vmain(["run", str(show), "--port", f"sim://?{query}", "--timeout", "0.1",
                  "--log", str(log_path), "-q"]) == 0
     log = read_log(log_path)
     bad = [m for m in log.rx if m["kind"] not in ("ack", "status")]
@@ -287,7 +287,7 @@ def test_wait_done_timeout_is_exit_3(tmp_path, capsys):
           - wait: done
             timeout: 0.3
     """)
-    assert main(["run", str(show), "--no-log", "-q"]) == 3
+    assert vmain(["run", str(show), "--no-log", "-q"]) == 3
     err = capsys.readouterr().err
     assert "motion 9 still executing after 0.3 s" in err
 
@@ -305,7 +305,7 @@ def test_log_is_never_overwritten(tmp_path, capsys):
     show = write_show(tmp_path, WIRE_SHOW)
     log_path = tmp_path / "kept.mcap"
     log_path.write_bytes(b"an earlier run")
-    assert main(["run", str(show), "--log", str(log_path)]) == 2
+    assert vmain(["run", str(show), "--log", str(log_path)]) == 2
     assert "already exists" in capsys.readouterr().err
     assert log_path.read_bytes() == b"an earlier run"
 
@@ -323,7 +323,7 @@ def test_unwritable_log_is_exit_2_before_the_robot_moves(tmp_path, capsys):
 def test_a_log_folder_that_does_not_exist_is_refused_not_created(tmp_path, capsys):
     show = write_show(tmp_path, WIRE_SHOW)
     missing = tmp_path / "typo" / "x.mcap"
-    assert main(["run", str(show), "--log", str(missing)]) == 2
+    assert vmain(["run", str(show), "--log", str(missing)]) == 2
     assert capsys.readouterr().err.strip() == (f"--log {missing}: cannot write: folder {missing.parent} "
                                                "does not exist (create it first)")
     assert not missing.parent.exists()
@@ -450,26 +450,29 @@ def test_port_lost_mid_show_over_a_pty(tmp_path):
     assert len(log.rx) == len(log.tx)
 
 
-@pytest.mark.skipif(sys.platform != "linux", reason="uses the default runs/ folder of a fresh checkout")
-def test_dance_runs_on_a_fresh_checkout_and_writes_a_valid_log(tmp_path):
-    done = choreo("run", str(Path(__file__).parent.parent / "shows" / "dance.yaml"), cwd=tmp_path,
-                  timeout=120)
-    assert done.returncode == 0, done.stderr
-    assert "built-in simulator" in done.stderr
-    (log_path,) = (tmp_path / "runs").glob("*.mcap")
+def test_dance_runs_on_a_fresh_checkout_and_writes_a_valid_log(tmp_path, monkeypatch, capsys):
+    """The README's first command, as a new user types it: no port, the default runs/ folder
+    (made on demand). On virtual time, so the 22-second show takes a second."""
+    monkeypatch.chdir(tmp_path)
+    assert vmain(["run", str(Path(__file__).parent.parent / "shows" / "dance.yaml")]) == 0
+    err = capsys.readouterr().err
+    assert "built-in simulator" in err and "done: 26 steps in 22.0" in err
+    (log_path,) = (tmp_path / "runs").glob("Dance-*.mcap")
+    assert f"log: runs/{log_path.name}" in err
     log = read_log(log_path)
     assert log.metadata["choreo.result"]["outcome"] == "done"
     assert len(log.rx) == len(log.tx) > 26 * 3 // 2
+    assert not [m for m in log.logs if m["level"] >= 3]  # no warning: on time, every reply right
 
 
 def test_progress_is_a_plain_line_a_step_off_a_terminal_and_silent_with_quiet(tmp_path, capsys):
     show = write_show(tmp_path, WIRE_SHOW)
-    assert main(["run", str(show), "--no-log"]) == 0
+    assert vmain(["run", str(show), "--no-log"]) == 0
     lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("[")]
     assert len(lines) == 5
     assert lines[0].endswith("] step 0 'first' (1/5): play 3 (wave)")
     assert lines[1].endswith("] step 1 (2/5): wait until motion 3 is done (timeout 60 s)")
-    assert main(["run", str(show), "--no-log", "--quiet"]) == 0
+    assert vmain(["run", str(show), "--no-log", "--quiet"]) == 0
     assert capsys.readouterr().err == ""
 
 
@@ -478,7 +481,7 @@ def test_live_progress_line_redraws_in_place(tmp_path):
 
     from choreo.cli.run import Progress
 
-    session = Session.prepare(RunRequest(str(write_show(tmp_path, WIRE_SHOW)), no_log=True))
+    session = prepare(RunRequest(str(write_show(tmp_path, WIRE_SHOW)), no_log=True))
     out = io.StringIO()
     progress = Progress(session, out, live=True, quiet=False)
     with session:
@@ -497,7 +500,7 @@ def test_live_progress_line_redraws_in_place(tmp_path):
     ("loop://", "loop://"),
 ])
 def test_a_sim_port_given_on_the_command_line_keeps_the_shows_durations(tmp_path, given, expected):
-    session = Session.prepare(RunRequest(str(write_show(tmp_path, WIRE_SHOW)), port=given, no_log=True))
+    session = prepare(RunRequest(str(write_show(tmp_path, WIRE_SHOW)), port=given, no_log=True))
     assert session.port == expected
 
 
@@ -513,7 +516,7 @@ def test_recording_waits_for_idle_time_and_loses_nothing(tmp_path):
           - play: 4
     """)
     log_path = tmp_path / "burst.mcap"
-    assert main(["run", str(show), "--log", str(log_path), "-q"]) == 0
+    assert vmain(["run", str(show), "--log", str(log_path), "-q"]) == 0
     log = read_log(log_path)
     assert [m.get("motion") for m in log.tx if m["kind"] == "play"] == [1, 2, 3, 4]
     assert [m["seq"] for m in log.rx] == list(range(1, 13))
@@ -528,7 +531,7 @@ def test_every_logged_message_matches_its_schema(tmp_path):
 
     show = write_show(tmp_path, WIRE_SHOW)
     log_path = tmp_path / "schemas.mcap"
-    assert main(["run", str(show), "--port", "sim://?nak=4", "--log", str(log_path), "-q"]) == 0
+    assert vmain(["run", str(show), "--port", "sim://?nak=4", "--log", str(log_path), "-q"]) == 0
     log = read_log(log_path)
     schemas_dir = Path(__file__).parent.parent / "schemas"
     files = {"/rcb4/tx": "log.tx.schema.json", "/rcb4/rx": "log.rx.schema.json",
@@ -555,7 +558,7 @@ def test_polls_stay_50_ms_apart_through_faults_and_retries(tmp_path, query):
           - wait: done
     """)
     log_path = tmp_path / "polls.mcap"
-    assert main(["run", str(show), "--port", f"sim://?{query}", "--timeout", "0.05",
+    assert vmain(["run", str(show), "--port", f"sim://?{query}", "--timeout", "0.05",
                  "--log", str(log_path), "-q"]) == 0
     log = read_log(log_path)
     polls = [m["_log_time"] for m in log.tx if m["kind"] == "status"]
@@ -575,7 +578,7 @@ def test_a_play_delayed_by_retries_is_reported_late(tmp_path):
     """)
     log_path = tmp_path / "slip.mcap"
     # frame 5 is the cue's CALL: no reply, a timeout and a settle, then its sequence again
-    assert main(["run", str(show), "--port", "sim://?drop=5", "--timeout", "0.05",
+    assert vmain(["run", str(show), "--port", "sim://?drop=5", "--timeout", "0.05",
                  "--log", str(log_path), "-q"]) == 0
     log = read_log(log_path)
     start, end = (m for m in log.steps if m.get("label") == "cue")
@@ -589,8 +592,8 @@ def test_a_play_delayed_by_retries_is_reported_late(tmp_path):
 
 def test_the_built_in_simulator_runs_at_the_shows_baud(tmp_path):
     show = write_show(tmp_path, "version: 1\nrobot: {baud: 1250000}\nsteps:\n  - play: 1\n")
-    assert main(["run", str(show), "--no-log", "-q"]) == 0
-    assert main(["run", str(show), "--baud", "625000", "--no-log", "-q"]) == 0
+    assert vmain(["run", str(show), "--no-log", "-q"]) == 0
+    assert vmain(["run", str(show), "--baud", "625000", "--no-log", "-q"]) == 0
 
 
 @pytest.mark.parametrize("argv,words", [
@@ -604,7 +607,7 @@ def test_the_built_in_simulator_runs_at_the_shows_baud(tmp_path):
 ])
 def test_bad_run_arguments_are_exit_2_before_anything_opens(tmp_path, capsys, argv, words):
     show = write_show(tmp_path, WIRE_SHOW)
-    assert main(["run", str(show), "--log", str(tmp_path / "never.mcap"), *argv]) == 2
+    assert vmain(["run", str(show), "--log", str(tmp_path / "never.mcap"), *argv]) == 2
     assert words in capsys.readouterr().err
     assert not (tmp_path / "never.mcap").exists()
 

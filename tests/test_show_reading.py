@@ -14,6 +14,7 @@ import pytest
 from choreo.cli import main
 from choreo.errors import ShowError, UsageError
 from choreo.record import default_log_path
+from runlog import vmain, prepare
 from choreo.session import RunRequest, Session
 from choreo.show.load import load_show, load_show_bytes
 from choreo.show.plan import compile_plan
@@ -122,7 +123,7 @@ def test_a_long_show_name_runs_and_writes_its_log(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # the default log folder, runs/, is made here
     show_path = tmp_path / "long.yaml"
     show_path.write_text(f"version: 1\nname: {'歩' * 200}\nsteps:\n  - play: 1\n")
-    assert main(["run", str(show_path), "--port", "sim://?motion_s=0.01", "-q"]) == 0
+    assert vmain(["run", str(show_path), "--port", "sim://?motion_s=0.01", "-q"]) == 0
     logs = list((tmp_path / "runs").glob("*.mcap"))
     assert len(logs) == 1 and logs[0].name.startswith("歩")
 
@@ -131,7 +132,7 @@ def test_a_sim_port_in_the_show_gets_the_runs_baud_and_the_shows_durations(tmp_p
     path = tmp_path / "s.yaml"
     path.write_text("version: 1\nrobot: {port: 'sim://', baud: 625000}\nmotions:\n  m: {number: 3, duration: 0.3}\n"
                     "steps:\n  - play: m\n  - wait: done\n")
-    session = Session.prepare(RunRequest(str(path), no_log=True))
+    session = prepare(RunRequest(str(path), no_log=True))
     assert session.port_source == "show"
     assert "baud=625000" in session.port and "durations=3:0.3" in session.port
     with session:
@@ -142,8 +143,8 @@ def test_a_sim_port_in_the_show_gets_the_runs_baud_and_the_shows_durations(tmp_p
 def test_a_bad_sim_option_is_a_bad_argument_in_run(tmp_path, port, capsys):
     path = tmp_path / "s.yaml"
     path.write_text("version: 1\nsteps:\n  - play: 1\n")
-    assert main(["run", str(path), "--port", port, "--no-log"]) == 2
+    assert vmain(["run", str(path), "--port", port, "--no-log"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"--port {port}: sim://:")
     with pytest.raises(UsageError):
-        Session.prepare(RunRequest(str(path), port=port, no_log=True))
+        prepare(RunRequest(str(path), port=port, no_log=True))

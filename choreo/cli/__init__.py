@@ -21,6 +21,7 @@ from choreo.errors import ChoreoError
 
 if TYPE_CHECKING:
     from choreo.__main__ import SignalGuard
+    from choreo.clock import TimeSource
 
 # Command modules, in the order `choreo --help` lists them.
 COMMAND_MODULES = ("run", "show", "importer", "frames", "sim", "probe", "log", "ports", "schema")
@@ -50,14 +51,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = None) -> int:
+def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = None,
+         time_source: TimeSource | None = None) -> int:
     """Run one command; every error and interruption becomes one message and an exit code here.
 
     `signals` (from the process entry, `choreo.__main__`) interrupts the command on Ctrl-C,
     SIGTERM or SIGHUP while it runs, and no longer once its outcome is being reported.
+    `time_source`: the time a run or replay keeps (the machine's unless given; an embedding
+    program or a test may pass `VirtualTime` to run shows on the in-process simulator at once).
     """
     try:
-        return _command(argv, signals)
+        return _command(argv, signals, time_source)
     except ChoreoError as exc:
         for line in exc.lines():
             print(line, file=sys.stderr)
@@ -107,7 +111,8 @@ def _drop_stdout() -> None:
         pass
 
 
-def _command(argv: Sequence[str] | None, signals: SignalGuard | None) -> int:
+def _command(argv: Sequence[str] | None, signals: SignalGuard | None,
+             time_source: TimeSource | None = None) -> int:
     if signals is not None:
         signals.arm()  # a signal that came while choreo loaded interrupts here
     try:
@@ -115,6 +120,7 @@ def _command(argv: Sequence[str] | None, signals: SignalGuard | None) -> int:
         args, extra = parser.parse_known_args(argv)
         if extra:
             getattr(args, "parser", parser).unknown_arguments(extra)
+        args.time_source = time_source
         code = int(args.handler(args) or 0)
         sys.stdout.flush()  # a full output fails here, inside the one place errors are mapped
         return code

@@ -293,7 +293,8 @@ def run_replay(args: argparse.Namespace) -> int:
                 out.flush()
 
         report = replay(args.log, port=args.port, speed=args.speed, baud=args.baud, timeout=args.timeout,
-                        log_path=args.new_log, on_difference=differs, on_start=started, layout=args.layout)
+                        log_path=args.new_log, on_difference=differs, on_start=started, layout=args.layout,
+                        time_source=args.time_source)
         unmatched = f", {report.unmatched} with no recorded reply" if report.unmatched else ""
         cut = f"; the recorded log is {report.cut.state}: {report.cut.reason}" if report.cut else ""
         late = f", {report.replay_late} sent late by the replay" if report.replay_late else ""

@@ -31,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
     port = args.port if args.port is not None else _kondo_adapter()
     if not port.strip():
         raise UsageError("--port: empty; give a device (/dev/ttyUSB0, COM3) or a URL (sim://)")
-    for line in probe(port, timeout=args.timeout).lines():
+    for line in probe(port, timeout=args.timeout, time_source=args.time_source).lines():
         print(line)
     return 0
 

@@ -72,7 +72,7 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     request = RunRequest(args.show, port=args.port, baud=args.baud, log_path=args.log,
                          no_log=args.no_log, from_step=args.from_step, timeout=args.timeout,
                          retries=args.retries, layout=args.layout)
-    session = Session.prepare(request)
+    session = Session.prepare(request, args.time_source)
     report.session = session
     say = _Say(sys.stderr, quiet=args.quiet)
     say(_port_line(session))

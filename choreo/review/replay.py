@@ -17,12 +17,12 @@ frame shorter. A robot (or `choreo sim` on a pty) runs its motions at their own 
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode
 
+from choreo.clock import TimeSource
 from choreo.errors import ChoreoError, UsageError
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import ShowClock, reply_meaning
@@ -209,7 +209,7 @@ class _StepRecord:
 
 def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, baud: int | None = None,
            timeout: float | None = None, log_path: str | Path | None = None, log_dir: str | Path = "runs",
-           layout: str | None = None,
+           layout: str | None = None, time_source: TimeSource | None = None,
            on_difference: Callable[[Difference], None] | None = None,
            on_start: Callable[[ReplayReport], None] | None = None) -> ReplayReport:
     """Replay the run recorded in `source`; the report says where the replies differ.
@@ -222,7 +222,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         from choreo.session import check_output_folder
 
         check_output_folder(Path(log_path), "--log")
-    from choreo.clock import RunClock
+    from choreo.clock import RunClock, SystemTime
     from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, Link
     from choreo.record import Recorder, RunInfo, default_log_path
 
@@ -236,7 +236,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         check_options(speed, baud, timeout, layout)
         url = at_speed(_with_durations(port or "sim://", show, baud, layout), speed)
         name = reader.run_info.get("show") or reader.path.stem
-        clock = RunClock()
+        clock = RunClock(time_source or SystemTime())
         new_log = Path(log_path) if log_path else default_log_path(f"{name}-replay", log_dir)
         attachment = reader.show_attachment()
         show_source = reader.attachment_data(attachment) if attachment else b""
@@ -277,7 +277,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
 
 
 def _elapsed(clock) -> float:
-    return (time.monotonic_ns() - clock.mono_anchor_ns) / 1e9
+    return (clock.mono_ns() - clock.mono_anchor_ns) / 1e9
 
 
 def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, report: ReplayReport,
@@ -304,12 +304,12 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
         nonlocal zero_mono, first_s, last
         if zero_mono is None:
             first_s = show_s  # start at once, whatever show time the recording starts at
-            zero_mono = time.monotonic()
+            zero_mono = clock.mono()
         target = zero_mono + (show_s - first_s) / speed
         if last is not None:
             target = max(target, last[1] + (show_s - last[0]) / speed)
         clock.sleep_until(target)
-        now = time.monotonic()
+        now = clock.mono()
         last = (show_s, now)
         lag_ms = (now - (zero_mono + (show_s - first_s) / speed)) * 1e3
         if lag_ms > report.max_lag_ms:
@@ -326,7 +326,7 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
                 show_s = recorded_clock.seconds(log_time) or 0.0
                 due(show_s)
                 recorder.on_step(_StepRecord(clock.wall_ns(), _retimed(message, first_s, speed,
-                                                                       (time.monotonic() - zero_mono))))
+                                                                       (clock.mono() - zero_mono))))
             elif topic == TX_TOPIC:
                 show_s = recorded_clock.seconds(log_time) or 0.0
                 try:

@@ -9,6 +9,8 @@ as bare iteration with the mcap reader", so the loop is one function with local 
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -369,12 +371,22 @@ def summarize_reader(reader: LogReader) -> Summary:
     summary.steps_failed = outcomes.get("failed", 0) + outcomes.get("timeout", 0)
     summary.steps_aborted = outcomes.get("aborted", 0)
     summary.steps_unfinished = len(steps_open)
-    result_s = (reader.result or {}).get("show_s")
-    if result_s:
-        summary.duration_s = float(result_s)
+    result_s = _seconds((reader.result or {}).get("show_s"))
+    if result_s is not None:
+        summary.duration_s = result_s
     elif last_time is not None and zero is not None:
         summary.duration_s = _show_s(last_time, zero)
     return summary
+
+
+def _seconds(text: str | None) -> float | None:
+    """A figure from the metadata, or None where it is missing or damaged (metadata records
+    carry no CRC: a flipped byte shows only here)."""
+    try:
+        value = float(text) if text else None
+    except ValueError:
+        return None
+    return value if value is not None and math.isfinite(value) else None
 
 
 def _slipped(end: dict, late_at_start: bool) -> bool:

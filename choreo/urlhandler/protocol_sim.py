@@ -21,11 +21,11 @@ does. The board is on `port.board`, its line on `port.line`.
 from __future__ import annotations
 
 import numbers
-import time
 from urllib.parse import urlsplit
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
+from choreo.clock import SystemTime, TimeSource
 from choreo.sim.board import SimBoard
 from choreo.sim.options import SimOptions, parse_query
 from choreo.sim.wire import REAL_GAP_S, Line, LineSettings
@@ -40,6 +40,8 @@ class Serial(SerialBase):
         self.board: SimBoard | None = None
         self.line: Line | None = None
         self.options: SimOptions | None = None
+        # The board's clock: the machine's, or the run's (virtual time in tests), set before open.
+        self.time_source: TimeSource = SystemTime()
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
 
     # -- opening -----------------------------------------------------------------------------
@@ -50,7 +52,7 @@ class Serial(SerialBase):
         if self._port is None:
             raise SerialException("Port must be configured before it can be used.")
         self.options = self.from_url(self._port)
-        self.board = self.options.board(power_on=time.monotonic())
+        self.board = self.options.board(power_on=self.time_source.now())
         self.line = Line(self.board, self.options.gap_s or REAL_GAP_S)
         self.is_open = True
         self._reconfigure_port()
@@ -96,7 +98,7 @@ class Serial(SerialBase):
     @property
     def in_waiting(self) -> int:
         line = self._live()
-        now = time.monotonic()
+        now = self.time_source.now()
         line.poll(now)
         return line.available(now)
 
@@ -106,10 +108,11 @@ class Serial(SerialBase):
         timeout None waits for all `size` bytes; 0 returns what has arrived at once.
         """
         line = self._live()
-        deadline = None if self._timeout is None else time.monotonic() + self._timeout
+        clock = self.time_source
+        deadline = None if self._timeout is None else clock.now() + self._timeout
         data = bytearray()
         while len(data) < size:
-            now = time.monotonic()
+            now = clock.now()
             line.poll(now)
             data += line.take(now, size - len(data))
             if len(data) >= size or (deadline is not None and now >= deadline):
@@ -118,7 +121,7 @@ class Serial(SerialBase):
             wait = _MAX_SLEEP_S if wake is None else max(wake - now, 0.0)
             if deadline is not None:
                 wait = min(wait, deadline - now)
-            time.sleep(min(max(wait, 0.0), _MAX_SLEEP_S))
+            clock.sleep(min(max(wait, 1e-6), _MAX_SLEEP_S))  # time must pass, on any clock
             line = self._live()
         return bytes(data)
 
@@ -126,14 +129,14 @@ class Serial(SerialBase):
         """Put the bytes on the wire to the board at once (write each frame in one call)."""
         line = self._live()
         data = to_bytes(data)
-        line.send(data, time.monotonic())
+        line.send(data, self.time_source.now())
         self._live()  # a `lose` fault on this frame: the write itself fails, as on an unplug
         return len(data)
 
     def reset_input_buffer(self) -> None:
         """Drop the reply bytes already received; those still on the wire arrive later."""
         line = self._live()
-        now = time.monotonic()
+        now = self.time_source.now()
         line.poll(now)
         line.discard(now)
 
