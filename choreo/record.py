@@ -46,26 +46,13 @@ from mcap.writer import CompressionType, Writer
 
 from choreo import __version__
 from choreo.errors import LogError
+from choreo.logformat import (CHANNELS, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC,
+                              STEP_TOPIC, TX_TOPIC, LogRecord, RxRecord, TxRecord)
 
 if TYPE_CHECKING:
     from choreo.link import RxEvent, TxEvent
     from choreo.runner import StepEvent
 
-TX_TOPIC = "/rcb4/tx"
-RX_TOPIC = "/rcb4/rx"
-STEP_TOPIC = "/choreo/step"
-LOG_TOPIC = "/choreo/log"
-
-# topic -> (schema name, schema file under schemas/)
-CHANNELS = {
-    TX_TOPIC: ("choreo.Tx", "log.tx.schema.json"),
-    RX_TOPIC: ("choreo.Rx", "log.rx.schema.json"),
-    STEP_TOPIC: ("choreo.Step", "log.step.schema.json"),
-    LOG_TOPIC: ("foxglove.Log", "foxglove.Log.schema.json"),
-}
-
-METADATA_NAME = "choreo"
-RESULT_METADATA_NAME = "choreo.result"
 FLUSH_EVERY_S = 0.5
 BATCH = 16  # messages the background flusher writes before it lets the runner have the GIL
 CHUNK_SIZE = 64 * 1024
@@ -146,52 +133,25 @@ def _dumps(message: dict) -> bytes:
     return _encode(message).encode()
 
 
-def without_absent(message: dict) -> dict:
-    """The message with its absent (None) fields left out: Foxglove's JSON-schema support takes
-    one type per field and refuses a topic whose schema allows null, so absent means omitted."""
-    return {key: value for key, value in message.items() if value is not None}
-
-
 def _tx_message(event: TxEvent) -> dict:
     tag = event.tag
-    return without_absent({
-        "seq": event.seq,
-        "step": tag.step if tag else None,
-        "label": tag.label if tag else None,
-        "kind": event.frame.kind.value,
-        "motion": event.frame.motion,
-        "attempt": event.attempt,
-        "hex": event.frame.hex,
-    })
+    return TxRecord(event.seq, event.frame.kind.value, event.frame.hex, event.attempt,
+                    tag.step if tag else None, tag.label if tag else None, event.frame.motion).to_json()
 
 
 def _rx_message(event: RxEvent) -> dict:
     reply = event.reply
-    return without_absent({
-        "seq": event.seq,
-        "kind": reply.kind.value,
-        "hex": reply.hex,
-        "latency_ms": round(event.latency_s * 1e3, 4),
-        "executing": reply.executing,
-        "error": reply.error,
-        "stale": reply.stale.hex(" ") if reply.stale else None,
-    })
+    return RxRecord(event.seq, reply.kind.value, reply.hex, round(event.latency_s * 1e3, 4), reply.executing,
+                    reply.error, reply.stale.hex(" ") if reply.stale else None).to_json()
 
 
 def _step_message(event: StepEvent) -> dict:
-    return without_absent(event.message())
+    return event.record().to_json()
 
 
 def _log_message(entry: tuple[int, str, int]) -> dict:
     level, message, time_ns = entry
-    return {
-        "timestamp": {"sec": time_ns // 1_000_000_000, "nsec": time_ns % 1_000_000_000},
-        "level": level,
-        "message": message,
-        "name": "choreo",
-        "file": "",
-        "line": 0,
-    }
+    return LogRecord.at(level, message, time_ns).to_json()
 
 
 # A reported event waiting to be written: (topic, log time, how to make its message, the event).

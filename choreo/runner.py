@@ -15,14 +15,13 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from choreo.clock import RunClock
+from choreo.logformat import ABORT_LABEL, ERROR, INFO, LATE_MS, WARNING, StepRecord
 from choreo.errors import Interrupted, LinkError
 from choreo.link import Link, Played, RxEvent, Tag, TxEvent
 from choreo.show.model import Plan, PlannedStep, StepKind
 
 POLL_S = 0.05  # the board refreshes its status every 50 ms: never poll faster
-LATE_MS = 1.0  # a step starting more than this after its due time is reported late
 
-DEBUG, INFO, WARNING, ERROR = 1, 2, 3, 4  # foxglove.Log levels
 
 
 @dataclass(frozen=True)
@@ -37,22 +36,11 @@ class StepEvent:
     late_ms: float = 0.0
     outcome: str | None = None  # end: ok | failed | aborted | timeout
 
-    def message(self) -> dict:
+    def record(self) -> StepRecord:
         step = self.step
-        return {
-            "index": step.index,
-            "path": step.path,
-            "label": step.label,
-            "kind": step.kind.value,
-            "motion": step.motion,
-            "cue": step.at,
-            "event": self.event,
-            "planned_s": round(self.planned_s, 6),
-            "estimated_s": round(step.planned_s, 6),
-            "actual_s": round(self.actual_s, 6),
-            "late_ms": round(self.late_ms, 3),
-            "outcome": self.outcome,
-        }
+        return StepRecord(step.index, step.kind.value, self.event, round(self.actual_s, 6),
+                          round(self.planned_s, 6), round(step.planned_s, 6), round(self.late_ms, 3),
+                          step.path, step.label, step.motion, step.at, self.outcome)
 
 
 class RunListener(Protocol):
@@ -256,7 +244,7 @@ class Runner:
             self._log(INFO, f"playing abort motion {self.on_abort}")
             self.link.should_stop = lambda: False
             try:
-                self._play(self.on_abort, Tag(None, "on_abort"), "on_abort")
+                self._play(self.on_abort, Tag(None, ABORT_LABEL), ABORT_LABEL)
             except LinkError as exc:
                 self._log(ERROR, f"abort motion {self.on_abort} failed: {exc}")
                 raise

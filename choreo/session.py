@@ -18,7 +18,8 @@ from choreo.clock import RunClock, SystemTime, TimeSource
 from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError, did_you_mean
 from choreo.layouts import SEED, Layout, layout_named
 from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
-from choreo.runner import ERROR, RunListener, Runner, RunResult, StopRequest
+from choreo.logformat import ERROR
+from choreo.runner import RunListener, Runner, RunResult, StopRequest
 from choreo.show.model import DEFAULT_MOTION_S, Plan, Show
 
 

@@ -61,8 +61,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     timeline = commands.add_parser(
         "timeline", help="each motion on the show clock, planned against actual",
-        description="Each motion as a bar on the show clock, planned against actual, with late cues "
-        "and faults marked. Text by default; --png draws a picture (needs matplotlib: choreo[plot]).")
+        description="Each motion as a bar on the show clock, planned against actual (the plan stays "
+        "visible, its unplayed rest in grey), with cues, late plays (retries included, as log summary "
+        "counts them), faults, failed and aborted steps marked. Text fitted to the terminal by default; "
+        "--png draws a picture (needs matplotlib: choreo[plot]).")
     timeline.add_argument("log", help="the run's .mcap log")
     timeline.add_argument("--png", metavar="FILE", help="write a PNG picture to FILE instead of text")
     timeline.set_defaults(handler=run_timeline)
@@ -119,9 +121,13 @@ def _stdout() -> Iterator[TextIO]:
 
 
 def _print_all(lines: Iterable[str]) -> None:
+    """Each line fitted to the terminal (cut with '…'); to a file or a pipe, whole."""
+    from choreo.cli.terminal import columns, fit
+
+    width = columns()
     with _stdout() as out:
         for line in lines:
-            out.write(line + "\n")
+            out.write(fit(line, width) + "\n")
 
 
 def run_summary(args: argparse.Namespace) -> int:
@@ -130,7 +136,10 @@ def run_summary(args: argparse.Namespace) -> int:
     from choreo.errors import ChoreoError
     from choreo.review.summary import render, summarize, summary_record
 
+    from choreo.cli.terminal import columns, fit
+
     failed = 0
+    width = columns()
     with _stdout() as out:
         for number, path in enumerate(_logs_in(args.log)):
             try:
@@ -142,7 +151,7 @@ def run_summary(args: argparse.Namespace) -> int:
             if args.json:
                 out.write(json.dumps(summary_record(summary), separators=(",", ":")) + "\n")
             else:
-                out.write(("\n" if number else "") + "\n".join(render(summary)) + "\n")
+                out.write(("\n" if number else "") + "\n".join(fit(line, width) for line in render(summary)) + "\n")
             out.flush()
     return 2 if failed else 0
 
@@ -185,9 +194,11 @@ def run_timeline(args: argparse.Namespace) -> int:
 
     if args.png:
         return _timeline_png(args.log, args.png)
+    from choreo.cli.terminal import UNKNOWN_COLUMNS, columns
+
     with LogReader(args.log) as reader:
         timeline = build(reader)
-    _print_all(render_text(timeline))
+    _print_all(render_text(timeline, columns() or UNKNOWN_COLUMNS))
     return 0
 
 
@@ -203,7 +214,7 @@ def _timeline_png(log: str, png: str) -> int:
             render_png(timeline, out)
     cut = f" (log {timeline.cut.state}: {timeline.cut.reason})" if timeline.cut else ""
     _print_all([f"timeline: {png}: {counted(len(timeline.runs), 'motion')}, "
-                f"{counted(len(timeline.late), 'late cue')}, {counted(len(timeline.faults), 'fault')}{cut}"])
+                f"{counted(len(timeline.late), 'late play')}, {counted(len(timeline.faults), 'fault')}{cut}"])
     return 0
 
 

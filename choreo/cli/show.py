@@ -100,8 +100,11 @@ def run_plan(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(_plan_record(show, plan), ensure_ascii=False))
         return 0
+    from choreo.cli.terminal import columns, fit
+
+    width = columns()
     for line in plan_lines(show, plan):
-        print(line)
+        print(fit(line, width))
     return 0
 
 

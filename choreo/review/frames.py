@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 from choreo.protocol import describe_frame, describe_reply
 from choreo.review.reader import LogReader, decode
-from choreo.review.summary import RX_TOPIC, STEP_TOPIC, TX_TOPIC, show_zero_ns, stale_replies
+from choreo.logformat import RX_TOPIC, STEP_TOPIC, TX_TOPIC
+from choreo.review.summary import show_zero_ns, stale_replies
 
 class ShowClock:
     """Wall-clock log times to show-clock seconds.

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import IO
 
 from choreo.errors import LogError
+from choreo.logformat import CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME
 
 MAGIC = b"\x89MCAP0\r\n"
 
@@ -75,11 +76,6 @@ def decode(data: bytes) -> dict:
         return json.loads(data)
 
 
-TX_TOPIC = "/rcb4/tx"
-RX_TOPIC = "/rcb4/rx"
-STEP_TOPIC = "/choreo/step"
-LOG_TOPIC = "/choreo/log"
-CHOREO_TOPICS = frozenset((TX_TOPIC, RX_TOPIC, STEP_TOPIC, LOG_TOPIC))
 
 
 @dataclass(frozen=True)
@@ -162,12 +158,12 @@ class LogReader:
     @property
     def run_info(self) -> dict[str, str]:
         """The `choreo` metadata: show, port, baud, start time... (empty if the log has none)."""
-        return self.metadata.get("choreo", {})
+        return self.metadata.get(METADATA_NAME, {})
 
     @property
     def result(self) -> dict[str, str] | None:
         """The `choreo.result` metadata written when the run closed its log, or None."""
-        return self.metadata.get("choreo.result")
+        return self.metadata.get(RESULT_METADATA_NAME)
 
     @property
     def complete(self) -> bool:

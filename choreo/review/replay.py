@@ -27,7 +27,7 @@ from choreo.errors import ChoreoError, UsageError
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import ShowClock, reply_meaning
 from choreo.review.reader import Cut, LogReader, decode
-from choreo.review.summary import LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC
+from choreo.logformat import LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, StepRecord
 
 LISTED_DIFFERENCES = 200  # kept in the report; all are counted (and written to the new log)
 
@@ -197,14 +197,14 @@ def check_options(speed: float, baud: int | None, timeout: float | None, layout:
 
 
 @dataclass
-class _StepRecord:
+class _ReplayedStep:
     """A recorded step event, re-timed for the new log (what Recorder.on_step needs of it)."""
 
     time_ns: int
-    fields: dict
+    step: StepRecord
 
-    def message(self) -> dict:
-        return self.fields
+    def record(self) -> StepRecord:
+        return self.step
 
 
 def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, baud: int | None = None,
@@ -325,8 +325,8 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
                 recorded_clock.see_step(log_time, message)
                 show_s = recorded_clock.seconds(log_time) or 0.0
                 due(show_s)
-                recorder.on_step(_StepRecord(clock.wall_ns(), _retimed(message, first_s, speed,
-                                                                       (clock.mono() - zero_mono))))
+                retimed = _retimed(message, first_s, speed, clock.mono() - zero_mono)
+                recorder.on_step(_ReplayedStep(clock.wall_ns(), StepRecord.from_json(retimed)))
             elif topic == TX_TOPIC:
                 show_s = recorded_clock.seconds(log_time) or 0.0
                 try:

@@ -3,8 +3,8 @@
 One linear pass over the log (see `reader`), in memory that does not grow with the log: counts,
 distributions kept as counters of microsecond-rounded values (reply latencies are bounded by the
 reply timeout, cue lateness by the show), per-slot motion statistics, and only the first few
-plays and log lines listed one by one. It is the command the benchmark holds to "at least as fast
-as bare iteration with the mcap reader", so the loop is one function with local names.
+plays and log lines listed one by one. Records come typed from `choreo.logformat`, and plays
+from its motion tracker, the one the timeline uses too.
 """
 
 from __future__ import annotations
@@ -15,15 +15,14 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from choreo.review.reader import LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, Cut, LogReader, decode
-
-
-LATE_MS = 1.0  # the runner reports a step starting later than this as late
+from choreo.logformat import (CHOREO_TOPICS, ERROR, LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING,
+                              LogRecord, MotionPlay, MotionTracker, RxRecord, StepRecord, TxRecord, is_late,
+                              parse, slipped)
+from choreo.review.reader import Cut, LogReader
 FRAME_KINDS = ("stop", "play", "restore", "status")
 REPLY_KINDS = ("ack", "nak", "status", "timeout", "invalid")
 LISTED_PLAYS = 30  # plays listed one by one; past this, per motion slot only
 LISTED_LOG_LINES = 10
-WARNING, ERROR = 3, 4  # foxglove.Log levels
 
 
 class Distribution:
@@ -135,7 +134,7 @@ class Summary:
     steps_run: int = 0
     steps_done: int = 0
     steps_late: int = 0  # play steps late on stage, counted once each as the runner counts them:
-    # started more than LATE_MS after their time, or (`_slipped`) retries delayed the motion that long
+    # started more than LATE_MS after their time, or (`logformat.slipped`) retries delayed the motion that long
     steps_late_by_retries: int = 0  # of those, the plays on time whose retries made them late
     steps_failed: int = 0
     steps_aborted: int = 0
@@ -232,151 +231,124 @@ def show_zero_ns(reader: LogReader) -> int | None:
 
 def summarize_reader(reader: LogReader) -> Summary:
     summary = Summary(reader.path, dict(reader.run_info), None, False, None)
-    frames = dict.fromkeys(FRAME_KINDS, 0)
-    replies = dict.fromkeys(REPLY_KINDS, 0)
-    latency: dict[int, int] = {}
-    lateness: dict[int, int] = {}
-    steps_open: dict[int, bool] = {}  # a step started and not ended -> a play late at its start
-    retried: set[int] = set()  # open steps with a frame sent again
-    outcomes = {"ok": 0, "failed": 0, "timeout": 0, "aborted": 0}
-    zero = show_zero_ns(reader)
-    zero_from_step = False
-    retries = late = late_by_retries = started = stale = 0
-    pending_seq = -1  # the tx waiting for its rx
-    last_time = None
-    # motion tracking: play -> restore ACKed -> running until a status says not executing
-    armed: tuple[int, int | None, str | None] | None = None  # motion, step, label of the last CALL
-    restore_seq = -1
-    restore_ns = 0
-    running: tuple[int, int | None, str | None, int] | None = None  # motion, step, label, start ns
-    status_seq = -1
-    status_ns = 0
-    finished: list[tuple[int, int | None, str | None, int, int | None, str]] = []
-    count = 0
-
-    topic = None
+    tally = _Tally(show_zero_ns(reader))
+    tracker = MotionTracker()
+    topic, count, last_time = None, 0, None
     try:
         for topic, log_time, data in reader.messages():
             count += 1
             last_time = log_time
+            if topic not in CHOREO_TOPICS:
+                continue
+            record = parse(topic, data)
             if topic == RX_TOPIC:
-                m = decode(data)
-                kind = m["kind"]
-                replies[kind] = replies.get(kind, 0) + 1
-                seq = m["seq"]
-                if seq == pending_seq:
-                    pending_seq = -1
-                if m.get("stale"):  # null in every clean exchange; absent in older logs
-                    stale += len(stale_replies(m.get("stale")))
-                if kind == "status":
-                    key = round(m["latency_ms"] * 1000)
-                    latency[key] = latency.get(key, 0) + 1
-                    if running is not None and seq == status_seq and m.get("executing") is False:
-                        finished.append((*running, status_ns - running[3], "status"))
-                        running = None
-                elif kind == "ack":
-                    key = round(m["latency_ms"] * 1000)
-                    latency[key] = latency.get(key, 0) + 1
-                    if seq == restore_seq and armed is not None:
-                        if running is not None:
-                            finished.append((*running, None, "stop"))
-                        running = (*armed, restore_ns)
-                        armed = None
-                elif kind == "nak":
-                    key = round(m["latency_ms"] * 1000)
-                    latency[key] = latency.get(key, 0) + 1
+                tally.reply(record, summary)
+                tracker.rx(record, log_time)
             elif topic == TX_TOPIC:
-                m = decode(data)
-                kind = m["kind"]
-                frames[kind] = frames.get(kind, 0) + 1
-                if pending_seq != -1:
-                    summary.unanswered += 1
-                pending_seq = m["seq"]
-                if m["attempt"] > 1:
-                    retries += 1
-                    if m.get("step") is not None:
-                        retried.add(m.get("step"))
-                if kind == "status":
-                    status_seq = pending_seq
-                    status_ns = log_time
-                elif kind == "restore":
-                    restore_seq = pending_seq
-                    restore_ns = log_time
-                elif kind == "play":
-                    armed = (m.get("motion"), m.get("step"), m.get("label"))
-                elif kind == "stop" and running is not None:
-                    finished.append((*running, None, "stop"))
-                    running = None
+                tally.frame(record, summary)
+                tracker.tx(record, log_time)
             elif topic == STEP_TOPIC:
-                m = decode(data)
-                index = m["index"]
-                if m["event"] == "start":
-                    started += 1
-                    steps_open[index] = False
-                    if m["kind"] == "play":  # a wait starts when the play before it is answered
-                        late_ms = m["late_ms"]
-                        key = round(late_ms * 1000)
-                        lateness[key] = lateness.get(key, 0) + 1
-                        if late_ms > LATE_MS:
-                            late += 1
-                            steps_open[index] = True
-                    if not zero_from_step:
-                        # the show clock's zero in wall-clock ns: this start's time minus its show time
-                        zero = log_time - round(m["actual_s"] * 1e9)
-                        zero_from_step = True
-                else:
-                    late_at_start = steps_open.pop(index, False)
-                    outcome = m.get("outcome")
-                    outcomes[outcome] = outcomes.get(outcome, 0) + 1
-                    if index in retried:
-                        retried.discard(index)
-                        if _slipped(m, late_at_start):
-                            late += 1
-                            late_by_retries += 1
-            elif topic == LOG_TOPIC:
-                m = decode(data)
-                level = m.get("level", 0)
-                if level >= WARNING:
-                    if level >= ERROR:
-                        summary.errors += 1
-                    else:
-                        summary.warnings += 1
-                    if len(summary.log_lines) < LISTED_LOG_LINES:
-                        summary.log_lines.append(LogLine(_show_s(log_time, zero), level, str(m.get("message", ""))))
-            if len(finished) > 256:
-                _add_plays(summary, finished, zero)
-
+                tally.step(record, log_time)
+            else:
+                tally.log_line(record, log_time, summary)
+            if len(tracker.plays) > 256:
+                _add_plays(summary, tracker.plays, tally.zero)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise reader.not_choreo(topic, count, exc) from None
-
-    if pending_seq != -1:
+    if tally.pending_seq != -1:
         summary.unanswered += 1
-    if running is not None:
-        finished.append((*running, None, "end of log"))
-    _add_plays(summary, finished, zero)
+    _add_plays(summary, tracker.finish(None), tally.zero)
     summary.messages = count
     summary.cut = reader.cut
     summary.result = reader.result
     summary.complete = reader.complete
-    summary.frames = frames
-    summary.replies = replies
-    summary.retries = retries
-    summary.stale = stale
-    summary.latency = Distribution(latency)
-    summary.lateness = Distribution(lateness)
-    summary.steps_run = started
-    summary.steps_late = late
-    summary.steps_late_by_retries = late_by_retries
-    summary.steps_done = outcomes.get("ok", 0)
-    summary.steps_failed = outcomes.get("failed", 0) + outcomes.get("timeout", 0)
-    summary.steps_aborted = outcomes.get("aborted", 0)
-    summary.steps_unfinished = len(steps_open)
+    tally.fill(summary)
     result_s = _seconds((reader.result or {}).get("show_s"))
     if result_s is not None:
         summary.duration_s = result_s
-    elif last_time is not None and zero is not None:
-        summary.duration_s = _show_s(last_time, zero)
+    elif last_time is not None and tally.zero is not None:
+        summary.duration_s = _show_s(last_time, tally.zero)
     return summary
+
+
+class _Tally:
+    """The counts of one pass: frames, replies, latencies, steps and their lateness."""
+
+    def __init__(self, zero: int | None) -> None:
+        self.zero = zero  # the show clock's zero in wall-clock ns (a step start fixes it)
+        self.zero_from_step = False
+        self.frames = dict.fromkeys(FRAME_KINDS, 0)
+        self.replies = dict.fromkeys(REPLY_KINDS, 0)
+        self.latency = Distribution()
+        self.lateness = Distribution()
+        self.late_at_start: dict[int, bool] = {}  # steps started and not ended
+        self.retried: set[int] = set()  # open steps with a frame sent again
+        self.outcomes = {"ok": 0, "failed": 0, "timeout": 0, "aborted": 0}
+        self.retries = self.late = self.late_by_retries = self.started = self.stale = 0
+        self.pending_seq = -1  # the frame waiting for its reply
+
+    def reply(self, rx: RxRecord, summary: Summary) -> None:
+        self.replies[rx.kind] = self.replies.get(rx.kind, 0) + 1
+        if rx.seq == self.pending_seq:
+            self.pending_seq = -1
+        if rx.stale:
+            self.stale += len(stale_replies(rx.stale))
+        if rx.kind in ("ack", "nak", "status"):
+            self.latency.add(rx.latency_ms)
+
+    def frame(self, tx: TxRecord, summary: Summary) -> None:
+        self.frames[tx.kind] = self.frames.get(tx.kind, 0) + 1
+        if self.pending_seq != -1:
+            summary.unanswered += 1
+        self.pending_seq = tx.seq
+        if tx.attempt > 1:
+            self.retries += 1
+            if tx.step is not None:
+                self.retried.add(tx.step)
+
+    def step(self, step: StepRecord, log_time: int) -> None:
+        if step.event == "start":
+            self.started += 1
+            self.late_at_start[step.index] = is_late(step)
+            if step.kind == "play":  # a wait starts when the play before it is answered
+                self.lateness.add(step.late_ms)
+                self.late += is_late(step)
+            if not self.zero_from_step:
+                self.zero = log_time - round(step.actual_s * 1e9)
+                self.zero_from_step = True
+            return
+        late_at_start = self.late_at_start.pop(step.index, False)
+        self.outcomes[step.outcome or "?"] = self.outcomes.get(step.outcome or "?", 0) + 1
+        if step.index in self.retried:
+            self.retried.discard(step.index)
+            if slipped(step, late_at_start):
+                self.late += 1
+                self.late_by_retries += 1
+
+    def log_line(self, line: LogRecord, log_time: int, summary: Summary) -> None:
+        if line.level < WARNING:
+            return
+        if line.level >= ERROR:
+            summary.errors += 1
+        else:
+            summary.warnings += 1
+        if len(summary.log_lines) < LISTED_LOG_LINES:
+            summary.log_lines.append(LogLine(_show_s(log_time, self.zero), line.level, str(line.message)))
+
+    def fill(self, summary: Summary) -> None:
+        summary.frames = self.frames
+        summary.replies = self.replies
+        summary.retries = self.retries
+        summary.stale = self.stale
+        summary.latency = self.latency
+        summary.lateness = self.lateness
+        summary.steps_run = self.started
+        summary.steps_late = self.late
+        summary.steps_late_by_retries = self.late_by_retries
+        summary.steps_done = self.outcomes.get("ok", 0)
+        summary.steps_failed = self.outcomes.get("failed", 0) + self.outcomes.get("timeout", 0)
+        summary.steps_aborted = self.outcomes.get("aborted", 0)
+        summary.steps_unfinished = len(self.late_at_start)
 
 
 def _seconds(text: str | None) -> float | None:
@@ -389,32 +361,23 @@ def _seconds(text: str | None) -> float | None:
     return value if value is not None and math.isfinite(value) else None
 
 
-def _slipped(end: dict, late_at_start: bool) -> bool:
-    """A play on time at its start whose retries delayed its motion past LATE_MS.
-
-    The runner says so in the play's end event (`late_ms`: how late the play sequence that
-    worked began) and in a warning line; only the event is read, a log line being words for
-    people. A play late at its start is counted there already: never twice. Logs from before
-    the end event carried it have 0 there.
-    """
-    return (end.get("kind") == "play" and end.get("outcome") == "ok" and not late_at_start
-            and (end.get("late_ms") or 0) > LATE_MS)
-
-
 def _show_s(log_time: int, zero: int | None) -> float:
     return (log_time - zero) / 1e9 if zero is not None else 0.0
 
 
-def _add_plays(summary: Summary, finished: list, zero: int | None) -> None:
-    """Move finished plays into the summary's per-slot statistics (and the listed first few)."""
-    for motion, step, label, start_ns, duration_ns, ended_by in finished:
-        play = Play(motion, step, label, _show_s(start_ns, zero),
-                    duration_ns / 1e9 if duration_ns is not None else None, ended_by)
+def _add_plays(summary: Summary, plays: list[MotionPlay], zero: int | None) -> None:
+    """Move the tracker's plays into the summary's per-slot statistics (and the listed first
+    few); a play that never started is no play of its motion."""
+    for done in plays:
+        if done.start_ns is None or done.motion is None:
+            continue
+        duration = (done.end_ns - done.start_ns) / 1e9 if done.measured and done.end_ns is not None else None
+        play = Play(done.motion, done.step, done.label, _show_s(done.start_ns, zero), duration, done.ended_by)
         summary.plays_total += 1
         if len(summary.plays) < LISTED_PLAYS:
             summary.plays.append(play)
-        summary.motions.setdefault(motion, MotionStats(motion)).add(play)
-    finished.clear()
+        summary.motions.setdefault(done.motion, MotionStats(done.motion)).add(play)
+    plays.clear()
 
 
 # -- text --------------------------------------------------------------------------------------

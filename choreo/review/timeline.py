@@ -18,11 +18,9 @@ from typing import BinaryIO
 from choreo.errors import ChoreoError
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import ShowClock
-from choreo.review.reader import Cut, LogReader, decode
-from choreo.review.summary import LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC
-
-ERROR = 4  # foxglove.Log level
-BAR_WIDTH = 60
+from choreo.logformat import (ABORT_LABEL, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, MotionPlay, MotionTracker,
+                              RxRecord, StepRecord, is_late, parse, slipped)
+from choreo.review.reader import Cut, LogReader
 
 
 class PlotUnavailable(ChoreoError):
@@ -77,11 +75,25 @@ class MotionRun:
 
 @dataclass(frozen=True)
 class Mark:
-    """A moment worth a reviewer's eye: a late cue, a fault on the wire, an error line."""
+    """A moment worth a reviewer's eye: a late play, a fault on the wire, a failed or aborted step,
+    an error line."""
 
     show_s: float
-    kind: str  # late | fault | error
+    kind: str  # late | fault | failure | abort | error
     text: str
+
+
+@dataclass(frozen=True)
+class Cue:
+    """A step with an `at:` time: where the show said something must happen."""
+
+    show_s: float
+    step: int
+    label: str | None
+
+    @property
+    def name(self) -> str:
+        return self.label or f"step {self.step}"
 
 
 @dataclass
@@ -89,6 +101,8 @@ class Timeline:
     show: str
     runs: list[MotionRun] = field(default_factory=list)
     marks: list[Mark] = field(default_factory=list)
+    cues: list[Cue] = field(default_factory=list)
+    unplayed: list[MotionRun] = field(default_factory=list)  # the plan's plays the run never reached
     end_s: float = 0.0
     outcome: str | None = None
     cut: Cut | None = None
@@ -102,175 +116,228 @@ class Timeline:
     def faults(self) -> list[Mark]:
         return [m for m in self.marks if m.kind != "late"]
 
+    @property
+    def span_s(self) -> float:
+        planned = (r.planned_end_s or 0.0 for r in self.runs + self.unplayed)
+        return max(self.end_s, max(planned, default=0.0), max((c.show_s for c in self.cues), default=0.0), 0.001)
+
 
 @dataclass
-class _Playing:
-    """A play step in progress, from its step start to the board saying the motion is over."""
+class _Step:
+    """A play step as its events tell it: when it was due, and how late its motion began."""
 
-    motion: int
-    step: int | None
-    label: str | None
-    planned_s: float | None
-    due_s: float | None
-    late_ms: float
-    start_s: float | None = None
+    start: StepRecord
+    late_ms: float = 0.0
 
 
 def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
-    """One pass over the log: the motion runs and the marks."""
+    """One pass over the log: the motion runs (from the same tracker as `log summary`), the
+    marks (late plays by the same rule), the cues, and the plan's plays the run never reached."""
     show = show or attached_show(reader)
     timeline = Timeline(reader.run_info.get("show") or reader.path.stem, show_problem=show.problem)
     clock = ShowClock(reader)
-    steps: dict[int, dict] = {}  # play steps started and not yet played (index -> step start)
-    armed: _Playing | None = None  # CALL sent, restore not yet ACKed
-    running: _Playing | None = None
-    frames: dict[int, tuple[str, dict]] = {}  # seq -> (frame kind, tx) awaiting its reply
-    last_s = 0.0
-
-    def finish(playing: _Playing, end_s: float | None, ended_by: str) -> None:
-        timeline.runs.append(MotionRun(
-            playing.motion, show.name_of(playing.motion), playing.step, playing.label, playing.planned_s,
-            show.expected_s(playing.motion), playing.due_s, playing.start_s, end_s, ended_by,
-            playing.late_ms))
-
+    tracker = MotionTracker()
+    steps: dict[int, _Step] = {}
+    last_ns: int | None = None
     topic, number = None, 0
     try:
         for topic, log_time, data in reader.messages((STEP_TOPIC, TX_TOPIC, RX_TOPIC, LOG_TOPIC)):
             number += 1
-            message = decode(data)
+            record = parse(topic, data)
+            last_ns = log_time if last_ns is None else max(last_ns, log_time)
             if topic == STEP_TOPIC:
-                clock.see_step(log_time, message)
-                now = clock.seconds(log_time)
-                if message["event"] == "start":
-                    late_ms = message.get("late_ms") or 0.0
-                    # Only a play's lateness shows on stage (a wait starts when the play is answered).
-                    if late_ms > LATE_MS and message.get("kind") == "play":
-                        label = f" '{message['label']}'" if message.get("label") else ""
-                        timeline.marks.append(Mark(now, "late", f"step {message['index']}{label} started "
-                                                                f"{late_ms:.1f} ms late (due {message['planned_s']:.3f} s)"))
-                    if message.get("kind") == "play":
-                        steps[message["index"]] = message
+                clock.see_step(log_time, record.to_json())
+                _see_step(timeline, steps, record, clock.seconds(log_time))
             elif topic == TX_TOPIC:
-                now = clock.seconds(log_time)
-                kind = message.get("kind")
-                frames[message["seq"]] = (kind, message, now)
-                if kind == "play":
-                    key = (message.get("step"), message.get("motion"))
-                    if armed is not None and (armed.step, armed.motion) == key:
-                        armed.start_s = None  # the play sequence tried again from its stop frame
-                    else:
-                        if armed is not None:
-                            finish(armed, None, "not started")
-                        step = steps.pop(key[0], None) if key[0] is not None else None
-                        armed = _Playing(message.get("motion"), key[0], message.get("label"),
-                                         step.get("estimated_s") if step else None,
-                                         step.get("planned_s") if step else None,
-                                         step.get("late_ms", 0.0) if step else 0.0)
-                elif kind == "restore" and armed is not None:
-                    armed.start_s = now
-                elif kind == "stop" and running is not None:
-                    finish(running, now, "stop")
-                    running = None
+                tracker.tx(record, log_time)
+                if record.label == ABORT_LABEL and not any(m.kind == "abort" for m in timeline.marks):
+                    timeline.marks.append(Mark(clock.seconds(log_time) or 0.0, "abort",
+                                               f"show stopped: abort motion {record.motion} played"))
             elif topic == RX_TOPIC:
-                now = clock.seconds(log_time)
-                kind = message.get("kind")
-                frame_kind, tx, sent_s = frames.pop(message.get("seq"), (None, {}, now))
-                if kind not in ("ack", "status"):
-                    step = tx.get("step")
-                    where = f"step {step}: " if step is not None else ""
-                    what = message.get("error") or kind
-                    timeline.marks.append(Mark(now, "fault", f"{where}{kind.upper()} to {frame_kind or 'a frame'} "
-                                                              f"(#{message.get('seq')}): {what}"))
-                    if frame_kind == "restore" and armed is not None:
-                        armed.start_s = None  # that try did not start it
-                elif frame_kind == "restore" and armed is not None and armed.start_s is not None:
-                    if running is not None:
-                        finish(running, armed.start_s, "stop")
-                    running, armed = armed, None
-                elif frame_kind == "status" and running is not None and message.get("executing") is False:
-                    finish(running, sent_s, "status")  # the query that found it over
-                    running = None
-            elif topic == LOG_TOPIC and message.get("level", 0) >= ERROR:
-                now = clock.seconds(log_time)
-                timeline.marks.append(Mark(now, "error", str(message.get("message", ""))))
-            else:
-                now = clock.seconds(log_time)
-            if now is not None:
-                last_s = max(last_s, now)
+                tracker.rx(record, log_time)
+                if not record.answered:
+                    timeline.marks.append(_fault(record, clock.seconds(log_time)))
+            elif record.level >= ERROR:
+                timeline.marks.append(Mark(clock.seconds(log_time) or 0.0, "error", str(record.message)))
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise reader.not_choreo(topic, number, exc) from None
-    if armed is not None:
-        finish(armed, None, "not started")
-    if running is not None:
-        finish(running, last_s, "end of log")
+    timeline.end_s = (clock.seconds(last_ns) or 0.0) if last_ns is not None else 0.0
+    for play in tracker.finish(last_ns):
+        timeline.runs.append(_run_of(play, steps.get(play.step) if play.step is not None else None, show, clock))
     timeline.runs.sort(key=lambda r: (r.start_s if r.start_s is not None else r.due_s or 0.0))
-    timeline.end_s = last_s
+    timeline.marks.sort(key=lambda m: m.show_s)
+    timeline.unplayed = _unplayed(show, steps)
     timeline.cut = reader.cut
     timeline.outcome = (reader.result or {}).get("outcome")
+    if timeline.outcome in ("aborted", "interrupted") and not any(m.kind == "abort" for m in timeline.marks):
+        timeline.marks.append(Mark(timeline.end_s, "abort", f"show {timeline.outcome}"))
     return timeline
+
+
+def _see_step(timeline: Timeline, steps: dict[int, _Step], step: StepRecord, now: float | None) -> None:
+    now = now or 0.0
+    if step.event == "start":
+        if step.cue is not None:
+            timeline.cues.append(Cue(step.cue, step.index, step.label))
+        if step.kind == "play":
+            steps[step.index] = _Step(step, step.late_ms if is_late(step) else 0.0)
+            if is_late(step):
+                timeline.marks.append(Mark(now, "late", f"{step.ref} started {step.late_ms:.1f} ms late "
+                                                        f"(due {step.planned_s:.3f} s)"))
+        return
+    known = steps.get(step.index)
+    if known is not None and slipped(step, late_at_start=known.late_ms > 0):
+        known.late_ms = step.late_ms
+        timeline.marks.append(Mark(now, "late", f"{step.ref}: motion {step.motion} started "
+                                                f"{step.late_ms:.1f} ms late (retries)"))
+    if step.outcome in ("failed", "timeout"):
+        timeline.marks.append(Mark(now, "failure", f"{step.ref} {step.outcome}"))
+    elif step.outcome == "aborted":
+        timeline.marks.append(Mark(now, "abort", f"{step.ref} aborted: the show was stopped"))
+
+
+def _fault(rx: RxRecord, now: float | None) -> Mark:
+    what = rx.error or rx.kind
+    return Mark(now or 0.0, "fault", f"{rx.kind.upper()} to frame #{rx.seq}: {what}")
+
+
+def _run_of(play: MotionPlay, step: _Step | None, show: AttachedShow, clock: ShowClock) -> MotionRun:
+    start = step.start if step is not None else None
+    motion = play.motion if play.motion is not None else -1
+    end_s = clock.seconds(play.end_ns) if play.start_ns is not None else None
+    return MotionRun(motion, show.name_of(play.motion), play.step, play.label,
+                     start.estimated_s if start else None, show.expected_s(motion),
+                     start.planned_s if start else None, clock.seconds(play.start_ns),
+                     end_s, play.ended_by, step.late_ms if step else 0.0)
+
+
+def _unplayed(show: AttachedShow, steps: dict[int, _Step]) -> list[MotionRun]:
+    """The attached plan's plays after the last one the run started: what a stopped, failed or
+    cut run never got to (drawn in grey)."""
+    plan = show.plan
+    if plan is None:
+        return []
+    last = max(steps, default=-1)
+    return [MotionRun(step.motion, show.name_of(step.motion), step.index, step.label, step.planned_s,
+                      show.expected_s(step.motion), None, None, None, "not played")
+            for step in plan.steps if step.index > last and step.kind.value == "play" and step.motion is not None]
 
 
 # -- text --------------------------------------------------------------------------------------
 
+MIN_BAR = 20  # the bar never gets narrower than this, however narrow the terminal
+PREFIX = 5 + 1 + 16 + 1 + 11 + 1 + 11 + 2  # step, motion, planned, actual, the gaps: 48 columns
+NARROW_PREFIX = 5 + 1 + 10 + 2  # step and motion only
 
-def _cells(start: float | None, end: float | None, scale: float) -> range:
+
+def _cells(start: float | None, end: float | None, scale: float, width: int) -> range:
     if start is None:
         return range(0)
-    first = min(BAR_WIDTH - 1, max(0, int(start * scale)))
-    last = min(BAR_WIDTH - 1, max(first, int((end if end is not None else start) * scale)))
+    first = min(width - 1, max(0, int(start * scale)))
+    last = min(width - 1, max(first, int((end if end is not None else start) * scale)))
     return range(first, last + 1)
 
 
-def render_text(timeline: Timeline) -> Iterator[str]:
-    """The timeline as text: a bar a motion (`-` planned, `#` actual, `!` late), then the marks."""
-    span = max(timeline.end_s, max((r.planned_end_s or 0.0 for r in timeline.runs), default=0.0), 0.001)
-    scale = BAR_WIDTH / span
+def _bar(run: MotionRun, scale: float, width: int) -> str:
+    """'-' planned only, '#' actual only, '=' both (the plan stays visible under the actual),
+    '.' an unmeasured end, '!' a late start, ':' a planned play the run never reached."""
+    bar = [" "] * width
+    planned = set(_cells(run.planned_s, run.planned_end_s, scale, width))
+    for i in planned:
+        bar[i] = ":" if run.ended_by == "not played" else "-"
+    for i in _cells(run.start_s, run.end_s, scale, width):
+        bar[i] = "."
+    for i in _cells(run.start_s, run.drawn_end_s, scale, width):
+        bar[i] = "=" if i in planned else "#"
+    if run.late_ms > LATE_MS and run.start_s is not None:
+        bar[_cells(run.start_s, run.start_s, scale, width)[0]] = "!"
+    return "".join(bar)
+
+
+def render_text(timeline: Timeline, columns: int = 80) -> Iterator[str]:
+    """The timeline as text that fits `columns`: a row a motion, the cues above, then the marks.
+    Narrower than the planned and actual figures and a 20-column bar, the figures go."""
+    for line in _text_lines(timeline, columns):
+        yield _fit(line, columns)
+
+
+def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
+    figures = columns >= PREFIX + MIN_BAR + 2
+    width = columns - (PREFIX if figures else NARROW_PREFIX) - 2
+    width = max(width, 8)
+    span = timeline.span_s
+    scale = width / span
     outcome = f", {timeline.outcome}" if timeline.outcome else ""
-    yield f"timeline of {timeline.show}: {timeline.end_s:.3f} s on the show clock{outcome}"
-    yield f"bars: '-' planned, '#' actual, '!' started late; one column = {span / BAR_WIDTH * 1000:.0f} ms"
+    yield _fit(f"timeline of {timeline.show}: {timeline.end_s:.3f} s on the show clock{outcome}", columns)
+    yield _fit(f"one column = {span / width * 1000:.0f} ms", columns)
+    yield _fit("bars: '-' planned, '#' actual, '=' both, '!' late, ':' not played, 'v' cue", columns)
     if timeline.show_problem:
-        yield f"(planned lengths: {timeline.show_problem}; 1 s each assumed)"
-    ruler = f"0 s{'':{BAR_WIDTH - 3 - len(f'{span:.1f} s')}}{span:.1f} s"
-    yield f"{'step':>5}  {'motion':<22} {'planned':>15} {'actual':>15}  |{ruler}|"
-    for run in timeline.runs:
-        bar = [" "] * BAR_WIDTH
-        for i in _cells(run.planned_s, run.planned_end_s, scale):
-            bar[i] = "-"
-        for i in _cells(run.start_s, run.end_s, scale):
-            bar[i] = "."
-        for i in _cells(run.start_s, run.drawn_end_s, scale):
-            bar[i] = "#"
-        if run.late_ms > LATE_MS and run.start_s is not None:
-            bar[_cells(run.start_s, run.start_s, scale)[0]] = "!"
+        yield _fit(f"(planned lengths: {timeline.show_problem}; 1 s each assumed)", columns)
+    end = f"{span:.1f} s"
+    ruler = f"0 s{'':{max(width - 3 - len(end), 1)}}{end}"[:width]
+    yield _row("step", "motion", "planned", "actual", ruler, figures)
+    if timeline.cues:
+        row = [" "] * width
+        for cue in timeline.cues:
+            row[_cells(cue.show_s, cue.show_s, scale, width)[0]] = "v"
+        yield _row("", "cues", "", "", "".join(row), figures)
+    for run in timeline.runs + timeline.unplayed:
         planned = _span(run.planned_s, run.planned_end_s)
-        if run.start_s is None:
+        if run.ended_by == "not played":
+            actual = "not played"
+        elif run.start_s is None:
             actual = "not started"
         else:
-            actual = _span(run.start_s, run.end_s) if run.measured else f"{run.start_s:.3f}-?"
+            actual = _span(run.start_s, run.end_s) if run.measured else _span(run.start_s, None) + "?"
         step = str(run.step) if run.step is not None else "abort"
-        yield f"{step:>5}  {run.title()[:22]:<22} {planned:>15} {actual:>15}  |{''.join(bar)}|"
+        yield _row(step, run.title(), planned, actual, _bar(run, scale, width), figures)
     if not timeline.runs:
         yield "  (no motion played)"
-    if any(r.ended_by not in ("status", "not started") for r in timeline.runs):
-        yield ("?: no status query saw it end (no `wait: done`): '#' for its expected length, "
-               "'.' up to what stopped it (the next play, or the log's end)")
-    for title, marks in (("late cues", timeline.late), ("faults", timeline.faults)):
+    if any(r.ended_by not in ("status", "not started", "not played") for r in timeline.runs):
+        yield _fit("?: no status query saw it end (no `wait: done`): drawn for its expected", columns)
+        yield _fit("   length, '.' up to what stopped it (the next play, or the log's end)", columns)
+    yield from _listed(timeline, columns)
+
+
+def _row(step: str, title: str, planned: str, actual: str, bar: str, figures: bool) -> str:
+    if figures:
+        return f"{step:>5} {title[:16]:<16} {planned:>11} {actual[:11]:>11}  |{bar}|"
+    return f"{step:>5} {title.replace('motion ', '')[:10]:<10}  |{bar}|"
+
+
+def _listed(timeline: Timeline, columns: int) -> Iterator[str]:
+    if timeline.cues:
+        yield _fit("cues: " + ", ".join(f"{c.name} at {c.show_s:g} s" for c in timeline.cues), columns)
+    for title, marks in (("late plays", timeline.late), ("faults", timeline.faults)):
         yield f"{title}: {len(marks) or 'none'}"
         for mark in marks:
-            yield f"  {mark.show_s:9.3f} s  {mark.text}"
+            yield _fit(f"  {mark.show_s:9.3f} s  {mark.text}", columns)
+    if timeline.unplayed:
+        yield _fit(f"not played: {counted(len(timeline.unplayed), 'play')} of the plan after the run "
+                   f"{'ended' if timeline.cut is None else 'was cut'}", columns)
     if timeline.cut is not None:
-        yield f"log {timeline.cut.state}: {timeline.cut}"
+        yield _fit(f"log {timeline.cut.state}: {timeline.cut}", columns)
+
+
+def _fit(line: str, columns: int) -> str:
+    """A line cut to the terminal with '…' (by design: the full text is in `log frames`)."""
+    return line if len(line) <= columns else line[:max(columns - 1, 1)] + "…"
 
 
 def counted(n: int, word: str) -> str:
-    """`1 late cue`, `3 faults`."""
+    """`1 late play`, `3 faults`."""
     return f"{n} {word}" if n == 1 else f"{n} {word}s"
 
 
 def _span(start: float | None, end: float | None) -> str:
+    """`1.500-3.500` in at most 11 characters: fewer decimals for later times."""
     if start is None:
         return "-"
-    return f"{start:.3f}-{end:.3f}" if end is not None else f"{start:.3f}-"
+    for decimals in (3, 2, 1, 0):
+        text = f"{start:.{decimals}f}-" + (f"{end:.{decimals}f}" if end is not None else "")
+        if len(text) <= 11:
+            return text
+    return text
 
 
 # -- picture -----------------------------------------------------------------------------------
@@ -289,7 +356,8 @@ def require_matplotlib() -> None:
 
 
 def render_png(timeline: Timeline, out: BinaryIO) -> None:
-    """Draw the timeline as a PNG into `out`: a row a motion slot, planned bars above actual ones.
+    """Draw the timeline as a PNG into `out`: a row a motion slot, planned bars above actual ones,
+    the plan's unplayed plays in grey, cue lines with their labels, and the marks.
 
     Takes an open file, not a path: the command opens its output before it reads the log, so a
     path it cannot write is one line at once, never a long read and then a traceback.
@@ -297,58 +365,84 @@ def render_png(timeline: Timeline, out: BinaryIO) -> None:
     require_matplotlib()
     import matplotlib.pyplot as plt
 
-    slots = sorted({r.motion for r in timeline.runs})
+    everything = timeline.runs + timeline.unplayed
+    slots = sorted({r.motion for r in everything})
     row = {motion: i for i, motion in enumerate(slots)}
-    names = {r.motion: r.title() for r in timeline.runs}
-    height = max(2.5, 0.55 * (len(slots) + 1) + 1.5)
+    names = {r.motion: r.title() for r in everything}
+    height = max(2.5, 0.55 * (len(slots) + 1) + 1.8)
     fig, ax = plt.subplots(figsize=(11, height), dpi=100)
     try:
-        for run in timeline.runs:
-            y = row[run.motion]
-            if run.planned_s is not None:
-                ax.broken_barh([(run.planned_s, run.expected_s)], (y - 0.42, 0.34),
-                               facecolors="#b8c4d6", edgecolors="#6b7a90", linewidth=0.5)
-            if run.start_s is not None and run.end_s is not None:
-                colour = "#2f6db5" if run.measured else "#8c6bb1"
-                ax.broken_barh([(run.start_s, max(run.drawn_end_s - run.start_s, 0.005))], (y - 0.04, 0.44),
-                               facecolors=colour)
-                if not run.measured and run.end_s > run.drawn_end_s:
-                    ax.hlines(y + 0.18, run.drawn_end_s, run.end_s, colors=colour, linestyles="dotted",
-                              linewidth=1.5)
-            if run.late_ms > LATE_MS and run.start_s is not None:
-                ax.plot([run.start_s], [y - 0.04], marker="v", color="#d62728", markersize=9, linestyle="")
+        for run in everything:
+            _draw_run(ax, run, row[run.motion])
         fault_y = len(slots)
-        late = timeline.late
         faults = timeline.faults
-        if faults:
-            ax.plot([m.show_s for m in faults], [fault_y] * len(faults), marker="x", color="#d62728",
-                    markersize=9, markeredgewidth=2, linestyle="")
+        for kind, marker, colour in _MARK_STYLES:
+            at = [m.show_s for m in faults if m.kind == kind]
+            if at:
+                ax.plot(at, [fault_y] * len(at), marker=marker, color=colour, markersize=9,
+                        markeredgewidth=2, linestyle="")
+        for cue in timeline.cues:
+            ax.axvline(cue.show_s, color="#555555", linestyle="--", linewidth=0.8)
+            ax.annotate(cue.name, (cue.show_s, 1.0), xycoords=("data", "axes fraction"), rotation=90,
+                        va="top", ha="right", fontsize="x-small", color="#333333")
         ax.set_yticks(list(range(len(slots))) + ([fault_y] if faults else []))
         ax.set_yticklabels([names[m] for m in slots] + (["faults"] if faults else []))
         ax.set_ylim(-0.8, fault_y + (0.8 if faults else -0.2))
         ax.invert_yaxis()
-        ax.set_xlim(0, max(timeline.end_s, max((r.planned_end_s or 0 for r in timeline.runs), default=0), 0.1) * 1.02)
+        ax.set_xlim(0, timeline.span_s * 1.02)
         ax.set_xlabel("show clock (s)")
         ax.grid(axis="x", color="#dddddd", linewidth=0.6)
         ax.set_axisbelow(True)
-        title = f"{timeline.show}: {timeline.end_s:.2f} s"
-        if timeline.outcome:
-            title += f", {timeline.outcome}"
-        if timeline.cut is not None:
-            title += f" (log {timeline.cut.state})"
-        title += f"; {counted(len(late), 'late cue')}, {counted(len(faults), 'fault')}"
-        ax.set_title(title)
-        from matplotlib.lines import Line2D
-        from matplotlib.patches import Patch
-
-        handles = [Patch(facecolor="#b8c4d6", edgecolor="#6b7a90", label="planned"),
-                   Patch(facecolor="#2f6db5", label="actual (to status: done)"),
-                   Patch(facecolor="#8c6bb1", label="actual (end not polled: expected length)"),
-                   Line2D([], [], marker="v", color="#d62728", linestyle="", label="late cue"),
-                   Line2D([], [], marker="x", color="#d62728", linestyle="", markeredgewidth=2, label="fault")]
-        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=5, frameon=False,
-                  fontsize="small")
+        ax.set_title(_png_title(timeline))
+        ax.legend(handles=_legend(), loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=5,
+                  frameon=False, fontsize="small")
         fig.tight_layout()
         fig.savefig(out, format="png")
     finally:
         plt.close(fig)
+
+
+PLANNED, UNPLAYED, MEASURED, UNMEASURED, RED = "#b8c4d6", "#dddddd", "#2f6db5", "#8c6bb1", "#d62728"
+_MARK_STYLES = (("fault", "x", RED), ("error", "x", "#8b0000"), ("failure", "X", "#8b0000"),
+                ("abort", "s", "#ff7f0e"))
+
+
+def _draw_run(ax, run: MotionRun, y: int) -> None:  # type: ignore[no-untyped-def]
+    if run.planned_s is not None:
+        unplayed = run.ended_by == "not played"
+        ax.broken_barh([(run.planned_s, run.expected_s)], (y - 0.42, 0.34),
+                       facecolors=UNPLAYED if unplayed else PLANNED,
+                       edgecolors="#aaaaaa" if unplayed else "#6b7a90", linewidth=0.5)
+    if run.start_s is not None and run.end_s is not None and run.drawn_end_s is not None:
+        colour = MEASURED if run.measured else UNMEASURED
+        ax.broken_barh([(run.start_s, max(run.drawn_end_s - run.start_s, 0.005))], (y - 0.04, 0.44),
+                       facecolors=colour)
+        if not run.measured and run.end_s > run.drawn_end_s:
+            ax.hlines(y + 0.18, run.drawn_end_s, run.end_s, colors=colour, linestyles="dotted", linewidth=1.5)
+    if run.late_ms > LATE_MS and run.start_s is not None:
+        ax.plot([run.start_s], [y - 0.04], marker="v", color=RED, markersize=9, linestyle="")
+        ax.annotate(f"{run.late_ms:.0f} ms late", (run.start_s, y - 0.1), fontsize="x-small", color=RED)
+
+
+def _png_title(timeline: Timeline) -> str:
+    title = f"{timeline.show}: {timeline.end_s:.2f} s"
+    if timeline.outcome:
+        title += f", {timeline.outcome}"
+    if timeline.cut is not None:
+        title += f" (log {timeline.cut.state})"
+    return title + f"; {counted(len(timeline.late), 'late play')}, {counted(len(timeline.faults), 'fault')}"
+
+
+def _legend() -> list:
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    return [Patch(facecolor=PLANNED, edgecolor="#6b7a90", label="planned"),
+            Patch(facecolor=UNPLAYED, edgecolor="#aaaaaa", label="not played"),
+            Patch(facecolor=MEASURED, label="actual (to status: done)"),
+            Patch(facecolor=UNMEASURED, label="actual (end not polled)"),
+            Line2D([], [], color="#555555", linestyle="--", label="cue"),
+            Line2D([], [], marker="v", color=RED, linestyle="", label="late play"),
+            Line2D([], [], marker="x", color=RED, linestyle="", markeredgewidth=2, label="fault"),
+            Line2D([], [], marker="X", color="#8b0000", linestyle="", label="failed step"),
+            Line2D([], [], marker="s", color="#ff7f0e", linestyle="", label="aborted")]

@@ -1,0 +1,269 @@
+"""The run log's format, in one place: topics, schemas, levels, the lateness rule, each message
+as a typed record with its JSON form, and the motion tracker every review reads plays with.
+
+The recorder writes records through `to_json`; every reader (summary, frames, timeline, export,
+replay) gets them back through `parse`, so a field is named once, here, and a log choreo did not
+write fails in one way (KeyError, TypeError or ValueError, which the reader turns into one line).
+JSON forms leave absent fields out: Foxglove's JSON-schema support takes one `type` per field
+and refuses a topic whose schema allows null.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any, ClassVar
+
+TX_TOPIC = "/rcb4/tx"
+RX_TOPIC = "/rcb4/rx"
+STEP_TOPIC = "/choreo/step"
+LOG_TOPIC = "/choreo/log"
+# topic -> (schema name, schema file under schemas/)
+CHANNELS = {
+    TX_TOPIC: ("choreo.Tx", "log.tx.schema.json"),
+    RX_TOPIC: ("choreo.Rx", "log.rx.schema.json"),
+    STEP_TOPIC: ("choreo.Step", "log.step.schema.json"),
+    LOG_TOPIC: ("foxglove.Log", "foxglove.Log.schema.json"),
+}
+CHOREO_TOPICS = frozenset(CHANNELS)
+METADATA_NAME = "choreo"
+RESULT_METADATA_NAME = "choreo.result"
+
+DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5  # foxglove.Log levels
+ABORT_LABEL = "on_abort"  # the label of the abort motion's frames (they belong to no step)
+
+# A play is late when it starts more than this after its time, or when retries delay the play
+# sequence that worked by more than this (the step's end event says by how much).
+LATE_MS = 1.0
+
+
+def without_absent(message: dict) -> dict:
+    """The message with its absent (None) fields left out."""
+    return {key: value for key, value in message.items() if value is not None}
+
+
+class _Record:
+    """JSON form of a dataclass record: absent fields omitted, required ones checked on read."""
+
+    topic: ClassVar[str]
+
+    def to_json(self) -> dict:
+        return without_absent({f.name: getattr(self, f.name) for f in fields(self)})  # type: ignore[arg-type]
+
+    @classmethod
+    def from_json(cls, message: Any) -> Any:
+        if not isinstance(message, dict):
+            raise TypeError(f"a JSON object, not {type(message).__name__}")
+        given = {}
+        for f in fields(cls):  # type: ignore[arg-type]
+            if f.name in message:
+                given[f.name] = message[f.name]
+            elif f.default is MISSING and f.default_factory is MISSING:
+                raise KeyError(f.name)
+        return cls(**given)
+
+
+@dataclass(frozen=True, slots=True)
+class TxRecord(_Record):
+    """A frame sent: its sequence number, kind (stop, play, restore, status...), bytes as hex."""
+
+    topic: ClassVar[str] = TX_TOPIC
+    seq: int
+    kind: str
+    hex: str
+    attempt: int = 1
+    step: int | None = None
+    label: str | None = None
+    motion: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class RxRecord(_Record):
+    """The verdict on what came back for frame `seq`: ack, nak, status, timeout or invalid."""
+
+    topic: ClassVar[str] = RX_TOPIC
+    seq: int
+    kind: str
+    hex: str = ""
+    latency_ms: float = 0.0
+    executing: bool | None = None
+    error: str | None = None
+    stale: str | None = None  # late replies to earlier frames, set aside, as hex
+
+    @property
+    def answered(self) -> bool:
+        """The board answered the frame as it should (an ACK or a status)."""
+        return self.kind in ("ack", "status")
+
+
+@dataclass(frozen=True, slots=True)
+class StepRecord(_Record):
+    """A step starting or ending, on the show clock (seconds since the show started)."""
+
+    topic: ClassVar[str] = STEP_TOPIC
+    index: int
+    kind: str
+    event: str  # start | end
+    actual_s: float
+    planned_s: float = 0.0  # when it was due at run time
+    estimated_s: float = 0.0  # where the compiled plan put it
+    late_ms: float = 0.0  # start: how late it started; end of a play: how late its motion began
+    path: str = ""
+    label: str | None = None
+    motion: int | None = None
+    cue: float | None = None
+    outcome: str | None = None  # end: ok | failed | aborted | timeout
+
+    @property
+    def ref(self) -> str:
+        """`step 4 'spin'`."""
+        return f"step {self.index}" + (f" '{self.label}'" if self.label else "")
+
+
+@dataclass(frozen=True, slots=True)
+class LogRecord(_Record):
+    """A log line (foxglove.Log): level, message, and its time."""
+
+    topic: ClassVar[str] = LOG_TOPIC
+    level: int
+    message: str
+    timestamp: dict = field(default_factory=dict)
+    name: str = "choreo"
+    file: str = ""
+    line: int = 0
+
+    @classmethod
+    def at(cls, level: int, message: str, time_ns: int) -> LogRecord:
+        return cls(level, message, {"sec": time_ns // 1_000_000_000, "nsec": time_ns % 1_000_000_000})
+
+    def to_json(self) -> dict:
+        return {"timestamp": self.timestamp, "level": self.level, "message": self.message,
+                "name": self.name, "file": self.file, "line": self.line}
+
+
+Record = TxRecord | RxRecord | StepRecord | LogRecord
+RECORD_TYPES: dict[str, type] = {TX_TOPIC: TxRecord, RX_TOPIC: RxRecord, STEP_TOPIC: StepRecord,
+                                 LOG_TOPIC: LogRecord}
+
+
+def parse(topic: str, data: bytes) -> Record:
+    """A message of a choreo topic as its record (ValueError, KeyError or TypeError if it is not one)."""
+    return RECORD_TYPES[topic].from_json(json.loads(data))
+
+
+def is_late(start: StepRecord) -> bool:
+    """A play that started late (only a play's lateness shows on stage: a wait starts when the
+    play before it is answered)."""
+    return start.kind == "play" and start.late_ms > LATE_MS
+
+
+def slipped(end: StepRecord, late_at_start: bool) -> bool:
+    """A play on time at its start whose retries delayed its motion past LATE_MS (the runner
+    says so in the play's end event). A play late at its start is counted there: never twice."""
+    return end.kind == "play" and end.outcome == "ok" and not late_at_start and end.late_ms > LATE_MS
+
+
+# -- motions -----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MotionPlay:
+    """One play of a motion as the wire shows it (log times, wall-clock ns)."""
+
+    motion: int | None
+    step: int | None
+    label: str | None
+    start_ns: int | None  # the restore frame that started it; None: it never started
+    end_ns: int | None
+    ended_by: str  # status | stop | end of log | not started
+
+    @property
+    def measured(self) -> bool:
+        """A status query saw it end: `end_ns` is its end (to within the 50 ms poll)."""
+        return self.ended_by == "status"
+
+
+@dataclass
+class _Armed:
+    motion: int | None
+    step: int | None
+    label: str | None
+    start_ns: int | None = None  # the restore of the try in progress
+    restore_seq: int | None = None
+
+
+class MotionTracker:
+    """Which motion runs when, from the frames and replies alone.
+
+    A play frame (the CALL) arms a motion; the ACK to the restore after it starts it, at the
+    restore's time. A retry of the same step's sequence re-arms it; an armed play that never got
+    its restore answered did not start. A status query answered "not executing" ends the motion
+    at the query's time (measured); the next play's stop frame, or the log's end, ends it
+    unmeasured. A restore whose answer was lost but after which the board reports the motion
+    executing did start (the runner counted that play done without sending it again).
+    """
+
+    def __init__(self) -> None:
+        self.plays: list[MotionPlay] = []
+        self._armed: _Armed | None = None
+        self._running: _Armed | None = None
+        self._lost_start: _Armed | None = None  # a restore with no answer: started, or not
+        self._sent: dict[int, tuple[TxRecord, int]] = {}
+
+    def tx(self, record: TxRecord, time_ns: int) -> None:
+        self._sent[record.seq] = (record, time_ns)
+        if len(self._sent) > 64:
+            self._sent.pop(next(iter(self._sent)))
+        if record.kind == "play":
+            armed = self._armed
+            if armed is None or (armed.step, armed.motion) != (record.step, record.motion):
+                self._not_started()
+                self._armed = _Armed(record.motion, record.step, record.label)
+            else:
+                armed.start_ns = armed.restore_seq = None  # the sequence tried again
+        elif record.kind == "restore" and self._armed is not None:
+            self._armed.start_ns, self._armed.restore_seq = time_ns, record.seq
+        elif record.kind == "stop":
+            self._lost_start = None  # the board was asked and the motion had not started
+            if self._running is not None:
+                self._end(time_ns, "stop")
+
+    def rx(self, record: RxRecord, time_ns: int) -> None:
+        sent, sent_ns = self._sent.pop(record.seq, (None, time_ns))
+        kind = sent.kind if sent is not None else None
+        armed = self._armed
+        if kind == "restore" and armed is not None and record.seq == armed.restore_seq:
+            if record.kind == "ack":
+                self._start(armed)
+            elif record.kind != "nak":
+                self._lost_start = armed  # carried out, or not: the board is asked next
+        elif kind == "status" and record.kind == "status":
+            if self._lost_start is not None and record.executing:
+                self._start(self._lost_start)
+            elif self._running is not None and record.executing is False:
+                self._end(sent_ns, "status")
+
+    def finish(self, end_ns: int | None) -> list[MotionPlay]:
+        """The plays, in the order they began, once the log is read to `end_ns`."""
+        self._not_started()
+        if self._running is not None:
+            self._end(end_ns, "end of log")
+        return self.plays
+
+    def _start(self, armed: _Armed) -> None:
+        if self._running is not None:
+            self._end(armed.start_ns, "stop")
+        self._running, self._armed, self._lost_start = armed, None, None
+
+    def _end(self, end_ns: int | None, ended_by: str) -> None:
+        running = self._running
+        assert running is not None
+        self.plays.append(MotionPlay(running.motion, running.step, running.label, running.start_ns,
+                                     end_ns, ended_by))
+        self._running = None
+
+    def _not_started(self) -> None:
+        armed = self._armed
+        if armed is not None:
+            self.plays.append(MotionPlay(armed.motion, armed.step, armed.label, None, None, "not started"))
+        self._armed = self._lost_start = None
