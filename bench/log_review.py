@@ -53,7 +53,8 @@ def generate_log(path: Path, messages: int) -> int:
     """
     from choreo import protocol
     from choreo.link import RxEvent, Tag, TxEvent
-    from choreo.record import WARNING, Recorder, RunInfo
+    from choreo.logformat import WARNING
+    from choreo.record import Recorder, RunInfo
     from choreo.runner import StepEvent
     from choreo.show.model import PlannedStep, StepKind
 

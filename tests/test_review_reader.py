@@ -356,7 +356,8 @@ def _log_with_late_plays(path: Path) -> None:
     on time with a slow first frame but no retry (not late); then one aborted by a second Ctrl-C."""
     from choreo import protocol
     from choreo.link import RxEvent, Tag, TxEvent
-    from choreo.record import WARNING, Recorder, RunInfo
+    from choreo.logformat import WARNING
+    from choreo.record import Recorder, RunInfo
     from choreo.runner import StepEvent
     from choreo.show.model import PlannedStep, StepKind
 

@@ -203,3 +203,10 @@ def test_a_record_a_log_did_not_write_names_the_missing_field():
     with pytest.raises(KeyError, match="kind"):
         parse("/rcb4/tx", b'{"seq": 1, "hex": ""}')
     assert parse("/rcb4/rx", b'{"seq": 2, "kind": "ack", "future_field": 1}') == RxRecord(2, "ack")
+
+
+def test_a_cut_line_is_exactly_the_width_with_an_ellipsis():
+    from choreo.textfit import fit
+
+    assert fit("abcdef", 4) == "abc…" and fit("abcdef", 1) == "…" and fit("abc", 3) == "abc"
+    assert fit("a" * 500, None) == "a" * 500  # no width (a pipe): whole

@@ -122,7 +122,8 @@ def _stdout() -> Iterator[TextIO]:
 
 def _print_all(lines: Iterable[str]) -> None:
     """Each line fitted to the terminal (cut with '…'); to a file or a pipe, whole."""
-    from choreo.cli.terminal import columns, fit
+    from choreo.cli.terminal import columns
+    from choreo.textfit import fit
 
     width = columns()
     with _stdout() as out:
@@ -136,7 +137,8 @@ def run_summary(args: argparse.Namespace) -> int:
     from choreo.errors import ChoreoError
     from choreo.review.summary import render, summarize, summary_record
 
-    from choreo.cli.terminal import columns, fit
+    from choreo.cli.terminal import columns
+    from choreo.textfit import fit
 
     failed = 0
     width = columns()

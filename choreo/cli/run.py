@@ -16,6 +16,7 @@ from typing import TextIO
 from choreo.__main__ import STOP_SIGNALS
 from choreo.errors import ChoreoError, Interrupted
 from choreo.layouts import LAYOUT_NAMES
+from choreo.textfit import fit
 
 
 
@@ -58,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         report.failed(exc)
         raise
     except KeyboardInterrupt:
-        report.failed(Interrupted("show interrupted"), exit_code=130)
+        report.failed(Interrupted("show interrupted"))
         raise
     finally:
         if args.json:
@@ -111,9 +112,9 @@ class _RunReport:
         self.error: str | None = None
         self.exit_code = 0
 
-    def failed(self, exc: ChoreoError, exit_code: int | None = None) -> None:
+    def failed(self, exc: ChoreoError) -> None:
         self.error = " / ".join(exc.lines())
-        self.exit_code = exc.exit_code if exit_code is None else exit_code
+        self.exit_code = exc.exit_code
 
     @property
     def record(self) -> dict:
@@ -168,8 +169,7 @@ def live_line(step: str, show_s: float, estimated_s: float, columns: int) -> str
     room = width - len(tail)
     if room < 1:
         return clock[:width]
-    text = step if len(step) <= room else step[:max(room - 1, 0)] + "…"
-    return text + tail
+    return fit(step, room) + tail
 
 
 class _Say:

@@ -100,7 +100,8 @@ def run_plan(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(_plan_record(show, plan), ensure_ascii=False))
         return 0
-    from choreo.cli.terminal import columns, fit
+    from choreo.cli.terminal import columns
+    from choreo.textfit import fit
 
     width = columns()
     for line in plan_lines(show, plan):

@@ -1,4 +1,5 @@
-"""How wide the user's terminal is, the one fact every human-facing output is fitted to."""
+"""How wide the user's terminal is, the one fact every human-facing output is fitted to
+(`choreo.textfit.fit` does the cutting)."""
 
 from __future__ import annotations
 
@@ -21,10 +22,3 @@ def columns(stream: TextIO | None = None) -> int | None:
         pass
     given = os.environ.get("COLUMNS", "")
     return int(given) if given.isdigit() and int(given) > 0 else None
-
-
-def fit(line: str, width: int | None) -> str:
-    """A line cut to `width` with '…' (by design: `--json`, `export` and a pipe keep it whole)."""
-    if width is None or len(line) <= width:
-        return line
-    return line[:max(width - 1, 1)] + "…"

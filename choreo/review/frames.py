@@ -29,8 +29,13 @@ class ShowClock:
         self.from_step = False
 
     def see_step(self, log_time: int, message: dict) -> None:
-        if not self.from_step and message.get("event") == "start":
-            self.zero_ns = log_time - round(message["actual_s"] * 1e9)
+        if message.get("event") == "start":
+            self.see_start(log_time, message["actual_s"])
+
+    def see_start(self, log_time: int, actual_s: float) -> None:
+        """A step started at `actual_s` on the show clock: the first one fixes the zero."""
+        if not self.from_step:
+            self.zero_ns = log_time - round(actual_s * 1e9)
             self.from_step = True
 
     def seconds(self, log_time: int | None) -> float | None:

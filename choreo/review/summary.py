@@ -242,7 +242,7 @@ def summarize_reader(reader: LogReader) -> Summary:
                 continue
             record = parse(topic, data)
             if topic == RX_TOPIC:
-                tally.reply(record, summary)
+                tally.reply(record)
                 tracker.rx(record, log_time)
             elif topic == TX_TOPIC:
                 tally.frame(record, summary)
@@ -287,7 +287,7 @@ class _Tally:
         self.retries = self.late = self.late_by_retries = self.started = self.stale = 0
         self.pending_seq = -1  # the frame waiting for its reply
 
-    def reply(self, rx: RxRecord, summary: Summary) -> None:
+    def reply(self, rx: RxRecord) -> None:
         self.replies[rx.kind] = self.replies.get(rx.kind, 0) + 1
         if rx.seq == self.pending_seq:
             self.pending_seq = -1

@@ -21,6 +21,7 @@ from choreo.review.frames import ShowClock
 from choreo.logformat import (ABORT_LABEL, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, MotionPlay, MotionTracker,
                               RxRecord, StepRecord, is_late, parse, slipped)
 from choreo.review.reader import Cut, LogReader
+from choreo.textfit import fit
 
 
 class PlotUnavailable(ChoreoError):
@@ -61,6 +62,11 @@ class MotionRun:
         if self.start_s is None or self.end_s is None or self.measured:
             return self.end_s
         return min(self.end_s, self.start_s + self.expected_s)
+
+    @property
+    def started_late(self) -> bool:
+        """It started: late at its step's start, or by retries (the summary's rule, kept in late_ms)."""
+        return self.late_ms > LATE_MS and self.start_s is not None
 
     @property
     def actual_s(self) -> float | None:
@@ -146,7 +152,8 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
             record = parse(topic, data)
             last_ns = log_time if last_ns is None else max(last_ns, log_time)
             if topic == STEP_TOPIC:
-                clock.see_step(log_time, record.to_json())
+                if record.event == "start":
+                    clock.see_start(log_time, record.actual_s)
                 _see_step(timeline, steps, record, clock.seconds(log_time))
             elif topic == TX_TOPIC:
                 tracker.tx(record, log_time)
@@ -249,7 +256,7 @@ def _bar(run: MotionRun, scale: float, width: int) -> str:
         bar[i] = "."
     for i in _cells(run.start_s, run.drawn_end_s, scale, width):
         bar[i] = "=" if i in planned else "#"
-    if run.late_ms > LATE_MS and run.start_s is not None:
+    if run.started_late:
         bar[_cells(run.start_s, run.start_s, scale, width)[0]] = "!"
     return "".join(bar)
 
@@ -258,7 +265,7 @@ def render_text(timeline: Timeline, columns: int = 80) -> Iterator[str]:
     """The timeline as text that fits `columns`: a row a motion, the cues above, then the marks.
     Narrower than the planned and actual figures and a 20-column bar, the figures go."""
     for line in _text_lines(timeline, columns):
-        yield _fit(line, columns)
+        yield fit(line, columns)
 
 
 def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
@@ -268,11 +275,11 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
     span = timeline.span_s
     scale = width / span
     outcome = f", {timeline.outcome}" if timeline.outcome else ""
-    yield _fit(f"timeline of {timeline.show}: {timeline.end_s:.3f} s on the show clock{outcome}", columns)
-    yield _fit(f"one column = {span / width * 1000:.0f} ms", columns)
-    yield _fit("bars: '-' planned, '#' actual, '=' both, '!' late, ':' not played, 'v' cue", columns)
+    yield f"timeline of {timeline.show}: {timeline.end_s:.3f} s on the show clock{outcome}"
+    yield f"one column = {span / width * 1000:.0f} ms"
+    yield "bars: '-' planned, '#' actual, '=' both, '!' late, ':' not played, 'v' cue"
     if timeline.show_problem:
-        yield _fit(f"(planned lengths: {timeline.show_problem}; 1 s each assumed)", columns)
+        yield f"(planned lengths: {timeline.show_problem}; 1 s each assumed)"
     end = f"{span:.1f} s"
     ruler = f"0 s{'':{max(width - 3 - len(end), 1)}}{end}"[:width]
     yield _row("step", "motion", "planned", "actual", ruler, figures)
@@ -294,9 +301,9 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
     if not timeline.runs:
         yield "  (no motion played)"
     if any(r.ended_by not in ("status", "not started", "not played") for r in timeline.runs):
-        yield _fit("?: no status query saw it end (no `wait: done`): drawn for its expected", columns)
-        yield _fit("   length, '.' up to what stopped it (the next play, or the log's end)", columns)
-    yield from _listed(timeline, columns)
+        yield "?: no status query saw it end (no `wait: done`): drawn for its expected"
+        yield "   length, '.' up to what stopped it (the next play, or the log's end)"
+    yield from _listed(timeline)
 
 
 def _row(step: str, title: str, planned: str, actual: str, bar: str, figures: bool) -> str:
@@ -305,23 +312,18 @@ def _row(step: str, title: str, planned: str, actual: str, bar: str, figures: bo
     return f"{step:>5} {title.replace('motion ', '')[:10]:<10}  |{bar}|"
 
 
-def _listed(timeline: Timeline, columns: int) -> Iterator[str]:
+def _listed(timeline: Timeline) -> Iterator[str]:
     if timeline.cues:
-        yield _fit("cues: " + ", ".join(f"{c.name} at {c.show_s:g} s" for c in timeline.cues), columns)
+        yield "cues: " + ", ".join(f"{c.name} at {c.show_s:g} s" for c in timeline.cues)
     for title, marks in (("late plays", timeline.late), ("faults", timeline.faults)):
         yield f"{title}: {len(marks) or 'none'}"
         for mark in marks:
-            yield _fit(f"  {mark.show_s:9.3f} s  {mark.text}", columns)
+            yield f"  {mark.show_s:9.3f} s  {mark.text}"
     if timeline.unplayed:
-        yield _fit(f"not played: {counted(len(timeline.unplayed), 'play')} of the plan after the run "
-                   f"{'ended' if timeline.cut is None else 'was cut'}", columns)
+        yield (f"not played: {counted(len(timeline.unplayed), 'play')} of the plan after the run "
+               f"{'ended' if timeline.cut is None else 'was cut'}")
     if timeline.cut is not None:
-        yield _fit(f"log {timeline.cut.state}: {timeline.cut}", columns)
-
-
-def _fit(line: str, columns: int) -> str:
-    """A line cut to the terminal with '…' (by design: the full text is in `log frames`)."""
-    return line if len(line) <= columns else line[:max(columns - 1, 1)] + "…"
+        yield f"log {timeline.cut.state}: {timeline.cut}"
 
 
 def counted(n: int, word: str) -> str:
@@ -419,7 +421,7 @@ def _draw_run(ax, run: MotionRun, y: int) -> None:  # type: ignore[no-untyped-de
                        facecolors=colour)
         if not run.measured and run.end_s > run.drawn_end_s:
             ax.hlines(y + 0.18, run.drawn_end_s, run.end_s, colors=colour, linestyles="dotted", linewidth=1.5)
-    if run.late_ms > LATE_MS and run.start_s is not None:
+    if run.started_late:
         ax.plot([run.start_s], [y - 0.04], marker="v", color=RED, markersize=9, linestyle="")
         ax.annotate(f"{run.late_ms:.0f} ms late", (run.start_s, y - 0.1), fontsize="x-small", color=RED)
 
