@@ -12,15 +12,16 @@ import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from urllib.parse import parse_qsl, urlencode
 
 from choreo.clock import RunClock, SystemTime, TimeSource
 from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError, did_you_mean
 from choreo.layouts import SEED, Layout, layout_named
 from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
-from choreo.logformat import ERROR
+from choreo.logformat import ERROR, INFO
+from choreo.record import Recorder, RunInfo, default_log_path
 from choreo.runner import RunListener, Runner, RunResult, StopRequest
 from choreo.show.model import DEFAULT_MOTION_S, Plan, Show
+from choreo.sim.options import SimUrl, durations_text
 
 
 @dataclass(frozen=True)
@@ -56,8 +57,7 @@ class Session:
     layout_source: str = "default"  # command line | show | default (assumed)
     unique_log: bool = False  # a default log name already taken gets a suffix instead of a refusal
     clock: RunClock = field(default_factory=RunClock)
-    recorder: object | None = None
-    link: Link | None = None
+    stage: Stage | None = None
     result: RunResult | None = None
 
     @classmethod
@@ -95,8 +95,6 @@ class Session:
         if request.log_path and not request.no_log:
             check_output_folder(Path(request.log_path), "--log")
         if not request.no_log:
-            from choreo.record import default_log_path
-
             log_path = Path(request.log_path) if request.log_path else default_log_path(
                 show.name, request.log_dir)
         return cls(show, plan, start, port, source, baud, timeout, retries + 1, log_path,
@@ -110,52 +108,26 @@ class Session:
 
     # -- opening and closing ---------------------------------------------------------------
 
+    @property
+    def recorder(self):  # type: ignore[no-untyped-def]
+        return self.stage.recorder if self.stage is not None else None
+
+    @property
+    def link(self) -> Link | None:
+        return self.stage.link if self.stage is not None else None
+
     def __enter__(self) -> Session:
-        try:
-            self._open()
-        except BaseException:
-            self.__exit__(*sys.exc_info())
-            raise
+        info = RunInfo(self.show.path, self.show.name, self.show.source, self.port, self.baud,
+                       self.clock.wall_anchor_ns, self.layout.name)
+        self.stage = Stage(info, self.log_path, self.clock, self.timeout, self.tries, self.layout,
+                           unique_log=self.unique_log)
+        self.stage.__enter__()
+        self.log_path = self.stage.log_path
         return self
 
-    def _open(self) -> None:
-        if self.log_path is not None:
-            from choreo.record import Recorder, RunInfo
-
-            info = RunInfo(self.show.path, self.show.name, self.show.source, self.port, self.baud,
-                           self.clock.wall_anchor_ns, self.layout.name)
-            self.recorder = Recorder(self.log_path, info, unique=self.unique_log)
-            self.log_path = self.recorder.path
-        try:
-            self.link = Link.open(self.port, self.baud, timeout=self.timeout, tries=self.tries,
-                                  clock=self.clock, listeners=[self.recorder] if self.recorder else [],
-                                  layout=self.layout)
-        except LinkError as exc:
-            if self.recorder is not None:
-                self.recorder.on_log(ERROR, str(exc))
-            raise
-
     def __exit__(self, exc_type, exc, tb) -> None:
-        if self.link is not None:
-            self.link.close()
-        if self.recorder is not None:
-            self.recorder.close(self._outcome(exc))
-
-    def _outcome(self, exc: BaseException | None) -> dict[str, str]:
-        if self.result is not None and exc is None:
-            meta = self.result.metadata()
-        elif isinstance(exc, (Interrupted, KeyboardInterrupt)):
-            meta = {"outcome": "interrupted"}
-        else:
-            meta = {"outcome": "failed"}
-        if isinstance(exc, ChoreoError):
-            meta["error"] = str(exc)
-            meta["exit_code"] = str(exc.exit_code)
-        elif isinstance(exc, KeyboardInterrupt):
-            meta["exit_code"] = "130"
-        elif exc is None:
-            meta["exit_code"] = "130" if meta["outcome"] == "aborted" else "0"
-        return meta
+        if self.stage is not None:
+            self.stage.__exit__(exc_type, exc, tb)
 
     # -- running ---------------------------------------------------------------------------
 
@@ -173,7 +145,78 @@ class Session:
         self.result = runner.run()
         if self.recorder is not None:
             self.recorder.check()
+        self.stage.outcome = self.result.metadata()
         return self.result
+
+
+@dataclass
+class Stage:
+    """What a run opens and must close: its log, then its port; closed in reverse, the log
+    finished with the run's outcome in its metadata whatever happened.
+
+    `choreo run` and `choreo replay` both open through it, so their logs say the same things
+    the same way: a port that will not open is an error line in a log that exists, and an
+    interrupted or failed run is said so with its exit code.
+    """
+
+    info: RunInfo
+    log_path: Path | None  # None: no log
+    clock: RunClock
+    timeout: float
+    tries: int
+    layout: Layout = SEED
+    unique_log: bool = False
+    opening_note: str | None = None  # logged before the port opens (what this run is)
+    outcome: dict[str, str] | None = None  # the finished run's metadata, set by whoever ran it
+    recorder: Recorder | None = None
+    link: Link | None = None
+
+    def __enter__(self) -> Stage:
+        try:
+            self._open()
+        except BaseException:
+            self.__exit__(*sys.exc_info())
+            raise
+        return self
+
+    def _open(self) -> None:
+        if self.log_path is not None:
+            self.recorder = Recorder(self.log_path, self.info, unique=self.unique_log)
+            self.log_path = self.recorder.path
+            if self.opening_note:
+                self.recorder.on_log(INFO, self.opening_note, self.clock.wall_ns())
+        try:
+            self.link = Link.open(self.info.port, self.info.baud, timeout=self.timeout, tries=self.tries,
+                                  clock=self.clock, listeners=[self.recorder] if self.recorder else [],
+                                  layout=self.layout)
+        except LinkError as exc:
+            if self.recorder is not None:
+                self.recorder.on_log(ERROR, str(exc))
+            raise
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self.link is not None:
+            self.link.close()
+        if self.recorder is not None:
+            self.recorder.close(outcome_metadata(self.outcome, exc))
+
+
+def outcome_metadata(finished: dict[str, str] | None, exc: BaseException | None) -> dict[str, str]:
+    """The log's last word: what the run said when it finished, else why it did not."""
+    if finished is not None and exc is None:
+        meta = dict(finished)
+    elif isinstance(exc, (Interrupted, KeyboardInterrupt)):
+        meta = {"outcome": "interrupted"}
+    else:
+        meta = {"outcome": "failed"}
+    if isinstance(exc, ChoreoError):
+        meta["error"] = str(exc)
+        meta["exit_code"] = str(exc.exit_code)
+    elif isinstance(exc, KeyboardInterrupt):
+        meta["exit_code"] = "130"
+    elif exc is None:
+        meta.setdefault("exit_code", "130" if meta["outcome"] == "aborted" else "0")
+    return meta
 
 
 def simulator_url(show: Show, plan: Plan, baud: int = DEFAULT_BAUD, layout: Layout = SEED) -> str:
@@ -195,13 +238,11 @@ def check_output_folder(path: Path, option: str) -> None:
         raise UsageError(f"{option} {path}: cannot write: folder {folder} {what} (create it first)")
 
 
-def check_simulator_url(url: str) -> None:
-    """A `sim://` URL's options are arguments: a bad one is exit 2 before anything opens, in
-    `run`, `replay` and `choreo sim` alike, not a port that failed to open (exit 3)."""
-    from choreo.urlhandler.protocol_sim import Serial
-
+def simulator(url: str) -> SimUrl:
+    """A `sim://` URL's options; a bad one is exit 2 before anything opens, in `run`, `replay`
+    and `choreo sim` alike, not a port that failed to open (exit 3)."""
     try:
-        Serial.from_url(url)
+        return SimUrl.parse(url)
     except ValueError as exc:
         raise UsageError(f"--port {url}: {exc}") from None
 
@@ -217,24 +258,19 @@ def with_show_durations(url: str, show: Show | None, plan: Plan | None,
     """
     if not is_simulator(url):
         return url
-    check_simulator_url(url)
-    base, _, query = url.partition("?")
-    given = dict(parse_qsl(query, keep_blank_values=True))
+    given = simulator(url)
     added: dict[str, str] = {}
-    if show is not None and plan is not None and "durations" not in given and "motion_s" not in given:
-        durations = {}
-        for motion in plan.motions_used() + ([show.on_abort] if show.on_abort is not None else []):
-            durations[motion] = show.duration_of(motion) or DEFAULT_MOTION_S
+    if show is not None and plan is not None and not given.says("motion_s"):
+        durations = {motion: show.duration_of(motion) or DEFAULT_MOTION_S
+                     for motion in plan.motions_used() + ([show.on_abort] if show.on_abort is not None else [])}
         if durations:
-            added["durations"] = ",".join(f"{m}:{d:g}" for m, d in sorted(durations.items()))
-    if "baud" not in given and baud != DEFAULT_BAUD:
+            added["durations"] = durations_text(durations)
+    if baud != DEFAULT_BAUD:
         added["baud"] = str(baud)
-    if "layout" not in given and layout is not SEED:
+    if layout is not SEED:
         added["layout"] = layout.name
-    if not added:
-        return url
-    extra = urlencode(added, safe=":,")
-    return f"{url}&{extra}" if query else f"sim://?{extra}"
+    amended = given.unless_given(**added)
+    return url if amended == given else str(amended)
 
 
 MAX_TIMEOUT_S = 10.0

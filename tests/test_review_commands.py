@@ -441,6 +441,10 @@ def test_replay_refuses_a_bad_speed_and_a_bad_port(logs, capsys, tmp_path):
     with LogReader(tmp_path / "b.mcap") as reader:  # the failed replay's own log is still closed properly
         list(reader.messages())
         assert reader.complete and reader.result["outcome"] == "failed"
+        assert reader.result["exit_code"] == "3" and "cannot open" in reader.result["error"]
+    # as a run's: what the replay was, then why the port did not open
+    lines = [m["message"] for m in mcap_topics(tmp_path / "b.mcap")["/choreo/log"]]
+    assert lines[0].startswith(f"replay of {logs.complete}") and "cannot open" in lines[-1]
 
 
 def _live_sim() -> str:

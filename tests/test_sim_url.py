@@ -303,3 +303,50 @@ def read_all_quiet(port: serial.SerialBase) -> bytes:
     while more := port.read(64):
         got += more
     return got
+
+
+# -- one object reads and writes sim:// URLs ---------------------------------------------------
+
+
+def test_sim_url_reads_the_options_and_writes_them_back_amended_by_name():
+    from choreo.sim.options import SimUrl
+
+    url = SimUrl.parse("sim://?drop=5&motion_s=0.5")
+    assert url.options.motion_s == 0.5 and url.options.faults.describe() != "no faults"
+    assert url.says("drop") and not url.says("baud")
+    assert str(url) == "sim://?drop=5&motion_s=0.5"
+    assert str(url.with_text(motion_s="0.25", wire="0")) == "sim://?drop=5&motion_s=0.25&wire=0"
+    assert str(url.unless_given(motion_s="9", baud="625000")) == "sim://?drop=5&motion_s=0.5&baud=625000"
+    assert str(SimUrl.parse("sim://")) == "sim://" and SimUrl.parse("SIM://?seed=3").says("seed")
+    written = url.with_text(durations="3:2.5,7:1.2")
+    assert SimUrl.parse(str(written)).options.durations == {3: 2.5, 7: 1.2}
+
+
+@pytest.mark.parametrize("url, message", [
+    ("sim://?drop=5&drop=6", "'drop' is given twice"),
+    ("sim://?bogus=1", "unknown option 'bogus'"),
+    ("loop://", "expected a URL like sim://"),
+    ("sim://host", "options only after '?'"),
+    ("sim://?motion_s=-1", "motion_s='-1'"),
+])
+def test_sim_url_refuses_what_the_simulator_refuses(url, message):
+    from choreo.sim.options import SimUrl
+
+    with pytest.raises(ValueError, match=message.replace("?", r"\?")):
+        SimUrl.parse(url)
+
+
+def test_a_runs_port_gets_what_its_url_leaves_unsaid_and_keeps_what_it_says():
+    from choreo.errors import UsageError
+    from choreo.layouts import layout_named
+    from choreo.session import with_show_durations
+    from choreo.sim.options import SimUrl
+
+    hth4 = layout_named("hth4-2.2")
+    url = with_show_durations("sim://?baud=625000&drop=5", None, None, 625000, hth4)
+    assert url == "sim://?baud=625000&drop=5&layout=hth4-2.2"  # the user's baud once, layout added
+    assert with_show_durations("sim://?drop=5", None, None) == "sim://?drop=5"  # nothing to add
+    assert with_show_durations("/dev/ttyUSB0", None, None, 625000, hth4) == "/dev/ttyUSB0"
+    assert SimUrl.parse(url).options.layout is hth4
+    with pytest.raises(UsageError, match=r"--port sim://\?drop=5&drop=6: sim://: option 'drop' is given twice"):
+        with_show_durations("sim://?drop=5&drop=6", None, None)

@@ -20,14 +20,13 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from urllib.parse import parse_qsl, urlencode
 
 from choreo.clock import TimeSource
-from choreo.errors import ChoreoError, UsageError
+from choreo.errors import UsageError
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import ShowClock, reply_meaning
 from choreo.review.reader import Cut, LogReader, decode
-from choreo.logformat import LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, StepRecord
+from choreo.logformat import LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, StepRecord
 
 LISTED_DIFFERENCES = 200  # kept in the report; all are counted (and written to the new log)
 
@@ -152,24 +151,19 @@ def at_speed(url: str, speed: float) -> str:
     """
     if speed == 1 or not _is_sim(url):
         return url
-    from choreo.sim.options import parse_query
+    from choreo.sim.options import SimUrl, durations_text, ms_text
 
-    base, _, query = url.partition("?")
     try:
-        options = parse_query(query)
+        given = SimUrl.parse(url)
     except ValueError:
         return url
-    scaled = {"motion_s": f"{options.motion_s / speed:.9g}",
-              "reply_ms": f"{options.reply_s * 1e3 / speed:.9g}"}
-    scaled["refresh_ms"] = f"{options.refresh_s * 1e3 / speed:.9g}"
+    options = given.options
+    scaled = {"motion_s": f"{options.motion_s / speed:.9g}", "reply_ms": ms_text(options.reply_s / speed),
+              "refresh_ms": ms_text(options.refresh_s / speed)}
     if options.durations:
-        scaled["durations"] = ",".join(f"{slot}:{seconds / speed:.9g}"
-                                       for slot, seconds in sorted(options.durations.items()))
-    if speed > 1 and "wire=" not in query:
-        scaled["wire"] = "0"
-    pairs = [(name, scaled.pop(name, value)) for name, value in parse_qsl(query, keep_blank_values=True)]
-    pairs += list(scaled.items())
-    return f"{base}?{urlencode(pairs, safe=':,')}"
+        scaled["durations"] = durations_text({slot: seconds / speed for slot, seconds in options.durations.items()})
+    faster = given.unless_given(wire="0") if speed > 1 else given
+    return str(faster.with_text(**scaled))
 
 
 MAX_SPEED = 1000.0
@@ -223,8 +217,9 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
 
         check_output_folder(Path(log_path), "--log")
     from choreo.clock import RunClock, SystemTime
-    from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, Link
-    from choreo.record import Recorder, RunInfo, default_log_path
+    from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S
+    from choreo.record import RunInfo, default_log_path
+    from choreo.session import Stage
 
     with LogReader(source) as reader:
         show = attached_show(reader)
@@ -243,36 +238,23 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         show_path = reader.run_info.get("show_path") or (attachment.name if attachment else "show.yaml")
         report = ReplayReport(reader.path, url, speed, new_log,
                               show_note=None if show.show is not None or port else show.problem)
-        recorder = Recorder(new_log, RunInfo(show_path, name, show_source, url, baud, clock.wall_anchor_ns,
-                                             layout), unique=log_path is None)
-        report.log_path = recorder.path
-        outcome: dict[str, str] = {"outcome": "failed"}
-        try:
-            recorder.on_log(2, f"replay of {reader.path} at speed {speed:g} on {url}", clock.wall_ns())
-            link = Link.open(url, baud, timeout=timeout or DEFAULT_TIMEOUT_S, tries=1, clock=clock,
-                             listeners=[recorder])
+        info = RunInfo(show_path, name, show_source, url, baud, clock.wall_anchor_ns, layout)
+        # the link sends the recorded bytes only: no layout of its own (an HTH4 link would read the
+        # config word at open, a frame the recording does not have)
+        stage = Stage(info, new_log, clock, timeout or DEFAULT_TIMEOUT_S, tries=1, unique_log=log_path is None,
+                      opening_note=f"replay of {reader.path} at speed {speed:g} on {url}")
+        with stage:
+            report.log_path = stage.log_path
             if speed > 1 and _is_sim(url):
                 # its motions and status refresh run `speed` times faster: so may the polls
-                link.status_spacing_s /= speed
-            try:
-                if on_start is not None:
-                    on_start(report)
-                _replay_frames(reader, link, recorder, clock, speed, report, on_difference)
-            finally:
-                link.close()
+                stage.link.status_spacing_s /= speed
+            if on_start is not None:
+                on_start(report)
+            _replay_frames(reader, stage.link, stage.recorder, clock, speed, report, on_difference)
             report.cut = reader.cut
-            outcome = {"outcome": "done", "replay_of": str(reader.path), "speed": f"{speed:g}",
-                       "frames": str(report.frames), "differences": str(report.different),
-                       "show_s": f"{_elapsed(clock):.6f}", "exit_code": "0"}
-        except ChoreoError as exc:
-            outcome["error"] = str(exc)
-            outcome["exit_code"] = str(exc.exit_code)
-            raise
-        except KeyboardInterrupt:
-            outcome = {"outcome": "interrupted", "exit_code": "130"}
-            raise
-        finally:
-            recorder.close(outcome)
+            stage.outcome = {"outcome": "done", "replay_of": str(reader.path), "speed": f"{speed:g}",
+                             "frames": str(report.frames), "differences": str(report.different),
+                             "show_s": f"{_elapsed(clock):.6f}", "exit_code": "0"}
     return report
 
 
@@ -367,7 +349,7 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
                 report.excused += difference.excused
                 if len(report.differences) < LISTED_DIFFERENCES:
                     report.differences.append(difference)
-                recorder.on_log(3, f"replay differs: {difference}", clock.wall_ns())
+                recorder.on_log(WARNING, f"replay differs: {difference}", clock.wall_ns())
                 if on_difference is not None:
                     on_difference(difference)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:

@@ -25,8 +25,8 @@ with dashes on the command line (`--motion-s 0.5 --drop 5`), and both go through
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from urllib.parse import parse_qsl
+from dataclasses import dataclass, field, replace
+from urllib.parse import parse_qsl, urlencode, urlsplit
 
 from choreo.layouts import SEED, Layout, layout_named
 from choreo.protocol import MOTION_SLOTS
@@ -87,15 +87,79 @@ class SimOptions:
         return f"{self.baud} baud 8E1, {board}, {motions}, {status}, {self.faults.describe()}"
 
 
+SCHEME = "sim"
+
+
+@dataclass(frozen=True)
+class SimUrl:
+    """A `sim://` URL as the options it spells out, in their order: read through the same
+    checks as the simulator's, and amended by name rather than by editing the text.
+
+    Choreo fills in what a user's URL leaves unsaid (the show's durations, the run's baud and
+    layout) and a replay rescales it; both go through `unless_given` and `with_text`, so an
+    option the user wrote is never lost or doubled, and the URL written back parses to what
+    was meant.
+    """
+
+    said: tuple[tuple[str, str], ...] = ()
+
+    @classmethod
+    def parse(cls, url: str) -> SimUrl:
+        """ValueError names what is wrong: not a `sim://` URL, an unknown option, a bad value."""
+        parts = urlsplit(url)
+        if parts.scheme.lower() != SCHEME:
+            raise ValueError(f"{url!r}: expected a URL like sim://?motion_s=0.5&drop=5")
+        if parts.netloc or parts.path.strip("/") or parts.fragment:
+            raise ValueError(f"{url!r}: sim:// takes options only after '?', like sim://?motion_s=0.5")
+        try:
+            parsed = cls(_pairs(parts.query))
+            parsed.options
+        except ValueError as exc:
+            raise ValueError(f"sim://: {exc}") from None
+        return parsed
+
+    @property
+    def options(self) -> SimOptions:
+        return parse_options(dict(self.said))
+
+    def says(self, name: str) -> bool:
+        return any(given == name for given, _ in self.said)
+
+    def with_text(self, **values: str) -> SimUrl:
+        """These options set to these texts: in place where the URL says them, else after."""
+        kept = [(name, values.pop(name, text)) for name, text in self.said]
+        return replace(self, said=tuple(kept + list(values.items())))
+
+    def unless_given(self, **values: str) -> SimUrl:
+        """These options added, except where the URL already says them: the user's word wins."""
+        return self.with_text(**{name: text for name, text in values.items() if not self.says(name)})
+
+    def __str__(self) -> str:
+        return f"{SCHEME}://" + (f"?{urlencode(self.said, safe=':,')}" if self.said else "")
+
+
+def durations_text(durations: Mapping[int, float]) -> str:
+    """{3: 2.5, 7: 1.2} -> `3:2.5,7:1.2`: what `parse_durations` reads back."""
+    return ",".join(f"{slot}:{seconds:.9g}" for slot, seconds in sorted(durations.items()))
+
+
+def ms_text(seconds: float) -> str:
+    """Seconds as the milliseconds an `_ms` option takes."""
+    return f"{seconds * 1e3:.9g}"
+
+
 def parse_query(query: str) -> SimOptions:
     """Options from a URL query string (`motion_s=0.5&drop=5`); ValueError says what is wrong."""
-    pairs = parse_qsl(query, keep_blank_values=True)
-    seen: dict[str, str] = {}
-    for name, value in pairs:
-        if name in seen:
-            raise ValueError(f"option {name!r} is given twice")
-        seen[name] = value
-    return parse_options(seen)
+    return parse_options(dict(_pairs(query)))
+
+
+def _pairs(query: str) -> tuple[tuple[str, str], ...]:
+    pairs = tuple(parse_qsl(query, keep_blank_values=True))
+    names = [name for name, _ in pairs]
+    twice = next((name for name in names if names.count(name) > 1), None)
+    if twice is not None:
+        raise ValueError(f"option {twice!r} is given twice")
+    return pairs
 
 
 def parse_options(values: Mapping[str, str]) -> SimOptions:

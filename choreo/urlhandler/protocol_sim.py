@@ -21,13 +21,12 @@ does. The board is on `port.board`, its line on `port.line`.
 from __future__ import annotations
 
 import numbers
-from urllib.parse import urlsplit
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
 from choreo.clock import SystemTime, TimeSource
 from choreo.sim.board import SimBoard
-from choreo.sim.options import SimOptions, parse_query
+from choreo.sim.options import SimOptions, SimUrl
 from choreo.sim.wire import REAL_GAP_S, Line, LineSettings
 
 _MAX_SLEEP_S = 0.05  # upper bound of one sleep while waiting, so a closed port is noticed
@@ -60,15 +59,7 @@ class Serial(SerialBase):
     @staticmethod
     def from_url(url: str) -> SimOptions:
         """The options in a `sim://?...` URL; ValueError names what is wrong."""
-        parts = urlsplit(url)
-        if parts.scheme != "sim":
-            raise ValueError(f"{url!r}: expected a URL like sim://?motion_s=0.5&drop=5")
-        if parts.netloc or parts.path.strip("/") or parts.fragment:
-            raise ValueError(f"{url!r}: sim:// takes options only after '?', like sim://?motion_s=0.5")
-        try:
-            return parse_query(parts.query)
-        except ValueError as exc:
-            raise ValueError(f"sim://: {exc}") from None
+        return SimUrl.parse(url).options
 
     def _reconfigure_port(self) -> None:
         """Record the client's settings: the board ignores a line it cannot read."""
