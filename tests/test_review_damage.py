@@ -174,10 +174,12 @@ def test_polls_next_to_a_motions_end_are_known_from_the_recording(run_log):
 
 
 def test_only_a_status_difference_at_a_motions_end_is_excused():
-    status = lambda executing: {"kind": "status", "executing": executing, "hex": ""}  # noqa: E731
+    from choreo.logformat import RxRecord
+
+    status = lambda executing: RxRecord(7, "status", executing=executing)  # noqa: E731
     at_end = Difference(7, 1, "status", 1.0, status(False), status(True), at_end=True)
     away = Difference(9, 1, "status", 1.5, status(False), status(True), at_end=False)
-    nak = Difference(11, 1, "status", 2.0, {"kind": "nak"}, status(True), at_end=True)
+    nak = Difference(11, 1, "status", 2.0, RxRecord(11, "nak"), status(True), at_end=True)
     assert at_end.excused and not away.excused and not nak.excused
 
 

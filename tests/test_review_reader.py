@@ -18,7 +18,8 @@ from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
 
 from choreo.errors import LogError
-from choreo.review.reader import MAGIC, LogReader, decode
+from choreo.logformat import decode
+from choreo.review.reader import MAGIC, LogReader
 from choreo.review.summary import Distribution, summarize
 
 REPO = Path(__file__).resolve().parent.parent

@@ -24,28 +24,27 @@ COLUMNS = (
 
 def row(exchange: Exchange) -> dict:
     """One frame and its reply as a flat dict (None where the log has no such field)."""
-    tx = exchange.tx or {}
-    rx = exchange.rx or {}
+    tx, rx = exchange.tx, exchange.rx
     return {
         "seq": exchange.seq,
         "tx_time_ns": exchange.tx_ns,
         "tx_show_s": _round(exchange.tx_s),
-        "step": tx.get("step"),
-        "label": tx.get("label"),
-        "frame": tx.get("kind"),
-        "motion": tx.get("motion"),
-        "attempt": tx.get("attempt"),
-        "tx_hex": tx.get("hex"),
-        "frame_meaning": frame_meaning(tx) if exchange.tx else None,
+        "step": tx.step if tx else None,
+        "label": tx.label if tx else None,
+        "frame": tx.kind if tx else None,
+        "motion": tx.motion if tx else None,
+        "attempt": tx.attempt if tx else None,
+        "tx_hex": tx.hex if tx else None,
+        "frame_meaning": frame_meaning(tx) if tx else None,
         "rx_time_ns": exchange.rx_ns,
         "rx_show_s": _round(exchange.rx_s),
-        "reply": rx.get("kind"),
-        "rx_hex": rx.get("hex"),
-        "latency_ms": rx.get("latency_ms"),
-        "executing": rx.get("executing"),
-        "error": rx.get("error"),
-        "stale": rx.get("stale"),  # late replies to earlier frames set aside before this one, as hex
-        "reply_meaning": reply_meaning(rx) if exchange.rx else None,
+        "reply": rx.kind if rx else None,
+        "rx_hex": rx.hex if rx else None,
+        "latency_ms": rx.latency_ms if rx else None,
+        "executing": rx.executing if rx else None,
+        "error": rx.error if rx else None,
+        "stale": rx.stale if rx else None,  # late replies to earlier frames set aside before this one, as hex
+        "reply_meaning": reply_meaning(rx) if rx else None,
     }
 
 

@@ -12,8 +12,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from choreo.protocol import describe_frame, describe_reply
-from choreo.review.reader import LogReader, decode
-from choreo.logformat import RX_TOPIC, STEP_TOPIC, TX_TOPIC
+from choreo.logformat import ABORT_LABEL, RX_TOPIC, STEP_TOPIC, TX_TOPIC, RxRecord, StepRecord, TxRecord, parse
+from choreo.review.reader import LogReader
 from choreo.review.summary import show_zero_ns, stale_replies
 
 class ShowClock:
@@ -28,9 +28,9 @@ class ShowClock:
         self.zero_ns = show_zero_ns(reader)
         self.from_step = False
 
-    def see_step(self, log_time: int, message: dict) -> None:
-        if message.get("event") == "start":
-            self.see_start(log_time, message["actual_s"])
+    def see_step(self, log_time: int, step: StepRecord) -> None:
+        if step.event == "start":
+            self.see_start(log_time, step.actual_s)
 
     def see_start(self, log_time: int, actual_s: float) -> None:
         """A step started at `actual_s` on the show clock: the first one fixes the zero."""
@@ -51,44 +51,44 @@ class Exchange:
     """One frame sent and what came back for it (tx or rx may be missing in a cut or odd log)."""
 
     seq: int
-    tx: dict | None
+    tx: TxRecord | None
     tx_ns: int | None
     tx_s: float | None  # show clock
-    rx: dict | None
+    rx: RxRecord | None
     rx_ns: int | None
     rx_s: float | None
 
     @property
     def step(self) -> int | None:
-        return self.tx.get("step") if self.tx else None
+        return self.tx.step if self.tx else None
 
     @property
     def frame_kind(self) -> str | None:
-        return self.tx.get("kind") if self.tx else None
+        return self.tx.kind if self.tx else None
 
     @property
     def reply_kind(self) -> str | None:
-        return self.rx.get("kind") if self.rx else None
+        return self.rx.kind if self.rx else None
 
 
 def exchanges(reader: LogReader, clock: ShowClock | None = None) -> Iterator[Exchange]:
     """Frames paired with their replies, in the order they were sent."""
     clock = clock or ShowClock(reader)
-    held: tuple[dict, int] | None = None  # a frame whose reply has not come yet
+    held: tuple[TxRecord, int] | None = None  # a frame whose reply has not come yet
     topic, number = None, 0
     try:
         for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC)):
             number += 1
             if topic == STEP_TOPIC:
                 if not clock.from_step:
-                    clock.see_step(log_time, decode(data))
+                    clock.see_step(log_time, parse(topic, data))
                 continue
-            message = decode(data)
-            if topic == TX_TOPIC:
+            message = parse(topic, data, partial=True)  # shown as it is, whoever wrote it
+            if isinstance(message, TxRecord):
                 if held is not None:
                     yield _pair(clock, held[0], held[1], None, None)
                 held = (message, log_time)
-            elif held is not None and held[0].get("seq") == message.get("seq"):
+            elif held is not None and held[0].seq == message.seq:
                 yield _pair(clock, held[0], held[1], message, log_time)
                 held = None
             else:  # a reply without its frame in the log
@@ -99,34 +99,34 @@ def exchanges(reader: LogReader, clock: ShowClock | None = None) -> Iterator[Exc
         yield _pair(clock, held[0], held[1], None, None)
 
 
-def _pair(clock: ShowClock, tx: dict | None, tx_ns: int | None, rx: dict | None, rx_ns: int | None) -> Exchange:
-    seq = (tx or rx or {}).get("seq", 0)
+def _pair(clock: ShowClock, tx: TxRecord | None, tx_ns: int | None, rx: RxRecord | None,
+          rx_ns: int | None) -> Exchange:
+    seq = (tx or rx).seq  # type: ignore[union-attr]
     return Exchange(seq, tx, tx_ns, clock.seconds(tx_ns), rx, rx_ns, clock.seconds(rx_ns))
 
 
-def frame_meaning(tx: dict) -> str:
+def frame_meaning(tx: TxRecord) -> str:
     """What a sent frame does, from its bytes: `CALL 0x000bb8: motion 0`."""
     try:
-        return describe_frame(bytes.fromhex(tx.get("hex", "")))
-    except ValueError:
-        return f"not hex: {tx.get('hex')!r}"
+        return describe_frame(bytes.fromhex(tx.hex))
+    except (TypeError, ValueError):
+        return f"not hex: {tx.hex!r}"
 
 
-def reply_meaning(rx: dict) -> str:
+def reply_meaning(rx: RxRecord) -> str:
     """What came back, in words: `ACK`, `status 0x23: executing`, or why it was refused."""
-    kind = rx.get("kind")
-    if kind in ("timeout", "invalid"):
-        error = rx.get("error") or ("no reply" if kind == "timeout" else "invalid reply")
-        return f"{kind}: {error}"
+    if rx.kind in ("timeout", "invalid"):
+        error = rx.error or ("no reply" if rx.kind == "timeout" else "invalid reply")
+        return f"{rx.kind}: {error}"
     try:
-        return describe_reply(bytes.fromhex(rx.get("hex", "")))
-    except ValueError:
-        return f"not hex: {rx.get('hex')!r}"
+        return describe_reply(bytes.fromhex(rx.hex))
+    except (TypeError, ValueError):
+        return f"not hex: {rx.hex!r}"
 
 
-def stale_note(rx: dict) -> str:
+def stale_note(rx: RxRecord) -> str:
     """` (set aside a late reply: 04 00 06 0a)` after a reply that came with late ones, or ``."""
-    replies = stale_replies(rx.get("stale"))
+    replies = stale_replies(rx.stale)
     if not replies:
         return ""
     what = "a late reply" if len(replies) == 1 else f"{len(replies)} late replies"
@@ -151,15 +151,14 @@ def lines(exchange: Exchange) -> Iterator[str]:
     """`show_s  tx  seq  kind  hex  meaning` and the same for its reply."""
     tx, rx = exchange.tx, exchange.rx
     if tx is not None:
-        step = tx.get("step")
-        where = f"step {step}" if step is not None else "abort" if tx.get("label") == "on_abort" else "-"
-        retry = f" (try {tx['attempt']})" if tx.get("attempt", 1) > 1 else ""
-        yield (f"{_time(exchange.tx_s)}  tx  #{exchange.seq:<6} {where:<9} {tx.get('kind', '?'):<8} "
-               f"{tx.get('hex', ''):<56} {frame_meaning(tx)}{retry}")
+        where = f"step {tx.step}" if tx.step is not None else "abort" if tx.label == ABORT_LABEL else "-"
+        retry = f" (try {tx.attempt})" if tx.attempt > 1 else ""
+        yield (f"{_time(exchange.tx_s)}  tx  #{exchange.seq:<6} {where:<9} {tx.kind:<8} "
+               f"{tx.hex:<56} {frame_meaning(tx)}{retry}")
     if rx is not None:
-        latency = f"{rx.get('latency_ms', 0):.3f} ms"
-        yield (f"{_time(exchange.rx_s)}  rx  #{exchange.seq:<6} {latency:<9} {rx.get('kind', '?'):<8} "
-               f"{rx.get('hex', ''):<56} {reply_meaning(rx)}{stale_note(rx)}")
+        latency = f"{rx.latency_ms:.3f} ms"
+        yield (f"{_time(exchange.rx_s)}  rx  #{exchange.seq:<6} {latency:<9} {rx.kind:<8} "
+               f"{rx.hex:<56} {reply_meaning(rx)}{stale_note(rx)}")
     elif tx is not None:
         yield f"{'':10}  rx  #{exchange.seq:<6} {'':9} {'-':<8} {'':56} no reply in the log (it ends here)"
 

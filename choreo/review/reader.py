@@ -24,7 +24,6 @@ Attachment, Metadata, Data End; everything else is skipped, as the spec allows).
 
 from __future__ import annotations
 
-import json
 import os
 import stat
 import struct
@@ -59,21 +58,6 @@ FOOTER_SIZE = 1 + 8 + 20  # opcode, length, summary start, summary offset start,
 # A message as the reader yields it: topic, log time (wall-clock ns), JSON bytes.
 Message = tuple[str, int, bytes]
 
-_scan_once = json.JSONDecoder().scan_once
-
-
-def decode(data: bytes) -> dict:
-    """A message's JSON as a dict.
-
-    Calls the C scanner directly: `json.loads` spends more than half its time on encoding
-    detection and whitespace checks that a recorder-written message never needs. Anything the
-    scanner does not take (leading whitespace, bad JSON) goes through `json.loads`, whose error
-    is the one to report.
-    """
-    try:
-        return _scan_once(data.decode(), 0)[0]
-    except (StopIteration, ValueError, UnicodeDecodeError):
-        return json.loads(data)
 
 
 

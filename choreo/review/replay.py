@@ -18,15 +18,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from choreo.clock import TimeSource
 from choreo.errors import UsageError
+from choreo.protocol import Frame, FrameKind
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import ShowClock, reply_meaning
-from choreo.review.reader import Cut, LogReader, decode
-from choreo.logformat import LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, StepRecord
+from choreo.logformat import (LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, RxRecord, StepRecord, TxRecord,
+                              parse)
+from choreo.review.reader import Cut, LogReader
 
 LISTED_DIFFERENCES = 200  # kept in the report; all are counted (and written to the new log)
 
@@ -39,8 +41,8 @@ class Difference:
     step: int | None
     frame: str  # frame kind
     show_s: float  # recorded show time of the frame
-    recorded: dict
-    replayed: dict
+    recorded: RxRecord
+    replayed: RxRecord
     late_ms: float = 0.0  # how late the replay sent the frame, on the run's clock (ms)
     at_end: bool = False  # in the recording, the motion's end showed at this poll or the next
 
@@ -48,15 +50,15 @@ class Difference:
     def timing(self) -> bool:
         """Both are good status replies that disagree only on whether the motion is still
         executing: a poll that fell on the motion's end, not a fault on the line."""
-        return self.recorded.get("kind") == self.replayed.get("kind") == "status"
+        return self.recorded.kind == self.replayed.kind == "status"
 
     @property
     def replay_late(self) -> bool:
         """The replay itself sent this poll late (a busy machine: at speed 10, 0.3 ms is 3 ms of
         the run), and it found over a motion the run found still executing: the replay's timing,
         not the board's answer. A poll sent on time that differs is never excused."""
-        return (self.timing and self.recorded.get("executing") is True
-                and self.replayed.get("executing") is False and self.late_ms > LATE_MS)
+        return (self.timing and self.recorded.executing is True
+                and self.replayed.executing is False and self.late_ms > LATE_MS)
 
     @property
     def excused(self) -> bool:
@@ -79,9 +81,9 @@ class Difference:
                 f"{_said(self.recorded)}, replay {_said(self.replayed)}{note}")
 
 
-def _said(reply: dict) -> str:
-    hex_ = reply.get("hex") or ""
-    return f"{reply_meaning(reply)}" + (f" ({hex_})" if hex_ and reply.get("kind") not in ("timeout", "invalid") else "")
+def _said(reply: RxRecord) -> str:
+    shown = reply.hex and reply.kind not in ("timeout", "invalid")
+    return reply_meaning(reply) + (f" ({reply.hex})" if shown else "")
 
 
 @dataclass
@@ -266,7 +268,6 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
                    on_difference: Callable[[Difference], None] | None) -> None:
     """The recorded frames, each at its show time / speed; replies compared as they come."""
     from choreo.link import Tag
-    from choreo.protocol import Frame, FrameKind
 
     at_end = _polls_at_motion_ends(reader)
     recorded_clock = ShowClock(reader)
@@ -275,7 +276,7 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
     last: tuple[float, float] | None = None  # the last event: (recorded show s, replay monotonic)
     restored: tuple[float, float] | None = None  # the last restore: (recorded show s, replay write)
     # recorded seq -> (tx, replayed reply, show s, how late it left on the run's clock in ms)
-    pending: dict[int, tuple[dict, dict, float, float]] = {}
+    pending: dict[int, tuple[TxRecord, RxRecord, float, float]] = {}
 
     def due(show_s: float) -> float:
         """Wait for an event's time: its recorded show time, and never closer to the event before
@@ -302,47 +303,41 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
     try:
         for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC)):
             number += 1
-            message = decode(data)
-            if topic == STEP_TOPIC:
-                recorded_clock.see_step(log_time, message)
+            record = parse(topic, data)
+            if isinstance(record, StepRecord):
+                recorded_clock.see_step(log_time, record)
+                due(recorded_clock.seconds(log_time) or 0.0)
+                retimed = _retimed(record, first_s, speed, clock.mono() - zero_mono)
+                recorder.on_step(_ReplayedStep(clock.wall_ns(), retimed))
+            elif isinstance(record, TxRecord):
                 show_s = recorded_clock.seconds(log_time) or 0.0
-                due(show_s)
-                retimed = _retimed(message, first_s, speed, clock.mono() - zero_mono)
-                recorder.on_step(_ReplayedStep(clock.wall_ns(), StepRecord.from_json(retimed)))
-            elif topic == TX_TOPIC:
-                show_s = recorded_clock.seconds(log_time) or 0.0
-                try:
-                    kind = FrameKind(message["kind"])
-                    frame = Frame(kind, bytes.fromhex(message["hex"]), message.get("motion"))
-                except (KeyError, ValueError):
-                    raise UsageError(f"log {reader.path}: frame #{message.get('seq')} cannot be sent again: "
-                                     f"kind {message.get('kind')!r}, bytes {message.get('hex')!r}") from None
-                if message["seq"] in pending:  # its recorded reply never came: nothing to compare
-                    pending.pop(message["seq"])
+                frame = _frame(reader, record)
+                if record.seq in pending:  # its recorded reply never came: nothing to compare
+                    pending.pop(record.seq)
                     report.unmatched += 1
                 target = due(show_s)
-                reply = link.send(frame, message.get("attempt", 1), Tag(message.get("step"), message.get("label")))
+                reply = link.send(frame, record.attempt, Tag(record.step, record.label))
                 report.frames += 1
-                replayed = {"kind": reply.kind.value, "hex": reply.hex, "executing": reply.executing,
-                            "error": reply.error}
+                replayed = RxRecord(record.seq, reply.kind.value, reply.hex, executing=reply.executing,
+                                    error=reply.error)
                 written = getattr(link, "last_tx_mono", target)  # after any wait in the link
-                if kind is FrameKind.RESTORE:
+                if frame.kind is FrameKind.RESTORE:
                     restored = (show_s, written)
                 late_ms = _late_ms(show_s, written, target, restored, speed)
-                pending[message["seq"]] = (message, replayed, show_s, late_ms)
+                pending[record.seq] = (record, replayed, show_s, late_ms)
                 if len(pending) > 64:  # replies missing from the recording: do not hold them forever
                     pending.pop(next(iter(pending)))
                     report.unmatched += 1
             else:
-                held = pending.pop(message.get("seq"), None)
+                held = pending.pop(record.seq, None)
                 if held is None:
                     continue
                 tx, replayed, show_s, late_ms = held
-                if _same(message, replayed):
+                if _same(record, replayed):
                     report.same += 1
                     continue
-                difference = Difference(message["seq"], tx.get("step"), tx.get("kind", "?"), show_s, message,
-                                        replayed, round(late_ms, 3), message["seq"] in at_end)
+                difference = Difference(record.seq, tx.step, tx.kind, show_s, record, replayed,
+                                        round(late_ms, 3), record.seq in at_end)
                 report.different += 1
                 report.timing += difference.timing
                 report.replay_late += difference.replay_late
@@ -357,6 +352,15 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
     report.unmatched += len(pending)
 
 
+def _frame(reader: LogReader, tx: TxRecord) -> Frame:
+    """The recorded frame, to send again byte for byte."""
+    try:
+        return Frame(FrameKind(tx.kind), bytes.fromhex(tx.hex), tx.motion)
+    except (TypeError, ValueError):
+        raise UsageError(f"log {reader.path}: frame #{tx.seq} cannot be sent again: "
+                         f"kind {tx.kind!r}, bytes {tx.hex!r}") from None
+
+
 def _polls_at_motion_ends(reader: LogReader) -> set[int]:
     """The recorded status polls next to a motion's end: the last that saw it executing and the
     first that saw it over (by the seq of the frame they answer)."""
@@ -364,17 +368,17 @@ def _polls_at_motion_ends(reader: LogReader) -> set[int]:
     edges: set[int] = set()
     previous: tuple[int, bool] | None = None
     for topic, _, data in reader.messages((TX_TOPIC, RX_TOPIC)):
-        message = decode(data)
-        if topic == TX_TOPIC:
-            if message.get("kind") == "status":
-                statuses.add(message.get("seq"))
+        record = parse(topic, data)
+        if isinstance(record, TxRecord):
+            if record.kind == "status":
+                statuses.add(record.seq)
             continue
-        executing = message.get("executing")
-        if message.get("seq") not in statuses or not isinstance(executing, bool):
+        executing = record.executing
+        if record.seq not in statuses or not isinstance(executing, bool):
             continue
         if previous is not None and previous[1] != executing:
-            edges.update((previous[0], message["seq"]))
-        previous = (message["seq"], executing)
+            edges.update((previous[0], record.seq))
+        previous = (record.seq, executing)
     return edges
 
 
@@ -394,24 +398,20 @@ def _late_ms(show_s: float, written: float, target: float, restored: tuple[float
     return max(0.0, behind * 1e3 * speed)
 
 
-def _same(recorded: dict, replayed: dict) -> bool:
+def _same(recorded: RxRecord, replayed: RxRecord) -> bool:
     """Same verdict and, where the board answered, the same bytes (a status byte included)."""
-    if recorded.get("kind") != replayed["kind"]:
+    if recorded.kind != replayed.kind:
         return False
-    if replayed["kind"] in ("timeout",):
-        return True
-    return (recorded.get("hex") or "") == (replayed["hex"] or "")
+    return replayed.kind == "timeout" or recorded.hex == replayed.hex
 
 
-def _retimed(message: dict, first_s: float, speed: float, elapsed_s: float) -> dict:
+def _retimed(step: StepRecord, first_s: float, speed: float, elapsed_s: float) -> StepRecord:
     """A recorded step event on the replay's clock (seconds since the replay's first frame)."""
-    fields = dict(message)
-    for key in ("planned_s", "estimated_s"):
-        if isinstance(fields.get(key), (int, float)):
-            fields[key] = round(max(0.0, (fields[key] - first_s) / speed), 6)
-    fields["actual_s"] = round(elapsed_s, 6)
-    if fields.get("event") == "start" and isinstance(fields.get("planned_s"), (int, float)):
-        fields["late_ms"] = round(max(0.0, (elapsed_s - fields["planned_s"]) * 1e3), 3)
-    if isinstance(fields.get("cue"), (int, float)):
-        fields["cue"] = round(max(0.0, (fields["cue"] - first_s) / speed), 6)
-    return fields
+
+    def moved(seconds: float) -> float:
+        return round(max(0.0, (seconds - first_s) / speed), 6)
+
+    planned_s = moved(step.planned_s)
+    late_ms = round(max(0.0, (elapsed_s - planned_s) * 1e3), 3) if step.event == "start" else step.late_ms
+    return replace(step, planned_s=planned_s, estimated_s=moved(step.estimated_s), actual_s=round(elapsed_s, 6),
+                   late_ms=late_ms, cue=None if step.cue is None else moved(step.cue))
