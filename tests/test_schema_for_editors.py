@@ -38,7 +38,7 @@ def test_every_default_and_example_is_a_value_the_schema_accepts():
 def test_fields_an_editor_fills_in_have_defaults_that_are_not_zero():
     step = SCHEMA["$defs"]["step"]["properties"]
     assert step["timeout"]["default"] == 60 and step["repeat"]["default"] >= 1
-    assert SCHEMA["properties"]["robot"]["properties"]["timeout"]["default"] == 0.2
+    assert SCHEMA["$defs"]["robot"]["properties"]["timeout"]["default"] == 0.2
 
 
 def test_choreo_schema_prints_the_installed_schema(capsys):

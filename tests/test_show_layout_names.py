@@ -59,7 +59,7 @@ def test_a_layout_that_is_not_text_says_so():
 
 
 def test_the_schema_lists_the_layouts_choreo_knows_with_seed_the_default():
-    layout = load_schema()["properties"]["robot"]["properties"]["layout"]
+    layout = load_schema()["$defs"]["robot"]["properties"]["layout"]
     assert tuple(layout["enum"]) == LAYOUT_NAMES
     assert layout["default"] == "seed" == LAYOUT_NAMES[0]
 

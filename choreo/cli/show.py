@@ -39,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run_validate(args: argparse.Namespace) -> int:
     from choreo.errors import ShowError
     from choreo.show.load import load_show
-    from choreo.show.plan import compile_plan
+    from choreo.show.plan import compile_plans
 
     problems = []
     files = []
@@ -50,11 +50,12 @@ def run_validate(args: argparse.Namespace) -> int:
             problems.extend(exc.problems)
             files.append({"path": path, "ok": False, "problems": [_problem_record(p) for p in exc.problems]})
             continue
-        plan = compile_plan(show)
+        plans = compile_plans(show)
         if args.json:
-            files.append({"path": path, "ok": True, **_show_record(show, plan)})
+            record = _show_record(show, *plans.values()) if not show.ensemble else _plans_record(show, plans)
+            files.append({"path": path, "ok": True, **record})
         else:
-            print(summary_line(show, plan), flush=True)
+            print(summary_line(show, plans), flush=True)
     if args.json:
         print(json.dumps({"ok": not problems, "files": files}, ensure_ascii=False))
         return 2 if problems else 0
@@ -81,56 +82,98 @@ def _plan_record(show, plan) -> dict:  # type: ignore[no-untyped-def]
     return {"path": show.path, **_show_record(show, plan), "plan": steps}
 
 
-def summary_line(show, plan) -> str:  # type: ignore[no-untyped-def]  # model types: imported lazily
-    """`shows/x.yaml: ok, 26 steps, motions 0 home, 1 bow, estimated 22.0 s`."""
+def summary_line(show, plans) -> str:  # type: ignore[no-untyped-def]  # model types: imported lazily
+    """`shows/x.yaml: ok, 26 steps, motions 0 home, 1 bow, estimated 22.0 s` (with several
+    robots: `ok, 2 robots, 30 steps, ...`, steps counted per robot)."""
     names: dict[int, str] = {}
     for entry in show.motions.values():
         names.setdefault(entry.number, entry.name)
-    motions = ", ".join(f"{n} {names[n]}" if n in names else str(n) for n in plan.motions_used())
-    late = _late_note(plan)
-    steps = f"{len(plan.steps)} step{'s' if len(plan.steps) != 1 else ''}"
+    used = sorted({m for plan in plans.values() for m in plan.motions_used()})
+    motions = ", ".join(f"{n} {names[n]}" if n in names else str(n) for n in used)
+    late = "".join(_late_note(plan) for plan in plans.values())
+    count = sum(1 for plan in plans.values() for step in plan.steps if step.is_for(plan.robot))
+    steps = f"{count} step{'s' if count != 1 else ''}"
+    robots = f"{len(plans)} robots, " if show.ensemble else ""
     played = f"motions {motions}" if motions else "no motions"
-    return f"{show.path}: ok, {steps}, {played}, estimated {_seconds(plan.estimated_s)}{late}"
+    total = max(plan.estimated_s for plan in plans.values())
+    return f"{show.path}: ok, {robots}{steps}, {played}, estimated {_seconds(total)}{late}"
 
 
 def run_plan(args: argparse.Namespace) -> int:
-    from choreo.show.plan import load_plan
+    from choreo.show.load import load_show
+    from choreo.show.plan import compile_plans
 
-    show, plan = load_plan(args.show)
+    show = load_show(args.show)
+    plans = compile_plans(show)
     if args.json:
-        print(json.dumps(_plan_record(show, plan), ensure_ascii=False))
+        print(json.dumps(_plans_record(show, plans), ensure_ascii=False))
         return 0
     from choreo.cli.terminal import columns
     from choreo.textfit import fit
 
     width = columns()
-    for line in plan_lines(show, plan):
+    lines = plan_lines(show, *plans.values()) if not show.ensemble else ensemble_lines(show, plans)
+    for line in lines:
         print(fit(line, width))
     return 0
 
 
+def _plans_record(show, plans) -> dict:  # type: ignore[no-untyped-def]
+    """One robot: the plan as before; several: `robots`, each robot's plan by name."""
+    if not show.ensemble:
+        return _plan_record(show, *plans.values())
+    from dataclasses import replace
+
+    robots = {}
+    for name, plan in plans.items():
+        mine = replace(plan, steps=tuple(step for step in plan.steps if step.is_for(name)))
+        robots[name] = {key: value for key, value in _plan_record(show, mine).items() if key not in ("path", "name")}
+    return {"path": show.path, "name": show.name, "tracks": bool(show.tracks),
+            "estimated_s": max(plan.estimated_s for plan in plans.values()), "robots": robots}
+
+
+def ensemble_lines(show, plans) -> list[str]:  # type: ignore[no-untyped-def]
+    """A section per robot: the steps it does (shared steps keep their index, so a gap is a step
+    for other robots), then the show's total."""
+    form = "tracks, one per robot" if show.tracks else "shared steps"
+    lines = [f"{show.name} ({show.path}): {len(plans)} robots, {form}, one show clock"]
+    for name, plan in plans.items():
+        lines.append("")
+        lines.append(f"robot {name}: layout {plan.layout}{_layout_note(plan)}")
+        mine = [step for step in plan.steps if step.is_for(name)]
+        lines.extend(_step_table(mine, show.tracks == {} and show.ensemble))
+    total = max(plan.estimated_s for plan in plans.values())
+    lines.append("")
+    lines.append(f"estimated total {_seconds(total)}" + "".join(_late_note(plan) for plan in plans.values()))
+    return lines
+
+
 def plan_lines(show, plan) -> list[str]:  # type: ignore[no-untyped-def]
     """The plan as aligned text: a header, one line a step, the total."""
-    digits = max((len(f"{step.planned_s:.3f}") for step in plan.steps), default=1)
+    lines = [f"{show.name} ({show.path}), layout {plan.layout}{_layout_note(plan)}"]
+    lines.extend(_step_table(plan.steps))
+    lines.append(f"estimated total {_seconds(plan.estimated_s)} ({len(plan.steps)} steps){_late_note(plan)}")
+    return lines
+
+
+def _step_table(steps, shared: bool = False) -> list[str]:  # type: ignore[no-untyped-def]
+    """Header and one aligned line a step; `shared`: who else does each step."""
+    digits = max((len(f"{step.planned_s:.3f}") for step in steps), default=1)
     rows = [
         (
             str(step.index),
             step.path,
             step.label or "-",
             _start(step, digits),
-            step.describe(),
+            step.describe() + (f" [{', '.join(step.robots)}]" if shared and step.robots else ""),
             " | ".join(frame.hex for frame in step.frames) or "-",
         )
-        for step in plan.steps
+        for step in steps
     ]
     header = ("#", "path", "label", "start", "step", "frames")
     widths = [max(len(row[i]) for row in [header, *rows]) for i in range(5)]
-    lines = [f"{show.name} ({show.path}), layout {plan.layout}{_layout_note(plan)}"]
-    for row in [header, *rows]:
-        cells = [row[0].rjust(widths[0])] + [row[i].ljust(widths[i]) for i in range(1, 5)] + [row[5]]
-        lines.append("  ".join(cells))
-    lines.append(f"estimated total {_seconds(plan.estimated_s)} ({len(plan.steps)} steps){_late_note(plan)}")
-    return lines
+    return ["  ".join([row[0].rjust(widths[0])] + [row[i].ljust(widths[i]) for i in range(1, 5)] + [row[5]])
+            for row in [header, *rows]]
 
 
 def _layout_note(plan) -> str:  # type: ignore[no-untyped-def]

@@ -34,6 +34,7 @@ import yaml
 
 from choreo.errors import Problem, ShowError
 from choreo.show.model import (
+    SOLO,
     DEFAULT_DONE_TIMEOUT_S,
     MOTION_NAME_FORMAT,
     Motion,
@@ -584,11 +585,11 @@ _TYPE_WORDS = {
 }
 
 _STEP_KINDS = ("play", "wait", "repeat")
-_STEP_KEYS = frozenset(("play", "wait", "timeout", "repeat", "steps", "at", "label"))
+_STEP_KEYS = frozenset(("play", "wait", "timeout", "repeat", "steps", "at", "label", "robots"))
 
 _REQUIRED = {
     "version": "missing: add `version: 1` (the show format's version)",
-    "steps": "missing: a show needs `steps:`, the list of what it does",
+    "steps": "missing: a show needs `steps:`, the list of what it does (or, with `robots:`, `tracks:`)",
     "number": "missing: give the motion's slot, e.g. `number: 3`",
 }
 
@@ -605,6 +606,14 @@ def _explain(error: Any, data: Any) -> list[tuple[JsonPath, str, bool]]:
             return [(step + ("timeout",), "`timeout` goes with `wait: done` only", True)]
         here = _value_at(data, step)
         return [(step, _step_kind_problem(here if isinstance(here, dict) else {}), False)]
+    if not path and validator in ("oneOf", "not") or validator == "dependentRequired" and not path:
+        return [_whole_show_problem(validator, instance)]
+    if validator == "type" and len(path) == 2 and path[0] == "robots" and not isinstance(instance, dict):
+        return [(path, f"robot {path[1]!r}: expected its settings as a mapping (`port: ...`, or `{{}}` for "
+                       f"none), not {_kind(instance)}; a show for one robot says `robot:`", False)]
+    if "propertyNames" in schema_path and schema_path[1:2] in (["robots"], ["tracks"]):
+        return [(path + (str(instance),), f"robot name {instance!r} must start with a letter and hold only "
+                                          "letters, digits, `_` and `-` (at most 32 characters)", True)]
     if "propertyNames" in schema_path:
         if validator == "maxLength":
             return [(path + (instance,), f"motion name is longer than {expected} characters", True)]
@@ -626,6 +635,18 @@ def _explain(error: Any, data: Any) -> list[tuple[JsonPath, str, bool]]:
     if validator == "anyOf":
         return [(path, _either_problem(path, instance, error.context), False)]
     return [(path, _simple_problem(path, validator, instance, expected), False)]
+
+
+def _whole_show_problem(validator: str, show: Any) -> tuple[JsonPath, str, bool]:
+    """What the show as a whole lacks or has twice: its steps, its robots."""
+    if validator == "not":
+        return (("robots",), "a show has `robot:` (one robot) or `robots:` (several, by name), not both", True)
+    if validator == "dependentRequired":
+        return (("tracks",), "`tracks:` are per robot: name the robots in `robots:` first", True)
+    if isinstance(show, dict) and "steps" in show and "tracks" in show:
+        return (("tracks",), "a show has `steps:` (every robot together) or `tracks:` (one list per robot), "
+                             "not both", True)
+    return (("steps",), _REQUIRED["steps"], False)
 
 
 def _value_at(data: Any, path: JsonPath) -> Any:
@@ -755,7 +776,10 @@ class _Walk:
     motions: dict[str, Any]  # name -> entry, the well-formed ones
     labels: dict[str, JsonPath] = field(default_factory=dict)
     last_cue: tuple[float, JsonPath] | None = None
-    played: bool = False
+    played: set[str] = field(default_factory=set)  # robots that have played a motion so far
+    robots: tuple[str, ...] = (SOLO,)  # the robots of the step list being walked
+    declared: tuple[str, ...] = ()  # `robots:` (empty for a one-robot show)
+    in_track: bool = False
 
     def ok(self, path: JsonPath) -> bool:
         """Whether the value at `path` passed the schema (so it is the type it should be)."""
@@ -772,11 +796,103 @@ def _check_meaning(doc: _Doc, report: _Report) -> None:
         _check_visible(walk, ("name",), data["name"], "the show's name")
     if "on_abort" in data and walk.ok(("on_abort",)):
         _check_motion_ref(walk, ("on_abort",), data["on_abort"])
+    _check_robots(walk)
     steps = data.get("steps")
     if isinstance(steps, list) and walk.ok(("steps",)):
-        total = _check_steps(walk, steps, ("steps",), looping=False)
-        if total > MAX_PLAN_STEPS:
-            report.add(doc.key_mark(("steps",)), ("steps",), f"the show expands to {total:,} steps or more; the limit is {MAX_PLAN_STEPS:,}")
+        walk.robots = walk.declared or (SOLO,)
+        _check_total(walk, ("steps",), _check_steps(walk, steps, ("steps",), looping=False))
+    tracks = data.get("tracks")
+    if isinstance(tracks, dict) and walk.ok(("tracks",)) and walk.declared:
+        _check_tracks(walk, tracks)
+
+
+def _check_total(walk: _Walk, path: JsonPath, total: int) -> None:
+    if total > MAX_PLAN_STEPS:
+        walk.report.add(walk.doc.key_mark(path), path,
+                        f"the show expands to {total:,} steps or more; the limit is {MAX_PLAN_STEPS:,}")
+
+
+def _check_robots(walk: _Walk) -> None:
+    """Each robot's abort motion is a motion; no two robots share a port; `on_fault` is for
+    a robot among several."""
+    data = walk.doc.data
+    robot = data.get("robot")
+    if isinstance(robot, dict) and "on_fault" in robot and walk.ok(("robot", "on_fault")):
+        walk.report.add(walk.doc.key_mark(("robot", "on_fault")), ("robot", "on_fault"),
+                        "`on_fault` decides what the other robots do: it is for a robot in `robots:`")
+    if isinstance(robot, dict) and "on_abort" in robot and walk.ok(("robot", "on_abort")):
+        _check_motion_ref(walk, ("robot", "on_abort"), robot["on_abort"])
+    robots = data.get("robots")
+    if not isinstance(robots, dict) or not walk.ok(("robots",)):
+        return
+    walk.declared = tuple(robots)
+    ports: dict[str, str] = {}
+    for name, settings in robots.items():
+        here = ("robots", name)
+        if not isinstance(settings, dict) or not walk.ok(here):
+            continue
+        if "on_abort" in settings and walk.ok(here + ("on_abort",)):
+            _check_motion_ref(walk, here + ("on_abort",), settings["on_abort"])
+        port = settings.get("port")
+        if not isinstance(port, str) or port.strip().lower().startswith("sim://"):
+            continue  # every simulator is a board of its own
+        first = ports.setdefault(port.strip(), name)
+        if first != name:
+            walk.report.add(walk.doc.mark(here + ("port",)), here + ("port",),
+                            f"port {port} is robot {first!r}'s already: each robot needs its own port")
+
+
+def _check_tracks(walk: _Walk, tracks: dict[str, Any]) -> None:
+    """A track for each declared robot and for no other; each track is walked as a show of
+    its own (cues in order, `wait: done` after a play), labels unique across them all."""
+    total = 0
+    for name, steps in tracks.items():
+        here = ("tracks", name)
+        if name not in walk.declared:
+            walk.report.add(walk.doc.key_mark(here), here, _unknown_robot(name, walk.declared, "a track for"))
+            continue
+        if not isinstance(steps, list) or not walk.ok(here):
+            continue
+        walk.robots, walk.in_track, walk.last_cue, walk.played = (name,), True, None, set()
+        total += _check_steps(walk, steps, here, looping=False)
+    missing = [name for name in walk.declared if name not in tracks]
+    if missing:
+        walk.report.add(walk.doc.key_mark(("tracks",)), ("tracks",),
+                        f"robot {missing[0]!r} has no track: give it one (a robot that stands still "
+                        "can `wait:` for the show's length), or leave it out of `robots:`")
+    _check_total(walk, ("tracks",), total)
+
+
+def _unknown_robot(name: str, declared: tuple[str, ...], what: str) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(name, declared, n=1)
+    hint = f"did you mean {close[0]!r}? " if close else ""
+    return f"{what} robot {name!r}, which `robots:` does not name: {hint}the robots are {', '.join(declared)}"
+
+
+def _step_robots(walk: _Walk, step: dict[str, Any], here: JsonPath) -> tuple[str, ...]:
+    """The robots a step is for, after checking its `robots:`; unknown names are reported."""
+    given = step.get("robots")
+    path = here + ("robots",)
+    if given is None or not walk.ok(path):
+        return walk.robots
+    if not walk.declared:
+        walk.report.add(walk.doc.key_mark(path), path, "a step's `robots:` picks among the show's "
+                        "`robots:`; this show has one robot (`robot:`)")
+        return walk.robots
+    if walk.in_track:
+        walk.report.add(walk.doc.key_mark(path), path, "a step in a track is that robot's own: "
+                        "leave out `robots:` (or write the step in the shared `steps:`)")
+        return walk.robots
+    known = [name for name in given if name in walk.robots]
+    for index, name in enumerate(given):
+        if name not in walk.declared:
+            walk.report.add(walk.doc.mark(path + (index,)), path + (index,), _unknown_robot(name, walk.declared, "a step for"))
+        elif name not in walk.robots:
+            walk.report.add(walk.doc.mark(path + (index,)), path + (index,),
+                            f"robot {name!r} is not among the repeat's robots ({', '.join(walk.robots)})")
+    return tuple(known) or walk.robots
 
 
 def _check_motion_table(walk: _Walk) -> None:
@@ -817,19 +933,25 @@ def _check_steps(walk: _Walk, steps: list[Any], path: JsonPath, looping: bool) -
             continue
         _check_cue(walk, step, here, looping)
         _check_label(walk, step, here)
+        robots = _step_robots(walk, step, here)
         if "play" in step:
             if walk.ok(here + ("play",)):
                 _check_motion_ref(walk, here + ("play",), step["play"])
-            walk.played = True
+            walk.played.update(robots)
             total += 1
-        elif step.get("wait") == "done" and not walk.played:
-            walk.report.add(walk.doc.mark(here + ("wait",)), here + ("wait",), "`wait: done` has no motion to wait for: play one before it")
+        elif step.get("wait") == "done" and not walk.played.issuperset(robots):
+            idle = [name for name in robots if name not in walk.played]
+            whose = f" (robot {idle[0]!r} has played nothing yet)" if walk.declared and not walk.in_track else ""
+            walk.report.add(walk.doc.mark(here + ("wait",)), here + ("wait",),
+                            f"`wait: done` has no motion to wait for{whose}: play one before it")
             total += 1
         elif "repeat" in step and isinstance(step.get("steps"), list) and walk.ok(here + ("steps",)):
             repeat = step["repeat"]
             count = int(repeat) if walk.ok(here + ("repeat",)) and isinstance(repeat, (int, float)) else 1
             _check_repeat_label(walk, step, here)
+            outer, walk.robots = walk.robots, robots
             inner = _check_steps(walk, step["steps"], here + ("steps",), looping or count > 1)
+            walk.robots = outer
             total += min(count * inner, MAX_PLAN_STEPS + 1)
         else:
             total += 1
@@ -908,23 +1030,34 @@ def _build_show(file: str, source: bytes, doc: _Doc) -> Show:
         name: Motion(name, int(entry["number"]), _seconds(entry.get("duration")))
         for name, entry in (data.get("motions") or {}).items()
     }
-    robot = data.get("robot") or {}
-    settings = RobotSettings(
-        port=robot.get("port"),
-        baud=robot.get("baud"),
-        timeout=_seconds(robot.get("timeout")),
-        retries=robot.get("retries"),
-        layout=robot.get("layout"),
-    )
+    robots = {name: _robot(entry or {}, motions) for name, entry in (data.get("robots") or {}).items()}
+    robot = _robot(data.get("robot") or {}, motions) if not robots else next(iter(robots.values()))
     abort = data.get("on_abort")
+    tracks = {name: _build_steps(steps, ("tracks", name), doc, motions)
+              for name, steps in (data.get("tracks") or {}).items()}
     return Show(
         path=file,
         name=data.get("name") or Path(file).stem,
         source=source,
-        robot=settings,
+        robot=robot,
         motions=motions,
         on_abort=None if abort is None else _motion_number(abort, motions),
-        steps=_build_steps(data["steps"], ("steps",), doc, motions),
+        steps=_build_steps(data["steps"], ("steps",), doc, motions) if "steps" in data else (),
+        robots=robots,
+        tracks=tracks,
+    )
+
+
+def _robot(entry: dict[str, Any], motions: dict[str, Motion]) -> RobotSettings:
+    abort = entry.get("on_abort")
+    return RobotSettings(
+        port=entry.get("port"),
+        baud=entry.get("baud"),
+        timeout=_seconds(entry.get("timeout")),
+        retries=entry.get("retries"),
+        layout=entry.get("layout"),
+        on_abort=None if abort is None else _motion_number(abort, motions),
+        on_fault=entry.get("on_fault", "stop"),
     )
 
 
@@ -933,7 +1066,9 @@ def _build_steps(steps: list[dict[str, Any]], path: JsonPath, doc: _Doc, motions
     for index, step in enumerate(steps):
         here = path + (index,)
         line, column = doc.mark(here)
-        common = dict(path=format_path(here), line=line, column=column, label=step.get("label"), at=_seconds(step.get("at")))
+        robots = tuple(step["robots"]) if "robots" in step else None
+        common = dict(path=format_path(here), line=line, column=column, label=step.get("label"),
+                      at=_seconds(step.get("at")), robots=robots)
         if "repeat" in step:
             inner = _build_steps(step["steps"], here + ("steps",), doc, motions)
             built.append(Repeat(count=int(step["repeat"]), steps=inner, **common))

@@ -41,15 +41,22 @@ def _is_letter(ch: str) -> bool:
     return category[0] == "L" or category == "Nl"
 
 
+SOLO = "robot"  # the name a one-robot show's robot goes by (`robot:`)
+ON_FAULT = ("stop", "continue")  # what the show does when one robot's link fails
+
+
 @dataclass(frozen=True)
 class RobotSettings:
-    """`robot:` in a show; every field optional (the command line overrides it)."""
+    """`robot:`, or one entry of `robots:`; every field optional (the command line overrides
+    the link settings)."""
 
     port: str | None = None
     baud: int | None = None
     timeout: float | None = None  # seconds to wait for one reply
     retries: int | None = None  # extra tries after a failed one (default 2: 3 tries in all)
     layout: str | None = None  # one of `choreo.layouts.LAYOUT_NAMES`; None: the show does not say (the run assumes seed)
+    on_abort: int | None = None  # this robot's abort motion; None: the show's `on_abort`
+    on_fault: str = "stop"  # `ON_FAULT`: stop the show, or let the other robots go on
 
 
 @dataclass(frozen=True)
@@ -78,6 +85,7 @@ class Step:
     motion: int | None = None  # PLAY: the slot
     motion_name: str | None = None  # PLAY: the name it was played by, if any
     seconds: float | None = None  # WAIT: how long; WAIT_DONE: the timeout
+    robots: tuple[str, ...] | None = None  # in `steps:` of several robots: who does it (None: all)
 
 
 @dataclass(frozen=True)
@@ -91,6 +99,7 @@ class Repeat:
     column: int = 0
     label: str | None = None  # names the first step of the first iteration
     at: float | None = None  # cues the first step of the first iteration
+    robots: tuple[str, ...] | None = None  # the robots its steps are for, unless a step says
 
 
 @dataclass(frozen=True)
@@ -100,10 +109,27 @@ class Show:
     path: str
     name: str
     source: bytes  # the file as read: hashed into the log's metadata and attached to it
-    robot: RobotSettings = RobotSettings()
+    robot: RobotSettings = RobotSettings()  # `robot:`; with `robots:`, the first robot's
     motions: dict[str, Motion] = field(default_factory=dict)
     on_abort: int | None = None  # motion number played when a run is aborted
     steps: tuple[Step | Repeat, ...] = ()  # the steps as written; `compile_plan` flattens them
+    robots: dict[str, RobotSettings] = field(default_factory=dict)  # `robots:`, in file order; {} for `robot:`
+    tracks: dict[str, tuple[Step | Repeat, ...]] = field(default_factory=dict)  # `tracks:`, by robot
+
+    @property
+    def ensemble(self) -> bool:
+        """Written for several robots (`robots:`): its robots have names, its log per-robot topics."""
+        return bool(self.robots)
+
+    @property
+    def cast(self) -> dict[str, RobotSettings]:
+        """Every robot by name: `robots:`, or the one robot of a `robot:` show as `robot`."""
+        return dict(self.robots) if self.robots else {SOLO: self.robot}
+
+    def abort_motion(self, robot: str) -> int | None:
+        """What `robot` plays when the show is stopped: its own `on_abort`, else the show's."""
+        own = self.cast[robot].on_abort
+        return own if own is not None else self.on_abort
 
     def duration_of(self, motion: int) -> float | None:
         """The expected duration the show gives a motion number (by any of its names)."""
@@ -142,6 +168,10 @@ class PlannedStep:
     planned_s: float = 0.0
     expected_s: float = 0.0  # how long the step is expected to take (WAIT_DONE: the motion's rest)
     frames: tuple[Frame, ...] = ()  # what it sends (WAIT_DONE: one status query, repeated)
+    robots: tuple[str, ...] | None = None  # in steps for several robots: who does it (None: every robot)
+
+    def is_for(self, robot: str) -> bool:
+        return self.robots is None or robot in self.robots
 
     @property
     def name(self) -> str:
@@ -165,9 +195,12 @@ class Plan:
     steps: tuple[PlannedStep, ...]
     estimated_s: float  # estimated total duration on the show clock
     layout: str = "seed"  # the board layout whose frames the steps carry
+    robot: str = SOLO  # whose plan it is
+    unison: bool = False  # shared steps: each starts when every robot it is for is through the one before
 
     def motions_used(self) -> list[int]:
-        return sorted({s.motion for s in self.steps if s.kind is StepKind.PLAY and s.motion is not None})
+        return sorted({s.motion for s in self.steps
+                       if s.kind is StepKind.PLAY and s.motion is not None and s.is_for(self.robot)})
 
     def find(self, ref: str) -> int:
         """The index of a step named by `--from`: an index or a label. KeyError if none."""

@@ -16,6 +16,7 @@ the real end of each motion, so these are estimates only where motions are conce
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,59 +35,91 @@ class _Flat:
     path: str
     label: str | None
     at: float | None
+    robots: tuple[str, ...] | None = None  # who does it (a repeat's robots pass to its steps)
 
 
 def compile_plan(show: Show, layout: Layout | None = None, baud: int | None = None) -> Plan:
-    """The show's steps with repeats expanded, each with its planned start and frames.
+    """The plan of a one-robot show (with several robots, the first robot's): the show's steps
+    with repeats expanded, each with its planned start and frames.
 
     The frames are the ones the run sends with `layout` and `baud` (default: the show's
     robot settings); an hth4-2.2 play's suspend and resume show `layouts.EXAMPLE_CONFIG`, as
     the run makes them from the config word it reads from the board.
     """
-    layout = layout or layout_named(show.robot.layout or "seed")
-    baud = baud or show.robot.baud or protocol.DEFAULT_BAUD
-    planned: list[PlannedStep] = []
+    first = next(iter(show.cast))
+    return compile_plans(show, {first: layout} if layout else {}, {first: baud} if baud else {})[first]
+
+
+def compile_plans(show: Show, layouts: Mapping[str, Layout] | None = None,
+                  bauds: Mapping[str, int] | None = None) -> dict[str, Plan]:
+    """Every robot's plan, by name, on the one show clock.
+
+    With `tracks:` each robot's plan is its own track. With shared `steps:` every robot's plan
+    holds every step (same index, same planned start), the ones for other robots marked so
+    (`PlannedStep.robots`): a step starts when every robot it is for is through the one
+    before, so the plans stay in step. `layouts`/`bauds` override the show's per robot.
+    """
+    layouts = layouts or {}
+    bauds = bauds or {}
+    links = {name: (layouts.get(name) or layout_named(settings.layout or "seed"),
+                    bauds.get(name) or settings.baud or protocol.DEFAULT_BAUD)
+             for name, settings in show.cast.items()}
+    if show.tracks:
+        return {name: _compile(show, _flatten(show.tracks[name]), {name: links[name]}, unison=False)[name]
+                for name in show.cast}
+    return _compile(show, _flatten(show.steps), links, unison=show.ensemble)
+
+
+def _compile(show: Show, flats: list[_Flat], links: dict[str, tuple[Layout, int]], unison: bool) -> dict[str, Plan]:
+    """Time the flat steps: a step is due at max(its cue, the end of the step before), the
+    end being, for `wait: done`, the latest expected end of the motions of the robots it is for."""
+    names = tuple(links)
+    steps: dict[str, list[PlannedStep]] = {name: [] for name in names}
     clock = 0.0  # end of the step before, on the show clock
-    last_play: tuple[float, int, float] | None = None  # (start, motion, expected duration)
-    waited = True  # whether the last play's end has been waited for already
-    sequences: dict[int, tuple[protocol.Frame, ...]] = {}  # frames are immutable: build each once
-    status = (layout.status,)
-    for index, flat in enumerate(_flatten(show.steps)):
+    last_play: dict[str, tuple[float, int, float] | None] = dict.fromkeys(names)  # (start, motion, duration)
+    waited = dict.fromkeys(names, True)  # whether the last play's end has been waited for already
+    sequences: dict[tuple[str, int], tuple[protocol.Frame, ...]] = {}  # frames are immutable: build each once
+    for index, flat in enumerate(flats):
         step = flat.step
+        who = flat.robots or names
         start = max(clock, flat.at or 0.0)  # never rounded below its cue
-        motion = step.motion
+        motions: dict[str, int | None] = {}
         if step.kind is StepKind.PLAY:
-            assert motion is not None, f"{flat.path}: a play step without a motion"
+            assert step.motion is not None, f"{flat.path}: a play step without a motion"
             expected = 0.0
-            last_play = (start, motion, _duration(show, motion))
-            waited = False
-            frames: tuple[protocol.Frame, ...] = sequences.get(motion) or sequences.setdefault(motion, layout.play_sequence(motion, baud=baud))
+            for name in who:
+                last_play[name], waited[name] = (start, step.motion, _duration(show, step.motion)), False
         elif step.kind is StepKind.WAIT:
             expected = float(step.seconds or 0.0)
-            frames = ()
         else:
-            motion = last_play[1] if last_play else None
-            expected = 0.0 if waited or last_play is None else max(0.0, _round(last_play[0] + last_play[2] - start))
-            waited = True
-            frames = status
-        planned.append(
-            PlannedStep(
-                index=index,
-                path=flat.path,
-                kind=step.kind,
-                line=step.line,
-                label=flat.label,
-                motion=motion,
+            expected = max((_rest(last_play[name], start) for name in who if not waited[name]), default=0.0)
+            motions = {name: last_play[name][1] for name in who if last_play[name] is not None}  # type: ignore[index]
+            waited.update(dict.fromkeys(who, True))
+        for name in names:
+            layout, baud = links[name]
+            mine = name in who
+            motion = step.motion if step.kind is StepKind.PLAY else motions.get(name)
+            if not mine or step.kind is StepKind.WAIT:
+                frames: tuple[protocol.Frame, ...] = ()
+            elif step.kind is StepKind.PLAY:
+                key = (name, step.motion)  # type: ignore[assignment]
+                frames = sequences.get(key) or sequences.setdefault(key, layout.play_sequence(step.motion, baud=baud))
+            else:
+                frames = (layout.status,)
+            steps[name].append(PlannedStep(
+                index=index, path=flat.path, kind=step.kind, line=step.line, label=flat.label, motion=motion,
                 motion_name=step.motion_name if step.kind is StepKind.PLAY else _name_of(show, motion),
-                seconds=step.seconds,
-                at=flat.at,
-                planned_s=start,
-                expected_s=expected,
-                frames=frames,
-            )
-        )
+                seconds=step.seconds, at=flat.at, planned_s=start, expected_s=expected, frames=frames,
+                robots=flat.robots if unison else None))
         clock = max(start, _round(start + expected))  # rounding never moves time backwards
-    return Plan(tuple(planned), clock, layout.name)
+    return {name: Plan(tuple(steps[name]), clock, links[name][0].name, name, unison) for name in names}
+
+
+def _rest(play: tuple[float, int, float] | None, now: float) -> float:
+    """What is left at `now` of a play's expected duration."""
+    if play is None:
+        return 0.0
+    return max(0.0, _round(play[0] + play[2] - now))
 
 
 def load_plan(path: str | Path) -> tuple[Show, Plan]:
@@ -102,28 +135,33 @@ def late_cues(plan: Plan) -> list[PlannedStep]:
     return [s for s in plan.steps if s.at is not None and s.planned_s > s.at + 1e-9]
 
 
-def _flatten(steps: tuple[Step | Repeat, ...], prefix: str = "", marks: str = "") -> list[_Flat]:
-    """Run order. `prefix` is the enclosing iteration's path; `marks` its `#K` suffixes for labels."""
+def _flatten(steps: tuple[Step | Repeat, ...], prefix: str = "", marks: str = "",
+             robots: tuple[str, ...] | None = None) -> list[_Flat]:
+    """Run order. `prefix` is the enclosing iteration's path; `marks` its `#K` suffixes for
+    labels; `robots` the enclosing repeat's robots."""
     out: list[_Flat] = []
     for item in steps:
         path = prefix + _local(item.path)
+        who = item.robots or robots
         if isinstance(item, Step):
-            out.append(_Flat(item, path, _label(item.label, marks), item.at))
+            out.append(_Flat(item, path, _label(item.label, marks), item.at, who))
             continue
         for k in range(1, item.count + 1):
-            inner = _flatten(item.steps, f"{path}#{k}.", marks + f"#{k}")
+            inner = _flatten(item.steps, f"{path}#{k}.", marks + f"#{k}", who)
             if k == 1 and inner and (item.at is not None or item.label is not None):
                 first = inner[0]
                 cues = [a for a in (item.at, first.at) if a is not None]
                 at = max(cues) if cues else None
-                inner[0] = _Flat(first.step, first.path, first.label or _label(item.label, marks), at)
+                inner[0] = _Flat(first.step, first.path, first.label or _label(item.label, marks), at, first.robots)
             out.extend(inner)
     return out
 
 
 def _local(path: str) -> str:
-    """The last component of a step's source path: `steps[3].steps[1]` -> `steps[1]`."""
-    return path[path.rfind("steps[") :]
+    """The last component of a step's source path: `steps[3].steps[1]` -> `steps[1]` (a
+    track's own steps keep theirs whole: `tracks.lead[2]`)."""
+    at = path.rfind("steps[")
+    return path[at:] if at >= 0 else path
 
 
 def _label(label: str | None, marks: str) -> str | None:
