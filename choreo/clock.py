@@ -47,6 +47,18 @@ class TimeSource(Protocol):
     def wall_ns(self) -> int:
         """Wall-clock nanoseconds, read once to anchor a run's log times."""
 
+    def admit(self, threads: int) -> None:
+        """Several threads (one a robot) are about to share this time."""
+
+    def leave(self) -> None:
+        """One of them is done."""
+
+    def notify(self) -> None:
+        """Something a `wait_for` predicate reads has changed."""
+
+    def wait_for(self, ready: Callable[[], bool], should_stop: Callable[[], bool]) -> bool:
+        """Block until `ready()` (True) or `should_stop()` (False)."""
+
 
 class SystemTime:
     """The machine's clocks: what a show on stage runs on."""
@@ -62,11 +74,38 @@ class SystemTime:
     def sleep(self, seconds: float) -> None:
         time.sleep(max(seconds, 0.0))
 
+    def __init__(self) -> None:
+        self._changed = threading.Condition()
+
     def spin(self) -> None:
-        pass
+        """Lets other threads run: one robot's thread spinning towards a cue must not hold
+        Python's lock while another robot's cue falls due (it would wait up to a switch interval)."""
+        time.sleep(0)
 
     def wall_ns(self) -> int:
         return time.time_ns()
+
+    # -- threads of one run (several robots) ------------------------------------------------
+
+    def admit(self, threads: int) -> None:
+        """`threads` threads are about to share this time: nothing to do on the machine's."""
+
+    def leave(self) -> None:
+        """A thread admitted with `admit` is done."""
+
+    def notify(self) -> None:
+        """Something a `wait_for` predicate reads has changed."""
+        with self._changed:
+            self._changed.notify_all()
+
+    def wait_for(self, ready: Callable[[], bool], should_stop: Callable[[], bool]) -> bool:
+        """Block until `ready()` (True) or `should_stop()` (False); woken by `notify`."""
+        with self._changed:
+            while not ready():
+                if should_stop():
+                    return False
+                self._changed.wait(0.05)
+        return True
 
 
 class VirtualTime:
@@ -83,7 +122,13 @@ class VirtualTime:
     def __init__(self, start_s: float = 1000.0) -> None:
         self._ns = round(start_s * 1e9)
         self._wall_ns = time.time_ns()
-        self._lock = threading.Lock()
+        self._lock = threading.Condition()
+        # With several threads (one a robot), time is a scheduler's: it moves only when every
+        # admitted thread sleeps or waits, to the earliest wake-up, so each thread sees the
+        # others' frames at the instants they were sent. None: one thread, sleeps advance at once.
+        self._running: int | None = None
+        self._sleepers: dict[object, int] = {}  # token -> wake-up time (ns)
+        self._waiting: dict[object, Callable[[], bool]] = {}  # token -> what it waits for
 
     def now(self) -> float:
         return self._ns / 1e9
@@ -92,11 +137,20 @@ class VirtualTime:
         return self._ns
 
     def sleep(self, seconds: float) -> None:
-        self.advance(seconds)
+        if self._running is None:
+            self.advance(seconds)
+            return
+        with self._lock:
+            token = object()
+            self._sleepers[token] = self._ns + max(1, math.ceil(seconds * 1e9))
+            self._block(token, self._sleepers)
 
     def spin(self) -> None:
-        with self._lock:
-            self._ns += self.SPIN_NS
+        if self._running is None:
+            with self._lock:
+                self._ns += self.SPIN_NS
+            return
+        self.sleep(self.SPIN_NS / 1e9)
 
     def advance(self, seconds: float) -> None:
         """Whole nanoseconds, rounded up: a sleep of any length lets some time pass, so a
@@ -107,6 +161,63 @@ class VirtualTime:
 
     def wall_ns(self) -> int:
         return self._wall_ns + self._ns
+
+    # -- threads of one run (several robots) ------------------------------------------------
+
+    def admit(self, threads: int) -> None:
+        """`threads` threads are about to share this time (call before starting them)."""
+        with self._lock:
+            self._running = (self._running or 0) + threads
+
+    def leave(self) -> None:
+        """An admitted thread is done: the others' time may move on without it."""
+        with self._lock:
+            assert self._running is not None, "leave() without admit()"
+            self._running -= 1
+            if self._running == 0 and not self._sleepers and not self._waiting:
+                self._running = None  # back to one thread
+            else:
+                self._schedule()
+
+    def notify(self) -> None:
+        """Predicates are read when time would move: nothing to wake here."""
+
+    def wait_for(self, ready: Callable[[], bool], should_stop: Callable[[], bool]) -> bool:
+        """Block until `ready()`; no time passes for it unless every other thread waits too."""
+        if ready():
+            return True
+        if self._running is None:
+            return False  # one thread: nobody else can make it ready
+        with self._lock:
+            token = object()
+            self._waiting[token] = lambda: ready() or should_stop()
+            self._block(token, self._waiting)
+        return ready()
+
+    def _block(self, token: object, where: dict) -> None:
+        """This thread stops running until the scheduler takes `token` out of `where`."""
+        assert self._running is not None
+        self._running -= 1
+        self._schedule()
+        while token in where:
+            self._lock.wait()
+
+    def _schedule(self) -> None:
+        """Every admitted thread is blocked: wake the waiters whose condition holds, else move
+        time to the earliest wake-up and wake the sleepers due then. The lock is held."""
+        if self._running != 0:
+            return
+        ready = [token for token, check in self._waiting.items() if check()]
+        if ready:
+            for token in ready:
+                del self._waiting[token]
+        elif self._sleepers:
+            self._ns = max(self._ns, min(self._sleepers.values()))
+            ready = [token for token, due in self._sleepers.items() if due <= self._ns]
+            for token in ready:
+                del self._sleepers[token]
+        self._running += len(ready)
+        self._lock.notify_all()
 
 
 @dataclass

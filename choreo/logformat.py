@@ -26,6 +26,35 @@ CHANNELS = {
     LOG_TOPIC: ("foxglove.Log", "foxglove.Log.schema.json"),
 }
 CHOREO_TOPICS = frozenset(CHANNELS)
+PER_ROBOT = (TX_TOPIC, RX_TOPIC, STEP_TOPIC)  # split by robot in a show for several robots
+
+
+def robot_topic(topic: str, robot: str | None) -> str:
+    """A robot's own topic in a show for several robots: `/rcb4/tx` -> `/rcb4/left/tx` (Foxglove
+    then plots and filters each robot on its own); a one-robot log keeps `/rcb4/tx`."""
+    if robot is None or topic not in PER_ROBOT:
+        return topic
+    head, _, tail = topic.rpartition("/")
+    return f"{head}/{robot}/{tail}"
+
+
+def base_topic(topic: str) -> str:
+    """`/rcb4/left/tx` -> `/rcb4/tx`: what kind of message a topic carries, whoever's it is."""
+    parts = topic.split("/")
+    if len(parts) == 4:
+        joined = f"/{parts[1]}/{parts[3]}"
+        if joined in PER_ROBOT:
+            return joined
+    return topic
+
+
+def channels_for(robots: tuple[str, ...] = ()) -> dict[str, tuple[str, str]]:
+    """Topic -> (schema name, schema file) of a log: the four topics, or with several robots
+    each robot's tx/rx/step and the shared log."""
+    if not robots:
+        return dict(CHANNELS)
+    split = {robot_topic(topic, robot): CHANNELS[topic] for robot in robots for topic in PER_ROBOT}
+    return {**split, LOG_TOPIC: CHANNELS[LOG_TOPIC]}
 METADATA_NAME = "choreo"
 RESULT_METADATA_NAME = "choreo.result"
 
@@ -97,6 +126,7 @@ class TxRecord(_Record):
     step: int | None = None
     label: str | None = None
     motion: int | None = None
+    robot: str | None = None  # whose frame, in a show for several robots
 
 
 @dataclass(frozen=True, slots=True)
@@ -111,6 +141,7 @@ class RxRecord(_Record):
     executing: bool | None = None
     error: str | None = None
     stale: str | None = None  # late replies to earlier frames, set aside, as hex
+    robot: str | None = None  # whose reply, in a show for several robots
 
     @property
     def answered(self) -> bool:
@@ -135,6 +166,7 @@ class StepRecord(_Record):
     motion: int | None = None
     cue: float | None = None
     outcome: str | None = None  # end: ok | failed | aborted | timeout
+    robot: str | None = None  # whose step, in a show for several robots
 
     @property
     def ref(self) -> str:

@@ -46,8 +46,8 @@ from mcap.writer import CompressionType, Writer
 
 from choreo import __version__
 from choreo.errors import LogError
-from choreo.logformat import (CHANNELS, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC,
-                              STEP_TOPIC, TX_TOPIC, LogRecord, RxRecord, TxRecord)
+from choreo.logformat import (LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC, STEP_TOPIC, TX_TOPIC,
+                              LogRecord, RxRecord, TxRecord, channels_for, robot_topic)
 
 if TYPE_CHECKING:
     from choreo.link import RxEvent, TxEvent
@@ -90,8 +90,19 @@ def schema_text(filename: str) -> bytes:
 
 
 @dataclass(frozen=True)
+class RobotInfo:
+    """One robot of a show for several: what the metadata says of its link."""
+
+    name: str
+    port: str
+    baud: int
+    layout: str = "seed"
+
+
+@dataclass(frozen=True)
 class RunInfo:
-    """What the log's `choreo` metadata says about the run."""
+    """What the log's `choreo` metadata says about the run (`port`, `baud` and `layout`: the
+    first robot's; `robots`: every robot of a show for several)."""
 
     show_path: str
     show_name: str
@@ -100,8 +111,22 @@ class RunInfo:
     baud: int
     start_ns: int
     layout: str = "seed"
+    robots: tuple[RobotInfo, ...] = ()
 
     def metadata(self) -> dict[str, str]:
+        return {**self._run(), **self._robots()}
+
+    def _robots(self) -> dict[str, str]:
+        """`robots: left,right` and `robot.left.port` etc.: MCAP metadata is flat text."""
+        if not self.robots:
+            return {}
+        named = {"robots": ",".join(robot.name for robot in self.robots)}
+        for robot in self.robots:
+            named.update({f"robot.{robot.name}.port": robot.port, f"robot.{robot.name}.baud": str(robot.baud),
+                          f"robot.{robot.name}.layout": robot.layout})
+        return named
+
+    def _run(self) -> dict[str, str]:
         return {
             "version": __version__,
             "show": self.show_name,
@@ -131,16 +156,16 @@ def _dumps(message: dict) -> bytes:
     return _encode(message).encode()
 
 
-def _tx_message(event: TxEvent) -> dict:
+def _tx_message(event: TxEvent, robot: str | None = None) -> dict:
     tag = event.tag
     return TxRecord(event.seq, event.frame.kind.value, event.frame.hex, event.attempt,
-                    tag.step if tag else None, tag.label if tag else None, event.frame.motion).to_json()
+                    tag.step if tag else None, tag.label if tag else None, event.frame.motion, robot).to_json()
 
 
-def _rx_message(event: RxEvent) -> dict:
+def _rx_message(event: RxEvent, robot: str | None = None) -> dict:
     reply = event.reply
     return RxRecord(event.seq, reply.kind.value, reply.hex, round(event.latency_s * 1e3, 4), reply.executing,
-                    reply.error, reply.stale.hex(" ") if reply.stale else None).to_json()
+                    reply.error, reply.stale.hex(" ") if reply.stale else None, robot).to_json()
 
 
 def _step_message(event: StepEvent) -> dict:
@@ -154,6 +179,29 @@ def _log_message(entry: tuple[int, str, int]) -> dict:
 
 # A reported event waiting to be written: (topic, log time, how to make its message, the event).
 _Pending = tuple[str, int, Callable[[Any], dict], Any]
+
+
+class RobotTap:
+    """One robot's link, heard by the recorder: frames and replies on `/rcb4/<robot>/...`,
+    each naming the robot."""
+
+    def __init__(self, recorder: Recorder, robot: str) -> None:
+        self.recorder = recorder
+        self.robot = robot
+        self.tx_topic = robot_topic(TX_TOPIC, robot)
+        self.rx_topic = robot_topic(RX_TOPIC, robot)
+
+    def on_tx(self, event: TxEvent) -> None:
+        self.recorder._queue((self.tx_topic, event.time_ns, self._tx, event))
+
+    def on_rx(self, event: RxEvent) -> None:
+        self.recorder._queue((self.rx_topic, event.time_ns, self._rx, event))
+
+    def _tx(self, event: TxEvent) -> dict:
+        return _tx_message(event, self.robot)
+
+    def _rx(self, event: RxEvent) -> dict:
+        return _rx_message(event, self.robot)
 
 
 class Recorder:
@@ -175,7 +223,8 @@ class Recorder:
         self._written = 0  # messages added to the file so far (their MCAP sequence numbers)
         self._chunks = 0  # chunks closed by a flush so far
         self._room = sys.maxsize  # messages reported that the reserve is known to hold
-        schemas = {topic: schema_text(filename) for topic, (_, filename) in CHANNELS.items()}
+        self._topics = channels_for(tuple(robot.name for robot in info.robots))
+        schemas = {topic: schema_text(filename) for topic, (_, filename) in self._topics.items()}
         self._summary_bytes = sum(map(len, schemas.values())) + SUMMARY_SLACK
         self._reserve = DiskReserve(self._file.fileno())
         need = self._summary_bytes + len(info.show_source) + START_SLACK + self._tail_bytes()
@@ -197,8 +246,8 @@ class Recorder:
         """Header, schemas, channels, metadata and the show, on the disk before the port opens."""
         self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
         self._writer.start(profile="", library=f"choreo {__version__}")
-        self._channels = {topic: self._register(topic, CHANNELS[topic][0], schemas[topic])
-                          for topic in CHANNELS}
+        self._channels = {topic: self._register(topic, self._topics[topic][0], schemas[topic])
+                          for topic in self._topics}
         self._writer.add_metadata(METADATA_NAME, info.metadata())
         self._writer.add_attachment(
             create_time=info.start_ns, log_time=info.start_ns,
@@ -241,7 +290,11 @@ class Recorder:
 
     def on_step(self, event: StepEvent) -> None:
         """Queued only: a step's start comes just before its first frame."""
-        self._queue((STEP_TOPIC, event.time_ns, _step_message, event))
+        self._queue((robot_topic(STEP_TOPIC, event.robot), event.time_ns, _step_message, event))
+
+    def for_robot(self, robot: str) -> RobotTap:
+        """The link listener of one robot of several: its frames on its own topics."""
+        return RobotTap(self, robot)
 
     def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
         """Queued only: a late-cue warning comes just before the cue's first frame."""

@@ -35,12 +35,13 @@ class StepEvent:
     time_ns: int
     late_ms: float = 0.0
     outcome: str | None = None  # end: ok | failed | aborted | timeout
+    robot: str | None = None  # whose step, in a show for several robots
 
     def record(self) -> StepRecord:
         step = self.step
         return StepRecord(step.index, step.kind.value, self.event, round(self.actual_s, 6),
                           round(self.planned_s, 6), round(step.planned_s, 6), round(self.late_ms, 3),
-                          step.path, step.label, step.motion, step.at, self.outcome)
+                          step.path, step.label, step.motion, step.at, self.outcome, self.robot)
 
 
 class RunListener(Protocol):
@@ -85,13 +86,26 @@ class WaitTimeout(LinkError):
     """`wait: done` gave up: the board kept saying the motion is executing."""
 
 
+class Cues(Protocol):
+    """Where a robot's runner meets the others on shared steps (`choreo.ensemble.Gates`)."""
+
+    def through(self, index: int, robot: str, end: float | None) -> float | None:
+        """`robot` is through step `index` (ended at `end` on the show clock, None: not its
+        step); blocks until every robot the step was for is, and returns when the next step
+        may start (None: the show is stopping)."""
+
+
 class Runner:
-    """Plays a plan over a link on one monotonic show clock."""
+    """Plays one robot's plan over its link on the show clock (one of several, with `robot`,
+    `zero` and `cues` given by `choreo.ensemble`)."""
 
     def __init__(self, plan: Plan, link: Link, *, clock: RunClock | None = None,
                  listeners: Iterable[RunListener] = (), start: int = 0, on_abort: int | None = None,
                  stop: StopRequest | None = None, poll_s: float = POLL_S,
-                 on_idle: Callable[[], None] | None = None) -> None:
+                 on_idle: Callable[[], None] | None = None, robot: str | None = None,
+                 cues: Cues | None = None) -> None:
+        self.robot = robot
+        self.cues = cues
         self.plan = plan
         self.link = link
         self.clock = clock or link.clock
@@ -110,16 +124,25 @@ class Runner:
 
     # -- the show ----------------------------------------------------------------------------
 
-    def run(self) -> RunResult:
-        """Play the plan from `start`; LinkError on a fault, RunResult otherwise (done or aborted)."""
+    def run(self, zero: float | None = None) -> RunResult:
+        """Play the plan from `start`; LinkError on a fault, RunResult otherwise (done or aborted).
+
+        `zero`: the monotonic time of show time 0, when several robots share the show clock."""
         steps = self.plan.steps[self.start:]
         cursor = self._origin()
-        self._zero = self.clock.mono() - cursor
+        self._zero = self.clock.mono() - cursor if zero is None else zero
         self.link.listeners.append(_RetryReporter(self))
         self.link.should_stop = self.stop
         try:
             for step in steps:
-                cursor = self._run_step(step, cursor)
+                mine = step.is_for(self.robot) if self.robot is not None else True
+                end = self._run_step(step, cursor) if mine else None
+                if self.cues is not None:
+                    cursor = self.cues.through(step.index, self.robot, end)  # type: ignore[arg-type]
+                    if cursor is None:
+                        raise Interrupted(self.stop.reason)
+                elif end is not None:
+                    cursor = end
         except Interrupted:
             return self._abort()
         return RunResult("done", self._run, self._late, self.show_time())
@@ -147,7 +170,7 @@ class Runner:
         # ran long before it) starts at once and counts as late by the overrun.
         planned = step.at if step.at is not None else due
         late_ms = (started - planned) * 1e3
-        self._emit(StepEvent(step, "start", planned, started, self._now_ns(), late_ms))
+        self._emit(StepEvent(step, "start", planned, started, self._now_ns(), late_ms, robot=self.robot))
         self._run += 1
         if late_ms > LATE_MS and step.kind is StepKind.PLAY:
             # Only a play's lateness shows on stage; a wait after a play always starts once the
@@ -173,7 +196,7 @@ class Runner:
             self._log(ERROR, str(exc))
             raise
         finally:
-            self._emit(StepEvent(step, "end", planned, self.show_time(), self._now_ns(), slip_ms, outcome))
+            self._emit(StepEvent(step, "end", planned, self.show_time(), self._now_ns(), slip_ms, outcome, self.robot))
 
     def _slip(self, step: PlannedStep, planned: float, already_late: bool) -> float:
         """How late the motion really started: retries delay the sequence that worked.
@@ -260,6 +283,8 @@ class Runner:
             listener.on_step(event)
 
     def _log(self, level: int, message: str) -> None:
+        if self.robot is not None:
+            message = f"robot {self.robot}: {message}"
         for listener in self.listeners:
             listener.on_log(level, message, self._now_ns())
 

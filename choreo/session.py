@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import math
 import sys
-from dataclasses import dataclass, field
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from choreo.clock import RunClock, SystemTime, TimeSource
@@ -18,9 +20,9 @@ from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError, did_y
 from choreo.layouts import SEED, Layout, layout_named
 from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
 from choreo.logformat import ERROR, INFO
-from choreo.record import Recorder, RunInfo, default_log_path
+from choreo.record import Recorder, RobotInfo, RunInfo, default_log_path
 from choreo.runner import RunListener, Runner, RunResult, StopRequest
-from choreo.show.model import DEFAULT_MOTION_S, Plan, Show
+from choreo.show.model import DEFAULT_MOTION_S, Plan, RobotSettings, Show
 from choreo.sim.options import SimUrl, durations_text
 
 
@@ -38,27 +40,44 @@ class RunRequest:
     retries: int | None = None
     layout: str | None = None
     log_dir: str = "runs"
+    robot_ports: Mapping[str, str] = field(default_factory=dict)  # `--port NAME=URL`
 
 
-@dataclass
-class Session:
-    """A prepared run: the checked show, its plan and every setting resolved."""
+@dataclass(frozen=True)
+class RobotLink:
+    """One robot's link, every setting resolved and where it came from."""
 
-    show: Show
-    plan: Plan
-    start: int
+    robot: str
     port: str
     port_source: str  # command line | show | simulator
     baud: int
     timeout: float
     tries: int
-    log_path: Path | None
     layout: Layout = SEED
     layout_source: str = "default"  # command line | show | default (assumed)
+    on_fault: str = "stop"
+
+    @property
+    def assumes_layout(self) -> bool:
+        """Nobody said which layout, and a real board is on the port: the run must say so."""
+        return self.layout_source == "default" and not is_simulator(self.port)
+
+
+@dataclass
+class Session:
+    """A prepared run: the checked show, each robot's plan and link, every setting resolved."""
+
+    show: Show
+    plans: dict[str, Plan]
+    starts: dict[str, int]  # where each robot's plan starts (--from)
+    links: dict[str, RobotLink]
+    log_path: Path | None
+    origin: float = 0.0  # show time of the first step played (--from), 0 for a whole show
     unique_log: bool = False  # a default log name already taken gets a suffix instead of a refusal
     clock: RunClock = field(default_factory=RunClock)
     stage: Stage | None = None
     result: RunResult | None = None
+    dropouts: list = field(default_factory=list)  # robots that dropped out (on_fault: continue)
 
     @classmethod
     def prepare(cls, request: RunRequest, time_source: TimeSource | None = None) -> Session:
@@ -67,44 +86,71 @@ class Session:
         `time_source`: what the run's clock reads, the machine's time unless given (virtual
         time drives only the in-process simulator: a real port is then refused at open)."""
         from choreo.show.load import load_show
-        from choreo.show.plan import compile_plan
+        from choreo.show.plan import compile_plans
 
         show = load_show(request.show_path)
-        robot = show.robot
-        baud = _pick(request.baud, robot.baud, DEFAULT_BAUD)
-        if baud not in BAUD_RATES:
-            raise UsageError(f"baud {baud}: the RCB-4 runs at {', '.join(map(str, BAUD_RATES))}")
-        layout, layout_source = _layout(request.layout, robot.layout)
-        plan = compile_plan(show, layout, baud)
-        start = _start_index(plan, request.from_step)
-        timeout = float(_pick(request.timeout, robot.timeout, DEFAULT_TIMEOUT_S))
-        retries = int(_pick(request.retries, robot.retries, DEFAULT_TRIES - 1))
-        check_timeout(timeout)
-        if not 0 <= retries <= MAX_RETRIES:
-            raise UsageError(f"--retries {retries}: give 0..{MAX_RETRIES} retries after a failed try")
-        if request.port is not None:
-            if not request.port.strip():
-                raise UsageError("--port: empty; give a device (/dev/ttyUSB0, COM3) or a URL (sim://)")
-            port, source = request.port, "command line"
-        elif robot.port:
-            port, source = robot.port, "show"
-        else:
-            port, source = "sim://", "simulator"
-        port = with_show_durations(port, show, plan, baud, layout)
+        _check_robot_ports(show, request)
+        links = {name: _robot_link(name, settings, request, show) for name, settings in show.cast.items()}
+        plans = compile_plans(show, {n: link.layout for n, link in links.items()},
+                              {n: link.baud for n, link in links.items()})
+        links = {name: replace(link, port=with_show_durations(link.port, show, plans[name], link.baud, link.layout,
+                                                              show.abort_motion(name)))
+                 for name, link in links.items()}
+        starts, origin = _starts(show, plans, request.from_step)
         log_path = None
         if request.log_path and not request.no_log:
             check_output_folder(Path(request.log_path), "--log")
         if not request.no_log:
             log_path = Path(request.log_path) if request.log_path else default_log_path(
                 show.name, request.log_dir)
-        return cls(show, plan, start, port, source, baud, timeout, retries + 1, log_path,
-                   layout, layout_source, unique_log=request.log_path is None,
+        return cls(show, plans, starts, links, log_path, origin, unique_log=request.log_path is None,
                    clock=RunClock(time_source or SystemTime()))
+
+    # -- the first (or only) robot: what a one-robot run reports ------------------------------
+
+    @property
+    def first(self) -> RobotLink:
+        return next(iter(self.links.values()))
+
+    @property
+    def plan(self) -> Plan:
+        return self.plans[self.first.robot]
+
+    @property
+    def start(self) -> int:
+        return self.starts[self.first.robot]
+
+    @property
+    def port(self) -> str:
+        return self.first.port
+
+    @property
+    def port_source(self) -> str:
+        return self.first.port_source
+
+    @property
+    def baud(self) -> int:
+        return self.first.baud
+
+    @property
+    def layout(self) -> Layout:
+        return self.first.layout
+
+    @property
+    def layout_source(self) -> str:
+        return self.first.layout_source
+
+    @property
+    def timeout(self) -> float:
+        return self.first.timeout
+
+    @property
+    def tries(self) -> int:
+        return self.first.tries
 
     @property
     def assumes_layout(self) -> bool:
-        """Nobody said which layout, and a real board is on the port: the run must say so."""
-        return self.layout_source == "default" and not is_simulator(self.port)
+        return self.first.assumes_layout
 
     # -- opening and closing ---------------------------------------------------------------
 
@@ -117,10 +163,12 @@ class Session:
         return self.stage.link if self.stage is not None else None
 
     def __enter__(self) -> Session:
+        robots = tuple(RobotInfo(n, l.port, l.baud, l.layout.name) for n, l in self.links.items()) \
+            if self.show.ensemble else ()
         info = RunInfo(self.show.path, self.show.name, self.show.source, self.port, self.baud,
-                       self.clock.wall_anchor_ns, self.layout.name)
-        self.stage = Stage(info, self.log_path, self.clock, self.timeout, self.tries, self.layout,
-                           unique_log=self.unique_log)
+                       self.clock.wall_anchor_ns, self.layout.name, robots)
+        self.stage = Stage(info, self.log_path, self.clock, list(self.links.values()), unique_log=self.unique_log,
+                           named=self.show.ensemble)
         self.stage.__enter__()
         self.log_path = self.stage.log_path
         return self
@@ -134,42 +182,66 @@ class Session:
     def run(self, listeners: list[RunListener] = (), stop: StopRequest | None = None) -> RunResult:
         """Play the show; a log that cannot take more stops it like a stop request (the
         exchange in flight, then the abort motion) and its LogError is the run's outcome."""
-        assert self.link is not None, "open the session first (with session:)"
+        assert self.stage is not None, "open the session first (with session:)"
         stop = stop if stop is not None else StopRequest()
         everyone = ([self.recorder] if self.recorder else []) + list(listeners)
         if self.recorder is not None:
             self.recorder.on_stop = stop.request
-        runner = Runner(self.plan, self.link, clock=self.clock, listeners=everyone, start=self.start,
-                        on_abort=self.show.on_abort, stop=stop,
-                        on_idle=self.recorder.on_idle if self.recorder else None)
-        self.result = runner.run()
+        runners = {name: Runner(self.plans[name], self.stage.links[name], clock=self.clock, listeners=everyone,
+                                start=self.starts[name], on_abort=self.show.abort_motion(name), stop=stop,
+                                on_idle=self.recorder.on_idle if self.recorder else None,
+                                robot=name if self.show.ensemble else None)
+                   for name in self.links}
+        if not self.show.ensemble:
+            self.result = runners[self.first.robot].run()
+        else:
+            self.result = self._run_ensemble(runners, stop, everyone)
         if self.recorder is not None:
             self.recorder.check()
         self.stage.outcome = self.result.metadata()
         return self.result
 
+    def _run_ensemble(self, runners: dict[str, Runner], stop: StopRequest, listeners: list) -> RunResult:
+        from choreo.ensemble import Ensemble, Part
+
+        def log(level: int, message: str) -> None:
+            for listener in listeners:
+                listener.on_log(level, message, self.clock.wall_ns())
+
+        parts = [Part(name, runner, self.links[name].on_fault) for name, runner in runners.items()]
+        ensemble = Ensemble(parts, self.clock, stop, unison=self.plan.unison, log=log, origin=self.origin)
+        try:
+            return ensemble.run().combined()
+        finally:
+            self.dropouts = ensemble.dropouts
+
 
 @dataclass
 class Stage:
-    """What a run opens and must close: its log, then its port; closed in reverse, the log
+    """What a run opens and must close: its log, then its ports; closed in reverse, the log
     finished with the run's outcome in its metadata whatever happened.
 
     `choreo run` and `choreo replay` both open through it, so their logs say the same things
     the same way: a port that will not open is an error line in a log that exists, and an
-    interrupted or failed run is said so with its exit code.
+    interrupted or failed run is said so with its exit code. With several robots (`named`),
+    each link's frames go to its robot's topics.
     """
 
     info: RunInfo
     log_path: Path | None  # None: no log
     clock: RunClock
-    timeout: float
-    tries: int
-    layout: Layout = SEED
+    robots: list[RobotLink]
     unique_log: bool = False
     opening_note: str | None = None  # logged before the port opens (what this run is)
+    named: bool = False  # several robots: topics and messages name each robot
     outcome: dict[str, str] | None = None  # the finished run's metadata, set by whoever ran it
     recorder: Recorder | None = None
-    link: Link | None = None
+    links: dict[str, Link] = field(default_factory=dict)
+
+    @property
+    def link(self) -> Link | None:
+        """The first (or only) robot's link."""
+        return next(iter(self.links.values()), None)
 
     def __enter__(self) -> Stage:
         try:
@@ -185,20 +257,82 @@ class Stage:
             self.log_path = self.recorder.path
             if self.opening_note:
                 self.recorder.on_log(INFO, self.opening_note, self.clock.wall_ns())
+        for robot in self.robots:
+            self.links[robot.robot] = self._open_link(robot)
+
+    def _open_link(self, robot: RobotLink) -> Link:
+        listeners = []
+        if self.recorder is not None:
+            listeners.append(self.recorder.for_robot(robot.robot) if self.named else self.recorder)
         try:
-            self.link = Link.open(self.info.port, self.info.baud, timeout=self.timeout, tries=self.tries,
-                                  clock=self.clock, listeners=[self.recorder] if self.recorder else [],
-                                  layout=self.layout)
+            return Link.open(robot.port, robot.baud, timeout=robot.timeout, tries=robot.tries, clock=self.clock,
+                             listeners=listeners, layout=robot.layout)
         except LinkError as exc:
+            if self.named:
+                exc = LinkError(f"robot {robot.robot}: {exc}")
             if self.recorder is not None:
                 self.recorder.on_log(ERROR, str(exc))
-            raise
+            raise exc from None
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        if self.link is not None:
-            self.link.close()
+        for link in self.links.values():
+            link.close()
         if self.recorder is not None:
             self.recorder.close(outcome_metadata(self.outcome, exc))
+
+
+def _robot_link(name: str, robot: RobotSettings, request: RunRequest, show: Show) -> RobotLink:
+    """One robot's settings: the command line, else the show, else the defaults."""
+    baud = _pick(request.baud, robot.baud, DEFAULT_BAUD)
+    if baud not in BAUD_RATES:
+        raise UsageError(f"baud {baud}: the RCB-4 runs at {', '.join(map(str, BAUD_RATES))}")
+    layout, layout_source = _layout(request.layout, robot.layout)
+    timeout = float(_pick(request.timeout, robot.timeout, DEFAULT_TIMEOUT_S))
+    retries = int(_pick(request.retries, robot.retries, DEFAULT_TRIES - 1))
+    check_timeout(timeout)
+    if not 0 <= retries <= MAX_RETRIES:
+        raise UsageError(f"--retries {retries}: give 0..{MAX_RETRIES} retries after a failed try")
+    given = request.robot_ports.get(name) if show.ensemble else request.port
+    if given is not None:
+        if not given.strip():
+            raise UsageError("--port: empty; give a device (/dev/ttyUSB0, COM3) or a URL (sim://)")
+        port, source = given, "command line"
+    elif robot.port:
+        port, source = robot.port, "show"
+    else:
+        port, source = "sim://", "simulator"
+    return RobotLink(name, port, source, baud, timeout, retries + 1, layout, layout_source, robot.on_fault)
+
+
+ROBOT_PORT = re.compile(r"^([A-Za-z][A-Za-z0-9_-]{0,31})=(.*)$", re.S)
+
+
+def split_robot_port(value: str) -> tuple[str, str] | None:
+    """`--port left=/dev/ttyUSB0` -> ("left", "/dev/ttyUSB0"); a plain port (which may hold
+    `=` itself, `sim://?drop=5`) -> None."""
+    match = ROBOT_PORT.match(value)
+    return (match.group(1), match.group(2)) if match else None
+
+
+def _check_robot_ports(show: Show, request: RunRequest) -> None:
+    """`--port URL` is for a one-robot show, `--port NAME=URL` for one of several."""
+    if show.ensemble and request.port is not None:
+        names = ", ".join(show.cast)
+        raise UsageError(f"--port {request.port}: this show has several robots ({names}): "
+                         f"give --port NAME=URL for each robot to move off its show port")
+    if not show.ensemble and request.robot_ports:
+        name = next(iter(request.robot_ports))
+        raise UsageError(f"--port {name}=...: this show has one robot (`robot:`): give --port URL")
+    for name in request.robot_ports:
+        if name not in show.cast:
+            raise UsageError(f"--port {name}=...: the show has no robot {name!r}"
+                             f"{did_you_mean(name, list(show.cast))}; its robots: {', '.join(show.cast)}")
+    real = [(n, p) for n, p in request.robot_ports.items() if not is_simulator(p)]
+    seen: dict[str, str] = {}
+    for name, port in real:
+        first = seen.setdefault(port, name)
+        if first != name:
+            raise UsageError(f"--port {name}={port}: robot {first} is on that port already: each robot needs its own")
 
 
 def outcome_metadata(finished: dict[str, str] | None, exc: BaseException | None) -> dict[str, str]:
@@ -248,7 +382,7 @@ def simulator(url: str) -> SimUrl:
 
 
 def with_show_durations(url: str, show: Show | None, plan: Plan | None,
-                        baud: int = DEFAULT_BAUD, layout: Layout = SEED) -> str:
+                        baud: int = DEFAULT_BAUD, layout: Layout = SEED, on_abort: int | None = None) -> str:
     """A `sim://` port gets what its URL does not say: the show's durations (when there is a
     show), the run's baud and the run's layout, wherever the URL came from.
 
@@ -261,8 +395,9 @@ def with_show_durations(url: str, show: Show | None, plan: Plan | None,
     given = simulator(url)
     added: dict[str, str] = {}
     if show is not None and plan is not None and not given.says("motion_s"):
+        abort = on_abort if on_abort is not None else show.on_abort
         durations = {motion: show.duration_of(motion) or DEFAULT_MOTION_S
-                     for motion in plan.motions_used() + ([show.on_abort] if show.on_abort is not None else [])}
+                     for motion in plan.motions_used() + ([abort] if abort is not None else [])}
         if durations:
             added["durations"] = durations_text(durations)
     if baud != DEFAULT_BAUD:
@@ -283,6 +418,28 @@ def check_timeout(timeout: float) -> float:
         raise UsageError(f"--timeout {timeout:g}: give the seconds to wait for a reply, "
                          f"more than 0 and at most {MAX_TIMEOUT_S:g}")
     return timeout
+
+
+def _starts(show: Show, plans: dict[str, Plan], ref: str | None) -> tuple[dict[str, int], float]:
+    """Where each robot's plan starts with `--from`, and that step's show time.
+
+    Shared steps: the step by index or label, for every robot. Tracks: the labelled step's
+    planned time, and each track from its first step planned at or after it (a label names a
+    moment of the show, whichever track it is written in)."""
+    if ref is None:
+        return dict.fromkeys(plans, 0), 0.0
+    if not show.tracks:
+        first = next(iter(plans.values()))
+        index = _start_index(first, ref)
+        return dict.fromkeys(plans, index), first.steps[index].planned_s if index < len(first.steps) else 0.0
+    moment = next((step.planned_s for plan in plans.values() for step in plan.steps if step.label == ref), None)
+    if moment is None:
+        labels = [s.label for plan in plans.values() for s in plan.steps if s.label]
+        raise UsageError(f"--from {ref}: no step with that label in any track{did_you_mean(ref, labels)}"
+                         f"{'; labels: ' + ', '.join(labels[:12]) if labels else ''} (tracks are named by labels, "
+                         "not indices)")
+    return {name: next((s.index for s in plan.steps if s.planned_s >= moment - 1e-9), len(plan.steps))
+            for name, plan in plans.items()}, moment
 
 
 def _start_index(plan: Plan, ref: str | None) -> int:

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import IO
 
 from choreo.errors import LogError
-from choreo.logformat import CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME
+from choreo.logformat import CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME, base_topic
 
 MAGIC = b"\x89MCAP0\r\n"
 
@@ -257,7 +257,7 @@ class LogReader:
         topics was written by another tool. Reviewing it would report an empty run (exit 0)."""
         if self.run_info or self.cut is not None or self.library.startswith("choreo"):
             return  # a choreo log, perhaps cut or damaged before its metadata
-        if any(channel.topic in CHOREO_TOPICS for channel in self.channels.values()):
+        if any(base_topic(channel.topic) in CHOREO_TOPICS for channel in self.channels.values()):
             return
         topics = ", ".join(sorted({c.topic for c in self.channels.values()})[:4]) or "none"
         raise self._fail(f"not a choreo log: an MCAP file without choreo's run metadata or topics "
@@ -375,7 +375,8 @@ class LogReader:
     def _route(self, channel_id: int, routes: dict[int, str | None],
                wanted: frozenset[str] | None) -> str | None:
         channel = self.channels.get(channel_id)
-        topic = channel.topic if channel else f"channel {channel_id}"
+        # a robot's own topic (`/rcb4/left/tx`) reads as its kind; the record names the robot
+        topic = base_topic(channel.topic) if channel else f"channel {channel_id}"
         routes[channel_id] = topic if wanted is None or topic in wanted else None
         return routes[channel_id]
 

@@ -199,6 +199,10 @@ class _ReplayedStep:
     time_ns: int
     step: StepRecord
 
+    @property
+    def robot(self) -> str | None:
+        return self.step.robot
+
     def record(self) -> StepRecord:
         return self.step
 
@@ -221,7 +225,8 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
     from choreo.clock import RunClock, SystemTime
     from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S
     from choreo.record import RunInfo, default_log_path
-    from choreo.session import Stage
+    from choreo.session import RobotLink, Stage
+    from choreo.show.model import SOLO
 
     with LogReader(source) as reader:
         show = attached_show(reader)
@@ -243,7 +248,8 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         info = RunInfo(show_path, name, show_source, url, baud, clock.wall_anchor_ns, layout)
         # the link sends the recorded bytes only: no layout of its own (an HTH4 link would read the
         # config word at open, a frame the recording does not have)
-        stage = Stage(info, new_log, clock, timeout or DEFAULT_TIMEOUT_S, tries=1, unique_log=log_path is None,
+        robot = RobotLink(SOLO, url, "command line", baud, timeout or DEFAULT_TIMEOUT_S, tries=1)
+        stage = Stage(info, new_log, clock, [robot], unique_log=log_path is None,
                       opening_note=f"replay of {reader.path} at speed {speed:g} on {url}")
         with stage:
             report.log_path = stage.log_path

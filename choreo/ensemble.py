@@ -1,0 +1,216 @@
+"""Several robots on one show clock: one runner thread per robot, gates for shared steps, faults.
+
+Each robot's `Runner` plays its own plan over its own link in a thread of its own, so a slow
+reply on one line never holds up another robot's frames; all read one show clock (the same
+monotonic zero). A unison play is due at the same instant in every thread, and each thread
+spins the last 2 ms to it on its own, so the robots' first bytes leave together, not one after
+the other.
+
+Shared `steps:` stay in step through `Gates`: a step starts when every robot it is for is
+through the one before. When the gate opens late (the last robot's `wait: done` saw its motion
+end just now), the next step is released a little ahead (`SYNC_S`), so that every thread, woken
+at slightly different moments, still sends at one due time.
+
+Faults: a robot whose link fails either stops the show (`on_fault: stop`, the default: the
+others play their abort motions, the run fails naming the robot) or drops out
+(`on_fault: continue`: the gates stop waiting for it and the others finish; the run still fails
+at the end, saying who dropped out and when).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+from choreo.clock import RunClock
+from choreo.errors import LinkError
+from choreo.logformat import ERROR, WARNING
+from choreo.runner import Runner, RunResult, StopRequest
+
+SYNC_S = 0.002  # how far ahead a gate opened late releases the next step (see the docstring)
+START_S = 0.02  # how far ahead of the threads' start show time 0 is
+
+
+@dataclass
+class _Gate:
+    """One shared step: who has come through it, and where the show clock stood."""
+
+    arrived: set[str] = field(default_factory=set)
+    end: float | None = None  # latest end of the step among the robots it was for
+    release: float | None = None  # when the next step may start, once everyone is through
+
+
+class Gates:
+    """Shared steps: step i + 1 starts when every robot still in the show is through step i."""
+
+    def __init__(self, robots: list[str], clock: RunClock, zero: float, stop: StopRequest) -> None:
+        self.live = set(robots)
+        self.clock = clock
+        self.zero = zero
+        self.stop = stop
+        self._gates: dict[int, _Gate] = {}
+        self._lock = threading.Lock()
+
+    def through(self, index: int, robot: str, end: float | None) -> float | None:
+        with self._lock:
+            gate = self._gates.setdefault(index, _Gate())
+            gate.arrived.add(robot)
+            if end is not None:
+                gate.end = end if gate.end is None else max(gate.end, end)
+            self._open(index, gate)
+        self.clock.source.notify()
+        if not self.clock.source.wait_for(lambda: gate.release is not None, self.stop):
+            return None
+        return gate.release
+
+    def drop(self, robot: str) -> None:
+        """`robot` is out of the show: no gate waits for it any more."""
+        with self._lock:
+            self.live.discard(robot)
+            for index, gate in self._gates.items():
+                self._open(index, gate)
+        self.clock.source.notify()
+
+    def _open(self, index: int, gate: _Gate) -> None:
+        """The last robot through opens the gate; the lock is held."""
+        if gate.release is not None or not self.live <= gate.arrived:
+            return
+        now = self.clock.mono() - self.zero
+        end = gate.end if gate.end is not None else now
+        gate.release = max(end, now + SYNC_S) if end < now + SYNC_S else end
+        self._gates.pop(index - 1, None)  # everyone is past the gate before: forget it
+
+
+@dataclass
+class Dropout:
+    """A robot whose link failed while the others went on (`on_fault: continue`)."""
+
+    robot: str
+    show_s: float
+    error: LinkError
+
+    def __str__(self) -> str:
+        return f"robot {self.robot} dropped out at {self.show_s:.3f} s: {self.error}"
+
+
+class RobotFault(LinkError):
+    """A robot's link failed: the message names the robot (exit 3)."""
+
+
+@dataclass(frozen=True)
+class Part:
+    """One robot's part in the show: its runner and what a fault on its link does."""
+
+    robot: str
+    runner: Runner
+    on_fault: str = "stop"
+
+
+@dataclass
+class EnsembleResult:
+    """The show's outcome for all robots: each runner's result, and who dropped out."""
+
+    results: dict[str, RunResult]
+    dropouts: list[Dropout]
+    show_s: float
+
+    @property
+    def outcome(self) -> str:
+        return "aborted" if any(r.outcome == "aborted" for r in self.results.values()) else "done"
+
+    @property
+    def late_steps(self) -> int:
+        return sum(r.late_steps for r in self.results.values())
+
+    @property
+    def steps_run(self) -> int:
+        return sum(r.steps_run for r in self.results.values())
+
+    def combined(self) -> RunResult:
+        return RunResult(self.outcome, self.steps_run, self.late_steps, self.show_s)
+
+
+class Ensemble:
+    """Runs every robot's part at once on one show clock; see the module's docstring."""
+
+    def __init__(self, parts: list[Part], clock: RunClock, stop: StopRequest, unison: bool,
+                 log: Callable[[int, str], None] = lambda level, message: None, origin: float = 0.0) -> None:
+        self.parts = parts
+        self.origin = origin  # show time of the first step played (0, or --from's step)
+        self.clock = clock
+        self.stop = stop
+        self.unison = unison
+        self.log = log
+        self._errors: dict[str, BaseException] = {}
+        self._results: dict[str, RunResult] = {}
+        self._dropouts: list[Dropout] = []
+        self._zero = 0.0
+        self._gates: Gates | None = None
+
+    def run(self) -> EnsembleResult:
+        """Every part in its thread; LinkError (naming the robot) when a fault stopped the show
+        or a robot dropped out, else the combined result."""
+        # show time 0 a little ahead: every thread is up and spinning when the first cue falls due
+        self._zero = self.clock.mono() - self.origin + START_S
+        if self.unison:
+            self._gates = Gates([p.robot for p in self.parts], self.clock, self._zero, self.stop)
+            for part in self.parts:
+                part.runner.cues = self._gates
+        threads = [threading.Thread(target=self._play, args=(part,), name=f"choreo-{part.robot}", daemon=True)
+                   for part in self.parts]
+        self.clock.source.admit(len(threads))
+        for thread in threads:
+            thread.start()
+        self._join(threads)
+        return self._finish()
+
+    @property
+    def dropouts(self) -> list[Dropout]:
+        return list(self._dropouts)
+
+    def _join(self, threads: list[threading.Thread]) -> None:
+        """Wait for every thread, in slices so that the main thread takes its signals (a first
+        Ctrl-C sets the stop request every runner reads; a second leaves at once)."""
+        for thread in threads:
+            while thread.is_alive():
+                thread.join(0.05)
+
+    def _play(self, part: Part) -> None:
+        try:
+            self._results[part.robot] = part.runner.run(zero=self._zero)
+        except LinkError as exc:
+            self._fault(part, exc)
+        except BaseException as exc:  # noqa: BLE001 - carried to the main thread, raised there
+            self._errors[part.robot] = exc
+            self.stop.request("stopped")
+        finally:
+            if self._gates is not None:
+                self._gates.drop(part.robot)
+            self.clock.source.leave()
+
+    def _fault(self, part: Part, exc: LinkError) -> None:
+        show_s = self.clock.mono() - self._zero
+        if part.on_fault == "continue":
+            dropout = Dropout(part.robot, show_s, exc)
+            self._dropouts.append(dropout)
+            self.log(WARNING, f"{dropout}; the others go on (on_fault: continue)")
+            return
+        self._errors[part.robot] = RobotFault(f"robot {part.robot}: {exc}")
+        self.log(ERROR, f"robot {part.robot}'s link failed at {show_s:.3f} s: the show stops")
+        self.stop.request(f"stopped: robot {part.robot}'s link failed")
+
+    def _finish(self) -> EnsembleResult:
+        if self._errors:
+            first = next(iter(self._errors.values()))
+            raise first
+        show_s = self.clock.mono() - self._zero
+        result = EnsembleResult(dict(self._results), list(self._dropouts), show_s)
+        if self._dropouts and result.outcome == "done":
+            named = "; ".join(str(d) for d in self._dropouts)
+            raise RobotFault(f"{named} (the others finished the show)")
+        return result
+
+
+def parts_of(runners: Mapping[str, Runner], on_fault: Mapping[str, str]) -> list[Part]:
+    return [Part(name, runner, on_fault.get(name, "stop")) for name, runner in runners.items()]
