@@ -277,5 +277,7 @@ class RunClock:
                     if left <= SPIN_S:
                         continue
                 source.sleep(min(left - SPIN_S, slice_s))
+            elif source.virtual:
+                source.sleep(left)  # nothing to gain by spinning on time that only sleeping moves
             else:
                 source.spin()

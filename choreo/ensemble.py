@@ -19,6 +19,7 @@ at the end, saying who dropped out and when).
 
 from __future__ import annotations
 
+import sys
 import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -30,6 +31,7 @@ from choreo.runner import Runner, RunResult, StopRequest
 
 SYNC_S = 0.002  # how far ahead a gate opened late releases the next step (see the docstring)
 START_S = 0.02  # how far ahead of the threads' start show time 0 is
+SWITCH_S = 0.0001  # Python's thread switch interval while several robots play
 
 
 @dataclass
@@ -68,7 +70,7 @@ class Gates:
         """`robot` is out of the show: no gate waits for it any more."""
         with self._lock:
             self.live.discard(robot)
-            for index, gate in self._gates.items():
+            for index, gate in list(self._gates.items()):
                 self._open(index, gate)
         self.clock.source.notify()
 
@@ -160,9 +162,16 @@ class Ensemble:
         threads = [threading.Thread(target=self._play, args=(part,), name=f"choreo-{part.robot}", daemon=True)
                    for part in self.parts]
         self.clock.source.admit(len(threads))
-        for thread in threads:
-            thread.start()
-        self._join(threads)
+        switch = sys.getswitchinterval()
+        # Python hands its lock between threads every 5 ms by default: a robot's thread due to
+        # send could wait that long behind another's work. Handed every 0.1 ms during the show.
+        sys.setswitchinterval(SWITCH_S)
+        try:
+            for thread in threads:
+                thread.start()
+            self._join(threads)
+        finally:
+            sys.setswitchinterval(switch)
         return self._finish()
 
     @property

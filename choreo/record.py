@@ -112,6 +112,7 @@ class RunInfo:
     start_ns: int
     layout: str = "seed"
     robots: tuple[RobotInfo, ...] = ()
+    unison: bool = False  # the robots share their steps (a unison play's starts are comparable)
 
     def metadata(self) -> dict[str, str]:
         return {**self._run(), **self._robots()}
@@ -120,7 +121,7 @@ class RunInfo:
         """`robots: left,right` and `robot.left.port` etc.: MCAP metadata is flat text."""
         if not self.robots:
             return {}
-        named = {"robots": ",".join(robot.name for robot in self.robots)}
+        named = {"robots": ",".join(robot.name for robot in self.robots), "unison": "yes" if self.unison else "no"}
         for robot in self.robots:
             named.update({f"robot.{robot.name}.port": robot.port, f"robot.{robot.name}.baud": str(robot.baud),
                           f"robot.{robot.name}.layout": robot.layout})

@@ -166,7 +166,7 @@ class Session:
         robots = tuple(RobotInfo(n, l.port, l.baud, l.layout.name) for n, l in self.links.items()) \
             if self.show.ensemble else ()
         info = RunInfo(self.show.path, self.show.name, self.show.source, self.port, self.baud,
-                       self.clock.wall_anchor_ns, self.layout.name, robots)
+                       self.clock.wall_anchor_ns, self.layout.name, robots, self.plan.unison)
         self.stage = Stage(info, self.log_path, self.clock, list(self.links.values()), unique_log=self.unique_log,
                            named=self.show.ensemble)
         self.stage.__enter__()

@@ -28,8 +28,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "With no --port and no robot.port in the show, runs against the built-in simulator.",
     )
     parser.add_argument("show", help="the show file (YAML)")
-    parser.add_argument("--port", help="pyserial URL or device: /dev/ttyUSB0, COM3, socket://, "
-                        "rfc2217://, loop://, spy://, sim:// (default: the show's robot.port, else sim://)")
+    parser.add_argument("--port", action="append", metavar="URL|NAME=URL",
+                        help="pyserial URL or device: /dev/ttyUSB0, COM3, socket://, rfc2217://, loop://, "
+                        "spy://, sim:// (default: the show's robot.port, else sim://); with several robots, "
+                        "NAME=URL for one robot (repeatable)")
     parser.add_argument("--baud", type=int, help="115200 (default), 625000 or 1250000")
     parser.add_argument("--layout", choices=LAYOUT_NAMES, help="the board's memory layout: seed "
                         "(the document's frames, default) or hth4-2.2 (motions written by Heart to "
@@ -70,17 +72,20 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     from choreo.session import RunRequest, Session
 
-    request = RunRequest(args.show, port=args.port, baud=args.baud, log_path=args.log,
+    port, robot_ports = port_arguments(args.port)
+    request = RunRequest(args.show, port=port, baud=args.baud, log_path=args.log,
                          no_log=args.no_log, from_step=args.from_step, timeout=args.timeout,
-                         retries=args.retries, layout=args.layout)
+                         retries=args.retries, layout=args.layout, robot_ports=robot_ports)
     session = Session.prepare(request, args.time_source)
     report.session = session
     say = _Say(sys.stderr, quiet=args.quiet)
-    say(_port_line(session))
-    say(_layout_line(session))
-    first = f" from step {session.start}" if session.start else ""
-    say(f"show: {session.show.name}: {len(session.plan.steps)} steps{first}, "
-        f"about {session.plan.estimated_s:.1f} s")
+    if session.show.ensemble:
+        for line in _robot_lines(session):
+            say(line)
+    else:
+        say(_port_line(session))
+        say(_layout_line(session))
+    say(_show_line(session))
     progress = Progress(session, sys.stderr, live=sys.stderr.isatty(), quiet=args.quiet)
     signals = _StopOnSignals()
     try:
@@ -100,6 +105,27 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     finally:
         progress.finish()
         signals.restore()
+
+
+def port_arguments(values: list[str] | None) -> tuple[str | None, dict[str, str]]:
+    """`--port URL` (one robot) and `--port NAME=URL` (repeatable, one robot of several)."""
+    from choreo.errors import UsageError
+    from choreo.session import split_robot_port
+
+    plain: list[str] = []
+    named: dict[str, str] = {}
+    for value in values or []:
+        split = split_robot_port(value)
+        if split is None:
+            plain.append(value)
+        elif split[0] in named:
+            raise UsageError(f"--port {value}: robot {split[0]} has a port already ({named[split[0]]})")
+        else:
+            named[split[0]] = split[1]
+    if len(plain) > 1:
+        raise UsageError(f"--port {plain[1]}: one --port URL for a one-robot show; for several robots "
+                         "give --port NAME=URL")
+    return (plain[0] if plain else None), named
 
 
 class _RunReport:
@@ -123,6 +149,11 @@ class _RunReport:
         if session is not None:
             record.update(name=session.show.name, port=session.port, baud=session.baud, layout=session.layout.name,
                           log=str(session.log_path) if session.log_path and session.recorder else None)
+            if session.show.ensemble:
+                record["robots"] = {link.robot: {"port": link.port, "baud": link.baud, "layout": link.layout.name}
+                                    for link in session.links.values()}
+                record["dropouts"] = [{"robot": d.robot, "show_s": round(d.show_s, 6), "error": str(d.error)}
+                                      for d in session.dropouts]
         else:
             record.update(log=None)
         if result is not None:
@@ -186,6 +217,28 @@ class _Say:
             print(line, file=self.out, flush=True)
         except (OSError, ValueError):
             self.quiet = True
+
+
+def _show_line(session) -> str:
+    first = f" from step {session.start}" if session.start and not session.show.tracks else ""
+    if session.show.tracks and session.origin:
+        first = f" from {session.origin:.3f} s"
+    estimated = max(plan.estimated_s for plan in session.plans.values())
+    if not session.show.ensemble:
+        return f"show: {session.show.name}: {len(session.plan.steps)} steps{first}, about {estimated:.1f} s"
+    form = "tracks" if session.show.tracks else "shared steps"
+    return f"show: {session.show.name}: {len(session.links)} robots, {form}{first}, about {estimated:.1f} s"
+
+
+def _robot_lines(session) -> list[str]:
+    """With several robots: a line per robot, its port and layout and where they came from."""
+    lines = []
+    for link in session.links.values():
+        source = {"simulator": "built-in simulator", "show": "from the show"}.get(link.port_source, "from --port")
+        assumed = ", layout assumed" if link.assumes_layout else ""
+        lines.append(f"robot {link.robot}: {link.port} at {link.baud} baud ({source}), "
+                     f"layout {link.layout.name}{assumed}")
+    return lines
 
 
 def _port_line(session) -> str:
@@ -253,7 +306,7 @@ class Progress:
     def __init__(self, session, out: TextIO, *, live: bool, quiet: bool) -> None:
         self.first = session.start
         self.total = len(session.plan.steps) - session.start
-        self.estimated = session.plan.estimated_s
+        self.estimated = max(plan.estimated_s for plan in session.plans.values())
         self.out = out
         self.live = live and not quiet
         self.quiet = quiet
@@ -270,7 +323,8 @@ class Progress:
             return
         step = event.step
         label = f" '{step.label}'" if step.label else ""
-        where = f"step {step.index}{label} ({step.index - self.first + 1}/{self.total})"
+        robot = f"{event.robot}: " if event.robot else ""
+        where = f"{robot}step {step.index}{label} ({step.index - self.first + 1}/{self.total})"
         if not self.live:
             self._write(f"[{event.actual_s:8.3f} s] {where}: {step.describe()}\n")
             return

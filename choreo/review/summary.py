@@ -15,7 +15,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from choreo.logformat import (CHOREO_TOPICS, ERROR, LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING,
+from choreo.logformat import (CHOREO_TOPICS, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING,
                               LogRecord, MotionPlay, MotionTracker, RxRecord, StepRecord, TxRecord, is_late,
                               parse, slipped)
 from choreo.review.reader import Cut, LogReader
@@ -152,6 +152,8 @@ class Summary:
     warnings: int = 0
     errors: int = 0
     log_lines: list[LogLine] = field(default_factory=list)  # the first LISTED_LOG_LINES warnings/errors
+    robots: dict[str, Summary] = field(default_factory=dict)  # a show for several robots: each one's figures
+    skew: Distribution = field(default_factory=Distribution)  # ms, unison plays: first to last motion start
 
     @property
     def frames_sent(self) -> int:
@@ -189,6 +191,9 @@ def summary_record(summary: Summary) -> dict:
                     for m in sorted(summary.motions.values(), key=lambda m: m.motion)],
         "warnings": summary.warnings,
         "errors": summary.errors,
+        **({"unison_skew": spread(summary.skew),
+            "robots": {name: {k: v for k, v in summary_record(robot).items() if k not in ("log", "state", "cut", "show", "result")}
+                       for name, robot in summary.robots.items()}} if summary.robots else {}),
     }
 
 
@@ -232,7 +237,8 @@ def show_zero_ns(reader: LogReader) -> int | None:
 def summarize_reader(reader: LogReader) -> Summary:
     summary = Summary(reader.path, dict(reader.run_info), None, False, None)
     tally = _Tally(show_zero_ns(reader))
-    tracker = MotionTracker()
+    parts: dict[str, _Part] = {}  # a show for several robots: each robot's own tally and tracker
+    solo = _Part(summary, tally, MotionTracker())
     topic, count, last_time = None, 0, None
     try:
         for topic, log_time, data in reader.messages():
@@ -241,34 +247,98 @@ def summarize_reader(reader: LogReader) -> Summary:
             if topic not in CHOREO_TOPICS:
                 continue
             record = parse(topic, data)
-            if topic == RX_TOPIC:
-                tally.reply(record)
-                tracker.rx(record, log_time)
-            elif topic == TX_TOPIC:
-                tally.frame(record, summary)
-                tracker.tx(record, log_time)
-            elif topic == STEP_TOPIC:
-                tally.step(record, log_time)
-            else:
+            if topic == LOG_TOPIC:
                 tally.log_line(record, log_time, summary)
-            if len(tracker.plays) > 256:
-                _add_plays(summary, tracker.plays, tally.zero)
+                continue
+            robot = record.robot  # type: ignore[union-attr]
+            part = solo if robot is None else parts.get(robot) or parts.setdefault(robot, _Part.named(reader, robot, tally))
+            part.see(topic, record, log_time, tally)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise reader.not_choreo(topic, count, exc) from None
-    if tally.pending_seq != -1:
-        summary.unanswered += 1
-    _add_plays(summary, tracker.finish(None), tally.zero)
     summary.messages = count
     summary.cut = reader.cut
     summary.result = reader.result
     summary.complete = reader.complete
+    for part in [solo, *parts.values()]:
+        part.finish(tally.zero)
     tally.fill(summary)
+    if parts:
+        order = [name for name in reader.run_info.get("robots", "").split(",") if name in parts]
+        summary.robots = {name: parts[name].summary for name in order + [n for n in parts if n not in order]}
+        _gather(summary, parts, reader.run_info.get("unison") == "yes")
     result_s = _seconds((reader.result or {}).get("show_s"))
     if result_s is not None:
         summary.duration_s = result_s
     elif last_time is not None and tally.zero is not None:
         summary.duration_s = _show_s(last_time, tally.zero)
     return summary
+
+
+@dataclass
+class _Part:
+    """One robot's share of the pass: its frames pair by their own seq, its motions are its own."""
+
+    summary: Summary
+    tally: _Tally
+    tracker: MotionTracker
+    starts: dict[int, int] = field(default_factory=dict)  # unison: step index -> motion start (ns)
+
+    @classmethod
+    def named(cls, reader: LogReader, robot: str, whole: _Tally) -> _Part:
+        run = {"port": reader.run_info.get(f"robot.{robot}.port", "?"),
+               "baud": reader.run_info.get(f"robot.{robot}.baud", "?"),
+               "layout": reader.run_info.get(f"robot.{robot}.layout", "?")}
+        return cls(Summary(reader.path, run, None, False, None), _Tally(whole.zero), MotionTracker())
+
+    def see(self, topic: str, record, log_time: int, whole: _Tally) -> None:  # type: ignore[no-untyped-def]
+        tallies = (whole,) if self.tally is whole else (whole, self.tally)
+        if topic == RX_TOPIC:
+            for tally in tallies:
+                tally.reply(record, self.tally)
+            self.tracker.rx(record, log_time)
+        elif topic == TX_TOPIC:
+            for tally in tallies:
+                tally.frame(record, self.summary, self.tally)
+            self.tracker.tx(record, log_time)
+        else:
+            for tally in tallies:
+                tally.step(record, log_time)
+        if len(self.tracker.plays) > 256:
+            self._plays(whole.zero)
+
+    def finish(self, zero: int | None) -> None:
+        if self.tally.pending_seq != -1:
+            self.summary.unanswered += 1
+        self.tracker.finish(None)
+        self._plays(zero)
+        if self.tally is not None:
+            self.tally.zero = zero
+            self.tally.fill(self.summary)
+
+    def _plays(self, zero: int | None) -> None:
+        for play in self.tracker.plays:
+            if play.start_ns is not None and play.step is not None:
+                self.starts.setdefault(play.step, play.start_ns)
+        _add_plays(self.summary, self.tracker.plays, zero)
+
+
+def _gather(summary: Summary, parts: dict[str, _Part], unison: bool) -> None:
+    """The whole show's figures from its robots': plays and motions, and for shared steps the
+    skew of each unison play (first robot's motion start to the last's)."""
+    summary.unanswered = sum(part.summary.unanswered for part in parts.values())
+    for part in parts.values():
+        summary.plays_total += part.summary.plays_total
+        for stats in part.summary.motions.values():
+            merged = summary.motions.setdefault(stats.motion, MotionStats(stats.motion))
+            merged.plays += stats.plays
+            merged.durations.extend(stats.durations[:10_000 - len(merged.durations)])
+    if not unison:
+        return
+    steps = set().union(*(part.starts for part in parts.values()))
+    for step in sorted(steps):
+        starts = [part.starts[step] for part in parts.values() if step in part.starts]
+        if len(starts) > 1:
+            summary.skew.add((max(starts) - min(starts)) / 1e6)
 
 
 class _Tally:
@@ -281,35 +351,40 @@ class _Tally:
         self.replies = dict.fromkeys(REPLY_KINDS, 0)
         self.latency = Distribution()
         self.lateness = Distribution()
-        self.late_at_start: dict[int, bool] = {}  # steps started and not ended
-        self.retried: set[int] = set()  # open steps with a frame sent again
+        self.late_at_start: dict[tuple[str | None, int], bool] = {}  # (robot, step) started and not ended
+        self.retried: set[tuple[str | None, int]] = set()  # open (robot, step)s with a frame sent again
         self.outcomes = {"ok": 0, "failed": 0, "timeout": 0, "aborted": 0}
         self.retries = self.late = self.late_by_retries = self.started = self.stale = 0
         self.pending_seq = -1  # the frame waiting for its reply
 
-    def reply(self, rx: RxRecord) -> None:
+    def reply(self, rx: RxRecord, own: _Tally | None = None) -> None:
+        """`own`: the tally of the robot the reply is from (its frames have their own seq)."""
+        own = own or self
         self.replies[rx.kind] = self.replies.get(rx.kind, 0) + 1
-        if rx.seq == self.pending_seq:
+        if rx.seq == own.pending_seq and own is self:
             self.pending_seq = -1
         if rx.stale:
             self.stale += len(stale_replies(rx.stale))
         if rx.kind in ("ack", "nak", "status"):
             self.latency.add(rx.latency_ms)
 
-    def frame(self, tx: TxRecord, summary: Summary) -> None:
+    def frame(self, tx: TxRecord, summary: Summary, own: _Tally | None = None) -> None:
+        """`own`: the tally of the robot the frame is to, which pairs it with its reply."""
         self.frames[tx.kind] = self.frames.get(tx.kind, 0) + 1
-        if self.pending_seq != -1:
-            summary.unanswered += 1
-        self.pending_seq = tx.seq
+        if own is None or own is self:
+            if self.pending_seq != -1:
+                summary.unanswered += 1
+            self.pending_seq = tx.seq
         if tx.attempt > 1:
             self.retries += 1
             if tx.step is not None:
-                self.retried.add(tx.step)
+                self.retried.add((tx.robot, tx.step))
 
     def step(self, step: StepRecord, log_time: int) -> None:
+        key = (step.robot, step.index)
         if step.event == "start":
             self.started += 1
-            self.late_at_start[step.index] = is_late(step)
+            self.late_at_start[key] = is_late(step)
             if step.kind == "play":  # a wait starts when the play before it is answered
                 self.lateness.add(step.late_ms)
                 self.late += is_late(step)
@@ -317,10 +392,10 @@ class _Tally:
                 self.zero = log_time - round(step.actual_s * 1e9)
                 self.zero_from_step = True
             return
-        late_at_start = self.late_at_start.pop(step.index, False)
+        late_at_start = self.late_at_start.pop(key, False)
         self.outcomes[step.outcome or "?"] = self.outcomes.get(step.outcome or "?", 0) + 1
-        if step.index in self.retried:
-            self.retried.discard(step.index)
+        if key in self.retried:
+            self.retried.discard(key)
             if slipped(step, late_at_start):
                 self.late += 1
                 self.late_by_retries += 1
@@ -437,6 +512,7 @@ def render(summary: Summary) -> Iterable[str]:
     yield (f"cues      lateness median {_ms(lateness.median)}, p99 {_ms(lateness.p99)}, max "
            f"{_ms(lateness.max)} ({len(lateness)} plays, {lateness.above(LATE_MS)} over {LATE_MS:g} ms)")
     yield from _render_motions(summary)
+    yield from _render_robots(summary)
     yield f"log lines {summary.warnings} warnings, {summary.errors} errors"
     for line in summary.log_lines:
         word = "error  " if line.level >= ERROR else "warning"
@@ -444,6 +520,27 @@ def render(summary: Summary) -> Iterable[str]:
     if summary.warnings + summary.errors > len(summary.log_lines):
         yield f"  ... and {summary.warnings + summary.errors - len(summary.log_lines)} more (choreo log frames)"
     yield f"messages  {summary.messages}"
+
+
+def _render_robots(summary: Summary) -> Iterable[str]:
+    """A show for several robots: a line or two per robot, and how together the unison plays began."""
+    if not summary.robots:
+        return
+    if len(summary.skew):
+        skew = summary.skew
+        yield (f"unison    motion starts apart: median {_ms(skew.median)}, p99 {_ms(skew.p99)}, max "
+               f"{_ms(skew.max)} ({len(skew)} plays by several robots; first robot's start to the last's)")
+    for name, robot in summary.robots.items():
+        run = robot.run
+        late = f", {robot.steps_late} late" if robot.steps_late else ""
+        failed = f", {robot.steps_failed} failed" if robot.steps_failed else ""
+        aborted = f", {robot.steps_aborted} aborted" if robot.steps_aborted else ""
+        yield (f"robot {name}: {run.get('port', '?')} at {run.get('baud', '?')} baud, layout {run.get('layout', '?')}; "
+               f"{robot.steps_run} steps{late}{failed}{aborted}, {robot.frames_sent} frames, {robot.retries} retries, "
+               f"{robot.plays_total} plays")
+        lat, cues = robot.latency, robot.lateness
+        yield (f"          latency median {_ms(lat.median)}, p99 {_ms(lat.p99)}; cue lateness median "
+               f"{_ms(cues.median)}, max {_ms(cues.max)}")
 
 
 def _render_motions(summary: Summary) -> Iterable[str]:
