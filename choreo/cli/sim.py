@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import sys
+import threading
 import time
 
 from choreo.errors import LinkError, UsageError
@@ -15,7 +17,8 @@ FAULT_HELP = (
 )
 
 EPILOG = """\
-The first line of standard output is the device path alone (e.g. /dev/pts/4); the server then
+The first line of standard output is the device path alone (e.g. /dev/pts/4; with --boards N,
+the first N lines, one board each); the server then
 answers frames there until Ctrl-C (SIGINT) or SIGTERM, and exits 0. Point any serial program at
 the path, e.g. `choreo run --port /dev/pts/4 shows/dance.yaml`, at the board's baud, 8 data
 bits, even parity, 1 stop bit; a client set otherwise gets no reply, as from a real board.
@@ -84,8 +87,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         faults.add_argument(f"--{kind.replace('_', '-')}", dest=kind, metavar="K|P", help=what)
     faults.add_argument("--late-ms", metavar="MS", help="how late a --late reply is, ms (default 500)")
     faults.add_argument("--seed", metavar="N", help="seed for faults given as a probability (default 0)")
+    parser.add_argument("--boards", type=int, default=1, metavar="N",
+                        help=f"serve N boards (1..{MAX_BOARDS}), each on its own pseudo-terminal, one path "
+                        "a line on stdout: one for each robot of a show for several (same options for all)")
     parser.add_argument("-v", "--verbose", action="store_true", help="log every frame and reply to stderr")
     parser.set_defaults(handler=run)
+
+
+MAX_BOARDS = 16
 
 
 def options_from_args(args: argparse.Namespace) -> dict[str, str]:
@@ -100,38 +109,75 @@ def options_from_args(args: argparse.Namespace) -> dict[str, str]:
 
 def run(args: argparse.Namespace) -> int:
     from choreo.sim.options import parse_options
-    from choreo.sim.pty import PtyServer, ServeEnd
-    from choreo.sim.wire import PTY_GAP_S
+    from choreo.sim.pty import ServeEnd
 
+    if not 1 <= args.boards <= MAX_BOARDS:
+        raise UsageError(f"choreo sim: --boards {args.boards}: give 1..{MAX_BOARDS}")
     try:
         options = parse_options(options_from_args(args))
     except ValueError as exc:
         raise UsageError(f"choreo sim: {_as_flags(str(exc))}") from None
     start = time.monotonic()
-    on_entry = None
-    if args.verbose:
-        def on_entry(entry):  # type: ignore[no-untyped-def]
-            print(entry.line(start), file=sys.stderr, flush=True)
-
-    board = options.board(on_entry=on_entry, power_on=start)
-    server = PtyServer(board, gap_s=options.gap_s or PTY_GAP_S, check_settings=not args.no_settings_check)
-    with server:
-        path = server.path
-        # Handlers first: whoever reads the path may signal us at once, and must get exit 0.
-        previous = {sig: signal.signal(sig, lambda *_: server.stop()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    servers = [_server(options, args, start, number if args.boards > 1 else None) for number in range(args.boards)]
+    with contextlib.ExitStack() as stack:
+        for server in servers:
+            stack.enter_context(server)
+        # Handlers first: whoever reads the paths may signal us at once, and must get exit 0.
+        stop_all = lambda *_: [server.stop() for server in servers]  # noqa: E731
+        previous = {sig: signal.signal(sig, stop_all) for sig in (signal.SIGINT, signal.SIGTERM)}
         try:
-            print(path, flush=True)
-            print(f"choreo sim: simulated RCB-4 on {path}, {options.describe()}; Ctrl-C to stop", file=sys.stderr)
-            end = server.serve()
+            for server in servers:
+                print(server.path, flush=True)
+            paths = ", ".join(server.path for server in servers)
+            print(f"choreo sim: simulated RCB-4 on {paths}, {options.describe()}; Ctrl-C to stop", file=sys.stderr)
+            ends = _serve_all(servers)
         finally:
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
-    if end is ServeEnd.LOST:
-        raise LinkError(
-            f"choreo sim: fault 'lose' at frame {board.lost_at_frame}: closed {path} "
-            "as if the adapter was unplugged"
-        )
+    lost = [f"closed {server.path} at frame {server.board.lost_at_frame}"
+            for server, end in zip(servers, ends) if end is ServeEnd.LOST]
+    if lost:
+        raise LinkError(f"choreo sim: fault 'lose': {'; '.join(lost)}, as if the adapter was unplugged")
     return 0
+
+
+def _server(options, args: argparse.Namespace, start: float, number: int | None):  # type: ignore[no-untyped-def]
+    from choreo.sim.pty import PtyServer
+    from choreo.sim.wire import PTY_GAP_S
+
+    on_entry = None
+    if args.verbose:
+        prefix = f"[board {number + 1}] " if number is not None else ""
+
+        def on_entry(entry):  # type: ignore[no-untyped-def]
+            print(prefix + entry.line(start), file=sys.stderr, flush=True)
+
+    board = options.board(on_entry=on_entry, power_on=start)
+    return PtyServer(board, gap_s=options.gap_s or PTY_GAP_S, check_settings=not args.no_settings_check)
+
+
+def _serve_all(servers: list) -> list:  # type: ignore[type-arg]
+    """Each board on its own thread (one stuck client never holds up another board's replies);
+    the main thread keeps the signals. A lost board ends alone: the others go on serving."""
+    from choreo.sim.pty import ServeEnd
+
+    if len(servers) == 1:
+        return [servers[0].serve()]
+    ends: list = [None] * len(servers)
+
+    def serve(index: int) -> None:
+        ends[index] = servers[index].serve()
+        if ends[index] is ServeEnd.LOST:
+            print(f"choreo sim: fault 'lose' at frame {servers[index].board.lost_at_frame}: closed "
+                  f"{servers[index].path}; the other boards go on", file=sys.stderr, flush=True)
+
+    threads = [threading.Thread(target=serve, args=(i,), daemon=True) for i in range(len(servers))]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        while thread.is_alive():
+            thread.join(0.1)
+    return ends
 
 
 def _as_flags(message: str) -> str:
