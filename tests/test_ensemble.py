@@ -219,3 +219,41 @@ def test_a_one_robot_show_logs_as_before(tmp_path):
     assert set(log.messages) == {"/rcb4/tx", "/rcb4/rx", "/choreo/step"}
     assert not any("robot" in m for topic in log.messages.values() for m in topic)
     assert "robots" not in log.metadata["choreo"]
+
+
+def test_review_commands_read_every_robot(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "100")
+    run_session(tmp_path, UNISON)
+    log = str(tmp_path / "run.mcap")
+    assert vmain(["log", "timeline", log]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    lanes = [i for i, line in enumerate(lines) if line.startswith("robot ")]
+    assert [lines[i] for i in lanes] == ["robot a", "robot b", "robot c"]
+    a_rows = lines[lanes[0] + 1:lanes[1]]
+    assert [row.split()[1:3] for row in a_rows] == [["motion", "1"], ["motion", "2"], ["motion", "1"]]
+    monkeypatch.setenv("COLUMNS", "400")
+    assert vmain(["log", "frames", log]) == 0
+    frames = capsys.readouterr().out
+    assert "no reply in the log" not in frames  # each robot's frames pair with their own replies
+    assert frames.count(" a: ") and frames.count(" b: ") and frames.count(" c: ")
+    assert vmain(["log", "export", log, "--jsonl", "-"]) == 0
+    rows = [__import__("json").loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert {row["robot"] for row in rows} == {"a", "b", "c"} and all(row["reply"] for row in rows)
+    assert vmain(["log", "summary", "--json", log]) == 0
+    summary = __import__("json").loads(capsys.readouterr().out)
+    assert list(summary["robots"]) == ["a", "b", "c"] and summary["unison_skew"]["count"] == 4
+    assert summary["robots"]["b"]["steps"]["run"] == 8
+
+
+def test_replay_replays_every_robot_on_its_own_simulator(tmp_path, capsys):
+    run_session(tmp_path, UNISON)
+    assert vmain(["replay", str(tmp_path / "run.mcap"), "--log", str(tmp_path / "replay.mcap"), "--strict"]) == 0
+    out = capsys.readouterr().out
+    recorded, replayed = read_log(tmp_path / "run.mcap"), read_log(tmp_path / "replay.mcap")
+    for name in "abc":
+        assert ([m["hex"] for m in replayed.topic(f"/rcb4/{name}/tx")]
+                == [m["hex"] for m in recorded.topic(f"/rcb4/{name}/tx")])
+    frames = sum(len(recorded.topic(f"/rcb4/{name}/tx")) for name in "abc")
+    assert f"replayed {frames} frames: {frames} same, 0 differ" in out
+    assert vmain(["replay", str(tmp_path / "run.mcap"), "--port", "sim://"]) == 2
+    assert "runs each on its own simulator" in capsys.readouterr().err

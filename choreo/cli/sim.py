@@ -134,10 +134,10 @@ def run(args: argparse.Namespace) -> int:
         finally:
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
-    lost = [f"closed {server.path} at frame {server.board.lost_at_frame}"
+    lost = [f"fault 'lose' at frame {server.board.lost_at_frame}: closed {server.path}"
             for server, end in zip(servers, ends) if end is ServeEnd.LOST]
     if lost:
-        raise LinkError(f"choreo sim: fault 'lose': {'; '.join(lost)}, as if the adapter was unplugged")
+        raise LinkError(f"choreo sim: {'; '.join(lost)} as if the adapter was unplugged")
     return 0
 
 

@@ -21,10 +21,15 @@ class AttachedShow:
     """What a review takes from the attached show; empty when the log has none or it fails to load."""
 
     show: object | None = None  # choreo.show.model.Show
-    plan: object | None = None  # choreo.show.model.Plan
+    plan: object | None = None  # choreo.show.model.Plan (with several robots, the first's)
     names: dict[int, str] = field(default_factory=dict)  # slot -> first name in `motions:`
     durations: dict[int, float] = field(default_factory=dict)  # slot -> expected seconds
     problem: str | None = None  # why the show could not be used, if it could not
+    plans: dict = field(default_factory=dict)  # robot -> Plan, in a show for several robots
+
+    def plan_of(self, robot: str | None):  # type: ignore[no-untyped-def]
+        """The robot's plan (None: the one robot's)."""
+        return self.plan if robot is None else self.plans.get(robot)
 
     def name_of(self, motion: int | None) -> str | None:
         return self.names.get(motion) if motion is not None else None
@@ -45,7 +50,7 @@ def attached_show(reader: LogReader) -> AttachedShow:
     try:
         from choreo.errors import ChoreoError
         from choreo.show.load import load_show
-        from choreo.show.plan import compile_plan
+        from choreo.show.plan import compile_plans
     except ImportError as exc:  # pragma: no cover - the loader ships with choreo
         return AttachedShow(problem=f"cannot load shows here: {exc}")
     name = Path(attachment.name).name or "show.yaml"
@@ -54,7 +59,7 @@ def attached_show(reader: LogReader) -> AttachedShow:
         path.write_bytes(source)
         try:
             show = load_show(path)
-            plan = compile_plan(show)
+            plans = compile_plans(show)
         except ChoreoError as exc:
             first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             return AttachedShow(problem=f"the attached show {attachment.name} does not load: {first}")
@@ -64,4 +69,5 @@ def attached_show(reader: LogReader) -> AttachedShow:
         names.setdefault(motion.number, motion.name)
         if motion.duration is not None:
             durations.setdefault(motion.number, motion.duration)
-    return AttachedShow(show, plan, names, durations)
+    return AttachedShow(show, next(iter(plans.values())), names, durations,
+                        plans=plans if show.ensemble else {})

@@ -19,6 +19,7 @@ COLUMNS = (
     "seq",
     "tx_time_ns", "tx_show_s", "step", "label", "frame", "motion", "attempt", "tx_hex", "frame_meaning",
     "rx_time_ns", "rx_show_s", "reply", "rx_hex", "latency_ms", "executing", "error", "stale", "reply_meaning",
+    "robot",
 )
 
 
@@ -45,6 +46,7 @@ def row(exchange: Exchange) -> dict:
         "error": rx.error if rx else None,
         "stale": rx.stale if rx else None,  # late replies to earlier frames set aside before this one, as hex
         "reply_meaning": reply_meaning(rx) if rx else None,
+        "robot": exchange.robot,  # whose frame, in a show for several robots (empty otherwise)
     }
 
 

@@ -63,6 +63,11 @@ class Exchange:
         return self.tx.step if self.tx else None
 
     @property
+    def robot(self) -> str | None:
+        """Whose frame, in a show for several robots."""
+        return (self.tx or self.rx).robot  # type: ignore[union-attr]
+
+    @property
     def frame_kind(self) -> str | None:
         return self.tx.kind if self.tx else None
 
@@ -74,7 +79,7 @@ class Exchange:
 def exchanges(reader: LogReader, clock: ShowClock | None = None) -> Iterator[Exchange]:
     """Frames paired with their replies, in the order they were sent."""
     clock = clock or ShowClock(reader)
-    held: tuple[TxRecord, int] | None = None  # a frame whose reply has not come yet
+    held: dict[str | None, tuple[TxRecord, int]] = {}  # by robot: a frame whose reply has not come yet
     topic, number = None, 0
     try:
         for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC)):
@@ -84,19 +89,21 @@ def exchanges(reader: LogReader, clock: ShowClock | None = None) -> Iterator[Exc
                     clock.see_step(log_time, parse(topic, data))
                 continue
             message = parse(topic, data, partial=True)  # shown as it is, whoever wrote it
+            waiting = held.pop(message.robot, None)
             if isinstance(message, TxRecord):
-                if held is not None:
-                    yield _pair(clock, held[0], held[1], None, None)
-                held = (message, log_time)
-            elif held is not None and held[0].seq == message.seq:
-                yield _pair(clock, held[0], held[1], message, log_time)
-                held = None
+                if waiting is not None:
+                    yield _pair(clock, waiting[0], waiting[1], None, None)
+                held[message.robot] = (message, log_time)
+            elif waiting is not None and waiting[0].seq == message.seq:
+                yield _pair(clock, waiting[0], waiting[1], message, log_time)
             else:  # a reply without its frame in the log
+                if waiting is not None:
+                    yield _pair(clock, waiting[0], waiting[1], None, None)
                 yield _pair(clock, None, None, message, log_time)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise reader.not_choreo(topic, number, exc) from None
-    if held is not None:
-        yield _pair(clock, held[0], held[1], None, None)
+    for frame, sent_ns in held.values():
+        yield _pair(clock, frame, sent_ns, None, None)
 
 
 def _pair(clock: ShowClock, tx: TxRecord | None, tx_ns: int | None, rx: RxRecord | None,
@@ -150,15 +157,16 @@ def _time(seconds: float | None) -> str:
 def lines(exchange: Exchange) -> Iterator[str]:
     """`show_s  tx  seq  kind  hex  meaning` and the same for its reply."""
     tx, rx = exchange.tx, exchange.rx
+    robot = f"{exchange.robot}: " if exchange.robot else ""
     if tx is not None:
         where = f"step {tx.step}" if tx.step is not None else "abort" if tx.label == ABORT_LABEL else "-"
         retry = f" (try {tx.attempt})" if tx.attempt > 1 else ""
         yield (f"{_time(exchange.tx_s)}  tx  #{exchange.seq:<6} {where:<9} {tx.kind:<8} "
-               f"{tx.hex:<56} {frame_meaning(tx)}{retry}")
+               f"{tx.hex:<56} {robot}{frame_meaning(tx)}{retry}")
     if rx is not None:
         latency = f"{rx.latency_ms:.3f} ms"
         yield (f"{_time(exchange.rx_s)}  rx  #{exchange.seq:<6} {latency:<9} {rx.kind:<8} "
-               f"{rx.hex:<56} {reply_meaning(rx)}{stale_note(rx)}")
+               f"{rx.hex:<56} {robot}{reply_meaning(rx)}{stale_note(rx)}")
     elif tx is not None:
         yield f"{'':10}  rx  #{exchange.seq:<6} {'':9} {'-':<8} {'':56} no reply in the log (it ends here)"
 

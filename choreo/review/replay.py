@@ -224,7 +224,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         check_output_folder(Path(log_path), "--log")
     from choreo.clock import RunClock, SystemTime
     from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S
-    from choreo.record import RunInfo, default_log_path
+    from choreo.record import RobotInfo, RunInfo, default_log_path
     from choreo.session import RobotLink, Stage
     from choreo.show.model import SOLO
 
@@ -245,25 +245,98 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         show_path = reader.run_info.get("show_path") or (attachment.name if attachment else "show.yaml")
         report = ReplayReport(reader.path, url, speed, new_log,
                               show_note=None if show.show is not None or port else show.problem)
-        info = RunInfo(show_path, name, show_source, url, baud, clock.wall_anchor_ns, layout)
-        # the link sends the recorded bytes only: no layout of its own (an HTH4 link would read the
+        robots = [name for name in reader.run_info.get("robots", "").split(",") if name]
+        if robots and port:
+            raise UsageError(f"--port {port}: a replay of several robots ({', '.join(robots)}) runs each on "
+                             "its own simulator; leave out --port")
+        # the links send the recorded bytes only: no layout of their own (an HTH4 link would read the
         # config word at open, a frame the recording does not have)
-        robot = RobotLink(SOLO, url, "command line", baud, timeout or DEFAULT_TIMEOUT_S, tries=1)
-        stage = Stage(info, new_log, clock, [robot], unique_log=log_path is None,
-                      opening_note=f"replay of {reader.path} at speed {speed:g} on {url}")
+        links = ([_robot_link(reader, show, name, speed, timeout) for name in robots] if robots else
+                 [RobotLink(SOLO, url, "command line", baud, timeout or DEFAULT_TIMEOUT_S, tries=1)])
+        robot_info = tuple(RobotInfo(link.robot, link.port, link.baud, reader.run_info.get(f"robot.{link.robot}.layout", "seed"))
+                           for link in links) if robots else ()
+        info = RunInfo(show_path, name, show_source, url, baud, clock.wall_anchor_ns, layout, robot_info,
+                       reader.run_info.get("unison") == "yes")
+        stage = Stage(info, new_log, clock, links, unique_log=log_path is None, named=bool(robots),
+                      opening_note=f"replay of {reader.path} at speed {speed:g} on {url if not robots else 'simulators'}")
+        if robots:
+            report.port = f"{len(robots)} simulators, one per robot ({', '.join(robots)})"
         with stage:
             report.log_path = stage.log_path
-            if speed > 1 and _is_sim(url):
-                # its motions and status refresh run `speed` times faster: so may the polls
-                stage.link.status_spacing_s /= speed
+            if speed > 1:
+                for link in stage.links.values():
+                    if _is_sim(link.name):  # its motions and status refresh run `speed` times faster: so may the polls
+                        link.status_spacing_s /= speed
             if on_start is not None:
                 on_start(report)
-            _replay_frames(reader, stage.link, stage.recorder, clock, speed, report, on_difference)
-            report.cut = reader.cut
+            if robots:
+                _replay_robots(source, stage, clock, speed, report, on_difference)
+            else:
+                _replay_frames(reader, stage.link, stage.recorder, clock, speed, report, on_difference)
+            report.cut = reader.cut if not robots else report.cut
             stage.outcome = {"outcome": "done", "replay_of": str(reader.path), "speed": f"{speed:g}",
                              "frames": str(report.frames), "differences": str(report.different),
                              "show_s": f"{_elapsed(clock):.6f}", "exit_code": "0"}
     return report
+
+
+def _robot_link(reader: LogReader, show: AttachedShow, robot: str, speed: float, timeout: float | None):  # type: ignore[no-untyped-def]
+    """A recorded robot's replay link: its own simulator, set up from its plan, at its baud."""
+    from choreo.layouts import layout_named
+    from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S
+    from choreo.session import RobotLink, with_show_durations
+
+    baud_text = reader.run_info.get(f"robot.{robot}.baud", "")
+    baud = int(baud_text) if baud_text.isdigit() and int(baud_text) in BAUD_RATES else DEFAULT_BAUD
+    layout = layout_named(reader.run_info.get(f"robot.{robot}.layout") or "seed")
+    plan = show.plan_of(robot)
+    abort = show.show.abort_motion(robot) if show.show is not None and plan is not None else None
+    url = with_show_durations("sim://", show.show if plan is not None else None, plan, baud, layout, abort)
+    return RobotLink(robot, at_speed(url, speed), "simulator", baud, timeout or DEFAULT_TIMEOUT_S, tries=1)
+
+
+def _replay_robots(source: str | Path, stage, clock, speed: float, report: ReplayReport,  # type: ignore[no-untyped-def]
+                   on_difference: Callable[[Difference], None] | None) -> None:
+    """Each robot's frames on its own thread and link, all on one start: a robot waiting for its
+    reply never holds up another's frames. Each thread reads the log on its own (a reader is
+    not shared between threads); the reports are added up at the end."""
+    import threading
+
+    start = clock.mono()
+    parts = {name: ReplayReport(report.source, link.name, speed, report.log_path) for name, link in stage.links.items()}
+    errors: list[BaseException] = []
+
+    def play(name: str) -> None:
+        try:
+            with LogReader(source) as reader:
+                _replay_frames(reader, stage.links[name], stage.recorder, clock, speed, parts[name], on_difference,
+                               robot=name, start=start)
+                parts[name].cut = reader.cut
+        except BaseException as exc:  # noqa: BLE001 - raised in the main thread
+            errors.append(exc)
+        finally:
+            clock.source.leave()
+
+    threads = [threading.Thread(target=play, args=(name,), name=f"choreo-replay-{name}", daemon=True)
+               for name in stage.links]
+    clock.source.admit(len(threads))
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        while thread.is_alive():
+            thread.join(0.05)
+    if errors:
+        raise errors[0]
+    for part in parts.values():
+        _add_up(report, part)
+
+
+def _add_up(report: ReplayReport, part: ReplayReport) -> None:
+    for name in ("frames", "same", "different", "timing", "replay_late", "excused", "unmatched"):
+        setattr(report, name, getattr(report, name) + getattr(part, name))
+    report.differences.extend(part.differences[:LISTED_DIFFERENCES - len(report.differences)])
+    report.max_lag_ms = max(report.max_lag_ms, part.max_lag_ms)
+    report.cut = report.cut or part.cut
 
 
 def _elapsed(clock) -> float:
@@ -271,13 +344,17 @@ def _elapsed(clock) -> float:
 
 
 def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, report: ReplayReport,
-                   on_difference: Callable[[Difference], None] | None) -> None:
-    """The recorded frames, each at its show time / speed; replies compared as they come."""
+                   on_difference: Callable[[Difference], None] | None, robot: str | None = None,
+                   start: float | None = None) -> None:
+    """The recorded frames, each at its show time / speed; replies compared as they come.
+
+    `robot`: only that robot's frames and steps; `start`: the monotonic time of recorded show
+    time 0, shared by every robot's thread (else the replay starts at its first event)."""
     from choreo.link import Tag
 
-    at_end = _polls_at_motion_ends(reader)
+    at_end = _polls_at_motion_ends(reader, robot)
     recorded_clock = ShowClock(reader)
-    zero_mono: float | None = None  # replay's monotonic time of recorded show time 0
+    zero_mono: float | None = start  # replay's monotonic time of recorded show time 0
     first_s = 0.0
     last: tuple[float, float] | None = None  # the last event: (recorded show s, replay monotonic)
     restored: tuple[float, float] | None = None  # the last restore: (recorded show s, replay write)
@@ -312,6 +389,9 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
             record = parse(topic, data)
             if isinstance(record, StepRecord):
                 recorded_clock.see_step(log_time, record)
+            if robot is not None and record.robot != robot:
+                continue
+            if isinstance(record, StepRecord):
                 due(recorded_clock.seconds(log_time) or 0.0)
                 retimed = _retimed(record, first_s, speed, clock.mono() - zero_mono)
                 recorder.on_step(_ReplayedStep(clock.wall_ns(), retimed))
@@ -367,7 +447,7 @@ def _frame(reader: LogReader, tx: TxRecord) -> Frame:
                          f"kind {tx.kind!r}, bytes {tx.hex!r}") from None
 
 
-def _polls_at_motion_ends(reader: LogReader) -> set[int]:
+def _polls_at_motion_ends(reader: LogReader, robot: str | None = None) -> set[int]:
     """The recorded status polls next to a motion's end: the last that saw it executing and the
     first that saw it over (by the seq of the frame they answer)."""
     statuses: set[int] = set()
@@ -375,6 +455,8 @@ def _polls_at_motion_ends(reader: LogReader) -> set[int]:
     previous: tuple[int, bool] | None = None
     for topic, _, data in reader.messages((TX_TOPIC, RX_TOPIC)):
         record = parse(topic, data)
+        if record.robot != robot:
+            continue
         if isinstance(record, TxRecord):
             if record.kind == "status":
                 statuses.add(record.seq)

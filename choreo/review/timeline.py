@@ -45,6 +45,7 @@ class MotionRun:
     end_s: float | None
     ended_by: str  # status | stop | end of log | not started
     late_ms: float = 0.0
+    robot: str | None = None  # whose play, in a show for several robots
 
     @property
     def planned_end_s(self) -> float | None:
@@ -142,8 +143,8 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
     show = show or attached_show(reader)
     timeline = Timeline(reader.run_info.get("show") or reader.path.stem, show_problem=show.problem)
     clock = ShowClock(reader)
-    tracker = MotionTracker()
-    steps: dict[int, _Step] = {}
+    trackers: dict[str | None, MotionTracker] = {}  # by robot: each robot's motions are its own
+    steps: dict[tuple[str | None, int], _Step] = {}
     last_ns: int | None = None
     topic, number = None, 0
     try:
@@ -156,12 +157,12 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
                     clock.see_start(log_time, record.actual_s)
                 _see_step(timeline, steps, record, clock.seconds(log_time))
             elif topic == TX_TOPIC:
-                tracker.tx(record, log_time)
+                trackers.setdefault(record.robot, MotionTracker()).tx(record, log_time)
                 if record.label == ABORT_LABEL and not any(m.kind == "abort" for m in timeline.marks):
                     timeline.marks.append(Mark(clock.seconds(log_time) or 0.0, "abort",
                                                f"show stopped: abort motion {record.motion} played"))
             elif topic == RX_TOPIC:
-                tracker.rx(record, log_time)
+                trackers.setdefault(record.robot, MotionTracker()).rx(record, log_time)
                 if not record.answered:
                     timeline.marks.append(_fault(record, clock.seconds(log_time)))
             elif record.level >= ERROR:
@@ -169,11 +170,16 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise reader.not_choreo(topic, number, exc) from None
     timeline.end_s = (clock.seconds(last_ns) or 0.0) if last_ns is not None else 0.0
-    for play in tracker.finish(last_ns):
-        timeline.runs.append(_run_of(play, steps.get(play.step) if play.step is not None else None, show, clock))
-    timeline.runs.sort(key=lambda r: (r.start_s if r.start_s is not None else r.due_s or 0.0))
+    order = {name: i for i, name in enumerate(reader.run_info.get("robots", "").split(","))}
+    for robot, tracker in trackers.items():
+        for play in tracker.finish(last_ns):
+            known = steps.get((robot, play.step)) if play.step is not None else None
+            timeline.runs.append(_run_of(play, known, show, clock, robot))
+    timeline.runs.sort(key=lambda r: (order.get(r.robot, len(order)),
+                                      r.start_s if r.start_s is not None else r.due_s or 0.0))
     timeline.marks.sort(key=lambda m: m.show_s)
-    timeline.unplayed = _unplayed(show, steps)
+    robots = list(show.plans) if show.plans else [None]
+    timeline.unplayed = [run for robot in robots for run in _unplayed(show, steps, robot)]
     timeline.cut = reader.cut
     timeline.outcome = (reader.result or {}).get("outcome")
     if timeline.outcome in ("aborted", "interrupted") and not any(m.kind == "abort" for m in timeline.marks):
@@ -181,53 +187,58 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
     return timeline
 
 
-def _see_step(timeline: Timeline, steps: dict[int, _Step], step: StepRecord, now: float | None) -> None:
+def _see_step(timeline: Timeline, steps: dict[tuple[str | None, int], _Step], step: StepRecord,
+              now: float | None) -> None:
     now = now or 0.0
+    whose = f"{step.robot}: " if step.robot else ""
     if step.event == "start":
-        if step.cue is not None:
+        if step.cue is not None and not any(c.show_s == step.cue and c.step == step.index for c in timeline.cues):
             timeline.cues.append(Cue(step.cue, step.index, step.label))
         if step.kind == "play":
-            steps[step.index] = _Step(step, step.late_ms if is_late(step) else 0.0)
+            steps[(step.robot, step.index)] = _Step(step, step.late_ms if is_late(step) else 0.0)
             if is_late(step):
-                timeline.marks.append(Mark(now, "late", f"{step.ref} started {step.late_ms:.1f} ms late "
+                timeline.marks.append(Mark(now, "late", f"{whose}{step.ref} started {step.late_ms:.1f} ms late "
                                                         f"(due {step.planned_s:.3f} s)"))
         return
-    known = steps.get(step.index)
+    known = steps.get((step.robot, step.index))
     if known is not None and slipped(step, late_at_start=known.late_ms > 0):
         known.late_ms = step.late_ms
-        timeline.marks.append(Mark(now, "late", f"{step.ref}: motion {step.motion} started "
+        timeline.marks.append(Mark(now, "late", f"{whose}{step.ref}: motion {step.motion} started "
                                                 f"{step.late_ms:.1f} ms late (retries)"))
     if step.outcome in ("failed", "timeout"):
-        timeline.marks.append(Mark(now, "failure", f"{step.ref} {step.outcome}"))
+        timeline.marks.append(Mark(now, "failure", f"{whose}{step.ref} {step.outcome}"))
     elif step.outcome == "aborted":
-        timeline.marks.append(Mark(now, "abort", f"{step.ref} aborted: the show was stopped"))
+        timeline.marks.append(Mark(now, "abort", f"{whose}{step.ref} aborted: the show was stopped"))
 
 
 def _fault(rx: RxRecord, now: float | None) -> Mark:
     what = rx.error or rx.kind
-    return Mark(now or 0.0, "fault", f"{rx.kind.upper()} to frame #{rx.seq}: {what}")
+    whose = f"{rx.robot}: " if rx.robot else ""
+    return Mark(now or 0.0, "fault", f"{whose}{rx.kind.upper()} to frame #{rx.seq}: {what}")
 
 
-def _run_of(play: MotionPlay, step: _Step | None, show: AttachedShow, clock: ShowClock) -> MotionRun:
+def _run_of(play: MotionPlay, step: _Step | None, show: AttachedShow, clock: ShowClock,
+            robot: str | None = None) -> MotionRun:
     start = step.start if step is not None else None
     motion = play.motion if play.motion is not None else -1
     end_s = clock.seconds(play.end_ns) if play.start_ns is not None else None
     return MotionRun(motion, show.name_of(play.motion), play.step, play.label,
                      start.estimated_s if start else None, show.expected_s(motion),
                      start.planned_s if start else None, clock.seconds(play.start_ns),
-                     end_s, play.ended_by, step.late_ms if step else 0.0)
+                     end_s, play.ended_by, step.late_ms if step else 0.0, robot)
 
 
-def _unplayed(show: AttachedShow, steps: dict[int, _Step]) -> list[MotionRun]:
+def _unplayed(show: AttachedShow, steps: dict[tuple[str | None, int], _Step], robot: str | None) -> list[MotionRun]:
     """The attached plan's plays after the last one the run started: what a stopped, failed or
-    cut run never got to (drawn in grey)."""
-    plan = show.plan
+    cut run never got to (drawn in grey), for one robot."""
+    plan = show.plan_of(robot)
     if plan is None:
         return []
-    last = max(steps, default=-1)
+    last = max((index for whose, index in steps if whose == robot), default=-1)
     return [MotionRun(step.motion, show.name_of(step.motion), step.index, step.label, step.planned_s,
-                      show.expected_s(step.motion), None, None, None, "not played")
-            for step in plan.steps if step.index > last and step.kind.value == "play" and step.motion is not None]
+                      show.expected_s(step.motion), None, None, None, "not played", robot=robot)
+            for step in plan.steps if step.index > last and step.kind.value == "play" and step.motion is not None
+            and (robot is None or step.is_for(robot))]
 
 
 # -- text --------------------------------------------------------------------------------------
@@ -288,7 +299,11 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
         for cue in timeline.cues:
             row[_cells(cue.show_s, cue.show_s, scale, width)[0]] = "v"
         yield _row("", "cues", "", "", "".join(row), figures)
-    for run in timeline.runs + timeline.unplayed:
+    lane = object()
+    for run in sorted(timeline.runs + timeline.unplayed, key=_lane_order(timeline)):
+        if run.robot is not None and run.robot != lane:
+            lane = run.robot
+            yield f"robot {lane}"
         planned = _span(run.planned_s, run.planned_end_s)
         if run.ended_by == "not played":
             actual = "not played"
@@ -304,6 +319,15 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
         yield "?: no status query saw it end (no `wait: done`): drawn for its expected"
         yield "   length, '.' up to what stopped it (the next play, or the log's end)"
     yield from _listed(timeline)
+
+
+def _lane_order(timeline: Timeline):  # type: ignore[no-untyped-def]
+    """Runs lane by lane (robots in the order they first played), then as they were."""
+    robots: dict[str | None, int] = {}
+    for run in timeline.runs + timeline.unplayed:
+        robots.setdefault(run.robot, len(robots))
+    position = {id(run): i for i, run in enumerate(timeline.runs + timeline.unplayed)}
+    return lambda run: (robots[run.robot], position[id(run)])
 
 
 def _row(step: str, title: str, planned: str, actual: str, bar: str, figures: bool) -> str:
@@ -367,15 +391,17 @@ def render_png(timeline: Timeline, out: BinaryIO) -> None:
     require_matplotlib()
     import matplotlib.pyplot as plt
 
-    everything = timeline.runs + timeline.unplayed
-    slots = sorted({r.motion for r in everything})
-    row = {motion: i for i, motion in enumerate(slots)}
-    names = {r.motion: r.title() for r in everything}
+    everything = sorted(timeline.runs + timeline.unplayed, key=_lane_order(timeline))
+    slots = list(dict.fromkeys((r.robot, r.motion) for r in everything))  # a row a robot's motion slot
+    if not any(r.robot for r in everything):
+        slots.sort(key=lambda slot: slot[1])
+    row = {slot: i for i, slot in enumerate(slots)}
+    names = {(r.robot, r.motion): (f"{r.robot}: " if r.robot else "") + r.title() for r in everything}
     height = max(2.5, 0.55 * (len(slots) + 1) + 1.8)
     fig, ax = plt.subplots(figsize=(11, height), dpi=100)
     try:
         for run in everything:
-            _draw_run(ax, run, row[run.motion])
+            _draw_run(ax, run, row[(run.robot, run.motion)])
         fault_y = len(slots)
         faults = timeline.faults
         for kind, marker, colour in _MARK_STYLES:
