@@ -35,6 +35,7 @@ BENCHMARKS = (
     ("recording", "5. recording cost"),
     ("log_review", "6. log review"),
     ("startup", "7. start-up"),
+    ("skew", "8. unison skew (several robots)"),
 )
 RESULTS = BENCH / "RESULTS.md"
 

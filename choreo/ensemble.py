@@ -7,7 +7,8 @@ spins the last 2 ms to it on its own, so the robots' first bytes leave together,
 the other.
 
 Shared `steps:` stay in step through `Gates`: a step starts when every robot it is for is
-through the one before. When the gate opens late (the last robot's `wait: done` saw its motion
+through the one before, and a unison play's start frames (the frame that starts the motion,
+after each robot's own exchanges before it) wait for each other and leave at one instant. When the gate opens late (the last robot's `wait: done` saw its motion
 end just now), the next step is released a little ahead (`SYNC_S`), so that every thread, woken
 at slightly different moments, still sends at one due time.
 
@@ -28,8 +29,10 @@ from choreo.clock import RunClock
 from choreo.errors import LinkError
 from choreo.logformat import ERROR, WARNING
 from choreo.runner import Runner, RunResult, StopRequest
+from choreo.show.model import PlannedStep
 
 SYNC_S = 0.002  # how far ahead a gate opened late releases the next step (see the docstring)
+ARMED = "armed"  # gates keyed (ARMED, step index): a unison play's start frames
 START_S = 0.02  # how far ahead of the threads' start show time 0 is
 SWITCH_S = 0.0001  # Python's thread switch interval while several robots play
 
@@ -41,6 +44,10 @@ class _Gate:
     arrived: set[str] = field(default_factory=set)
     end: float | None = None  # latest end of the step among the robots it was for
     release: float | None = None  # when the next step may start, once everyone is through
+    expected: frozenset[str] | None = None  # who must arrive (None: every robot still in the show)
+    writes: dict[str, Callable[[], None]] = field(default_factory=dict)  # a unison play's start frames
+    written: dict[str, int] | None = None  # when each was written (monotonic ns)
+    taking: bool = False  # the writer has the writes: no robot may take its own back
 
 
 class Gates:
@@ -66,22 +73,66 @@ class Gates:
             return None
         return gate.release
 
+    def armed(self, step: PlannedStep, robot: str, write: Callable[[], None]) -> int | None:
+        """Every robot the unison play is for is ready to send its start frame: the last one to
+        get ready writes them all, back to back, `SYNC_S` later (one thread: no wake-ups to wait
+        for between them). The others get the moment theirs was written."""
+        key = (ARMED, step.index)
+        with self._lock:
+            gate = self._gates.setdefault(key, _Gate(expected=frozenset(step.robots) if step.robots else None))
+            if gate.release is not None:
+                return None  # a retry after the others went: on its own
+            gate.writes[robot] = write
+            gate.arrived.add(robot)
+            self._open(key, gate)
+            writer = gate.release is not None
+        if writer:
+            self._write_all(gate)
+        elif not self.clock.source.wait_for(lambda: gate.written is not None, self.stop):
+            with self._lock:
+                if not gate.taking:  # stopping before the writes began: this robot writes its own
+                    gate.writes.pop(robot, None)
+                    return None
+            self.clock.source.wait_for(lambda: gate.written is not None, lambda: False)
+        return gate.written.get(robot) if gate.written is not None else None
+
+    def _write_all(self, gate: _Gate) -> None:
+        self.clock.sleep_until(self.zero + gate.release)  # type: ignore[operator]
+        written = {}
+        with self._lock:
+            gate.taking = True
+            writes = dict(gate.writes)
+        for name, write in writes.items():
+            written[name] = self.clock.mono_ns()
+            write()
+        gate.written = written
+        self.clock.source.notify()
+
     def drop(self, robot: str) -> None:
         """`robot` is out of the show: no gate waits for it any more."""
         with self._lock:
             self.live.discard(robot)
-            for index, gate in list(self._gates.items()):
-                self._open(index, gate)
+            opened = []
+            for key, gate in list(self._gates.items()):
+                waiting = gate.release is None
+                self._open(key, gate)
+                if waiting and gate.release is not None and gate.writes:
+                    opened.append(gate)  # a unison play the others were ready for: write it here
+        for gate in opened:
+            self._write_all(gate)
         self.clock.source.notify()
 
-    def _open(self, index: int, gate: _Gate) -> None:
+    def _open(self, key: int | tuple[str, int], gate: _Gate) -> None:
         """The last robot through opens the gate; the lock is held."""
-        if gate.release is not None or not self.live <= gate.arrived:
+        awaited = self.live if gate.expected is None else gate.expected & self.live
+        if gate.release is not None or not awaited <= gate.arrived:
             return
         now = self.clock.mono() - self.zero
         end = gate.end if gate.end is not None else now
-        gate.release = max(end, now + SYNC_S) if end < now + SYNC_S else end
-        self._gates.pop(index - 1, None)  # everyone is past the gate before: forget it
+        gate.release = max(end, now + SYNC_S)
+        if isinstance(key, int):  # everyone is past the step before and its play: forget them
+            self._gates.pop(key - 1, None)
+            self._gates.pop((ARMED, key), None)
 
 
 @dataclass

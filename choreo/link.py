@@ -167,6 +167,7 @@ class Link:
         # Bytes read while waiting for the line to go quiet: logged with the next frame's reply.
         self._set_aside = b""
         self._seq = 0
+        self._lost_write: PortLost | None = None  # a write that failed (see `_raise_lost_write`)
 
     @classmethod
     def open(cls, url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TIMEOUT_S,
@@ -213,11 +214,15 @@ class Link:
 
     # -- the sequences a show uses ---------------------------------------------------------
 
-    def play(self, motion: int, tag: Tag | None = None) -> Played:
+    def play(self, motion: int, tag: Tag | None = None,
+             before_start: Callable[[Callable[[], None]], int | None] | None = None) -> Played:
         """Stop, CALL the slot, restore; a failure anywhere retries the whole sequence.
 
         The sequence is one unit for a stop request too: it is checked before the stop frame
         only, because a sequence cut after its stop frame leaves the board's program halted.
+        `before_start` is handed the write of the frame that starts the motion (the last) and
+        may make it itself, returning when (monotonic ns): several robots' links hand theirs to
+        one thread that writes them back to back, so that their motions start together.
         Returns how many tries it took and when the sequence that worked began.
         """
         frames = self.layout.play_sequence(motion, self.config, self.baud)
@@ -226,7 +231,8 @@ class Link:
         for attempt in range(1, self.tries + 1):
             self._check_stop(what)
             for frame in frames:
-                reply = self.send(frame, attempt, tag, what=what)
+                together = before_start if frame is frames[-1] else None
+                reply = self.send(frame, attempt, tag, what=what, write=together)
                 self.moved = True
                 if frame is frames[0]:
                     began = self.last_tx_mono
@@ -286,7 +292,8 @@ class Link:
 
     # -- one try ---------------------------------------------------------------------------
 
-    def send(self, frame: Frame, attempt: int = 1, tag: Tag | None = None, what: str | None = None) -> Reply:
+    def send(self, frame: Frame, attempt: int = 1, tag: Tag | None = None, what: str | None = None,
+             write: Callable[[Callable[[], None]], int | None] | None = None) -> Reply:
         """Write one frame, read and judge its reply; no retry.
 
         Port loss is a LinkError. Bytes already waiting (a late reply to an earlier frame) are
@@ -302,10 +309,15 @@ class Link:
             self.clock.sleep_until(self._last_status_mono + self.status_spacing_s)
         self._seq += 1
         seq = self._seq
-        sent = self.clock.mono_ns()  # the frame's time: just before the write
         lost: PortLost | None = None
+        written = write(self._write_for(frame.data)) if write is not None else None
         try:
-            self._write(frame.data)
+            if written is None:
+                sent = self.clock.mono_ns()  # the frame's time: just before the write
+                self._write(frame.data)
+            else:
+                sent = written  # written by another thread, with other robots' (see `play`)
+                self._raise_lost_write()
         except PortLost as exc:
             lost = exc
         # Listeners hear of the frame once it is out: their work never delays a cue's first byte.
@@ -382,6 +394,22 @@ class Link:
             self.port.write(data)
         except OSError as exc:  # serial.SerialException is an OSError
             raise PortLost(_reason(exc)) from None
+
+    def _write_for(self, data: bytes) -> Callable[[], None]:
+        """The write of `data` as another thread makes it: a failure is kept for this link's
+        own thread to raise (see `_raise_lost_write`)."""
+        def write_now() -> None:
+            try:
+                self._write(data)
+            except PortLost as exc:
+                self._lost_write = exc
+        return write_now
+
+    def _raise_lost_write(self) -> None:
+        """A write another thread made for this link failed: fail here, as if written here."""
+        lost, self._lost_write = self._lost_write, None
+        if lost is not None:
+            raise lost
 
     def _read(self, count: int) -> bytes:
         try:

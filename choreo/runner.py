@@ -94,6 +94,11 @@ class Cues(Protocol):
         step); blocks until every robot the step was for is, and returns when the next step
         may start (None: the show is stopping)."""
 
+    def armed(self, step: PlannedStep, robot: str, write: Callable[[], None]) -> int | None:
+        """`robot` has sent all of a unison play but the frame that starts the motion, whose
+        `write` it hands over; blocks until every robot the play is for has, and returns when
+        its frame was written (monotonic ns), or None: write it yourself (stopping, a retry)."""
+
 
 class Runner:
     """Plays one robot's plan over its link on the show clock (one of several, with `robot`,
@@ -217,7 +222,7 @@ class Runner:
         tag = Tag(step.index, step.label)
         if step.kind is StepKind.PLAY:
             assert step.motion is not None
-            self._played = self._play(step.motion, tag, step_ref(step))
+            self._played = self._play(step.motion, tag, step_ref(step), self._together(step))
             self._last_play_done = self.clock.mono()
             self._last_motion = step.motion
             return due
@@ -228,10 +233,20 @@ class Runner:
             return end
         return self._wait_done(step, tag) - self._zero
 
-    def _play(self, motion: int, tag: Tag, where: str) -> Played:
+    def _together(self, step: PlannedStep) -> Callable[[Callable[[], None]], int | None] | None:
+        """With other robots on a unison play: hand the frame that starts the motion to the
+        gate, which writes every robot's back to back once all are ready, so that their motions
+        start at one instant (the frames before it take each robot's own reply times)."""
+        if self.cues is None or self.robot is None:
+            return None
+        cues, robot = self.cues, self.robot
+        return lambda write: cues.armed(step, robot, write)
+
+    def _play(self, motion: int, tag: Tag, where: str,
+              before_start: Callable[[Callable[[], None]], int | None] | None = None) -> Played:
         """One play sequence; a start whose reply was lost but which the board shows running
         is a play done (never sent twice), said in a warning."""
-        played = self.link.play(motion, tag)
+        played = self.link.play(motion, tag, before_start)
         if played.recovered:
             self._log(WARNING, f"{where}: {played.recovered}, but the board shows motion {motion} "
                                "running: it was not sent again")

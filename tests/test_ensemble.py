@@ -257,3 +257,14 @@ def test_replay_replays_every_robot_on_its_own_simulator(tmp_path, capsys):
     assert f"replayed {frames} frames: {frames} same, 0 differ" in out
     assert vmain(["replay", str(tmp_path / "run.mcap"), "--port", "sim://"]) == 2
     assert "runs each on its own simulator" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("lose", [3, 5, 6, 11, 13])
+def test_a_robot_dropping_out_anywhere_never_holds_up_the_others(tmp_path, lose):
+    """Frame K of b's is lost: in a play sequence, before or at its start frame, or in a poll;
+    the others, waiting for b at a shared step or a unison start, go on without it."""
+    text = UNISON.replace("      b: {}", "      b: {on_fault: continue}")
+    session, error = run_session(tmp_path, text, robot_ports={"b": f"sim://?lose={lose}"})
+    assert isinstance(error, LinkError) and "robot b dropped out at " in str(error)
+    played = {name: [m for m, _ in starts(board)] for name, board in boards(session).items()}
+    assert played["a"] == [1, 2, 1] and played["c"] == [1, 3, 3, 1]
