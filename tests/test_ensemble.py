@@ -268,3 +268,13 @@ def test_a_robot_dropping_out_anywhere_never_holds_up_the_others(tmp_path, lose)
     assert isinstance(error, LinkError) and "robot b dropped out at " in str(error)
     played = {name: [m for m, _ in starts(board)] for name, board in boards(session).items()}
     assert played["a"] == [1, 2, 1] and played["c"] == [1, 3, 3, 1]
+
+
+def test_run_json_names_every_robot_and_who_dropped_out(tmp_path, capsys):
+    text = UNISON.replace("      b: {}", "      b: {on_fault: continue}")
+    show = write(tmp_path, text)
+    code = vmain(["run", str(show), "--json", "-q", "--log", str(tmp_path / "r.mcap"), "--port", "b=sim://?lose=5"])
+    record = __import__("json").loads(capsys.readouterr().out)
+    assert code == 3 and record["exit"] == 3 and list(record["robots"]) == ["a", "b", "c"]
+    assert record["robots"]["b"]["port"].startswith("sim://?lose=5")
+    assert [d["robot"] for d in record["dropouts"]] == ["b"] and "robot b dropped out" in record["error"]

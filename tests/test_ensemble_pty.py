@@ -122,3 +122,37 @@ def test_sim_boards_refuses_a_count_it_cannot_serve():
     done = subprocess.run([sys.executable, "-m", "choreo", "sim", "--boards", "0"], capture_output=True,
                           text=True, timeout=20)
     assert done.returncode == 2 and done.stderr.strip() == "choreo sim: --boards 0: give 1..16"
+
+
+def test_tracks_over_ptys_meet_on_a_shared_cue(tmp_path):
+    show = tmp_path / "canon.yaml"
+    show.write_text(dedent("""
+        version: 1
+        robots: {lead: {}, follow: {}}
+        tracks:
+          lead:
+            - play: 1
+              at: 0.1
+            - play: 2
+              at: 0.6
+          follow:
+            - play: 1
+              at: 0.3
+            - play: 2
+              at: 0.6
+    """).lstrip())
+    log_path = tmp_path / "canon.mcap"
+    boards = Boards(2, "--motion-s", "0.1")
+    with boards as (first, second):
+        run = start_choreo("run", str(show), "--log", str(log_path), "--port", f"lead={first}",
+                           "--port", f"follow={second}")
+        _, err = run.communicate(timeout=30)
+        journal = boards.stop()
+    assert run.returncode == 0, err
+    for number in (1, 2):
+        started = [line for line in journal[number] if "started, runs" in line]
+        assert ["motion 1 started" in started[0], "motion 2 started" in started[1]] == [True, True]
+    log = read_log(log_path)
+    cues = {name: [m["cue"] for m in log.topic(f"/choreo/{name}/step") if m["event"] == "start"]
+            for name in ("lead", "follow")}
+    assert cues == {"lead": [0.1, 0.6], "follow": [0.3, 0.6]}
