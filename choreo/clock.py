@@ -76,11 +76,13 @@ class SystemTime:
 
     def __init__(self) -> None:
         self._changed = threading.Condition()
+        self._threads = 0  # threads of one run sharing this time (several robots)
 
     def spin(self) -> None:
-        """Lets other threads run: one robot's thread spinning towards a cue must not hold
-        Python's lock while another robot's cue falls due (it would wait up to a switch interval)."""
-        time.sleep(0)
+        """A busy-wait turn; with several robots' threads, one that lets the others run: one
+        robot spinning towards a cue must not hold Python's lock while another's falls due."""
+        if self._threads:
+            time.sleep(0)
 
     def wall_ns(self) -> int:
         return time.time_ns()
@@ -88,10 +90,14 @@ class SystemTime:
     # -- threads of one run (several robots) ------------------------------------------------
 
     def admit(self, threads: int) -> None:
-        """`threads` threads are about to share this time: nothing to do on the machine's."""
+        """`threads` threads are about to share this time (spinning then yields to them)."""
+        with self._changed:
+            self._threads += threads
 
     def leave(self) -> None:
         """A thread admitted with `admit` is done."""
+        with self._changed:
+            self._threads = max(0, self._threads - 1)
 
     def notify(self) -> None:
         """Something a `wait_for` predicate reads has changed."""
