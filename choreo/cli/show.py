@@ -76,7 +76,8 @@ def _show_record(show, plan) -> dict:  # type: ignore[no-untyped-def]
 
 def _plan_record(show, plan) -> dict:  # type: ignore[no-untyped-def]
     steps = [{"index": step.index, "path": step.path, "label": step.label, "kind": step.kind.value,
-              "start_s": step.planned_s, "cue": step.at, "motion": step.motion,
+              "start_s": step.planned_s, "cue": step.at,
+              **({"cue_bar": step.at_beat[0], "cue_beat": step.at_beat[1]} if step.at_beat else {}), "motion": step.motion,
               "motion_name": step.motion_name, "seconds": step.seconds, "text": step.describe(),
               "frames": [frame.hex for frame in step.frames]} for step in plan.steps]
     return {"path": show.path, **_show_record(show, plan), "plan": steps}
@@ -190,9 +191,10 @@ def _start(step, digits: int) -> str:  # type: ignore[no-untyped-def]
     text = f"{step.planned_s:{digits}.3f} s"
     if step.at is None:
         return text
+    cue = f"{step.at:g}" if step.at_beat is None else f"{step.at:g} = bar {step.at_beat[0]} beat {step.at_beat[1]:g}"
     if step.planned_s > step.at + 1e-9:
-        return f"{text} (at {step.at:g}, late {step.planned_s - step.at:.3f} s)"
-    return f"{text} (at {step.at:g})"
+        return f"{text} (at {cue}, late {step.planned_s - step.at:.3f} s)"
+    return f"{text} (at {cue})"
 
 
 def _late_note(plan) -> str:  # type: ignore[no-untyped-def]

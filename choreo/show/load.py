@@ -35,6 +35,7 @@ import yaml
 from choreo.errors import Problem, ShowError
 from choreo.show.model import (
     SOLO,
+    Tempo,
     DEFAULT_DONE_TIMEOUT_S,
     MOTION_NAME_FORMAT,
     Motion,
@@ -632,9 +633,31 @@ def _explain(error: Any, data: Any) -> list[tuple[JsonPath, str, bool]]:
         if "steps" in instance and "repeat" not in instance:
             return [(path + ("steps",), "nested `steps:` need `repeat: N` beside them", True)]
         return [(path + ("repeat",), "`repeat` needs the `steps:` to repeat", True)]
+    if validator == "anyOf" and path and path[-1] == "at":
+        return [_cue_problem(path, instance, error.context)]
     if validator == "anyOf":
         return [(path, _either_problem(path, instance, error.context), False)]
     return [(path, _simple_problem(path, validator, instance, expected), False)]
+
+
+def _cue_problem(path: JsonPath, instance: Any, context: list[Any]) -> tuple[JsonPath, str, bool]:
+    """`at:` is seconds or `{bar: N, beat: B}`: say what is wrong with the form it was given in."""
+    if isinstance(instance, dict):
+        for e in context:
+            inner = tuple(e.absolute_path)[len(path):]
+            if e.validator == "additionalProperties":
+                extra = next(key for key in instance if key not in ("bar", "beat"))
+                return path + (extra,), _unknown_key(extra, ["bar", "beat"]), True
+            if e.validator == "required":
+                return path, "a cue in bars and beats needs its `bar:` (from 1), e.g. `{bar: 12, beat: 3}`", False
+            if inner and e.validator != "type":
+                return path + inner, _simple_problem(path + inner, e.validator, e.instance, e.validator_value), False
+            if inner:
+                return path + inner, f"expected a number, not {_kind(e.instance)}", False
+    for e in context:
+        if e.validator not in ("type", "$ref") and not tuple(e.absolute_path)[len(path):]:
+            return path, _simple_problem(path, e.validator, e.instance, e.validator_value), False
+    return path, f"expected seconds (a number) or a bar and beat (`{{bar: 12, beat: 3}}`), not {_kind(instance)}", False
 
 
 def _whole_show_problem(validator: str, show: Any) -> tuple[JsonPath, str, bool]:
@@ -965,15 +988,37 @@ def _check_cue(walk: _Walk, step: dict[str, Any], here: JsonPath, looping: bool)
     if at is None or not walk.ok(path) or isinstance(at, bool):
         return
     mark = walk.doc.mark(path)
+    if isinstance(at, dict):
+        at = _beat_seconds(walk, at, path)
+        if at is None:
+            return
     if looping:
         walk.report.add(mark, path, "a cue inside a repeat would be late on every pass after the first: put `at:` on the repeat step")
         return
     if walk.last_cue is not None and at < walk.last_cue[0]:
         prev, prev_path = walk.last_cue
         line = walk.doc.mark(prev_path)[0]
-        walk.report.add(mark, path, f"cue at {_value(at)} s comes after the cue at {_value(prev)} s ({format_path(prev_path)}, line {line}): cues must not go back in time")
+        walk.report.add(mark, path, f"cue at {at:g} s comes after the cue at {prev:g} s ({format_path(prev_path)}, line {line}): cues must not go back in time")
         return
     walk.last_cue = (at, path)
+
+
+def _beat_seconds(walk: _Walk, at: dict[str, Any], path: JsonPath) -> float | None:
+    """A bar-and-beat cue in seconds; None (reported) without a usable tempo or past the bar."""
+    tempo = walk.doc.data.get("tempo")
+    if not isinstance(tempo, dict) or not walk.ok(("tempo",)):
+        if not isinstance(tempo, dict):
+            walk.report.add(walk.doc.mark(path), path, "a cue in bars and beats needs the music's `tempo:` "
+                            "(e.g. `tempo: {bpm: 120, offset: 0.5, meter: 4}`), or give seconds")
+        return None
+    built = _tempo(tempo)
+    beat = float(at.get("beat", 1))
+    if beat >= built.meter + 1:  # type: ignore[union-attr]
+        walk.report.add(walk.doc.mark(path + ("beat",)), path + ("beat",),
+                        f"beat {_value(at.get('beat'))}: a bar has {built.meter} beats (tempo.meter), "  # type: ignore[union-attr]
+                        f"so beats run from 1 to below {built.meter + 1}")  # type: ignore[union-attr]
+        return None
+    return built.seconds(int(at["bar"]), beat)  # type: ignore[union-attr]
 
 
 def _check_visible(walk: _Walk, path: JsonPath, text: str, what: str) -> bool:
@@ -1033,7 +1078,8 @@ def _build_show(file: str, source: bytes, doc: _Doc) -> Show:
     robots = {name: _robot(entry or {}, motions) for name, entry in (data.get("robots") or {}).items()}
     robot = _robot(data.get("robot") or {}, motions) if not robots else next(iter(robots.values()))
     abort = data.get("on_abort")
-    tracks = {name: _build_steps(steps, ("tracks", name), doc, motions)
+    tempo = _tempo(data.get("tempo"))
+    tracks = {name: _build_steps(steps, ("tracks", name), doc, motions, tempo)
               for name, steps in (data.get("tracks") or {}).items()}
     return Show(
         path=file,
@@ -1042,10 +1088,26 @@ def _build_show(file: str, source: bytes, doc: _Doc) -> Show:
         robot=robot,
         motions=motions,
         on_abort=None if abort is None else _motion_number(abort, motions),
-        steps=_build_steps(data["steps"], ("steps",), doc, motions) if "steps" in data else (),
+        steps=_build_steps(data["steps"], ("steps",), doc, motions, tempo) if "steps" in data else (),
         robots=robots,
         tracks=tracks,
+        tempo=tempo,
     )
+
+
+def _tempo(entry: dict[str, Any] | None) -> Tempo | None:
+    if not entry:
+        return None
+    return Tempo(float(entry["bpm"]), float(entry.get("offset", 0.0)), int(entry.get("meter", 4)))
+
+
+def _cue(at: Any, tempo: Tempo | None) -> tuple[float | None, tuple[int, float] | None]:
+    """A cue as seconds, and as bar and beat if it was written so (checked: tempo exists)."""
+    if isinstance(at, dict):
+        bar, beat = int(at["bar"]), float(at.get("beat", 1))
+        assert tempo is not None, "a bar-and-beat cue without a tempo passed the checks"
+        return tempo.seconds(bar, beat), (bar, beat)
+    return _seconds(at), None
 
 
 def _robot(entry: dict[str, Any], motions: dict[str, Motion]) -> RobotSettings:
@@ -1061,16 +1123,18 @@ def _robot(entry: dict[str, Any], motions: dict[str, Motion]) -> RobotSettings:
     )
 
 
-def _build_steps(steps: list[dict[str, Any]], path: JsonPath, doc: _Doc, motions: dict[str, Motion]) -> tuple[Step | Repeat, ...]:
+def _build_steps(steps: list[dict[str, Any]], path: JsonPath, doc: _Doc, motions: dict[str, Motion],
+                 tempo: Tempo | None = None) -> tuple[Step | Repeat, ...]:
     built: list[Step | Repeat] = []
     for index, step in enumerate(steps):
         here = path + (index,)
         line, column = doc.mark(here)
         robots = tuple(step["robots"]) if "robots" in step else None
+        at, at_beat = _cue(step.get("at"), tempo)
         common = dict(path=format_path(here), line=line, column=column, label=step.get("label"),
-                      at=_seconds(step.get("at")), robots=robots)
+                      at=at, at_beat=at_beat, robots=robots)
         if "repeat" in step:
-            inner = _build_steps(step["steps"], here + ("steps",), doc, motions)
+            inner = _build_steps(step["steps"], here + ("steps",), doc, motions, tempo)
             built.append(Repeat(count=int(step["repeat"]), steps=inner, **common))
         elif "play" in step:
             ref = step["play"]

@@ -81,7 +81,8 @@ class Step:
     line: int = 0  # 1-based line and column of the step, for messages
     column: int = 0
     label: str | None = None
-    at: float | None = None  # the cue, if the step has one
+    at: float | None = None  # the cue, if the step has one (seconds, bars and beats resolved)
+    at_beat: tuple[int, float] | None = None  # the cue as written in bars and beats, if it was
     motion: int | None = None  # PLAY: the slot
     motion_name: str | None = None  # PLAY: the name it was played by, if any
     seconds: float | None = None  # WAIT: how long; WAIT_DONE: the timeout
@@ -99,7 +100,21 @@ class Repeat:
     column: int = 0
     label: str | None = None  # names the first step of the first iteration
     at: float | None = None  # cues the first step of the first iteration
+    at_beat: tuple[int, float] | None = None  # that cue as written in bars and beats, if it was
     robots: tuple[str, ...] | None = None  # the robots its steps are for, unless a step says
+
+
+@dataclass(frozen=True)
+class Tempo:
+    """`tempo:`: where the music's bars and beats fall on the show clock."""
+
+    bpm: float
+    offset: float = 0.0  # seconds to bar 1, beat 1
+    meter: int = 4  # beats a bar
+
+    def seconds(self, bar: int, beat: float = 1.0) -> float:
+        """Bar and beat (counted from 1) on the show clock, to the nanosecond."""
+        return round(self.offset + ((bar - 1) * self.meter + (beat - 1)) * 60.0 / self.bpm, 9)
 
 
 @dataclass(frozen=True)
@@ -115,6 +130,7 @@ class Show:
     steps: tuple[Step | Repeat, ...] = ()  # the steps as written; `compile_plan` flattens them
     robots: dict[str, RobotSettings] = field(default_factory=dict)  # `robots:`, in file order; {} for `robot:`
     tracks: dict[str, tuple[Step | Repeat, ...]] = field(default_factory=dict)  # `tracks:`, by robot
+    tempo: Tempo | None = None
 
     @property
     def ensemble(self) -> bool:
@@ -165,6 +181,7 @@ class PlannedStep:
     motion_name: str | None = None
     seconds: float | None = None  # WAIT: how long; WAIT_DONE: the timeout
     at: float | None = None  # the cue: not before this many seconds after the show's start
+    at_beat: tuple[int, float] | None = None  # the cue as written in bars and beats, if it was
     planned_s: float = 0.0
     expected_s: float = 0.0  # how long the step is expected to take (WAIT_DONE: the motion's rest)
     frames: tuple[Frame, ...] = ()  # what it sends (WAIT_DONE: one status query, repeated)

@@ -36,6 +36,7 @@ class _Flat:
     label: str | None
     at: float | None
     robots: tuple[str, ...] | None = None  # who does it (a repeat's robots pass to its steps)
+    at_beat: tuple[int, float] | None = None  # the cue in bars and beats, as written
 
 
 def compile_plan(show: Show, layout: Layout | None = None, baud: int | None = None) -> Plan:
@@ -109,7 +110,8 @@ def _compile(show: Show, flats: list[_Flat], links: dict[str, tuple[Layout, int]
             steps[name].append(PlannedStep(
                 index=index, path=flat.path, kind=step.kind, line=step.line, label=flat.label, motion=motion,
                 motion_name=step.motion_name if step.kind is StepKind.PLAY else _name_of(show, motion),
-                seconds=step.seconds, at=flat.at, planned_s=start, expected_s=expected, frames=frames,
+                seconds=step.seconds, at=flat.at, at_beat=flat.at_beat, planned_s=start, expected_s=expected,
+                frames=frames,
                 robots=flat.robots if unison else None))
         clock = max(start, _round(start + expected))  # rounding never moves time backwards
     return {name: Plan(tuple(steps[name]), clock, links[name][0].name, name, unison) for name in names}
@@ -144,15 +146,16 @@ def _flatten(steps: tuple[Step | Repeat, ...], prefix: str = "", marks: str = ""
         path = prefix + _local(item.path)
         who = item.robots or robots
         if isinstance(item, Step):
-            out.append(_Flat(item, path, _label(item.label, marks), item.at, who))
+            out.append(_Flat(item, path, _label(item.label, marks), item.at, who, item.at_beat))
             continue
         for k in range(1, item.count + 1):
             inner = _flatten(item.steps, f"{path}#{k}.", marks + f"#{k}", who)
             if k == 1 and inner and (item.at is not None or item.label is not None):
                 first = inner[0]
-                cues = [a for a in (item.at, first.at) if a is not None]
-                at = max(cues) if cues else None
-                inner[0] = _Flat(first.step, first.path, first.label or _label(item.label, marks), at, first.robots)
+                cues = [(a, b) for a, b in ((item.at, item.at_beat), (first.at, first.at_beat)) if a is not None]
+                at, at_beat = max(cues, key=lambda cue: cue[0]) if cues else (None, None)
+                inner[0] = _Flat(first.step, first.path, first.label or _label(item.label, marks), at,
+                                 first.robots, at_beat)
             out.extend(inner)
     return out
 
