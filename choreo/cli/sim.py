@@ -63,6 +63,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="status refresh period: a status query shows the board as of the last refresh, "
              "every MS ms from start (default 50; 0: live)",
     )
+    board.add_argument("--latency-ms", metavar="MS", help="an FTDI USB adapter's latency timer between "
+                       "board and client: replies wait for its next tick, every MS ms (1..255; a real "
+                       "adapter's default is 16); default 0: none")
     board.add_argument(
         "--no-wire", action="store_true", help="bytes take no time (default: 11 bits a byte at the baud)"
     )
@@ -153,7 +156,8 @@ def _server(options, args: argparse.Namespace, start: float, number: int | None)
             print(prefix + entry.line(start), file=sys.stderr, flush=True)
 
     board = options.board(on_entry=on_entry, power_on=start)
-    return PtyServer(board, gap_s=options.gap_s or PTY_GAP_S, check_settings=not args.no_settings_check)
+    return PtyServer(board, gap_s=options.gap_s or PTY_GAP_S, check_settings=not args.no_settings_check,
+                     latency_s=options.latency_s)
 
 
 def _serve_all(servers: list) -> list:  # type: ignore[type-arg]

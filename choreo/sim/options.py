@@ -18,6 +18,7 @@ with dashes on the command line (`--motion-s 0.5 --drop 5`), and both go through
 | layout | the board's memory layout: `seed` or `hth4-2.2` (where its motion slots start) | seed |
 | config | the config word at power-on, e.g. `0x821b` (what an HTH4 2.2+ project saves) | 0x0002 |
 | baud_switch | 1: a config write whose COM baud bits name another baud switches the board to it | 0 |
+| latency_ms | an FTDI USB adapter's latency timer: reply bytes reach the client at its next tick (every MS ms), or at once when 62 are waiting; 0: no adapter | 0 |
 | lose, drop, nak, badsum, short, junk, late | faults: K (every K-th frame) or P (probability) | none |
 | lose_start | no reply to the frame that starts a motion (it still starts): K-th start or P | none |
 """
@@ -42,7 +43,7 @@ from choreo.sim.board import (
 from choreo.sim.faults import DEFAULT_LATE_S, FAULT_KINDS, FaultPlan
 
 SETTINGS = ("baud", "motion_s", "durations", "reply_ms", "refresh_ms", "wire", "gap_ms", "seed", "late_ms",
-            "layout", "config", "baud_switch")
+            "layout", "config", "baud_switch", "latency_ms")
 OPTION_NAMES: tuple[str, ...] = SETTINGS + FAULT_KINDS
 
 
@@ -61,6 +62,7 @@ class SimOptions:
     layout: Layout = SEED
     config: int = POWER_ON_CONFIG
     baud_switch: bool = False
+    latency_s: float = 0.0  # an FTDI adapter's latency timer between the board and the client (0: none)
 
     def board(self, **kwargs: object) -> SimBoard:
         """A fresh board with these options (kwargs: `on_entry`, `journal_size`, `power_on`)."""
@@ -84,7 +86,8 @@ class SimOptions:
         motions = f"motions {self.motion_s:g} s" + (f" ({slots})" if slots else "")
         status = f"status every {self.refresh_s * 1000:g} ms" if self.refresh_s > 0 else "status live"
         board = f"layout {self.layout.name}, config 0x{self.config:04x}" + (", baud switch" if self.baud_switch else "")
-        return f"{self.baud} baud 8E1, {board}, {motions}, {status}, {self.faults.describe()}"
+        adapter = f", USB latency timer {self.latency_s * 1e3:g} ms" if self.latency_s else ""
+        return f"{self.baud} baud 8E1, {board}, {motions}, {status}{adapter}, {self.faults.describe()}"
 
 
 SCHEME = "sim"
@@ -186,6 +189,7 @@ def parse_options(values: Mapping[str, str]) -> SimOptions:
         layout=_parsed(values, "layout", layout_named, SEED),
         config=_parsed(values, "config", _word, POWER_ON_CONFIG),
         baud_switch=_parsed(values, "baud_switch", _flag, False),
+        latency_s=_parsed(values, "latency_ms", _latency, 0.0),
     )
 
 
@@ -259,6 +263,14 @@ def _positive_milliseconds(text: str) -> float:
     if value <= 0:
         raise ValueError("milliseconds must be > 0")
     return value
+
+
+def _latency(text: str) -> float:
+    """An FTDI latency timer: 0 (no adapter) or 1..255 ms, as the chip takes."""
+    value = _number(text)
+    if value != 0 and not 1 <= value <= 255:
+        raise ValueError("an FTDI latency timer is 1..255 ms (0: no adapter)")
+    return value / 1000
 
 
 def _whole(text: str) -> int:

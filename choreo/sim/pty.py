@@ -55,9 +55,10 @@ class ServeEnd(str, Enum):
 class PtyServer:
     """A simulated board on a pseudo-terminal. Use as a context manager, or open/serve/close."""
 
-    def __init__(self, board: SimBoard, gap_s: float = PTY_GAP_S, check_settings: bool = True) -> None:
+    def __init__(self, board: SimBoard, gap_s: float = PTY_GAP_S, check_settings: bool = True,
+                 latency_s: float = 0.0) -> None:
         self.board = board
-        self.line = Line(board, gap_s)
+        self.line = Line(board, gap_s, latency_s)
         self.check_settings = check_settings
         self.path: str | None = None
         self._master: int | None = None

@@ -23,8 +23,10 @@ stream:
 
 from __future__ import annotations
 
+import math
+
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from choreo.protocol import MAX_FRAME_SIZE
 from choreo.sim.board import SimBoard
@@ -115,11 +117,50 @@ class Framer:
         return unit
 
 
+FTDI_PACKET = 62  # reply bytes an FTDI chip sends at once, without waiting for its timer
+
+
+@dataclass
+class LatencyTimer:
+    """An FTDI USB adapter between the board and the client: reply bytes wait in the chip
+    until its latency timer fires (every `period_s`, 16 ms by default on a real adapter), or
+    until `FTDI_PACKET` bytes are waiting. The timer is modelled free-running from power-on,
+    so a short reply waits anything from 0 to `period_s`, `period_s / 2` on average: the
+    cautious reading of FTDI's note (it restarts on every transfer, which no log shows)."""
+
+    period_s: float
+    origin: float = 0.0
+    held: list[tuple[float, int]] = field(default_factory=list)
+
+    def release(self, arrivals: list[tuple[float, int]]) -> list[tuple[float, int]]:
+        """The same bytes, at the times the client sees them."""
+        out: list[tuple[float, int]] = []
+        for at, byte in arrivals:
+            if self.held and at > self._tick(self.held[0][0]):
+                out.extend(self._flush(self._tick(self.held[0][0])))
+            self.held.append((at, byte))
+            if len(self.held) >= FTDI_PACKET:
+                out.extend(self._flush(at))
+        if self.held:
+            out.extend(self._flush(self._tick(self.held[0][0])))
+        return out
+
+    def _tick(self, at: float) -> float:
+        """The first timer expiry at or after `at`."""
+        ticks = math.ceil((at - self.origin) / self.period_s - 1e-9)
+        return self.origin + max(ticks, 0) * self.period_s
+
+    def _flush(self, at: float) -> list[tuple[float, int]]:
+        flushed, self.held = [(max(at, arrived), byte) for arrived, byte in self.held], []
+        return flushed
+
+
 class Line:
     """Client <-> board, on the board's clock. Single-threaded: the transport drives it."""
 
-    def __init__(self, board: SimBoard, gap_s: float = REAL_GAP_S) -> None:
+    def __init__(self, board: SimBoard, gap_s: float = REAL_GAP_S, latency_s: float = 0.0) -> None:
         self.board = board
+        self.timer = LatencyTimer(latency_s, board.power_on) if latency_s > 0 else None
         self.framer = Framer(gap_s)
         self.settings: LineSettings | None = None  # None: unknown, assumed right
         self._in_free = float("-inf")
@@ -195,4 +236,5 @@ class Line:
             return
         sent = self.board.receive(unit.data, unit.at, unit.first)
         if sent is not None:
-            self._out.extend(zip(sent.times, sent.data))
+            arrivals = list(zip(sent.times, sent.data))
+            self._out.extend(self.timer.release(arrivals) if self.timer is not None else arrivals)

@@ -52,7 +52,7 @@ class Serial(SerialBase):
             raise SerialException("Port must be configured before it can be used.")
         self.options = self.from_url(self._port)
         self.board = self.options.board(power_on=self.time_source.now())
-        self.line = Line(self.board, self.options.gap_s or REAL_GAP_S)
+        self.line = Line(self.board, self.options.gap_s or REAL_GAP_S, self.options.latency_s)
         self.is_open = True
         self._reconfigure_port()
 
