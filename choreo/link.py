@@ -118,6 +118,22 @@ def open_port(url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TI
         raise LinkError(f"port {url}: cannot open: {_reason(exc)}{_open_hint(exc)}") from None
 
 
+def usb_latency_note(port: serial.SerialBase) -> str | None:
+    """Ask a real serial device's driver for low latency; if its FTDI latency timer still holds
+    replies over 1 ms, what that costs and the command that fixes it (said once, at open)."""
+    from choreo.usb import LOW_LATENCY_MS, ask_low_latency, latency_fix, latency_timer_ms
+
+    device = str(getattr(port, "port", "") or "")
+    if not device.startswith("/dev/"):
+        return None  # a URL port (sim://, socket://): no USB adapter of its own
+    ask_low_latency(port)
+    timer = latency_timer_ms(device)
+    if timer is None or timer <= LOW_LATENCY_MS:
+        return None
+    return (f"port {device}: the USB adapter's latency timer is {timer} ms: each reply may wait up to "
+            f"{timer} ms, a play up to {3 * timer} ms more; fix: {latency_fix(device)}")
+
+
 def _reason(exc: BaseException) -> str:
     text = str(exc).strip() or type(exc).__name__
     return text.splitlines()[0]
@@ -167,6 +183,7 @@ class Link:
         # Bytes read while waiting for the line to go quiet: logged with the next frame's reply.
         self._set_aside = b""
         self._seq = 0
+        self.latency_note: str | None = None  # the adapter's latency timer, when it costs time
         self._lost_write: PortLost | None = None  # a write that failed (see `_raise_lost_write`)
 
     @classmethod
@@ -180,6 +197,7 @@ class Link:
         port = open_port(url, baud, timeout=timeout, exclusive=exclusive, clock=clock)
         link = cls(port, name=url, timeout=timeout, tries=tries, clock=clock, listeners=listeners,
                    layout=layout)
+        link.latency_note = usb_latency_note(port)
         if layout.reads_config:
             try:
                 link.read_config()

@@ -19,7 +19,7 @@ from choreo.clock import RunClock, SystemTime, TimeSource
 from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError, did_you_mean
 from choreo.layouts import SEED, Layout, layout_named
 from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
-from choreo.logformat import ERROR, INFO
+from choreo.logformat import ERROR, INFO, WARNING
 from choreo.record import Recorder, RobotInfo, RunInfo, default_log_path
 from choreo.runner import RunListener, Runner, RunResult, StopRequest
 from choreo.show.model import DEFAULT_MOTION_S, Plan, RobotSettings, Show
@@ -237,6 +237,7 @@ class Stage:
     outcome: dict[str, str] | None = None  # the finished run's metadata, set by whoever ran it
     recorder: Recorder | None = None
     links: dict[str, Link] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)  # what the user should hear once the ports are open
 
     @property
     def link(self) -> Link | None:
@@ -259,6 +260,11 @@ class Stage:
                 self.recorder.on_log(INFO, self.opening_note, self.clock.wall_ns())
         for robot in self.robots:
             self.links[robot.robot] = self._open_link(robot)
+            note = self.links[robot.robot].latency_note
+            if note is not None:
+                self.notes.append(f"robot {robot.robot}: {note}" if self.named else note)
+                if self.recorder is not None:
+                    self.recorder.on_log(WARNING, self.notes[-1], self.clock.wall_ns())
 
     def _open_link(self, robot: RobotLink) -> Link:
         listeners = []

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-KONDO_USB = (0x165C, 0x0008)  # Kondo Dual USB Adapter HS (an FTDI chip)
+from choreo.usb import KONDO_USB
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

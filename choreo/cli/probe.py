@@ -40,7 +40,7 @@ def _kondo_adapter() -> str:
     """The one Kondo adapter plugged in; otherwise the user must say which port."""
     from serial.tools import list_ports
 
-    from choreo.cli.ports import KONDO_USB
+    from choreo.usb import KONDO_USB
 
     ports = list_ports.comports()
     kondo = [p.device for p in ports if (p.vid, p.pid) == KONDO_USB]

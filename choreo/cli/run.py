@@ -91,6 +91,8 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     try:
         with _log_named_on_failure(session, say), signals as stop, session:
             say(f"log: {session.log_path}" if session.log_path else "log: off (--no-log)")
+            for note in session.stage.notes:
+                say(f"warning: {note}")
             result = session.run([progress], stop)
         report.result = result
         progress.finish()

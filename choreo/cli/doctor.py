@@ -1,0 +1,37 @@
+"""`choreo doctor [--port URL]`: check the adapter, driver, permission, latency timer and board."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "doctor",
+        help="check what stands between you and a working show, with the fix for each problem",
+        description="Check the serial ports and Kondo's USB adapter (165C:0008), whether a driver "
+        "serves it, permission on the device, its FTDI latency timer, and whether a board answers "
+        "(a read-only probe: the robot does not move). One line a check; a problem comes with the "
+        "command that fixes it. Exit 1 if there is a problem.",
+    )
+    parser.add_argument("--port", help="the port to check and probe (default: the one Kondo adapter "
+                        "plugged in); sim:// probes the built-in simulator")
+    parser.add_argument("--no-probe", action="store_true", help="do not talk to the board")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from serial.tools import list_ports
+
+    from choreo.doctor import PROBLEM, SerialPort, examine
+    from choreo.probe import probe
+
+    ports = [SerialPort(p.device, p.vid, p.pid) for p in list_ports.comports()]
+
+    def probe_port(port: str):  # type: ignore[no-untyped-def]
+        return probe(port, time_source=args.time_source)
+
+    findings = examine(ports, args.port, probe=None if args.no_probe else probe_port)
+    for finding in findings:
+        print(finding.line())
+    return 1 if any(f.level == PROBLEM for f in findings) else 0

@@ -1,0 +1,125 @@
+"""`choreo doctor`: what stands between a user and a working show, one finding and one fix a line.
+
+Each check looks at one thing (the serial ports, Kondo's adapter and its driver, permission on
+the device, the FTDI latency timer, the board itself) and says it is fine, or what is wrong and
+the command that fixes it. Checks read the machine through arguments (the ports pyserial lists,
+a sysfs tree, a probe function), so tests give them a machine of their own.
+"""
+
+from __future__ import annotations
+
+import grp
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from choreo.errors import ChoreoError
+from choreo.probe import BoardInfo
+from choreo.usb import KONDO_USB, NEW_ID_FIX, SYSFS, latency_fix, latency_timer_ms, usb_devices
+
+OK, PROBLEM, NOTE = "ok", "problem", "note"
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One check's verdict: what it found, and the fix when something is wrong."""
+
+    level: str  # ok | problem | note
+    check: str
+    text: str
+    fix: str | None = None
+
+    def line(self) -> str:
+        mark = {OK: "ok     ", PROBLEM: "PROBLEM", NOTE: "note   "}[self.level]
+        return f"{mark} {self.check}: {self.text}" + (f" -> fix: {self.fix}" if self.fix else "")
+
+
+@dataclass(frozen=True)
+class SerialPort:
+    """What doctor needs of a port pyserial lists."""
+
+    device: str
+    vid: int | None = None
+    pid: int | None = None
+
+    @property
+    def is_kondo(self) -> bool:
+        return (self.vid, self.pid) == KONDO_USB
+
+
+def examine(ports: Sequence[SerialPort], port: str | None = None, *, sysfs: Path = SYSFS,
+            probe: Callable[[str], BoardInfo] | None = None) -> list[Finding]:
+    """Every check, in the order a user fixes things: adapter, driver, permission, latency,
+    then the board on `port` (or on the one Kondo adapter found)."""
+    findings = _adapters(ports, sysfs)
+    target = port or _only_kondo(ports)
+    if target is not None and not target.lower().startswith(("sim://", "socket://", "rfc2217://", "loop://")):
+        findings += _device(target, sysfs)
+    if probe is not None and target is not None:
+        findings.append(_board(target, probe))
+    elif target is None:
+        findings.append(Finding(NOTE, "board", "not probed: no port given and no single Kondo adapter "
+                                "found", "choreo doctor --port /dev/ttyUSB0 (or sim:// to try the simulator)"))
+    return findings
+
+
+def _only_kondo(ports: Sequence[SerialPort]) -> str | None:
+    kondo = [p.device for p in ports if p.is_kondo]
+    return kondo[0] if len(kondo) == 1 else None
+
+
+def _adapters(ports: Sequence[SerialPort], sysfs: Path) -> list[Finding]:
+    kondo = [p for p in ports if p.is_kondo]
+    listed = ", ".join(sorted(p.device for p in ports)) or "none"
+    if kondo:
+        return [Finding(OK, "adapter", f"Kondo's USB adapter (165C:0008) on {', '.join(p.device for p in kondo)}")]
+    unbound = [d for d in usb_devices(sysfs) if d.is_kondo]
+    if unbound:
+        return [Finding(PROBLEM, "adapter", "Kondo's USB adapter (165C:0008) is plugged in but no driver "
+                        "gives it a serial port (ftdi_sio does not know Kondo's id)", NEW_ID_FIX)]
+    if ports:
+        return [Finding(NOTE, "adapter", f"no Kondo adapter (165C:0008) found; serial ports: {listed}",
+                        "plug in Kondo's adapter, or give --port for another one")]
+    return [Finding(PROBLEM, "adapter", "no serial ports and no Kondo adapter (165C:0008) found",
+                    "plug in the adapter (and check `lsusb`); sim:// runs shows without one")]
+
+
+def _device(device: str, sysfs: Path) -> list[Finding]:
+    """Permission on the device and its latency timer."""
+    path = Path(device)
+    if not path.exists():
+        return [Finding(PROBLEM, "device", f"{device} does not exist", "choreo ports lists the serial ports")]
+    findings = [_permission(path)]
+    timer = latency_timer_ms(device, sysfs)
+    if timer is None:
+        findings.append(Finding(NOTE, "latency", f"{device} has no FTDI latency timer to read (not an FTDI "
+                                "adapter, or not Linux)"))
+    elif timer > 1:
+        findings.append(Finding(PROBLEM, "latency", f"{device}'s FTDI latency timer is {timer} ms: each reply "
+                                f"may wait up to {timer} ms, a play up to {3 * timer} ms more",
+                                latency_fix(device, sysfs)))
+    else:
+        findings.append(Finding(OK, "latency", f"{device}'s FTDI latency timer is {timer} ms"))
+    return findings
+
+
+def _permission(path: Path) -> Finding:
+    if os.access(path, os.R_OK | os.W_OK):
+        return Finding(OK, "permission", f"{path} can be read and written")
+    try:
+        group = grp.getgrgid(path.stat().st_gid).gr_name
+    except (KeyError, OSError):
+        group = "dialout"
+    return Finding(PROBLEM, "permission", f"{path} cannot be opened by this user (it belongs to group {group})",
+                   f"sudo usermod -aG {group} $USER, then log out and in again")
+
+
+def _board(port: str, probe: Callable[[str], BoardInfo]) -> Finding:
+    try:
+        info = probe(port)
+    except ChoreoError as exc:
+        return Finding(PROBLEM, "board", str(exc).splitlines()[0], f"choreo probe --port {port} says "
+                       "more; check the cable, the board's power and its baud")
+    version = f", version {info.version!r}" if info.version else ""
+    return Finding(OK, "board", f"a board answers on {port} at {info.baud} baud{version}")
