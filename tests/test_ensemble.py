@@ -278,3 +278,14 @@ def test_run_json_names_every_robot_and_who_dropped_out(tmp_path, capsys):
     assert code == 3 and record["exit"] == 3 and list(record["robots"]) == ["a", "b", "c"]
     assert record["robots"]["b"]["port"].startswith("sim://?lose=5")
     assert [d["robot"] for d in record["dropouts"]] == ["b"] and "robot b dropped out" in record["error"]
+
+
+def test_log_frames_shows_one_robot_on_request(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "400")
+    run_session(tmp_path, UNISON)
+    log = str(tmp_path / "run.mcap")
+    assert vmain(["log", "frames", log, "--robot", "b"]) == 0
+    lines = capsys.readouterr().out.splitlines()[1:]
+    assert lines and all(" b: " in line for line in lines)
+    assert vmain(["log", "frames", log, "--robot", "d"]) == 2
+    assert "--robot d: not a robot of this log; its robots: a, b, c" in capsys.readouterr().err

@@ -57,6 +57,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     frames.add_argument("--kind", choices=FRAME_AND_REPLY_KINDS, metavar="K",
                         help="only frames of this kind or with replies of this kind: "
                         + ", ".join(FRAME_AND_REPLY_KINDS))
+    frames.add_argument("--robot", metavar="NAME", help="only this robot's frames (a show for several robots)")
     frames.set_defaults(handler=run_frames)
 
     timeline = commands.add_parser(
@@ -186,7 +187,14 @@ def run_frames(args: argparse.Namespace) -> int:
     from choreo.review.reader import LogReader
 
     with LogReader(args.log) as reader:
-        _print_all(frame_lines(reader, step=args.step, kind=args.kind))
+        robots = [name for name in reader.run_info.get("robots", "").split(",") if name]
+        if args.robot is not None and args.robot not in robots:
+            from choreo.errors import UsageError, did_you_mean
+
+            known = f"its robots: {', '.join(robots)}" if robots else "it is a one-robot log"
+            raise UsageError(f"--robot {args.robot}: not a robot of this log"
+                             f"{did_you_mean(args.robot, robots)}; {known}")
+        _print_all(frame_lines(reader, step=args.step, kind=args.kind, robot=args.robot))
     return 0
 
 

@@ -140,10 +140,12 @@ def stale_note(rx: RxRecord) -> str:
     return f" (set aside {what}: {', '.join(replies)})"
 
 
-def matches(exchange: Exchange, step: int | None, kind: str | None) -> bool:
-    """`--step N` and `--kind K`: K names a frame kind or a reply kind; either side matching
-    keeps the pair, so `--kind nak` shows each refused frame with its NAK."""
+def matches(exchange: Exchange, step: int | None, kind: str | None, robot: str | None = None) -> bool:
+    """`--step N`, `--kind K` and `--robot NAME`: K names a frame kind or a reply kind; either
+    side matching keeps the pair, so `--kind nak` shows each refused frame with its NAK."""
     if step is not None and exchange.step != step:
+        return False
+    if robot is not None and exchange.robot != robot:
         return False
     if kind is not None and kind not in (exchange.frame_kind, exchange.reply_kind):
         return False
@@ -174,12 +176,13 @@ def lines(exchange: Exchange) -> Iterator[str]:
 HEADER = f"{'show s':>10}  dir {'seq':<7} {'step/lat':<9} {'kind':<8} {'bytes':<56} meaning"
 
 
-def frame_lines(reader: LogReader, step: int | None = None, kind: str | None = None) -> Iterator[str]:
+def frame_lines(reader: LogReader, step: int | None = None, kind: str | None = None,
+                robot: str | None = None) -> Iterator[str]:
     """Every line `choreo log frames` prints, header first; a cut log ends with where it stops."""
     yield HEADER
     shown = 0
     for exchange in exchanges(reader):
-        if matches(exchange, step, kind):
+        if matches(exchange, step, kind, robot):
             shown += 1
             try:
                 yield from lines(exchange)
@@ -189,5 +192,6 @@ def frame_lines(reader: LogReader, step: int | None = None, kind: str | None = N
         yield f"log {reader.cut.state}: {reader.cut}"
     if not shown:
         wanted = " and ".join(x for x in (f"step {step}" if step is not None else "",
-                                         f"kind {kind}" if kind else "") if x)
+                                         f"kind {kind}" if kind else "",
+                                         f"robot {robot}" if robot else "") if x)
         yield f"no frames{' with ' + wanted if wanted else ''} in this log"
