@@ -43,6 +43,7 @@ class _Gate:
 
     arrived: set[str] = field(default_factory=set)
     end: float | None = None  # latest end of the step among the robots it was for
+    idle: float | None = None  # where the plan ends the step, for the robots it was not for
     release: float | None = None  # when the next step may start, once everyone is through
     expected: frozenset[str] | None = None  # who must arrive (None: every robot still in the show)
     writes: dict[str, Callable[[], None]] = field(default_factory=dict)  # a unison play's start frames
@@ -61,12 +62,16 @@ class Gates:
         self._gates: dict[int, _Gate] = {}
         self._lock = threading.Lock()
 
-    def through(self, index: int, robot: str, end: float | None) -> float | None:
+    def through(self, index: int, robot: str, end: float | None, idle: float | None = None) -> float | None:
+        """A step nobody left could do (its robots dropped out) ends when the plan says
+        (`idle`): the robots still on stage keep the show's timing, not run ahead of it."""
         with self._lock:
             gate = self._gates.setdefault(index, _Gate())
             gate.arrived.add(robot)
             if end is not None:
                 gate.end = end if gate.end is None else max(gate.end, end)
+            if idle is not None:
+                gate.idle = idle if gate.idle is None else max(gate.idle, idle)
             self._open(index, gate)
         self.clock.source.notify()
         if not self.clock.source.wait_for(lambda: gate.release is not None, self.stop):
@@ -128,7 +133,7 @@ class Gates:
         if gate.release is not None or not awaited <= gate.arrived:
             return
         now = self.clock.mono() - self.zero
-        end = gate.end if gate.end is not None else now
+        end = gate.end if gate.end is not None else gate.idle if gate.idle is not None else now
         gate.release = max(end, now + SYNC_S)
         if isinstance(key, int):  # everyone is past the step before and its play: forget them
             self._gates.pop(key - 1, None)

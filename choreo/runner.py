@@ -89,10 +89,10 @@ class WaitTimeout(LinkError):
 class Cues(Protocol):
     """Where a robot's runner meets the others on shared steps (`choreo.ensemble.Gates`)."""
 
-    def through(self, index: int, robot: str, end: float | None) -> float | None:
+    def through(self, index: int, robot: str, end: float | None, idle: float | None = None) -> float | None:
         """`robot` is through step `index` (ended at `end` on the show clock, None: not its
-        step); blocks until every robot the step was for is, and returns when the next step
-        may start (None: the show is stopping)."""
+        step, which would end at `idle` as planned); blocks until every robot the step was for
+        is, and returns when the next step may start (None: the show is stopping)."""
 
     def armed(self, step: PlannedStep, robot: str, write: Callable[[], None]) -> int | None:
         """`robot` has sent all of a unison play but the frame that starts the motion, whose
@@ -143,7 +143,9 @@ class Runner:
                 mine = step.is_for(self.robot) if self.robot is not None else True
                 end = self._run_step(step, cursor) if mine else None
                 if self.cues is not None:
-                    cursor = self.cues.through(step.index, self.robot, end)  # type: ignore[arg-type]
+                    # a step for others takes, if none of them is left to do it, its planned time
+                    idle = None if mine else cursor + step.expected_s
+                    cursor = self.cues.through(step.index, self.robot, end, idle)  # type: ignore[arg-type]
                     if cursor is None:
                         raise Interrupted(self.stop.reason)
                 elif end is not None:

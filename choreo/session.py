@@ -333,10 +333,12 @@ def _check_robot_ports(show: Show, request: RunRequest) -> None:
         if name not in show.cast:
             raise UsageError(f"--port {name}=...: the show has no robot {name!r}"
                              f"{did_you_mean(name, list(show.cast))}; its robots: {', '.join(show.cast)}")
+    from choreo.show.load import same_port
+
     real = [(n, p) for n, p in request.robot_ports.items() if not is_simulator(p)]
     seen: dict[str, str] = {}
     for name, port in real:
-        first = seen.setdefault(port, name)
+        first = seen.setdefault(same_port(port), name)
         if first != name:
             raise UsageError(f"--port {name}={port}: robot {first} is on that port already: each robot needs its own")
 

@@ -139,6 +139,7 @@ def test_the_log_names_every_robot_and_the_review_reads_it(tmp_path, capsys):
     assert vmain(["log", "summary", str(tmp_path / "run.mcap")]) == 0
     out = capsys.readouterr().out
     assert "unison    motion starts apart: median 0.000 ms, p99 0.000 ms, max 0.000 ms (4 plays" in out
+    assert ", 3 robots (a, b, c; ports below)" in out
     assert [line.split(":")[0] for line in out.splitlines() if line.startswith("robot ")] == ["robot a", "robot b", "robot c"]
     assert "0 unanswered" not in out and "unanswered" not in out
 
@@ -289,3 +290,15 @@ def test_log_frames_shows_one_robot_on_request(tmp_path, capsys, monkeypatch):
     assert lines and all(" b: " in line for line in lines)
     assert vmain(["log", "frames", log, "--robot", "d"]) == 2
     assert "--robot d: not a robot of this log; its robots: a, b, c" in capsys.readouterr().err
+
+
+def test_robots_left_keep_the_shows_timing_when_the_robot_of_a_step_dropped_out(tmp_path):
+    """a drops out during the first `wait: done`; its wave (0.8 s, steps 2-3) is not danced,
+    but b and c still clap when the plan says, after it, not 0.8 s early."""
+    text = UNISON.replace("      a: {}", "      a: {on_fault: continue}")
+    session, error = run_session(tmp_path, text, robot_ports={"a": "sim://?lose=12"})
+    assert isinstance(error, LinkError) and "robot a dropped out" in str(error)
+    b = starts(boards(session)["b"])
+    assert [m for m, _ in b] == [1, 3, 3, 1]
+    bow, clap = b[0][1], b[1][1]
+    assert clap - bow >= 1.0 + 0.8  # the bow's second, then the wave's planned 0.8 s

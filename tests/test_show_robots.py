@@ -142,7 +142,7 @@ def test_tracks_are_plans_of_their_own_on_one_clock(tmp_path):
     ("version: 1\nrobots: {left: {}, right: {}}\nsteps:\n  - play: 1\n    robots: [lfet]\n",
      (5, 14, "steps[0].robots[0]"), "a step for robot 'lfet', which `robots:` does not name: did you mean 'left'?"),
     ("version: 1\nrobots: {a: {port: /dev/ttyUSB0}, b: {port: /dev/ttyUSB0}}\nsteps: [{play: 1}]\n",
-     (2, 45, "robots.b.port"), "port /dev/ttyUSB0 is robot 'a''s already: each robot needs its own port"),
+     (2, 45, "robots.b.port"), "port /dev/ttyUSB0 is already robot a's: each robot needs its own port"),
     ("version: 1\nsteps:\n  - play: 1\n    robots: [a]\n", (4, 5, "steps[0].robots"),
      "this show has one robot (`robot:`)"),
     ("version: 1\nrobot: {}\nrobots: {a: {}}\nsteps: [{play: 1}]\n", (3, 1, "robots"),
@@ -202,3 +202,9 @@ def test_validate_counts_every_robots_steps(tmp_path, capsys):
     assert main(["validate", str(write(tmp_path, UNISON)), "shows/canon.yaml"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert ": ok, 3 robots, 22 steps" in out[0] and "shows/canon.yaml: ok, 2 robots, 20 steps" in out[1]
+
+
+def test_one_device_spelt_two_ways_is_still_one_port(tmp_path):
+    found = problems(tmp_path, "version: 1\nrobots: {a: {port: /dev/ttyUSB0}, b: {port: /dev/../dev/ttyUSB0}}\n"
+                               "steps: [{play: 1}]\n")
+    assert [path for _, _, path, _ in found] == ["robots.b.port"]

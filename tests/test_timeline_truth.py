@@ -84,7 +84,7 @@ def test_a_failed_run_marks_the_failure_and_greys_the_rest_of_the_plan(tmp_path)
     text = list(render_text(timeline, 100))
     unplayed_rows = [line for line in text if "not played" in line and "|" in line]
     assert len(unplayed_rows) == 3 and all(":" in row.split("|")[1] for row in unplayed_rows)
-    assert "not played: 3 plays of the plan after the run ended" in text
+    assert "not played: 3 plays of the plan that the run never reached" in text
 
 
 class StopAfter:

@@ -477,7 +477,11 @@ def render(summary: Summary) -> Iterable[str]:
     sha = run.get("show_sha256", "")
     where = f" ({run['show_path']}" + (f", sha256 {sha[:12]}" if sha else "") + ")" if run.get("show_path") else ""
     yield f"show      {summary.show_name}{where}"
-    if run:
+    if run and run.get("robots"):
+        names = run["robots"].split(",")
+        yield (f"run       started {run.get('start_time', '?')}, {len(names)} robots ({', '.join(names)}; "
+               f"ports below) (choreo {run.get('version', '?')}, host {run.get('host', '?')})")
+    elif run:
         yield (f"run       started {run.get('start_time', '?')} on {run.get('port', '?')} at "
                f"{run.get('baud', '?')} baud (choreo {run.get('version', '?')}, host {run.get('host', '?')})")
     else:

@@ -316,8 +316,8 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
     if not timeline.runs:
         yield "  (no motion played)"
     if any(r.ended_by not in ("status", "not started", "not played") for r in timeline.runs):
-        yield "?: no status query saw it end (no `wait: done`): drawn for its expected"
-        yield "   length, '.' up to what stopped it (the next play, or the log's end)"
+        yield "?: no status query saw it end (no `wait: done`, or the show stopped first): drawn"
+        yield "   for its expected length, '.' up to what stopped it (the next play, or the log's end)"
     yield from _listed(timeline)
 
 
@@ -344,8 +344,10 @@ def _listed(timeline: Timeline) -> Iterator[str]:
         for mark in marks:
             yield f"  {mark.show_s:9.3f} s  {mark.text}"
     if timeline.unplayed:
-        yield (f"not played: {counted(len(timeline.unplayed), 'play')} of the plan after the run "
-               f"{'ended' if timeline.cut is None else 'was cut'}")
+        robots = sorted({run.robot for run in timeline.unplayed if run.robot})
+        whose = f" (robot {', '.join(robots)})" if robots else ""
+        yield (f"not played: {counted(len(timeline.unplayed), 'play')} of the plan{whose} that the run "
+               f"{'never reached' if timeline.cut is None else 'had not reached where the log was cut'}")
     if timeline.cut is not None:
         yield f"log {timeline.cut.state}: {timeline.cut}"
 

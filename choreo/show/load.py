@@ -21,6 +21,8 @@ Messages are `FILE:LINE:COL: PATH: WHAT` (`choreo.errors.Problem`); paths are wr
 
 from __future__ import annotations
 
+import os
+
 import json
 import math
 import re
@@ -859,10 +861,17 @@ def _check_robots(walk: _Walk) -> None:
         port = settings.get("port")
         if not isinstance(port, str) or port.strip().lower().startswith("sim://"):
             continue  # every simulator is a board of its own
-        first = ports.setdefault(port.strip(), name)
+        first = ports.setdefault(same_port(port), name)
         if first != name:
             walk.report.add(walk.doc.mark(here + ("port",)), here + ("port",),
-                            f"port {port} is robot {first!r}'s already: each robot needs its own port")
+                            f"port {port} is already robot {first}'s: each robot needs its own port")
+
+
+def same_port(port: str) -> str:
+    """A port as compared for sharing: a device path normalised (`/dev/../dev/ttyUSB0`, a
+    trailing space), a URL as written."""
+    port = port.strip()
+    return os.path.normpath(port) if "://" not in port else port
 
 
 def _check_tracks(walk: _Walk, tracks: dict[str, Any]) -> None:
