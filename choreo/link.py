@@ -78,6 +78,11 @@ class Played:
     # Set when the start frame's reply was lost but the board showed the motion running: the
     # play counts as done and was not sent again (what was lost, for the run's warning).
     recovered: str | None = None
+    started: float | None = None  # monotonic time the frame that starts the motion was written
+
+
+LEAD_WEIGHT = 0.25  # how much each measured play moves the running estimate of the lead
+REPLY_DELAY_GUESS_S = 0.0005  # a board's reply delay before any play has been measured
 
 
 class LinkListener(Protocol):
@@ -184,6 +189,7 @@ class Link:
         self._set_aside = b""
         self._seq = 0
         self.latency_note: str | None = None  # the adapter's latency timer, when it costs time
+        self._lead_s: float | None = None  # see `start_lead_s`
         self._lost_write: PortLost | None = None  # a write that failed (see `_raise_lost_write`)
 
     @classmethod
@@ -258,16 +264,34 @@ class Link:
                 if not reply.ok:
                     break
             else:
-                return Played(attempt, began)
+                started = self.last_tx_mono
+                if attempt == 1:
+                    self._learn_lead(started - began)
+                return Played(attempt, began, started=started)
             if frame is frames[-1] and reply.kind is not ReplyKind.NAK:
                 # The start frame may have been carried out with only its answer lost.
                 if self._started(start_sent, tag, what):
                     lost = f"the reply to '{what}' ({frame.kind.value} frame) was lost ({reply.describe()})"
-                    return Played(attempt, began, recovered=lost)
+                    return Played(attempt, began, recovered=lost, started=self.last_tx_mono)
                 # The status answer came after any late reply: the line is idle for the retry.
             elif attempt < self.tries and not self._settle(reply, tag, what):
                 raise self._failed(what, frame, reply, tag, attempt, silent=True)
         raise self._failed(what, frame, reply, tag, self.tries)
+
+    def start_lead_s(self, motion: int) -> float:
+        """How long after a play's first frame its start frame goes out: the exchanges before
+        it. A running estimate from this link's own plays, seeded from the wire time at the
+        baud (each frame and its ACK, 11 bits a byte) and a short reply delay."""
+        if self._lead_s is None:
+            frames = self.layout.play_sequence(motion, self.config, self.baud)[:-1]
+            byte_s = 11 / self.baud
+            self._lead_s = sum((len(f.data) + 4) * byte_s + REPLY_DELAY_GUESS_S for f in frames)
+        return self._lead_s
+
+    def _learn_lead(self, measured_s: float) -> None:
+        if measured_s > 0:
+            known = self._lead_s
+            self._lead_s = measured_s if known is None else known + LEAD_WEIGHT * (measured_s - known)
 
     def _started(self, start_sent: float, tag: Tag | None, what: str) -> bool:
         """Did the start frame whose reply was lost start the motion? Ask the board.

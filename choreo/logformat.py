@@ -167,6 +167,8 @@ class StepRecord(_Record):
     cue: float | None = None
     outcome: str | None = None  # end: ok | failed | aborted | timeout
     robot: str | None = None  # whose step, in a show for several robots
+    start_s: float | None = None  # end of a play: when the frame that started the motion was written
+    lead_ms: float | None = None  # end of a cued play: how far ahead of its cue the first frame was due
 
     @property
     def ref(self) -> str:

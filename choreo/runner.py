@@ -36,12 +36,16 @@ class StepEvent:
     late_ms: float = 0.0
     outcome: str | None = None  # end: ok | failed | aborted | timeout
     robot: str | None = None  # whose step, in a show for several robots
+    start_s: float | None = None  # end of a play: when the frame that started the motion was written
+    lead_ms: float = 0.0  # end of a cued play: how far ahead of the cue its first frame was due
 
     def record(self) -> StepRecord:
         step = self.step
         return StepRecord(step.index, step.kind.value, self.event, round(self.actual_s, 6),
                           round(self.planned_s, 6), round(step.planned_s, 6), round(self.late_ms, 3),
-                          step.path, step.label, step.motion, step.at, self.outcome, self.robot)
+                          step.path, step.label, step.motion, step.at, self.outcome, self.robot,
+                          None if self.start_s is None else round(self.start_s, 6),
+                          round(self.lead_ms, 3) if self.lead_ms else None)
 
 
 class RunListener(Protocol):
@@ -169,13 +173,16 @@ class Runner:
         return self.clock.mono() - self._zero
 
     def _run_step(self, step: PlannedStep, cursor: float) -> float:
-        due = max(step.at, cursor) if step.at is not None else cursor
+        # A cued play goes out early by the exchanges before its start frame, so that the frame
+        # that starts the motion is written on the cue (never before the step before has ended).
+        lead = self.link.start_lead_s(step.motion) if step.kind is StepKind.PLAY and step.at is not None else 0.0
+        due = max(step.at - lead, cursor) if step.at is not None else cursor
         if not self._sleep_until(self._zero + due):
             raise Interrupted(self.stop.reason)
         started = self.show_time()
         # A cue is measured against its own time: one the show has already overrun (a motion
         # ran long before it) starts at once and counts as late by the overrun.
-        planned = step.at if step.at is not None else due
+        planned = step.at - lead if step.at is not None else due
         late_ms = (started - planned) * 1e3
         self._emit(StepEvent(step, "start", planned, started, self._now_ns(), late_ms, robot=self.robot))
         self._run += 1
@@ -187,8 +194,9 @@ class Runner:
             self._log(WARNING, f"{step_ref(step)}{cue} started {late_ms:.1f} ms late")
         outcome = "failed"
         slip_ms = 0.0
+        self._played = Played(1, 0.0)
         try:
-            end = self._do(step, due)
+            end = self._do(step, due + lead)
             outcome = "ok"
             if step.kind is StepKind.PLAY:
                 slip_ms = self._slip(step, planned, already_late=late_ms > LATE_MS)
@@ -203,7 +211,9 @@ class Runner:
             self._log(ERROR, str(exc))
             raise
         finally:
-            self._emit(StepEvent(step, "end", planned, self.show_time(), self._now_ns(), slip_ms, outcome, self.robot))
+            start_s = self._played.started - self._zero if self._played.started is not None else None
+            self._emit(StepEvent(step, "end", planned, self.show_time(), self._now_ns(), slip_ms, outcome,
+                                 self.robot, start_s, lead * 1e3))
 
     def _slip(self, step: PlannedStep, planned: float, already_late: bool) -> float:
         """How late the motion really started: retries delay the sequence that worked.

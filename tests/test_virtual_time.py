@@ -62,7 +62,10 @@ def test_a_show_on_virtual_time_takes_no_real_time_and_keeps_its_schedule(tmp_pa
     assert time.monotonic() - wall < 10  # about 1.9 s of show; no sleep is real
     assert result.outcome == "done" and result.late_steps == 0
     starts = {m["index"]: m for m in log.steps if m["event"] == "start"}
-    assert starts[2]["actual_s"] == pytest.approx(1.5, abs=1e-4)  # the cue, to the 0.1 ms
+    ends = {m["index"]: m for m in log.steps if m["event"] == "end"}
+    # the play goes out early by its lead, so that the frame that starts the motion is on the cue
+    assert starts[2]["actual_s"] == pytest.approx(1.5 - ends[2]["lead_ms"] / 1e3, abs=1e-4)
+    assert ends[2]["start_s"] == pytest.approx(1.5, abs=1e-4)  # the motion starts on the cue
     assert starts[4]["actual_s"] == pytest.approx(1.75, abs=1e-4)  # absolute: the wait ends on time
     assert result.show_s > 1.75
 
