@@ -210,7 +210,8 @@ class Ensemble:
         """Every part in its thread; LinkError (naming the robot) when a fault stopped the show
         or a robot dropped out, else the combined result."""
         # show time 0 a little ahead: every thread is up and spinning when the first cue falls due
-        self._zero = self.clock.mono() - self.origin + START_S
+        preroll = max(part.runner.preroll_s() for part in self.parts)
+        self._zero = self.clock.mono() - self.origin + max(START_S, preroll)
         if self.unison:
             self._gates = Gates([p.robot for p in self.parts], self.clock, self._zero, self.stop)
             for part in self.parts:
@@ -273,7 +274,8 @@ class Ensemble:
         result = EnsembleResult(dict(self._results), list(self._dropouts), show_s)
         if self._dropouts and result.outcome == "done":
             named = "; ".join(str(d) for d in self._dropouts)
-            raise RobotFault(f"{named} (the others finished the show)")
+            everyone = len(self._dropouts) == len(self.parts)
+            raise RobotFault(f"{named} ({'every robot dropped out' if everyone else 'the others finished the show'})")
         return result
 
 

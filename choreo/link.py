@@ -190,6 +190,7 @@ class Link:
         self._seq = 0
         self.latency_note: str | None = None  # the adapter's latency timer, when it costs time
         self._lead_s: float | None = None  # see `start_lead_s`
+        self._lead_measured = False
         self._lost_write: PortLost | None = None  # a write that failed (see `_raise_lost_write`)
 
     @classmethod
@@ -289,9 +290,11 @@ class Link:
         return self._lead_s
 
     def _learn_lead(self, measured_s: float) -> None:
+        """The first measured play replaces the seed; later ones move the estimate a quarter."""
         if measured_s > 0:
-            known = self._lead_s
+            known = None if not self._lead_measured else self._lead_s
             self._lead_s = measured_s if known is None else known + LEAD_WEIGHT * (measured_s - known)
+            self._lead_measured = True
 
     def _started(self, start_sent: float, tag: Tag | None, what: str) -> bool:
         """Did the start frame whose reply was lost start the motion? Ask the board.

@@ -138,7 +138,8 @@ class Runner:
 
         `zero`: the monotonic time of show time 0, when several robots share the show clock."""
         steps = self.plan.steps[self.start:]
-        cursor = self._origin()
+        preroll = self.preroll_s()
+        cursor = self._origin() - preroll  # a first play cued at the start may go out before it
         self._zero = self.clock.mono() - cursor if zero is None else zero
         self.link.listeners.append(_RetryReporter(self))
         self.link.should_stop = self.stop
@@ -165,6 +166,15 @@ class Runner:
         if self.start and self.start < len(self.plan.steps):
             return self.plan.steps[self.start].planned_s
         return 0.0
+
+    def preroll_s(self) -> float:
+        """How long before show time 0 (or --from's step) the run must begin for its first play
+        to go out early by its lead: a cue at the very start still lands on its time."""
+        steps = self.plan.steps[self.start:]
+        first = next((s for s in steps if self.robot is None or s.is_for(self.robot)), None)
+        if first is None or first.kind is not StepKind.PLAY or first.at is None:
+            return 0.0
+        return max(0.0, self.link.start_lead_s(first.motion) - (first.at - self._origin()))
 
     def _sleep_until(self, deadline: float) -> bool:
         return self.clock.sleep_until(deadline, self.stop, on_idle=self.on_idle)

@@ -91,10 +91,11 @@ class Session:
         show = load_show(request.show_path)
         _check_robot_ports(show, request)
         links = {name: _robot_link(name, settings, request, show) for name, settings in show.cast.items()}
+        _check_shared_ports(links)
         plans = compile_plans(show, {n: link.layout for n, link in links.items()},
                               {n: link.baud for n, link in links.items()})
-        links = {name: replace(link, port=with_show_durations(link.port, show, plans[name], link.baud, link.layout,
-                                                              show.abort_motion(name)))
+        links = {name: replace(link, port=_for_robot(name, show, lambda: with_show_durations(
+                     link.port, show, plans[name], link.baud, link.layout, show.abort_motion(name))))
                  for name, link in links.items()}
         starts, origin = _starts(show, plans, request.from_step)
         log_path = None
@@ -238,6 +239,7 @@ class Stage:
     recorder: Recorder | None = None
     links: dict[str, Link] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)  # what the user should hear once the ports are open
+    opened: bool = False  # every port opened
 
     @property
     def link(self) -> Link | None:
@@ -265,6 +267,7 @@ class Stage:
                 self.notes.append(f"robot {robot.robot}: {note}" if self.named else note)
                 if self.recorder is not None:
                     self.recorder.on_log(WARNING, self.notes[-1], self.clock.wall_ns())
+        self.opened = True
 
     def _open_link(self, robot: RobotLink) -> Link:
         listeners = []
@@ -310,6 +313,29 @@ def _robot_link(name: str, robot: RobotSettings, request: RunRequest, show: Show
     return RobotLink(name, port, source, baud, timeout, retries + 1, layout, layout_source, robot.on_fault)
 
 
+def _check_shared_ports(links: dict[str, RobotLink]) -> None:
+    """Two robots on one device, however each got its port (show, --port): refused before any
+    port opens, not a lock error halfway through opening them."""
+    from choreo.show.load import same_port
+
+    seen: dict[str, RobotLink] = {}
+    for link in links.values():
+        if is_simulator(link.port):
+            continue
+        first = seen.setdefault(same_port(link.port), link)
+        if first is not link:
+            raise UsageError(f"robot {link.robot}'s port {link.port} ({link.port_source}) is robot {first.robot}'s "
+                             f"too ({first.port_source}): each robot needs its own port")
+
+
+def _for_robot(name: str, show: Show, make):  # type: ignore[no-untyped-def]
+    """A usage error about one robot of several says which robot."""
+    try:
+        return make()
+    except UsageError as exc:
+        raise UsageError(f"robot {name}: {exc}") if show.ensemble else exc from None
+
+
 ROBOT_PORT = re.compile(r"^([A-Za-z][A-Za-z0-9_-]{0,31})=(.*)$", re.S)
 
 
@@ -328,7 +354,7 @@ def _check_robot_ports(show: Show, request: RunRequest) -> None:
                          f"give --port NAME=URL for each robot to move off its show port")
     if not show.ensemble and request.robot_ports:
         name = next(iter(request.robot_ports))
-        raise UsageError(f"--port {name}=...: this show has one robot (`robot:`): give --port URL")
+        raise UsageError(f"--port {name}=...: this show is for one robot (it names no `robots:`): give --port URL")
     for name in request.robot_ports:
         if name not in show.cast:
             raise UsageError(f"--port {name}=...: the show has no robot {name!r}"

@@ -149,9 +149,9 @@ def test_tracks_advance_on_their_own_and_meet_on_a_shared_cue(tmp_path):
     assert error is None
     lead, follow = starts(boards(session)["lead"]), starts(boards(session)["follow"])
     assert [m for m, _ in lead] == [4, 9] == [m for m, _ in follow]
-    assert follow[0][1] - lead[0][1] == pytest.approx(1.0, abs=5e-4)  # the canon: one second behind
+    assert follow[0][1] - lead[0][1] == pytest.approx(1.0, abs=1e-3)  # the canon: one second behind
     assert lead[1][1] == follow[1][1]  # together again on the cue at 4 s
-    assert lead[1][1] - lead[0][1] == pytest.approx(3.0, abs=5e-4)
+    assert lead[1][1] - lead[0][1] == pytest.approx(3.0, abs=1e-3)  # the first play: a seeded lead
 
 
 def test_a_fault_on_one_robot_stops_the_show_and_the_others_play_their_abort(tmp_path):

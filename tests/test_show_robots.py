@@ -208,3 +208,17 @@ def test_one_device_spelt_two_ways_is_still_one_port(tmp_path):
     found = problems(tmp_path, "version: 1\nrobots: {a: {port: /dev/ttyUSB0}, b: {port: /dev/../dev/ttyUSB0}}\n"
                                "steps: [{play: 1}]\n")
     assert [path for _, _, path, _ in found] == ["robots.b.port"]
+
+
+@pytest.mark.parametrize("body, where, message", [
+    ("robots: {a: {}}\nsteps:\n  - play: 1\n    robots: [1, a]\n", "steps[0].robots[0]", "expected text, not the number 1"),
+    ("robots: {}\nsteps: [{play: 1}]\n", "robots", "`robots:` is empty: name at least one robot"),
+    ("robots: {a: {}}\nsteps:\n  - play: 1\n    robots: [a, a]\n", "steps[0].robots", "names a robot twice"),
+    ("robots: {a: {}}\nsteps:\n  - play: 1\n    robots: ['1']\n", "steps[0].robots[0]", "robot name '1' must start"),
+    ("robots: {a: {}}\nsteps:\n  - play: 1\n    robots: []\n", "steps[0].robots", "a step's `robots:` is empty"),
+    ("robots: {a: {}}\ntracks: {}\n", "tracks", "`tracks:` is empty"),
+])
+def test_robot_lists_of_the_wrong_shape_get_plain_words(tmp_path, body, where, message):
+    found = problems(tmp_path, "version: 1\n" + body)
+    assert any(path == where and message in said for _, _, path, said in found), found
+    assert not any("Properties" in said or "uniqueItems" in said or "pattern" in said for _, _, _, said in found)

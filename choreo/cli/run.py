@@ -118,6 +118,8 @@ def port_arguments(values: list[str] | None) -> tuple[str | None, dict[str, str]
     named: dict[str, str] = {}
     for value in values or []:
         split = split_robot_port(value)
+        if value.startswith("="):
+            raise UsageError(f"--port {value}: give the robot's name before '=' (--port NAME=URL)")
         if split is None:
             plain.append(value)
         elif split[0] in named:
@@ -182,7 +184,7 @@ def _log_named_on_failure(session, say) -> Iterator[None]:  # type: ignore[no-un
     try:
         yield
     except BaseException:
-        if session.recorder is not None and session.link is None:
+        if session.recorder is not None and not session.stage.opened:
             say(f"log: {session.log_path}")
         raise
 
@@ -296,6 +298,11 @@ class _StopOnSignals:
             signal.signal(signum, handler)
 
 
+def _own_steps(plan, start: int, robot: str) -> list[int]:  # type: ignore[no-untyped-def]
+    """The indices of the steps a robot plays from `start`: the progress line counts those."""
+    return [step.index for step in plan.steps[start:] if step.is_for(robot)]
+
+
 class Progress:
     """The run on screen: a live line on a terminal, a plain line a step otherwise.
 
@@ -306,8 +313,9 @@ class Progress:
     REDRAW_S = 0.25
 
     def __init__(self, session, out: TextIO, *, live: bool, quiet: bool) -> None:
-        self.first = session.start
-        self.total = len(session.plan.steps) - session.start
+        # each robot's steps from where it starts (a robot's own, in shared steps), by robot
+        self.counts = {name if session.show.ensemble else None: _own_steps(plan, session.starts[name], name)
+                       for name, plan in session.plans.items()}
         self.estimated = max(plan.estimated_s for plan in session.plans.values())
         self.out = out
         self.live = live and not quiet
@@ -326,7 +334,9 @@ class Progress:
         step = event.step
         label = f" '{step.label}'" if step.label else ""
         robot = f"{event.robot}: " if event.robot else ""
-        where = f"{robot}step {step.index}{label} ({step.index - self.first + 1}/{self.total})"
+        own = self.counts.get(event.robot, [])
+        place = f" ({own.index(step.index) + 1}/{len(own)})" if step.index in own else ""
+        where = f"{robot}step {step.index}{label}{place}"
         if not self.live:
             self._write(f"[{event.actual_s:8.3f} s] {where}: {step.describe()}\n")
             return

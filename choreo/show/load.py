@@ -716,8 +716,23 @@ def _either_problem(path: JsonPath, instance: Any, context: list[Any]) -> str:
     return f"expected a motion number 0..119 or a name from `motions:`, not {_kind(instance)}{_quote_hint(instance)}"
 
 
+_ROBOT_LISTS = {
+    "minProperties": "is empty: name at least one robot",
+    "maxProperties": "names more than {expected} robots: at most {expected} in one show",
+    "uniqueItems": "names a robot twice: list each once",
+    "minItems": "is empty: name at least one robot (or leave it out: every robot)",
+}
+
+
 def _simple_problem(path: JsonPath, validator: str, instance: Any, expected: Any) -> str:
     leaf = path[-1] if path else ""
+    if path and path[0] in ("robots", "tracks") and len(path) == 1 and validator in _ROBOT_LISTS:
+        return f"`{path[0]}:` {_ROBOT_LISTS[validator].format(expected=expected)}"
+    if "robots" in path[-2:] and validator in _ROBOT_LISTS:
+        return f"a step's `robots:` {_ROBOT_LISTS[validator].format(expected=expected)}"
+    if validator == "pattern" and len(path) >= 2 and path[-2] == "robots" and isinstance(path[-1], int):
+        return (f"robot name {instance!r} must start with a letter and hold only letters, digits, `_` and `-` "
+                "(at most 32 characters)")
     if validator == "type":
         want = expected if isinstance(expected, list) else [expected]
         words = " or ".join(_TYPE_WORDS.get(t, t) for t in want)
@@ -917,8 +932,10 @@ def _step_robots(walk: _Walk, step: dict[str, Any], here: JsonPath) -> tuple[str
         walk.report.add(walk.doc.key_mark(path), path, "a step in a track is that robot's own: "
                         "leave out `robots:` (or write the step in the shared `steps:`)")
         return walk.robots
-    known = [name for name in given if name in walk.robots]
+    known = [name for name in given if isinstance(name, str) and name in walk.robots]
     for index, name in enumerate(given):
+        if not isinstance(name, str):
+            continue  # the schema has said what is wrong with it
         if name not in walk.declared:
             walk.report.add(walk.doc.mark(path + (index,)), path + (index,), _unknown_robot(name, walk.declared, "a step for"))
         elif name not in walk.robots:

@@ -1,0 +1,52 @@
+"""Motions start on the cue: a cued play goes out early by the exchanges before its start frame,
+so the frame that starts the motion reaches the board on the cue (judged by the simulator's
+journal, on virtual time), whatever the board's reply delay or the USB adapter's latency timer."""
+
+from __future__ import annotations
+
+import pytest
+
+from choreo.session import RunRequest
+from runlog import prepare, read_log
+
+SHOW = "version: 1\nsteps:\n" + "".join(f"  - play: {1 + i % 3}\n    at: {0.5 * i:g}\n" for i in range(8))
+
+
+def motion_starts(session) -> list[float]:
+    board = session.link.port.board
+    return [entry.at - board.power_on for entry in board.journal
+            if entry.kind == "frame" and " started, runs " in entry.note]
+
+
+@pytest.mark.parametrize("query", ["reply_ms=0.2", "reply_ms=3", "latency_ms=1", "latency_ms=16"])
+def test_the_start_frame_reaches_the_board_on_the_cue(tmp_path, query):
+    show = tmp_path / "show.yaml"
+    show.write_text(SHOW)
+    session = prepare(RunRequest(str(show), port=f"sim://?motion_s=0.1&{query}", log_path=str(tmp_path / "r.mcap")))
+    with session:
+        session.run()
+    log = read_log(tmp_path / "r.mcap")
+    ends = [m for m in log.steps if m["event"] == "end"]
+    assert all(m["lead_ms"] > 0 for m in ends)
+    first_bytes = [m["actual_s"] for m in log.steps if m["event"] == "start"]
+    assert all(first < 0.5 * i for i, first in enumerate(first_bytes) if i)  # each play went out early
+    # board time of each motion's start against its cue (the board's clock starts a little
+    # before the show's): the same offset for every cue once the link has learnt its lead
+    starts = motion_starts(session)
+    offsets = [start - 0.5 * i for i, start in enumerate(starts)]
+    spread = max(offsets[2:]) - min(offsets[2:])
+    # a latency timer's ticks fall anywhere against an exchange: up to a tick of jitter each
+    assert len(starts) == 8 and spread < (0.035 if "latency_ms=16" in query else 0.002)
+    start_s = [m["start_s"] for m in ends]  # the log: start frames written on the cue
+    assert all(abs(s - 0.5 * i) < (0.035 if "latency_ms=16" in query else 0.002) for i, s in enumerate(start_s) if i > 1)
+
+
+def test_a_cue_at_the_very_start_is_not_late(tmp_path):
+    show = tmp_path / "show.yaml"
+    show.write_text("version: 1\nsteps:\n  - play: 1\n    at: 0\n  - play: 2\n    at: 0.5\n")
+    session = prepare(RunRequest(str(show), log_path=str(tmp_path / "r.mcap")))
+    with session:
+        result = session.run()
+    assert result.late_steps == 0
+    ends = [m for m in read_log(tmp_path / "r.mcap").steps if m["event"] == "end"]
+    assert ends[0]["start_s"] == pytest.approx(0.0, abs=0.002)  # the run began early by the lead
