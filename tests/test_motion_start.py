@@ -50,3 +50,16 @@ def test_a_cue_at_the_very_start_is_not_late(tmp_path):
     assert result.late_steps == 0
     ends = [m for m in read_log(tmp_path / "r.mcap").steps if m["event"] == "end"]
     assert ends[0]["start_s"] == pytest.approx(0.0, abs=0.002)  # the run began early by the lead
+
+
+def test_the_summary_reports_motion_starts_against_their_cues(tmp_path, capsys):
+    from runlog import vmain
+
+    show = tmp_path / "show.yaml"
+    show.write_text(SHOW)
+    assert vmain(["run", str(show), "--port", "sim://?motion_s=0.1", "--log", str(tmp_path / "r.mcap"), "-q"]) == 0
+    assert vmain(["log", "summary", "--json", str(tmp_path / "r.mcap")]) == 0
+    starts = __import__("json").loads(capsys.readouterr().out)["motion_start_vs_cue"]
+    assert starts["count"] == 8 and abs(starts["median_ms"]) < 0.5 and starts["max_ms"] < 1.0
+    assert vmain(["log", "summary", str(tmp_path / "r.mcap")]) == 0
+    assert "starts    motion start vs cue (start frame written): median " in capsys.readouterr().out

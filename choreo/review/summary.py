@@ -146,6 +146,7 @@ class Summary:
     stale: int = 0  # late replies to earlier frames, read and set aside before a frame's own reply
     latency: Distribution = field(default_factory=Distribution)  # ms, replies that came back
     lateness: Distribution = field(default_factory=Distribution)  # ms, play step starts (the cues)
+    motion_starts: Distribution = field(default_factory=Distribution)  # ms, cued plays: start frame minus cue
     plays: list[Play] = field(default_factory=list)  # the first LISTED_PLAYS
     plays_total: int = 0
     motions: dict[int, MotionStats] = field(default_factory=dict)
@@ -187,6 +188,7 @@ def summary_record(summary: Summary) -> dict:
         "replies": {**summary.replies, "stale": summary.stale, "unanswered": summary.unanswered},
         "latency": spread(summary.latency),
         "cue_lateness": spread(summary.lateness),
+        "motion_start_vs_cue": spread(summary.motion_starts),
         "motions": [{"motion": m.motion, "plays": m.plays, "measured": m.measured, "median_s": m.median_s}
                     for m in sorted(summary.motions.values(), key=lambda m: m.motion)],
         "warnings": summary.warnings,
@@ -351,6 +353,7 @@ class _Tally:
         self.replies = dict.fromkeys(REPLY_KINDS, 0)
         self.latency = Distribution()
         self.lateness = Distribution()
+        self.motion_starts = Distribution()
         self.late_at_start: dict[tuple[str | None, int], bool] = {}  # (robot, step) started and not ended
         self.retried: set[tuple[str | None, int]] = set()  # open (robot, step)s with a frame sent again
         self.outcomes = {"ok": 0, "failed": 0, "timeout": 0, "aborted": 0}
@@ -392,6 +395,8 @@ class _Tally:
                 self.zero = log_time - round(step.actual_s * 1e9)
                 self.zero_from_step = True
             return
+        if step.kind == "play" and step.cue is not None and step.start_s is not None:
+            self.motion_starts.add((step.start_s - step.cue) * 1e3)
         late_at_start = self.late_at_start.pop(key, False)
         self.outcomes[step.outcome or "?"] = self.outcomes.get(step.outcome or "?", 0) + 1
         if key in self.retried:
@@ -417,6 +422,7 @@ class _Tally:
         summary.stale = self.stale
         summary.latency = self.latency
         summary.lateness = self.lateness
+        summary.motion_starts = self.motion_starts
         summary.steps_run = self.started
         summary.steps_late = self.late
         summary.steps_late_by_retries = self.late_by_retries
@@ -515,6 +521,10 @@ def render(summary: Summary) -> Iterable[str]:
     lateness = summary.lateness
     yield (f"cues      lateness median {_ms(lateness.median)}, p99 {_ms(lateness.p99)}, max "
            f"{_ms(lateness.max)} ({len(lateness)} plays, {lateness.above(LATE_MS)} over {LATE_MS:g} ms)")
+    starts = summary.motion_starts
+    if len(starts):
+        yield (f"starts    motion start vs cue (start frame written): median {_ms(starts.median)}, p99 "
+               f"{_ms(starts.p99)}, max {_ms(starts.max)} ({len(starts)} cued plays, sent early by their lead)")
     yield from _render_motions(summary)
     yield from _render_robots(summary)
     yield f"log lines {summary.warnings} warnings, {summary.errors} errors"
