@@ -302,3 +302,16 @@ def test_robots_left_keep_the_shows_timing_when_the_robot_of_a_step_dropped_out(
     assert [m for m, _ in b] == [1, 3, 3, 1]
     bow, clap = b[0][1], b[1][1]
     assert clap - bow >= 1.0 + 0.8  # the bow's second, then the wave's planned 0.8 s
+
+
+def test_a_robots_show_port_given_to_another_robot_is_refused_before_any_port_opens(tmp_path, capsys):
+    show = write(tmp_path, UNISON.replace("      a: {}", "      a: {port: /dev/ttyS9}"))
+    assert vmain(["run", str(show), "--port", "b=/dev/ttyS9", "--no-log"]) == 2
+    assert "robot b's port /dev/ttyS9 (command line) is robot a's too (show)" in capsys.readouterr().err
+
+
+def test_the_log_is_named_when_a_later_robots_port_fails(tmp_path, capsys):
+    show = write(tmp_path, UNISON)
+    code = vmain(["run", str(show), "--log", str(tmp_path / "k.mcap"), "--port", f"c={tmp_path / 'no-tty'}"])
+    err = capsys.readouterr().err
+    assert code == 3 and f"log: {tmp_path / 'k.mcap'}" in err and "robot c: port " in err

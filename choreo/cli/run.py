@@ -361,9 +361,13 @@ class Progress:
     def _columns(self) -> int:
         """The terminal's width now (it may be resized mid-show); 80 if it cannot be told."""
         try:
-            return os.get_terminal_size(self.out.fileno()).columns if self.out is not None else 80
+            size = os.get_terminal_size(self.out.fileno()).columns if self.out is not None else 80
         except (OSError, ValueError, AttributeError):
-            return 80
+            size = 0
+        if size > 0:
+            return size
+        given = os.environ.get("COLUMNS", "")  # a terminal that reports no width (script, some CI ttys)
+        return int(given) if given.isdigit() and int(given) > 0 else 80
 
     def _write(self, text: str) -> None:
         """The screen is not the show: a closed pipe or terminal silences progress, nothing more."""
