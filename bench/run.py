@@ -36,6 +36,7 @@ BENCHMARKS = (
     ("log_review", "6. log review"),
     ("startup", "7. start-up"),
     ("skew", "8. unison skew (several robots)"),
+    ("motion_start", "9. motion start against the cue"),
 )
 RESULTS = BENCH / "RESULTS.md"
 
