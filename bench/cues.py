@@ -1,8 +1,11 @@
-"""Benchmark 1, cue accuracy: how late each `at:` cue's first byte leaves, against its time.
+"""Benchmark 1, cue accuracy: how late each `at:` cue's first byte leaves, against its due time.
+
+A cued play is due at its cue minus its lead (the expected time of the exchanges before the
+frame that starts the motion, so that frame lands on the cue: benchmark 9 measures that).
 
 A show of many plays, each on its own `at:` cue, runs against `choreo sim` on a pseudo-terminal
 with the log on (as on stage). A cue's lateness is the moment its first frame (the stop frame)
-is handed to the port's write call, minus the cue's time on the show clock. The link's own tx
+is handed to the port's write call, minus its due time on the show clock. The link's own tx
 timestamp (what the log records, taken before the listeners run) is reported beside it: the
 difference is the work done between the two, which is on the cue's critical path. Cue spacing varies (80 to 139 ms, a fixed pseudo-random sequence) so the
 cues do not fall in step with the timer tick or the simulator's own loop.
@@ -45,13 +48,16 @@ def lateness_ms(run: ShowRun) -> tuple[list[float], list[float]]:
     for i, event in enumerate(run.capture.tx):
         if event.tag is not None and event.tag.step is not None:
             first.setdefault(event.tag.step, i)
+    # a cued play's first frame is due at the cue minus its lead (the exchanges before the frame
+    # that starts the motion, which is written on the cue): the step's own due time
+    due = {event.step.index: event.planned_s for event in run.capture.steps if event.event == "start"}
     written, stamped = [], []
     for event in run.capture.steps:
         step = event.step
         if event.event == "start" and step.at is not None:
             i = first[step.index]
-            written.append((run.show_time_mono(run.capture.writes[i]) - step.at) * 1e3)
-            stamped.append((run.show_time(run.capture.tx[i].time_ns) - step.at) * 1e3)
+            written.append((run.show_time_mono(run.capture.writes[i]) - due[step.index]) * 1e3)
+            stamped.append((run.show_time(run.capture.tx[i].time_ns) - due[step.index]) * 1e3)
     return written, stamped
 
 
