@@ -23,7 +23,7 @@ from choreo.logformat import ERROR, INFO, WARNING
 from choreo.record import Recorder, RobotInfo, RunInfo, default_log_path
 from choreo.runner import RunListener, Runner, RunResult, StopRequest
 from choreo.show.model import DEFAULT_MOTION_S, Plan, RobotSettings, Show
-from choreo.sim.options import SimUrl, durations_text
+from choreo.sim.options import SimUrl, durations_text, is_simulator
 
 
 @dataclass(frozen=True)
@@ -359,14 +359,6 @@ def _check_robot_ports(show: Show, request: RunRequest) -> None:
         if name not in show.cast:
             raise UsageError(f"--port {name}=...: the show has no robot {name!r}"
                              f"{did_you_mean(name, list(show.cast))}; its robots: {', '.join(show.cast)}")
-    from choreo.show.load import same_port
-
-    real = [(n, p) for n, p in request.robot_ports.items() if not is_simulator(p)]
-    seen: dict[str, str] = {}
-    for name, port in real:
-        first = seen.setdefault(same_port(port), name)
-        if first != name:
-            raise UsageError(f"--port {name}={port}: robot {first} is on that port already: each robot needs its own")
 
 
 def outcome_metadata(finished: dict[str, str] | None, exc: BaseException | None) -> dict[str, str]:
@@ -391,10 +383,6 @@ def simulator_url(show: Show, plan: Plan, baud: int = DEFAULT_BAUD, layout: Layo
     """`sim://` with the show's motion durations (so `wait: done` behaves as on the robot), the
     run's baud (a board at another baud would not answer) and layout."""
     return with_show_durations("sim://", show, plan, baud, layout)
-
-
-def is_simulator(url: str) -> bool:
-    return url.lower().startswith("sim://")
 
 
 def check_output_folder(path: Path, option: str) -> None:

@@ -187,7 +187,7 @@ def run_frames(args: argparse.Namespace) -> int:
     from choreo.review.reader import LogReader
 
     with LogReader(args.log) as reader:
-        robots = [name for name in reader.run_info.get("robots", "").split(",") if name]
+        robots = reader.robots
         if args.robot is not None and args.robot not in robots:
             from choreo.errors import UsageError, did_you_mean
 

@@ -145,6 +145,11 @@ class LogReader:
         return self.metadata.get(METADATA_NAME, {})
 
     @property
+    def robots(self) -> list[str]:
+        """The robots of a show for several, in the show's order (empty for a one-robot log)."""
+        return [name for name in self.run_info.get("robots", "").split(",") if name]
+
+    @property
     def result(self) -> dict[str, str] | None:
         """The `choreo.result` metadata written when the run closed its log, or None."""
         return self.metadata.get(RESULT_METADATA_NAME)

@@ -29,6 +29,7 @@ from choreo.review.frames import ShowClock, reply_meaning
 from choreo.logformat import (LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, RxRecord, StepRecord, TxRecord,
                               parse)
 from choreo.review.reader import Cut, LogReader
+from choreo.sim.options import is_simulator
 
 LISTED_DIFFERENCES = 200  # kept in the report; all are counted (and written to the new log)
 
@@ -112,7 +113,7 @@ class ReplayReport:
     @property
     def speed_note(self) -> str | None:
         """Why replies may differ at a motion's end: only a `sim://` board runs faster."""
-        if self.speed == 1 or _is_sim(self.port):
+        if self.speed == 1 or is_simulator(self.port):
             return None
         return (f"{self.port} runs its motions at their own speed, not {self.speed:g}x: "
                 "status polls near a motion's end may differ")
@@ -134,9 +135,6 @@ def _with_durations(url: str, show: AttachedShow, baud: int | None = None, layou
     return with_show_durations(url, show.show, show.plan, baud or DEFAULT_BAUD, layout_named(layout))
 
 
-def _is_sim(url: str) -> bool:
-    return url.lower().startswith("sim://")
-
 
 def at_speed(url: str, speed: float) -> str:
     """A `sim://` URL whose board runs `speed` times faster: every slot's duration (`durations`),
@@ -151,7 +149,7 @@ def at_speed(url: str, speed: float) -> str:
     run's timing than on. A URL that sets `wire` itself keeps it; one the simulator would refuse
     is left as it is, for the link to say what is wrong with it.
     """
-    if speed == 1 or not _is_sim(url):
+    if speed == 1 or not is_simulator(url):
         return url
     from choreo.sim.options import SimUrl, durations_text, ms_text
 
@@ -245,7 +243,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         show_path = reader.run_info.get("show_path") or (attachment.name if attachment else "show.yaml")
         report = ReplayReport(reader.path, url, speed, new_log,
                               show_note=None if show.show is not None or port else show.problem)
-        robots = [name for name in reader.run_info.get("robots", "").split(",") if name]
+        robots = reader.robots
         if robots and port:
             raise UsageError(f"--port {port}: a replay of several robots ({', '.join(robots)}) runs each on "
                              "its own simulator; leave out --port")
@@ -265,7 +263,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
             report.log_path = stage.log_path
             if speed > 1:
                 for link in stage.links.values():
-                    if _is_sim(link.name):  # its motions and status refresh run `speed` times faster: so may the polls
+                    if is_simulator(link.name):  # its motions and status refresh run `speed` times faster: so may the polls
                         link.status_spacing_s /= speed
             if on_start is not None:
                 on_start(report)

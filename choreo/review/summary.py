@@ -265,7 +265,7 @@ def summarize_reader(reader: LogReader) -> Summary:
         part.finish(tally.zero)
     tally.fill(summary)
     if parts:
-        order = [name for name in reader.run_info.get("robots", "").split(",") if name in parts]
+        order = [name for name in reader.robots if name in parts]
         summary.robots = {name: parts[name].summary for name in order + [n for n in parts if n not in order]}
         _gather(summary, parts, reader.run_info.get("unison") == "yes")
     result_s = _seconds((reader.result or {}).get("show_s"))

@@ -170,7 +170,7 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise reader.not_choreo(topic, number, exc) from None
     timeline.end_s = (clock.seconds(last_ns) or 0.0) if last_ns is not None else 0.0
-    order = {name: i for i, name in enumerate(reader.run_info.get("robots", "").split(","))}
+    order = {name: i for i, name in enumerate(reader.robots)}
     for robot, tracker in trackers.items():
         for play in tracker.finish(last_ns):
             known = steps.get((robot, play.step)) if play.step is not None else None

@@ -141,6 +141,11 @@ class SimUrl:
         return f"{SCHEME}://" + (f"?{urlencode(self.said, safe=':,')}" if self.said else "")
 
 
+def is_simulator(url: str) -> bool:
+    """A port that is the built-in simulator (`sim://...`), not a device or another URL."""
+    return url.lower().startswith(f"{SCHEME}://")
+
+
 def durations_text(durations: Mapping[int, float]) -> str:
     """{3: 2.5, 7: 1.2} -> `3:2.5,7:1.2`: what `parse_durations` reads back."""
     return ",".join(f"{slot}:{seconds:.9g}" for slot, seconds in sorted(durations.items()))
