@@ -262,24 +262,27 @@ class RunClock:
     def to_wall_ns(self, mono_s: float) -> int:
         return self.wall_anchor_ns + round(mono_s * 1e9) - self.mono_anchor_ns
 
-    def sleep_until(self, deadline: float, should_stop: Callable[[], bool] = lambda: False,
+    def sleep_until(self, deadline: float | Callable[[], float], should_stop: Callable[[], bool] = lambda: False,
                     slice_s: float = 0.05, on_idle: Callable[[], None] | None = None) -> bool:
         """Sleep until a monotonic deadline, spinning the last SPIN_S; False if told to stop.
 
         Sleeps in slices so that a stop request (Ctrl-C) is seen within `slice_s`. Before each
-        slice with more than IDLE_S to spare, `on_idle` runs: the time to write the log.
+        slice with more than IDLE_S to spare, `on_idle` runs: the time to write the log. A
+        deadline given as a function is read again each slice: a show time on the music's
+        clock falls at a monotonic time that moves as the sound card's clock drifts.
         """
         source = self.source
+        due = deadline if callable(deadline) else lambda: deadline
         while True:
             if should_stop():
                 return False
-            left = deadline - source.now()
+            left = due() - source.now()
             if left <= 0:
                 return True
             if left > SPIN_S:
                 if on_idle is not None and left > IDLE_S:
                     on_idle()
-                    left = deadline - source.now()
+                    left = due() - source.now()
                     if left <= SPIN_S:
                         continue
                 source.sleep(min(left - SPIN_S, slice_s))
@@ -287,3 +290,39 @@ class RunClock:
                 source.sleep(left)  # nothing to gain by spinning on time that only sleeping moves
             else:
                 source.spin()
+
+
+class ShowClock(Protocol):
+    """Show time against the monotonic clock: the machine's (a fixed zero) or the music's
+    (the playing song's position, which drifts against the machine's).
+
+    Everything that schedules on show time (runners, gates) goes through one, so a show runs
+    the same code on either clock."""
+
+    def mono_at(self, show_s: float) -> float:
+        """The monotonic time at which show time `show_s` falls (on the latest estimate)."""
+
+    def show_at(self, mono: float) -> float:
+        """The show time at monotonic time `mono`."""
+
+
+@dataclass(frozen=True)
+class MachineShowClock:
+    """The machine's clock: show time 0 is one fixed monotonic instant."""
+
+    zero: float  # monotonic time of show time 0
+
+    def mono_at(self, show_s: float) -> float:
+        return self.zero + show_s
+
+    def show_at(self, mono: float) -> float:
+        return mono - self.zero
+
+
+def sleep_until_show(clock: RunClock, show: ShowClock, show_s: float,
+                     should_stop: Callable[[], bool] = lambda: False,
+                     on_idle: Callable[[], None] | None = None) -> bool:
+    """Sleep until show time `show_s` on `show`; False if told to stop."""
+    if isinstance(show, MachineShowClock):
+        return clock.sleep_until(show.zero + show_s, should_stop, on_idle=on_idle)
+    return clock.sleep_until(lambda: show.mono_at(show_s), should_stop, on_idle=on_idle)

@@ -25,7 +25,7 @@ import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from choreo.clock import RunClock
+from choreo.clock import MachineShowClock, RunClock, ShowClock, sleep_until_show
 from choreo.errors import LinkError
 from choreo.logformat import ERROR, WARNING
 from choreo.runner import Runner, RunResult, StopRequest
@@ -54,10 +54,10 @@ class _Gate:
 class Gates:
     """Shared steps: step i + 1 starts when every robot still in the show is through step i."""
 
-    def __init__(self, robots: list[str], clock: RunClock, zero: float, stop: StopRequest) -> None:
+    def __init__(self, robots: list[str], clock: RunClock, show: ShowClock, stop: StopRequest) -> None:
         self.live = set(robots)
         self.clock = clock
-        self.zero = zero
+        self.show = show
         self.stop = stop
         self._gates: dict[int, _Gate] = {}
         self._lock = threading.Lock()
@@ -102,7 +102,7 @@ class Gates:
         return gate.written.get(robot) if gate.written is not None else None
 
     def _write_all(self, gate: _Gate) -> None:
-        self.clock.sleep_until(self.zero + gate.release)  # type: ignore[operator]
+        sleep_until_show(self.clock, self.show, gate.release)  # type: ignore[arg-type]
         written = {}
         with self._lock:
             gate.taking = True
@@ -132,7 +132,7 @@ class Gates:
         awaited = self.live if gate.expected is None else gate.expected & self.live
         if gate.release is not None or not awaited <= gate.arrived:
             return
-        now = self.clock.mono() - self.zero
+        now = self.show.show_at(self.clock.mono())
         end = gate.end if gate.end is not None else gate.idle if gate.idle is not None else now
         gate.release = max(end, now + SYNC_S)
         if isinstance(key, int):  # everyone is past the step before and its play: forget them
@@ -203,17 +203,21 @@ class Ensemble:
         self._errors: dict[str, BaseException] = {}
         self._results: dict[str, RunResult] = {}
         self._dropouts: list[Dropout] = []
-        self._zero = 0.0
+        self.show: ShowClock = MachineShowClock(0.0)
         self._gates: Gates | None = None
 
-    def run(self) -> EnsembleResult:
+    def preroll_s(self) -> float:
+        """How long before the show's start the threads must be running: long enough for every
+        thread to be up and spinning, and for a first play cued at the start to go out early."""
+        return max(START_S, *(part.runner.preroll_s() for part in self.parts))
+
+    def run(self, show: ShowClock | None = None) -> EnsembleResult:
         """Every part in its thread; LinkError (naming the robot) when a fault stopped the show
-        or a robot dropped out, else the combined result."""
-        # show time 0 a little ahead: every thread is up and spinning when the first cue falls due
-        preroll = max(part.runner.preroll_s() for part in self.parts)
-        self._zero = self.clock.mono() - self.origin + max(START_S, preroll)
+        or a robot dropped out, else the combined result. `show`: the music's clock, else the
+        machine's, with show time 0 (or --from's step) `preroll_s` from now."""
+        self.show = show if show is not None else MachineShowClock(self.clock.mono() - self.origin + self.preroll_s())
         if self.unison:
-            self._gates = Gates([p.robot for p in self.parts], self.clock, self._zero, self.stop)
+            self._gates = Gates([p.robot for p in self.parts], self.clock, self.show, self.stop)
             for part in self.parts:
                 part.runner.cues = self._gates
         threads = [threading.Thread(target=self._play, args=(part,), name=f"choreo-{part.robot}", daemon=True)
@@ -244,7 +248,7 @@ class Ensemble:
 
     def _play(self, part: Part) -> None:
         try:
-            self._results[part.robot] = part.runner.run(zero=self._zero)
+            self._results[part.robot] = part.runner.run(self.show)
         except LinkError as exc:
             self._fault(part, exc)
         except BaseException as exc:  # noqa: BLE001 - carried to the main thread, raised there
@@ -256,7 +260,7 @@ class Ensemble:
             self.clock.source.leave()
 
     def _fault(self, part: Part, exc: LinkError) -> None:
-        show_s = self.clock.mono() - self._zero
+        show_s = self.show.show_at(self.clock.mono())
         if part.on_fault == "continue":
             dropout = Dropout(part.robot, show_s, exc)
             self._dropouts.append(dropout)
@@ -270,7 +274,7 @@ class Ensemble:
         if self._errors:
             first = next(iter(self._errors.values()))
             raise first
-        show_s = self.clock.mono() - self._zero
+        show_s = self.show.show_at(self.clock.mono())
         result = EnsembleResult(dict(self._results), list(self._dropouts), show_s)
         if self._dropouts and result.outcome == "done":
             named = "; ".join(str(d) for d in self._dropouts)

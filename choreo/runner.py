@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Protocol
 
-from choreo.clock import RunClock
+from choreo.clock import MachineShowClock, RunClock, ShowClock, sleep_until_show
 from choreo.logformat import ABORT_LABEL, ERROR, INFO, LATE_MS, WARNING, StepRecord
 from choreo.errors import Interrupted, LinkError
 from choreo.link import Link, Played, RxEvent, Tag, TxEvent
@@ -124,7 +124,7 @@ class Runner:
         self.stop = stop or StopRequest()
         self.poll_s = poll_s
         self.on_idle = on_idle  # background work (the recorder's writes) done while waiting
-        self._zero = 0.0
+        self.show: ShowClock = MachineShowClock(0.0)
         self._last_play_done: float | None = None  # monotonic time the last restore was answered
         self._last_motion: int | None = None
         self._played = Played(1, 0.0)  # how the last play sequence went
@@ -133,14 +133,15 @@ class Runner:
 
     # -- the show ----------------------------------------------------------------------------
 
-    def run(self, zero: float | None = None) -> RunResult:
+    def run(self, show: ShowClock | None = None) -> RunResult:
         """Play the plan from `start`; LinkError on a fault, RunResult otherwise (done or aborted).
 
-        `zero`: the monotonic time of show time 0, when several robots share the show clock."""
+        `show`: the show clock, when several robots share it or the music keeps it (by default
+        the machine's, with the show starting now)."""
         steps = self.plan.steps[self.start:]
         preroll = self.preroll_s()
         cursor = self._origin() - preroll  # a first play cued at the start may go out before it
-        self._zero = self.clock.mono() - cursor if zero is None else zero
+        self.show = show if show is not None else MachineShowClock(self.clock.mono() - cursor)
         self.link.listeners.append(_RetryReporter(self))
         self.link.should_stop = self.stop
         try:
@@ -176,18 +177,18 @@ class Runner:
             return 0.0
         return max(0.0, self.link.start_lead_s(first.motion) - (first.at - self._origin()))
 
-    def _sleep_until(self, deadline: float) -> bool:
-        return self.clock.sleep_until(deadline, self.stop, on_idle=self.on_idle)
+    def _sleep_until(self, show_s: float) -> bool:
+        return sleep_until_show(self.clock, self.show, show_s, self.stop, on_idle=self.on_idle)
 
     def show_time(self) -> float:
-        return self.clock.mono() - self._zero
+        return self.show.show_at(self.clock.mono())
 
     def _run_step(self, step: PlannedStep, cursor: float) -> float:
         # A cued play goes out early by the exchanges before its start frame, so that the frame
         # that starts the motion is written on the cue (never before the step before has ended).
         lead = self.link.start_lead_s(step.motion) if step.kind is StepKind.PLAY and step.at is not None else 0.0
         due = max(step.at - lead, cursor) if step.at is not None else cursor
-        if not self._sleep_until(self._zero + due):
+        if not self._sleep_until(due):
             raise Interrupted(self.stop.reason)
         started = self.show_time()
         # A cue is measured against its own time: one the show has already overrun (a motion
@@ -221,7 +222,7 @@ class Runner:
             self._log(ERROR, str(exc))
             raise
         finally:
-            start_s = self._played.started - self._zero if self._played.started is not None else None
+            start_s = self.show.show_at(self._played.started) if self._played.started is not None else None
             self._emit(StepEvent(step, "end", planned, self.show_time(), self._now_ns(), slip_ms, outcome,
                                  self.robot, start_s, lead * 1e3))
 
@@ -232,7 +233,7 @@ class Runner:
         carries it so the log says when the motion began, not only when the step did.
         """
         played = self._played
-        slip_ms = (played.began - self._zero - planned) * 1e3
+        slip_ms = (self.show.show_at(played.began) - planned) * 1e3
         if played.tries > 1 and slip_ms > LATE_MS and not already_late:
             self._late += 1
             self._log(WARNING, f"{step_ref(step)}: motion {step.motion} started {slip_ms:.1f} ms "
@@ -250,10 +251,10 @@ class Runner:
             return due
         if step.kind is StepKind.WAIT:
             end = due + (step.seconds or 0.0)
-            if not self._sleep_until(self._zero + end):
+            if not self._sleep_until(end):
                 raise Interrupted(self.stop.reason)
             return end
-        return self._wait_done(step, tag) - self._zero
+        return self.show.show_at(self._wait_done(step, tag))
 
     def _together(self, step: PlannedStep) -> Callable[[Callable[[], None]], int | None] | None:
         """With other robots on a unison play: hand the frame that starts the motion to the
@@ -281,7 +282,7 @@ class Runner:
         first = self._last_play_done + self.poll_s if self._last_play_done is not None else started
         due = max(first, started)
         while True:
-            if not self._sleep_until(due):
+            if not self.clock.sleep_until(due, self.stop, on_idle=self.on_idle):
                 raise Interrupted(self.stop.reason)
             reply = self.link.query_status(tag)
             if not reply.executing:
