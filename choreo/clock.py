@@ -25,6 +25,9 @@ from typing import Protocol
 SPIN_S = 0.002
 # Background work (writing the log) runs only before a sleep with at least this much to spare.
 IDLE_S = 0.01
+# Python's thread switch interval while other threads share a show (several robots' runners,
+# the music's audio callback): a thread due to send must not wait 5 ms (the default) for the lock.
+SWITCH_S = 0.0001
 
 
 class TimeSource(Protocol):

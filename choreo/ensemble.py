@@ -25,7 +25,7 @@ import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from choreo.clock import MachineShowClock, RunClock, ShowClock, sleep_until_show
+from choreo.clock import SWITCH_S, MachineShowClock, RunClock, ShowClock, sleep_until_show
 from choreo.errors import LinkError
 from choreo.logformat import ERROR, WARNING
 from choreo.runner import Runner, RunResult, StopRequest
@@ -34,7 +34,6 @@ from choreo.show.model import PlannedStep
 SYNC_S = 0.002  # how far ahead a gate opened late releases the next step (see the docstring)
 ARMED = "armed"  # gates keyed (ARMED, step index): a unison play's start frames
 START_S = 0.02  # how far ahead of the threads' start show time 0 is
-SWITCH_S = 0.0001  # Python's thread switch interval while several robots play
 
 
 @dataclass

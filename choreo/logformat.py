@@ -19,12 +19,15 @@ TX_TOPIC = "/rcb4/tx"
 RX_TOPIC = "/rcb4/rx"
 STEP_TOPIC = "/choreo/step"
 LOG_TOPIC = "/choreo/log"
+CLOCK_TOPIC = "/choreo/clock"
+CLOCK_EVERY_S = 0.5  # how often (show time) /choreo/clock samples the show clock
 # topic -> (schema name, schema file under schemas/)
 CHANNELS = {
     TX_TOPIC: ("choreo.Tx", "log.tx.schema.json"),
     RX_TOPIC: ("choreo.Rx", "log.rx.schema.json"),
     STEP_TOPIC: ("choreo.Step", "log.step.schema.json"),
     LOG_TOPIC: ("foxglove.Log", "foxglove.Log.schema.json"),
+    CLOCK_TOPIC: ("choreo.Clock", "log.clock.schema.json"),
 }
 CHOREO_TOPICS = frozenset(CHANNELS)
 PER_ROBOT = (TX_TOPIC, RX_TOPIC, STEP_TOPIC)  # split by robot in a show for several robots
@@ -55,7 +58,7 @@ def channels_for(robots: tuple[str, ...] = ()) -> dict[str, tuple[str, str]]:
     if not robots:
         return dict(CHANNELS)
     split = {robot_topic(topic, robot): CHANNELS[topic] for robot in robots for topic in PER_ROBOT}
-    return {**split, LOG_TOPIC: CHANNELS[LOG_TOPIC]}
+    return {**split, LOG_TOPIC: CHANNELS[LOG_TOPIC], CLOCK_TOPIC: CHANNELS[CLOCK_TOPIC]}
 METADATA_NAME = "choreo"
 RESULT_METADATA_NAME = "choreo.result"
 
@@ -205,9 +208,21 @@ class LogRecord(_Record):
                 "name": self.name, "file": self.file, "line": self.line}
 
 
-Record = TxRecord | RxRecord | StepRecord | LogRecord
+@dataclass(frozen=True, slots=True)
+class ClockRecord(_Record):
+    """The show clock against the machine's monotonic clock (CLOCK_MONOTONIC on Linux), sampled
+    every half second: any other recording made on the machine lines up with the show by it.
+    On the music's clock the two drift apart as the sound card's crystal does."""
+
+    topic: ClassVar[str] = CLOCK_TOPIC
+    show_s: float
+    monotonic_ns: int
+    source: str = "machine"  # machine | music: what keeps the show clock
+
+
+Record = TxRecord | RxRecord | StepRecord | LogRecord | ClockRecord
 RECORD_TYPES: dict[str, type] = {TX_TOPIC: TxRecord, RX_TOPIC: RxRecord, STEP_TOPIC: StepRecord,
-                                 LOG_TOPIC: LogRecord}
+                                 LOG_TOPIC: LogRecord, CLOCK_TOPIC: ClockRecord}
 
 
 _scan_once = json.JSONDecoder().scan_once

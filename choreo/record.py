@@ -46,8 +46,8 @@ from mcap.writer import CompressionType, Writer
 
 from choreo import __version__
 from choreo.errors import LogError
-from choreo.logformat import (LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC, STEP_TOPIC, TX_TOPIC,
-                              LogRecord, RxRecord, TxRecord, channels_for, robot_topic)
+from choreo.logformat import (CLOCK_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC, STEP_TOPIC,
+                              TX_TOPIC, ClockRecord, LogRecord, RxRecord, TxRecord, channels_for, robot_topic)
 
 if TYPE_CHECKING:
     from choreo.link import RxEvent, TxEvent
@@ -171,6 +171,10 @@ def _rx_message(event: RxEvent, robot: str | None = None) -> dict:
 
 def _step_message(event: StepEvent) -> dict:
     return event.record().to_json()
+
+
+def _clock_message(record: ClockRecord) -> dict:
+    return record.to_json()
 
 
 def _log_message(entry: tuple[int, str, int]) -> dict:
@@ -301,6 +305,10 @@ class Recorder:
         """Queued only: a late-cue warning comes just before the cue's first frame."""
         time_ns = time.time_ns() if time_ns is None else time_ns
         self._queue((LOG_TOPIC, time_ns, _log_message, (level, message, time_ns)))
+
+    def on_clock(self, record: ClockRecord, time_ns: int) -> None:
+        """Queued only: a sample of the show clock (`choreo.clocks.ClockSampler`)."""
+        self._queue((CLOCK_TOPIC, time_ns, _clock_message, record))
 
     def _queue(self, item: _Pending) -> None:
         """One append, and one comparison: is the message still inside the reserve? If not, the

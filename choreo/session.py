@@ -9,17 +9,19 @@ run's outcome in its metadata.
 from __future__ import annotations
 
 import math
-import sys
 import re
+import sys
+import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from choreo.clock import RunClock, SystemTime, TimeSource
+from choreo.clock import SWITCH_S, MachineShowClock, RunClock, ShowClock, SystemTime, TimeSource
 from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError, did_you_mean
 from choreo.layouts import SEED, Layout, layout_named
 from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
-from choreo.logformat import ERROR, INFO, WARNING
+from choreo.logformat import CLOCK_EVERY_S, ERROR, INFO, WARNING, ClockRecord
+from choreo.music import LEAD_IN_S, Output, Player, Song, pick_output
 from choreo.record import Recorder, RobotInfo, RunInfo, default_log_path
 from choreo.runner import RunListener, Runner, RunResult, StopRequest
 from choreo.show.model import DEFAULT_MOTION_S, Plan, RobotSettings, Show
@@ -41,6 +43,8 @@ class RunRequest:
     layout: str | None = None
     log_dir: str = "runs"
     robot_ports: Mapping[str, str] = field(default_factory=dict)  # `--port NAME=URL`
+    no_music: bool = False  # `--no-music`: silent, on the machine's clock
+    audio_device: str | None = None  # `--audio-device`: an output from `choreo devices`
 
 
 @dataclass(frozen=True)
@@ -78,6 +82,10 @@ class Session:
     stage: Stage | None = None
     result: RunResult | None = None
     dropouts: list = field(default_factory=list)  # robots that dropped out (on_fault: continue)
+    song: Song | None = None  # the music that keeps the show clock (None: the machine's clock)
+    output: Output | None = None  # where it plays (None: the default output)
+    player: Player | None = None  # while it plays
+    _switch: float = 0.005  # Python's thread switch interval before the music started
 
     @classmethod
     def prepare(cls, request: RunRequest, time_source: TimeSource | None = None) -> Session:
@@ -98,6 +106,7 @@ class Session:
                      link.port, show, plans[name], link.baud, link.layout, show.abort_motion(name))))
                  for name, link in links.items()}
         starts, origin = _starts(show, plans, request.from_step)
+        song, output = _music(show, request, time_source)
         log_path = None
         if request.log_path and not request.no_log:
             check_output_folder(Path(request.log_path), "--log")
@@ -105,7 +114,7 @@ class Session:
             log_path = Path(request.log_path) if request.log_path else default_log_path(
                 show.name, request.log_dir)
         return cls(show, plans, starts, links, log_path, origin, unique_log=request.log_path is None,
-                   clock=RunClock(time_source or SystemTime()))
+                   clock=RunClock(time_source or SystemTime()), song=song, output=output)
 
     # -- the first (or only) robot: what a one-robot run reports ------------------------------
 
@@ -190,19 +199,34 @@ class Session:
             self.recorder.on_stop = stop.request
         runners = {name: Runner(self.plans[name], self.stage.links[name], clock=self.clock, listeners=everyone,
                                 start=self.starts[name], on_abort=self.show.abort_motion(name), stop=stop,
-                                on_idle=self.recorder.on_idle if self.recorder else None,
                                 robot=name if self.show.ensemble else None)
                    for name in self.links}
-        if not self.show.ensemble:
-            self.result = runners[self.first.robot].run()
-        else:
-            self.result = self._run_ensemble(runners, stop, everyone)
+        ensemble = self._ensemble(runners, stop, everyone) if self.show.ensemble else None
+        preroll = ensemble.preroll_s() if ensemble is not None else runners[self.first.robot].preroll_s()
+        show = self._start_show_clock(preroll, everyone)
+        sampler = ClockSampler(self.recorder, self.clock, show, "music" if self.player else "machine") \
+            if self.recorder is not None else None
+        for runner in runners.values():
+            runner.on_idle = sampler
+        try:
+            if sampler is not None:
+                sampler.sample(force=True)
+            if ensemble is None:
+                self.result = runners[self.first.robot].run(show)
+            else:
+                self.result = self._run_ensemble(ensemble, show)
+            if self.result.outcome == "done":
+                self._play_out(show, stop, sampler)
+            if sampler is not None:
+                sampler.sample(force=True)
+        finally:
+            self._stop_music(everyone)
         if self.recorder is not None:
             self.recorder.check()
         self.stage.outcome = self.result.metadata()
         return self.result
 
-    def _run_ensemble(self, runners: dict[str, Runner], stop: StopRequest, listeners: list) -> RunResult:
+    def _ensemble(self, runners: dict[str, Runner], stop: StopRequest, listeners: list):  # type: ignore[no-untyped-def]
         from choreo.ensemble import Ensemble, Part
 
         def log(level: int, message: str) -> None:
@@ -210,11 +234,69 @@ class Session:
                 listener.on_log(level, message, self.clock.wall_ns())
 
         parts = [Part(name, runner, self.links[name].on_fault) for name, runner in runners.items()]
-        ensemble = Ensemble(parts, self.clock, stop, unison=self.plan.unison, log=log, origin=self.origin)
+        return Ensemble(parts, self.clock, stop, unison=self.plan.unison, log=log, origin=self.origin)
+
+    def _run_ensemble(self, ensemble, show: ShowClock) -> RunResult:  # type: ignore[no-untyped-def]
         try:
-            return ensemble.run().combined()
+            return ensemble.run(show).combined()
         finally:
             self.dropouts = ensemble.dropouts
+
+    # -- the show clock --------------------------------------------------------------------
+
+    def _start_show_clock(self, preroll: float, listeners: list[RunListener]) -> ShowClock:
+        """The music's clock, its song started a lead-in before the run's first moment (a play
+        cued at the very start goes out ahead of the first sample by its lead), else the
+        machine's, with the run's first moment `preroll` from now. The log's metadata gets
+        show time 0 as wall-clock and monotonic nanoseconds either way."""
+        assert self.stage is not None
+        if self.song is None:
+            show: ShowClock = MachineShowClock(self.clock.mono() - (self.origin - preroll))
+        else:
+            self.player = Player(self.song, self.output, self.origin, max(LEAD_IN_S, preroll + LEAD_IN_S))
+            show = self.player.start()
+            # The audio thread shares the interpreter: spinning towards a cue yields to it, and
+            # Python hands its lock over every SWITCH_S, not every 5 ms.
+            self.clock.source.admit(1)
+            self._switch = sys.getswitchinterval()
+            sys.setswitchinterval(SWITCH_S)
+            if self.player.note is not None:
+                self._tell(listeners, WARNING, self.player.note)
+            self._tell(listeners, INFO, f"music: {self.player.describe()}")
+        zero_ns = round(show.mono_at(0.0) * 1e9)
+        self.stage.outcome_extra.update({
+            "clock": "music" if self.player else "machine", "show_zero_monotonic_ns": str(zero_ns),
+            "show_zero_wall_ns": str(self.clock.wall_ns(zero_ns))})
+        if self.song is not None:
+            self.stage.outcome_extra.update({"music.file": self.song.music.file, "music.start": f"{self.song.music.start:g}",
+                                             "audio.backend": self.player.backend if self.player else ""})
+        return show
+
+    def _play_out(self, show: ShowClock, stop: StopRequest, sampler: ClockSampler | None) -> None:
+        """The show's last step is done: its music plays to the end (Ctrl-C stops it there; the
+        show itself is done)."""
+        if self.player is None:
+            return
+        end = self.player.end_show_s
+        while show.show_at(self.clock.mono()) < end and not stop():
+            self.clock.sleep(min(0.05, max(0.0, show.mono_at(end) - self.clock.mono())))
+            if sampler is not None:
+                sampler()
+
+    def _stop_music(self, listeners: list[RunListener]) -> None:
+        if self.player is None:
+            return
+        self.player.close()
+        self.clock.source.leave()
+        sys.setswitchinterval(self._switch)
+        problem = self.player.feed.problem if self.player.feed is not None else None
+        if problem is not None:
+            self._tell(listeners, WARNING, f"music: {self.player.song.music.file} stopped decoding early "
+                                           f"({problem}); the show clock ran on in silence")
+
+    def _tell(self, listeners: list[RunListener], level: int, message: str) -> None:
+        for listener in listeners:
+            listener.on_log(level, message, self.clock.wall_ns())
 
 
 @dataclass
@@ -240,6 +322,7 @@ class Stage:
     links: dict[str, Link] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)  # what the user should hear once the ports are open
     opened: bool = False  # every port opened
+    outcome_extra: dict[str, str] = field(default_factory=dict)  # what the run adds to the outcome (its clock)
 
     @property
     def link(self) -> Link | None:
@@ -287,7 +370,48 @@ class Stage:
         for link in self.links.values():
             link.close()
         if self.recorder is not None:
-            self.recorder.close(outcome_metadata(self.outcome, exc))
+            self.recorder.close({**outcome_metadata(self.outcome, exc), **self.outcome_extra})
+
+
+def _music(show: Show, request: RunRequest, time_source: TimeSource | None) -> tuple[Song | None, Output | None]:
+    """The song that keeps the show clock, and its output; (None, None) on the machine's clock.
+    A song that will not decode, or an output that is not there, stops the run here (exit 2)."""
+    if show.music is None or request.no_music:
+        if request.audio_device is not None and show.music is None:
+            raise UsageError(f"--audio-device {request.audio_device}: the show has no `music:` to play")
+        return None, None
+    if time_source is not None and time_source.virtual:
+        raise UsageError("music plays in real time, not on virtual time: run with --no-music")
+    return Song.open(show.music, show.path), pick_output(request.audio_device)
+
+
+class ClockSampler:
+    """Samples the show clock against the monotonic clock into the log's /choreo/clock every
+    CLOCK_EVERY_S of show time; it rides on the runners' idle time (when they sleep towards a
+    step), so it never delays a frame, and with the log's own idle work after it."""
+
+    def __init__(self, recorder: Recorder, clock: RunClock, show: ShowClock, source: str,
+                 every_s: float = CLOCK_EVERY_S) -> None:
+        self.recorder = recorder
+        self.clock = clock
+        self.show = show
+        self.source = source
+        self.every_s = every_s
+        self._last: float | None = None
+        self._lock = threading.Lock()
+
+    def __call__(self) -> None:
+        self.sample()
+        self.recorder.on_idle()
+
+    def sample(self, force: bool = False) -> None:
+        with self._lock:
+            mono_ns = self.clock.mono_ns()
+            show_s = self.show.show_at(mono_ns / 1e9)
+            if not force and self._last is not None and show_s - self._last < self.every_s:
+                return
+            self._last = show_s
+        self.recorder.on_clock(ClockRecord(round(show_s, 6), mono_ns, self.source), self.clock.wall_ns(mono_ns))
 
 
 def _robot_link(name: str, robot: RobotSettings, request: RunRequest, show: Show) -> RobotLink:

@@ -132,7 +132,7 @@ def test_the_log_names_every_robot_and_the_review_reads_it(tmp_path, capsys):
     session, error = run_session(tmp_path, UNISON)
     log = read_log(tmp_path / "run.mcap")
     assert set(log.messages) == {f"/{kind}/{name}/{topic}" for name in "abc"
-                                 for kind, topic in (("rcb4", "tx"), ("rcb4", "rx"), ("choreo", "step"))}
+                                 for kind, topic in (("rcb4", "tx"), ("rcb4", "rx"), ("choreo", "step"))} | {"/choreo/clock"}
     meta = log.metadata["choreo"]
     assert meta["robots"] == "a,b,c" and meta["unison"] == "yes" and meta["robot.b.port"].startswith("sim://")
     assert all(m["robot"] == "b" for m in log.topic("/choreo/b/step"))
@@ -217,7 +217,7 @@ def test_from_a_label_in_tracks_starts_every_track_at_that_moment(tmp_path):
 def test_a_one_robot_show_logs_as_before(tmp_path):
     run_session(tmp_path, "version: 1\nsteps:\n  - play: 1\n  - wait: done\n")
     log = read_log(tmp_path / "run.mcap")
-    assert set(log.messages) == {"/rcb4/tx", "/rcb4/rx", "/choreo/step"}
+    assert set(log.messages) == {"/rcb4/tx", "/rcb4/rx", "/choreo/step", "/choreo/clock"}
     assert not any("robot" in m for topic in log.messages.values() for m in topic)
     assert "robots" not in log.metadata["choreo"]
 

@@ -69,7 +69,8 @@ def log(tmp_path_factory):
 def test_logged_messages_match_their_schemas_and_hold_no_null(log):
     schemas = {path.name: json.loads(path.read_text()) for path in LOG_SCHEMAS}
     by_topic = {"/rcb4/tx": "log.tx.schema.json", "/rcb4/rx": "log.rx.schema.json",
-                "/choreo/step": "log.step.schema.json", "/choreo/log": "foxglove.Log.schema.json"}
+                "/choreo/step": "log.step.schema.json", "/choreo/log": "foxglove.Log.schema.json",
+                "/choreo/clock": "log.clock.schema.json"}
     seen = set()
     for topic, messages in log.messages.items():
         for message in messages:

@@ -54,7 +54,8 @@ def test_reads_every_message_as_the_mcap_library_does(synthetic):
     assert reader.run_info["show"] == "bench" and reader.run_info["baud"] == "115200"
     assert reader.result["outcome"] == "done"
     assert reader.show_source().startswith(b"version: 1")
-    assert {c.topic for c in reader.channels.values()} == {"/rcb4/tx", "/rcb4/rx", "/choreo/step", "/choreo/log"}
+    assert {c.topic for c in reader.channels.values()} == {"/rcb4/tx", "/rcb4/rx", "/choreo/step", "/choreo/log",
+                                                                   "/choreo/clock"}
 
 
 def test_topic_filter_and_a_second_pass(synthetic):

@@ -143,8 +143,16 @@ def test_full_log_contents(tmp_path):
     log_path = tmp_path / "full.mcap"
     assert vmain(["run", str(show), "--log", str(log_path), "--quiet"]) == 0
     log = read_log(log_path)
-    assert log.schemas == {"/rcb4/tx": "choreo.Tx", "/rcb4/rx": "choreo.Rx",
-                           "/choreo/step": "choreo.Step"}  # no warnings: no /choreo/log message
+    assert log.schemas == {"/rcb4/tx": "choreo.Tx", "/rcb4/rx": "choreo.Rx", "/choreo/step": "choreo.Step",
+                           "/choreo/clock": "choreo.Clock"}  # no warnings: no /choreo/log message
+    # the show clock sampled against the monotonic clock at its start and its end (and every half
+    # second between: tests/test_music.py); on the machine's clock the two move together to the nanosecond
+    clock = log.topic("/choreo/clock")
+    shows = [m["show_s"] for m in clock]
+    assert all(m["source"] == "machine" for m in clock) and shows == sorted(shows) and len(clock) >= 2
+    zero_ns = int(log.metadata["choreo.result"]["show_zero_monotonic_ns"])
+    assert all(abs(m["monotonic_ns"] - zero_ns - m["show_s"] * 1e9) < 1e3 for m in clock)
+    assert log.metadata["choreo.result"]["clock"] == "machine"
     assert [m["seq"] for m in log.tx] == list(range(1, len(log.tx) + 1))
     assert [m["seq"] for m in log.rx] == [m["seq"] for m in log.tx]  # one rx for every tx
     assert all(m["kind"] in ("ack", "status") and m["latency_ms"] > 0 for m in log.rx)

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from choreo.clock import TimeSource
 
 # Command modules, in the order `choreo --help` lists them.
-COMMAND_MODULES = ("run", "show", "importer", "frames", "sim", "probe", "doctor", "log", "ports", "schema")
+COMMAND_MODULES = ("run", "show", "beats", "importer", "frames", "sim", "probe", "doctor", "log", "ports", "devices", "schema")
 
 
 def build_parser() -> argparse.ArgumentParser:

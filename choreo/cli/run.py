@@ -45,6 +45,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for a reply, 0 < S <= 10 (default 0.2)")
     parser.add_argument("--retries", type=int, metavar="N",
                         help="retries of a failed frame or play sequence, 0..10 (default 2: 3 tries)")
+    music = parser.add_mutually_exclusive_group()
+    music.add_argument("--no-music", action="store_true", help="do not play the show's music: run "
+                       "silent on the machine's clock")
+    music.add_argument("--audio-device", metavar="OUTPUT", help="where the music plays: a number or "
+                       "name from `choreo devices`, or null (silent, keeps the music's time); default: "
+                       "the system's output")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress output")
     parser.add_argument("--json", action="store_true", help="at the end, the run's result and log "
                         "path as one JSON object on stdout (also when it fails; stderr as without)")
@@ -75,7 +81,8 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     port, robot_ports = port_arguments(args.port)
     request = RunRequest(args.show, port=port, baud=args.baud, log_path=args.log,
                          no_log=args.no_log, from_step=args.from_step, timeout=args.timeout,
-                         retries=args.retries, layout=args.layout, robot_ports=robot_ports)
+                         retries=args.retries, layout=args.layout, robot_ports=robot_ports,
+                         no_music=args.no_music, audio_device=args.audio_device)
     session = Session.prepare(request, args.time_source)
     report.session = session
     say = _Say(sys.stderr, quiet=args.quiet)
@@ -86,6 +93,8 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
         say(_port_line(session))
         say(_layout_line(session))
     say(_show_line(session))
+    if session.show.music is not None:
+        say(_music_line(session))
     progress = Progress(session, sys.stderr, live=sys.stderr.isatty(), quiet=args.quiet)
     signals = _StopOnSignals()
     try:
@@ -243,6 +252,17 @@ def _robot_lines(session) -> list[str]:
         lines.append(f"robot {link.robot}: {link.port} at {link.baud} baud ({source}), "
                      f"layout {link.layout.name}{assumed}")
     return lines
+
+
+def _music_line(session) -> str:  # type: ignore[no-untyped-def]
+    """What keeps the show clock: the music (which file, from where, on which output) or, with
+    --no-music, the machine."""
+    if session.song is None:
+        return f"music: {session.show.music.file} not played (--no-music): the machine's clock keeps the show"
+    song = session.song
+    start = song.music.start + session.origin
+    where = session.output.name if session.output is not None else "the default output"
+    return f"music: {song.music.file} from {start:.1f} s of {song.duration_s:.1f} s, on {where}: the show clock"
 
 
 def _port_line(session) -> str:

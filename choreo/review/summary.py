@@ -15,8 +15,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from choreo.logformat import (CHOREO_TOPICS, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING,
-                              LogRecord, MotionPlay, MotionTracker, RxRecord, StepRecord, TxRecord, is_late,
+from choreo.logformat import (CHOREO_TOPICS, CLOCK_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING,
+                              ClockRecord, LogRecord, MotionPlay, MotionTracker, RxRecord, StepRecord, TxRecord, is_late,
                               parse, slipped)
 from choreo.review.reader import Cut, LogReader
 FRAME_KINDS = ("stop", "play", "restore", "status")
@@ -121,6 +121,30 @@ class LogLine:
 
 
 @dataclass
+class ClockSpan:
+    """The show clock against the machine's over the run (/choreo/clock): on the music's clock
+    the two part as the sound card's crystal drifts from the computer's."""
+
+    source: str
+    samples: int
+    first: ClockRecord
+    last: ClockRecord
+
+    def add(self, sample: ClockRecord) -> None:
+        self.samples += 1
+        self.last = sample
+
+    @property
+    def span_s(self) -> float:
+        return (self.last.monotonic_ns - self.first.monotonic_ns) / 1e9
+
+    @property
+    def drift_ms(self) -> float:
+        """How far the show clock ran ahead of the machine's over the span (ms)."""
+        return ((self.last.show_s - self.first.show_s) - self.span_s) * 1e3
+
+
+@dataclass
 class Summary:
     """Everything `choreo log summary` reports about one run log."""
 
@@ -155,6 +179,7 @@ class Summary:
     log_lines: list[LogLine] = field(default_factory=list)  # the first LISTED_LOG_LINES warnings/errors
     robots: dict[str, Summary] = field(default_factory=dict)  # a show for several robots: each one's figures
     skew: Distribution = field(default_factory=Distribution)  # ms, unison plays: first to last motion start
+    clock: ClockSpan | None = None  # the show clock against the machine's (/choreo/clock)
 
     @property
     def frames_sent(self) -> int:
@@ -189,6 +214,11 @@ def summary_record(summary: Summary) -> dict:
         "latency": spread(summary.latency),
         "cue_lateness": spread(summary.lateness),
         "motion_start_vs_cue": spread(summary.motion_starts),
+        "clock": None if summary.clock is None else {
+            "source": summary.clock.source, "samples": summary.clock.samples, "span_s": round(summary.clock.span_s, 6),
+            "drift_ms": round(summary.clock.drift_ms, 3),
+            "show_zero_monotonic_ns": _int(summary.result, "show_zero_monotonic_ns"),
+            "show_zero_wall_ns": _int(summary.result, "show_zero_wall_ns")},
         "motions": [{"motion": m.motion, "plays": m.plays, "measured": m.measured, "median_s": m.median_s}
                     for m in sorted(summary.motions.values(), key=lambda m: m.motion)],
         "warnings": summary.warnings,
@@ -252,6 +282,9 @@ def summarize_reader(reader: LogReader) -> Summary:
             if topic == LOG_TOPIC:
                 tally.log_line(record, log_time, summary)
                 continue
+            if topic == CLOCK_TOPIC:
+                _clock_sample(summary, record)
+                continue
             robot = record.robot  # type: ignore[union-attr]
             part = solo if robot is None else parts.get(robot) or parts.setdefault(robot, _Part.named(reader, robot, tally))
             part.see(topic, record, log_time, tally)
@@ -274,6 +307,13 @@ def summarize_reader(reader: LogReader) -> Summary:
     elif last_time is not None and tally.zero is not None:
         summary.duration_s = _show_s(last_time, tally.zero)
     return summary
+
+
+def _clock_sample(summary: Summary, sample: ClockRecord) -> None:
+    if summary.clock is None:
+        summary.clock = ClockSpan(sample.source, 1, sample, sample)
+    else:
+        summary.clock.add(sample)
 
 
 @dataclass
@@ -525,6 +565,7 @@ def render(summary: Summary) -> Iterable[str]:
     if len(starts):
         yield (f"starts    motion start vs cue (start frame written): median {_ms(starts.median)}, p99 "
                f"{_ms(starts.p99)}, max {_ms(starts.max)} ({len(starts)} cued plays, sent early by their lead)")
+    yield from _render_clock(summary)
     yield from _render_motions(summary)
     yield from _render_robots(summary)
     yield f"log lines {summary.warnings} warnings, {summary.errors} errors"
@@ -534,6 +575,26 @@ def render(summary: Summary) -> Iterable[str]:
     if summary.warnings + summary.errors > len(summary.log_lines):
         yield f"  ... and {summary.warnings + summary.errors - len(summary.log_lines)} more (choreo log frames)"
     yield f"messages  {summary.messages}"
+
+
+def _render_clock(summary: Summary) -> Iterable[str]:
+    """Which clock kept the show, and how it ran against the machine's."""
+    clock, result = summary.clock, summary.result or {}
+    if clock is None:
+        return
+    if clock.source == "music":
+        music = f"the music ({result.get('music.file', '?')} from {result.get('music.start', '0')} s"
+        backend = result.get("audio.backend")
+        kept = music + (f", on {backend})" if backend else ")")
+    else:
+        kept = "the machine's"
+    drift = f"; show clock minus machine clock {clock.drift_ms:+.3f} ms over {clock.span_s:.1f} s" if clock.samples > 1 else ""
+    yield f"clock     {kept}: {clock.samples} samples{drift}"
+
+
+def _int(result: dict[str, str] | None, key: str) -> int | None:
+    text = (result or {}).get(key, "")
+    return int(text) if text.isdigit() else None
 
 
 def _render_robots(summary: Summary) -> Iterable[str]:

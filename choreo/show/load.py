@@ -40,7 +40,9 @@ from choreo.show.model import (
     Tempo,
     DEFAULT_DONE_TIMEOUT_S,
     MOTION_NAME_FORMAT,
+    MUSIC_FORMATS,
     Motion,
+    Music,
     Repeat,
     RobotSettings,
     Show,
@@ -77,11 +79,14 @@ def load_show(path: str | Path) -> Show:
     source = _read(Path(path), report)
     if source is None:
         raise ShowError(report.problems())
-    return load_show_bytes(source, str(path))
+    return load_show_bytes(source, str(path), folder=Path(path).parent)
 
 
-def load_show_bytes(source: bytes, path: str = "<show>") -> Show:
-    """A show from its bytes (e.g. attached to a log); `path` names it in messages and records."""
+def load_show_bytes(source: bytes, path: str = "<show>", folder: Path | None = None) -> Show:
+    """A show from its bytes (e.g. attached to a log); `path` names it in messages and records.
+
+    `folder`: where the show file is, so that its music is looked for there (None: a show with
+    no folder, as one attached to a log: its music is not looked for)."""
     report = _Report(path)
     if len(source) > MAX_BYTES:
         report.add((0, 0), "", f"the file is over {MAX_BYTES // 1024} KiB, too big for a show file")
@@ -91,10 +96,10 @@ def load_show_bytes(source: bytes, path: str = "<show>") -> Show:
     if doc is None:
         raise ShowError(report.problems())
     _check_schema(doc, report)
-    _check_meaning(doc, report)
+    _check_meaning(doc, report, folder)
     if report.any():
         raise ShowError(report.problems())
-    return _build_show(path, source, doc)
+    return _build_show(path, source, doc, folder)
 
 
 def load_schema() -> dict[str, Any]:
@@ -826,7 +831,7 @@ class _Walk:
         return all(path[:n] not in self.report.flagged for n in range(len(path) + 1))
 
 
-def _check_meaning(doc: _Doc, report: _Report) -> None:
+def _check_meaning(doc: _Doc, report: _Report, folder: Path | None = None) -> None:
     data = doc.data
     motions = data.get("motions") if isinstance(data.get("motions"), dict) else {}
     walk = _Walk(doc, report, {})
@@ -837,6 +842,7 @@ def _check_meaning(doc: _Doc, report: _Report) -> None:
     if "on_abort" in data and walk.ok(("on_abort",)):
         _check_motion_ref(walk, ("on_abort",), data["on_abort"])
     _check_robots(walk)
+    _check_music(walk, folder)
     steps = data.get("steps")
     if isinstance(steps, list) and walk.ok(("steps",)):
         walk.robots = walk.declared or (SOLO,)
@@ -844,6 +850,22 @@ def _check_meaning(doc: _Doc, report: _Report) -> None:
     tracks = data.get("tracks")
     if isinstance(tracks, dict) and walk.ok(("tracks",)) and walk.declared:
         _check_tracks(walk, tracks)
+
+
+def _check_music(walk: _Walk, folder: Path | None) -> None:
+    """A sound file choreo can decode, which exists beside the show (when it has a folder)."""
+    music = walk.doc.data.get("music")
+    path = ("music", "file")
+    if not isinstance(music, dict) or not isinstance(music.get("file"), str) or not walk.ok(path):
+        return
+    file = music["file"]
+    if Path(file).suffix.lower() not in MUSIC_FORMATS:
+        walk.report.add(walk.doc.mark(path), path, f"{file}: choreo plays {', '.join(f[1:] for f in MUSIC_FORMATS)} "
+                        "files: convert it, or give one of those")
+    elif folder is not None and not (folder / file).is_file():
+        where = folder / file
+        what = "is a folder" if where.is_dir() else "no such file"
+        walk.report.add(walk.doc.mark(path), path, f"{file}: {what} ({where}; the path is relative to the show file)")
 
 
 def _check_total(walk: _Walk, path: JsonPath, total: int) -> None:
@@ -1094,7 +1116,7 @@ def _check_repeat_label(walk: _Walk, step: dict[str, Any], here: JsonPath) -> No
 # --------------------------------------------------------------------------- records
 
 
-def _build_show(file: str, source: bytes, doc: _Doc) -> Show:
+def _build_show(file: str, source: bytes, doc: _Doc, folder: Path | None = None) -> Show:
     """The records from data that passed every check (so types are what the schema says)."""
     data = doc.data
     motions = {
@@ -1118,7 +1140,14 @@ def _build_show(file: str, source: bytes, doc: _Doc) -> Show:
         robots=robots,
         tracks=tracks,
         tempo=tempo,
+        music=_music(data.get("music"), folder),
     )
+
+
+def _music(entry: dict[str, Any] | None, folder: Path | None) -> Music | None:
+    if not entry:
+        return None
+    return Music(entry["file"], float(entry.get("start", 0.0)), str(folder) if folder is not None else ".")
 
 
 def _tempo(entry: dict[str, Any] | None) -> Tempo | None:

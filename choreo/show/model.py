@@ -10,6 +10,7 @@ from __future__ import annotations
 import unicodedata
 from dataclasses import dataclass, field
 from enum import Enum
+from pathlib import Path
 
 from choreo.protocol import Frame
 
@@ -117,6 +118,22 @@ class Tempo:
         return round(self.offset + ((bar - 1) * self.meter + (beat - 1)) * 60.0 / self.bpm, 9)
 
 
+MUSIC_FORMATS = (".wav", ".mp3", ".flac", ".ogg")  # what miniaudio decodes
+
+
+@dataclass(frozen=True)
+class Music:
+    """`music:`: the soundtrack whose playback position is the show clock."""
+
+    file: str  # as written in the show, relative to the show file's folder
+    start: float = 0.0  # seconds into the file at show time 0
+    folder: str = "."  # the show file's folder, where `file` is looked up
+
+    @property
+    def path(self) -> Path:
+        return Path(self.folder) / self.file
+
+
 @dataclass(frozen=True)
 class Show:
     """A loaded, checked show file."""
@@ -131,6 +148,7 @@ class Show:
     robots: dict[str, RobotSettings] = field(default_factory=dict)  # `robots:`, in file order; {} for `robot:`
     tracks: dict[str, tuple[Step | Repeat, ...]] = field(default_factory=dict)  # `tracks:`, by robot
     tempo: Tempo | None = None
+    music: Music | None = None
 
     @property
     def ensemble(self) -> bool:

@@ -1,0 +1,365 @@
+"""The show's music: its file checked before the stage opens, played through miniaudio, and the
+show clock read from the playing song.
+
+Show time is the position of the sample leaving the sound device, not the machine's clock: a
+sound card's crystal drifts against the computer's by tens of parts per million (a few ms over
+a song), and the audience hears the card. Each time the device asks for more samples (every
+`PERIOD_MS`), the feed notes how many it has handed over and when; handed-over samples wait
+`latency_s` in the device's buffer before they are heard. A late callback (the thread woke
+late) would make the music seem late, an early one cannot happen, so the clock takes the
+earliest reading of the last `WINDOW_S`: that follows drift and ignores wake-up jitter.
+
+The Python binding of miniaudio does not report the device's own latency; the clock takes the
+buffer choreo asks for ((periods - 1) x period, 20 ms) as the latency. Output stages beyond the
+sound card (a Bluetooth speaker, a mixing desk's processing) add their own delay, which no
+computer can see; `--audio-latency` (not yet) would be the place for it.
+
+miniaudio is imported only here and only when music plays, so `choreo validate` and
+`choreo --help` do not pay for it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+from choreo.errors import ChoreoError, UsageError
+from choreo.show.model import Music
+
+PERIOD_MS = 10  # how much the device asks for at a time
+PERIODS = 3  # periods in the device's buffer
+LATENCY_S = (PERIODS - 1) * PERIOD_MS / 1000  # how long a sample handed over waits to be heard
+WINDOW_S = 2.0  # the clock's earliest reading over this long is its estimate
+LOCK_CALLBACKS = PERIODS + 4  # readings before the clock is trusted: past the buffer's prefill
+LOCK_TIMEOUT_S = 2.0
+LEAD_IN_S = 0.25  # silence before the show's first moment: time for the clock to settle
+CHANNELS = 2
+NULL_DEVICE = "null"  # --audio-device null: miniaudio's null backend, silent, in real time
+
+
+class AudioError(ChoreoError):
+    """The music cannot play: a file that does not decode, a device that does not open (exit 2:
+    nothing was sent to any robot)."""
+
+    exit_code = 2
+
+
+# --------------------------------------------------------------------------- the file
+
+
+@dataclass(frozen=True)
+class Song:
+    """A show's music file, decodable, with what playing it needs to know."""
+
+    music: Music
+    sample_rate: int
+    duration_s: float
+
+    @property
+    def path(self) -> str:
+        return str(self.music.path)
+
+    @classmethod
+    def open(cls, music: Music, show_path: str) -> Song:
+        """The song's facts, read from its header; AudioError naming the show if it will not
+        decode or `start` is past its end (before any port opens)."""
+        import miniaudio
+
+        where = f"{show_path}: music.file {music.file}"
+        try:
+            info = miniaudio.get_file_info(str(music.path))
+        except FileNotFoundError:
+            raise AudioError(f"{where}: no such file ({music.path})") from None
+        except (miniaudio.DecodeError, OSError) as exc:
+            raise AudioError(f"{where}: cannot decode it ({_reason(exc)}): is it a wav, mp3, flac or ogg file?") from None
+        if info.sample_rate <= 0 or info.num_frames <= 0:
+            raise AudioError(f"{where}: the file holds no sound")
+        song = cls(music, int(info.sample_rate), info.num_frames / info.sample_rate)
+        if music.start >= song.duration_s:
+            raise AudioError(f"{show_path}: music.start {music.start:g} s is past the end of {music.file} "
+                             f"({song.duration_s:.1f} s long)")
+        return song
+
+    def frames(self, seconds: float) -> int:
+        return round(seconds * self.sample_rate)
+
+
+def _reason(exc: BaseException) -> str:
+    return " ".join(str(arg) for arg in exc.args if isinstance(arg, str)) or type(exc).__name__
+
+
+# --------------------------------------------------------------------------- the clock
+
+
+@dataclass
+class MusicClock:
+    """Show time from the playing music (see the module's docstring); a `ShowClock`.
+
+    `first_show_s`: the show time of the first sample handed to the device (the lead-in's
+    first, a little before the show's start)."""
+
+    sample_rate: int
+    first_show_s: float
+    latency_s: float = LATENCY_S
+    window_s: float = WINDOW_S
+    readings: int = 0
+    _zero: float | None = None  # monotonic time the first sample is heard (estimate)
+    _window: deque = field(default_factory=deque)  # (mono, zero) with increasing zeros
+
+    def handed_over(self, mono: float, frames_before: int) -> None:
+        """The device asked for samples at `mono`, `frames_before` having been handed over
+        already: the sample handed over now is heard `latency_s` later."""
+        zero = mono - frames_before / self.sample_rate + self.latency_s
+        window = self._window
+        while window and window[-1][1] >= zero:
+            window.pop()  # a later reading that is also earlier: the old ones can never win again
+        window.append((mono, zero))
+        while window[0][0] < mono - self.window_s:
+            window.popleft()
+        self._zero = window[0][1]
+        self.readings += 1
+
+    @property
+    def locked(self) -> bool:
+        return self.readings >= LOCK_CALLBACKS
+
+    @property
+    def zero(self) -> float:
+        """The monotonic time of show time 0."""
+        if self._zero is None:
+            raise AudioError("the music's clock has not started")
+        return self._zero - self.first_show_s
+
+    def mono_at(self, show_s: float) -> float:
+        return self.zero + show_s
+
+    def show_at(self, mono: float) -> float:
+        return mono - self.zero
+
+
+# --------------------------------------------------------------------------- the feed
+
+
+class Feed:
+    """The samples the device plays: a lead-in of silence, the song from the show's first
+    moment, then silence for as long as the show runs on (its clock keeps the card's time)."""
+
+    def __init__(self, song: Song, clock: MusicClock, lead_in_s: float, skip_s: float,
+                 now: Callable[[], float] = time.monotonic) -> None:
+        self.song = song
+        self.clock = clock
+        self.now = now
+        self.frame_bytes = 2 * CHANNELS  # signed 16-bit, stereo
+        self.lead_in = song.frames(lead_in_s)
+        self.skip = song.frames(song.music.start + skip_s)  # where in the file the show starts
+        self.handed = 0  # frames handed over so far
+        self.song_frames = 0  # of those, from the file
+        self.ended_at: int | None = None  # frames handed over when the file ran out
+        self.problem: str | None = None  # why the file stopped decoding early
+        self._source: Iterator[Any] | None = None
+        self._pending = bytearray()
+
+    def generator(self):  # type: ignore[no-untyped-def]
+        """What miniaudio's device pulls from: sent a frame count, yields that many frames."""
+        wanted = yield b""
+        while True:
+            self.clock.handed_over(self.now(), self.handed)
+            chunk = self._take(int(wanted))
+            self.handed += int(wanted)
+            wanted = yield chunk
+
+    def _take(self, frames: int) -> bytes:
+        silence_left = max(0, self.lead_in - self.handed)
+        silent = min(frames, silence_left)
+        out = bytearray(silent * self.frame_bytes)
+        need = (frames - silent) * self.frame_bytes
+        while len(self._pending) < need and self.ended_at is None:
+            self._decode_more()
+        take = min(need, len(self._pending))
+        out += self._pending[:take]
+        del self._pending[:take]
+        self.song_frames += take // self.frame_bytes
+        out += bytes(need - take)
+        return bytes(out)
+
+    def _decode_more(self) -> None:
+        try:
+            if self._source is None:
+                self._source = self._open()
+            chunk = next(self._source)
+        except StopIteration:
+            chunk = None
+        except Exception as exc:  # noqa: BLE001 - the audio thread must never die: the show's clock runs on it
+            self.problem = _reason(exc)
+            chunk = None
+        if not chunk:
+            self.ended_at = self.handed
+            return
+        self._pending += chunk.tobytes() if hasattr(chunk, "tobytes") else bytes(chunk)
+
+    def _open(self) -> Iterator[Any]:
+        import miniaudio
+
+        return miniaudio.stream_file(self.song.path, output_format=miniaudio.SampleFormat.SIGNED16,
+                                     nchannels=CHANNELS, sample_rate=self.song.sample_rate,
+                                     frames_to_read=self.song.frames(PERIOD_MS / 1000) or 1,
+                                     seek_frame=self.skip)
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+@dataclass(frozen=True)
+class Output:
+    """An audio output `choreo devices` lists and `--audio-device` picks."""
+
+    number: int  # 1-based, as listed; 0 for the null output
+    name: str
+    backend: str
+    device_id: Any = None  # miniaudio's id (None: the backend's default)
+
+
+def outputs() -> list[Output]:
+    """The playback devices miniaudio finds on this machine (none where it finds no sound
+    system), and the null output last, which every machine has."""
+    import miniaudio
+
+    found: list[Output] = []
+    with hushed_stderr():
+        try:
+            devices = miniaudio.Devices()
+            found = [Output(n, str(d["name"]), devices.backend, d["id"])
+                     for n, d in enumerate(devices.get_playbacks(), 1)]
+        except miniaudio.MiniaudioError:
+            pass
+    return found + [Output(0, NULL_DEVICE, "Null")]
+
+
+def pick_output(given: str | None, listed: Callable[[], list[Output]] = outputs) -> Output | None:
+    """`--audio-device`: a number or a name (any unique part of it, any case) from
+    `choreo devices`, or `null`; None: the system's default output."""
+    if given is None:
+        return None
+    if given.strip().lower() == NULL_DEVICE:
+        return Output(0, NULL_DEVICE, "Null")
+    choices = [o for o in listed() if o.name != NULL_DEVICE]
+    if given.strip().isdigit():
+        match = [o for o in choices if o.number == int(given)]
+    else:
+        match = [o for o in choices if given.strip().lower() in o.name.lower()]
+    names = "; ".join(f"{o.number}: {o.name}" for o in choices) or "none found"
+    if not match:
+        raise UsageError(f"--audio-device {given}: no such output (outputs: {names}; or null for none)")
+    if len(match) > 1:
+        raise UsageError(f"--audio-device {given}: names {len(match)} outputs ({names}): give its number")
+    return match[0]
+
+
+@contextlib.contextmanager
+def hushed_stderr() -> Iterator[None]:
+    """ALSA's library writes its complaints (no sound card, unknown PCM) straight to file
+    descriptor 2; choreo reports what failed in its own words instead."""
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as devnull:
+            os.dup2(devnull.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+# --------------------------------------------------------------------------- playing
+
+
+@dataclass
+class Player:
+    """The song playing on an output, and the show clock it keeps."""
+
+    song: Song
+    output: Output | None = None  # None: the default output, the null one if there is none
+    origin: float = 0.0  # the show time the run starts at (--from's step), 0 for a whole show
+    lead_in_s: float = LEAD_IN_S
+    clock: MusicClock | None = None
+    feed: Feed | None = None
+    backend: str = ""
+    note: str | None = None  # what the user should hear (no sound output: the null one plays)
+    _device: Any = None
+
+    def start(self) -> MusicClock:
+        """Open the output, start playing and return the clock once it is trusted."""
+        self.clock = MusicClock(self.song.sample_rate, self.origin - self.lead_in_s)
+        self.feed = Feed(self.song, self.clock, self.lead_in_s, self.origin)
+        self._device = self._open_device()
+        generator = self.feed.generator()
+        next(generator)
+        self._device.start(generator)
+        self._await_lock()
+        return self.clock
+
+    def _open_device(self) -> Any:
+        import miniaudio
+
+        output = self.output
+        backends = [miniaudio.Backend.NULL] if output is not None and output.name == NULL_DEVICE else None
+        device_id = output.device_id if output is not None else None
+        try:
+            with hushed_stderr():
+                device = miniaudio.PlaybackDevice(output_format=miniaudio.SampleFormat.SIGNED16, nchannels=CHANNELS,
+                                                  sample_rate=self.song.sample_rate, buffersize_msec=PERIOD_MS,
+                                                  callback_periods=PERIODS, device_id=device_id, backends=backends,
+                                                  app_name="choreo")
+        except miniaudio.MiniaudioError as exc:
+            if output is not None:
+                raise AudioError(f"audio output {output.name!r} will not open ({_reason(exc)}): "
+                                 "see `choreo devices`, or run with --no-music") from None
+            self.note = ("no sound output opens on this machine: the music's clock runs on the null output "
+                         "(silent, in real time); `choreo devices` lists outputs")
+            return self._open_null()
+        self.backend = device.backend
+        return device
+
+    def _open_null(self) -> Any:
+        import miniaudio
+
+        device = miniaudio.PlaybackDevice(output_format=miniaudio.SampleFormat.SIGNED16, nchannels=CHANNELS,
+                                          sample_rate=self.song.sample_rate, buffersize_msec=PERIOD_MS,
+                                          callback_periods=PERIODS, backends=[miniaudio.Backend.NULL])
+        self.backend = device.backend
+        return device
+
+    def _await_lock(self) -> None:
+        assert self.clock is not None
+        deadline = time.monotonic() + LOCK_TIMEOUT_S
+        while not self.clock.locked:
+            if time.monotonic() > deadline:
+                self.close()
+                raise AudioError(f"the audio output ({self.backend}) did not start playing within "
+                                 f"{LOCK_TIMEOUT_S:g} s: see `choreo devices`, or run with --no-music")
+            time.sleep(0.002)
+
+    @property
+    def end_show_s(self) -> float:
+        """The show time at which the song's last sample is heard."""
+        return self.song.duration_s - self.song.music.start
+
+    def close(self) -> None:
+        if self._device is not None:
+            device, self._device = self._device, None
+            with contextlib.suppress(Exception):
+                device.close()
+
+    def describe(self) -> str:
+        """`song.wav from 0.0 s on ALSA`: what the run's first lines say."""
+        name = self.output.name if self.output is not None else "the default output"
+        start = self.song.music.start + self.origin
+        return f"{self.song.music.file} from {start:.1f} s on {name} ({self.backend})"
