@@ -240,14 +240,14 @@ def outputs() -> list[Output]:
     return found + [Output(0, NULL_DEVICE, "Null")]
 
 
-def pick_output(given: str | None, listed: Callable[[], list[Output]] = outputs) -> Output | None:
+def pick_output(given: str | None, listed: Callable[[], list[Output]] | None = None) -> Output | None:
     """`--audio-device`: a number or a name (any unique part of it, any case) from
     `choreo devices`, or `null`; None: the system's default output."""
     if given is None:
         return None
     if given.strip().lower() == NULL_DEVICE:
         return Output(0, NULL_DEVICE, "Null")
-    choices = [o for o in listed() if o.name != NULL_DEVICE]
+    choices = [o for o in (listed or outputs)() if o.name != NULL_DEVICE]
     if given.strip().isdigit():
         match = [o for o in choices if o.number == int(given)]
     else:
