@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from choreo.errors import ChoreoError
+from choreo.errors import ChoreoError, UsageError
 from choreo.probe import BoardInfo
 from choreo.usb import KONDO_USB, NEW_ID_FIX, SYSFS, latency_fix, latency_timer_ms, usb_devices
 
@@ -49,9 +49,9 @@ class SerialPort:
 
 
 def examine(ports: Sequence[SerialPort], port: str | None = None, *, sysfs: Path = SYSFS,
-            probe: Callable[[str], BoardInfo] | None = None) -> list[Finding]:
+            probe: Callable[[str], BoardInfo] | None = None, audio: Callable[[], Finding] | None = None) -> list[Finding]:
     """Every check, in the order a user fixes things: adapter, driver, permission, latency,
-    then the board on `port` (or on the one Kondo adapter found)."""
+    the board on `port` (or on the one Kondo adapter found), then the music's output."""
     findings = _adapters(ports, sysfs)
     target = port or _only_kondo(ports)
     if target is not None and not target.lower().startswith(("sim://", "socket://", "rfc2217://", "loop://")):
@@ -61,6 +61,8 @@ def examine(ports: Sequence[SerialPort], port: str | None = None, *, sysfs: Path
     elif target is None:
         findings.append(Finding(NOTE, "board", "not probed: no port given and no single Kondo adapter "
                                 "found", "choreo doctor --port /dev/ttyUSB0 (or sim:// to try the simulator)"))
+    if audio is not None:
+        findings.append(audio())
     return findings
 
 
@@ -123,3 +125,22 @@ def _board(port: str, probe: Callable[[str], BoardInfo]) -> Finding:
                        "more; check the cable, the board's power and its baud")
     version = f", version {info.version!r}" if info.version else ""
     return Finding(OK, "board", f"a board answers on {port} at {info.baud} baud{version}")
+
+
+def audio_output(try_output: Callable[[], str], asked: str | None = None) -> Finding:
+    """Whether the music will be heard: the output `--audio-device` names (a problem if it does
+    not open) or the system's default (a note if none opens: a music show then plays silent, on
+    the null output, keeping the music's time)."""
+    where = f"output {asked!r}" if asked else "the default output"
+    try:
+        backend = try_output()
+    except ChoreoError as exc:
+        if asked:
+            text = str(exc) if isinstance(exc, UsageError) else f"{where}: {exc}"
+            return Finding(PROBLEM, "audio", text, "choreo devices lists the outputs")
+        return Finding(NOTE, "audio", f"{where}: {exc}: music shows play silent on the "
+                       "null output, keeping the music's time", "connect a sound output (on Linux, `aplay -l` "
+                       "lists sound cards); choreo devices lists what choreo finds")
+    if backend.lower() == "null":
+        return Finding(NOTE, "audio", f"{where} is the null output: music shows play silent")
+    return Finding(OK, "audio", f"{where} opens ({backend})")

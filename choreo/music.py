@@ -260,6 +260,34 @@ def pick_output(given: str | None, listed: Callable[[], list[Output]] | None = N
     return match[0]
 
 
+def open_device(output: Output | None, sample_rate: int) -> Any:
+    """A miniaudio playback device on `output` (None: the system's default), not started;
+    miniaudio's MiniaudioError if it will not open."""
+    import miniaudio
+
+    null = output is not None and output.name == NULL_DEVICE
+    with hushed_stderr():
+        return miniaudio.PlaybackDevice(output_format=miniaudio.SampleFormat.SIGNED16, nchannels=CHANNELS,
+                                        sample_rate=sample_rate, buffersize_msec=PERIOD_MS, callback_periods=PERIODS,
+                                        device_id=None if output is None or null else output.device_id,
+                                        backends=[miniaudio.Backend.NULL] if null else None, app_name="choreo")
+
+
+def try_output(output: Output | None = None) -> str:
+    """Open `output` (None: the default) without playing, and say what opened: what `choreo
+    doctor` checks. AudioError if it will not open."""
+    import miniaudio
+
+    try:
+        device = open_device(output, 48000)
+    except miniaudio.MiniaudioError as exc:
+        raise AudioError(f"it will not open ({_reason(exc)})") from None
+    try:
+        return device.backend
+    finally:
+        device.close()
+
+
 @contextlib.contextmanager
 def hushed_stderr() -> Iterator[None]:
     """ALSA's library writes its complaints (no sound card, unknown PCM) straight to file
@@ -309,31 +337,15 @@ class Player:
     def _open_device(self) -> Any:
         import miniaudio
 
-        output = self.output
-        backends = [miniaudio.Backend.NULL] if output is not None and output.name == NULL_DEVICE else None
-        device_id = output.device_id if output is not None else None
         try:
-            with hushed_stderr():
-                device = miniaudio.PlaybackDevice(output_format=miniaudio.SampleFormat.SIGNED16, nchannels=CHANNELS,
-                                                  sample_rate=self.song.sample_rate, buffersize_msec=PERIOD_MS,
-                                                  callback_periods=PERIODS, device_id=device_id, backends=backends,
-                                                  app_name="choreo")
+            device = open_device(self.output, self.song.sample_rate)
         except miniaudio.MiniaudioError as exc:
-            if output is not None:
-                raise AudioError(f"audio output {output.name!r} will not open ({_reason(exc)}): "
+            if self.output is not None:
+                raise AudioError(f"audio output {self.output.name!r} will not open ({_reason(exc)}): "
                                  "see `choreo devices`, or run with --no-music") from None
             self.note = ("no sound output opens on this machine: the music's clock runs on the null output "
                          "(silent, in real time); `choreo devices` lists outputs")
-            return self._open_null()
-        self.backend = device.backend
-        return device
-
-    def _open_null(self) -> Any:
-        import miniaudio
-
-        device = miniaudio.PlaybackDevice(output_format=miniaudio.SampleFormat.SIGNED16, nchannels=CHANNELS,
-                                          sample_rate=self.song.sample_rate, buffersize_msec=PERIOD_MS,
-                                          callback_periods=PERIODS, backends=[miniaudio.Backend.NULL])
+            device = open_device(Output(0, NULL_DEVICE, "Null"), self.song.sample_rate)
         self.backend = device.backend
         return device
 

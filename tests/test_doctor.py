@@ -116,3 +116,29 @@ def test_a_run_asks_for_low_latency_and_says_once_what_a_slow_timer_costs(monkey
     assert usb_latency_note(FakeSerial("/dev/ttyUSB0")) is None
     sim = FakeSerial("sim://")
     assert usb_latency_note(sim) is None and sim.low_latency is None  # a URL port has no adapter
+
+
+def test_the_audio_output_is_checked_with_a_fix_when_it_does_not_open():
+    from choreo.doctor import NOTE, OK, PROBLEM, audio_output
+    from choreo.music import AudioError
+
+    def will_not_open() -> str:
+        raise AudioError("it will not open (failed to init device)")
+
+    assert audio_output(lambda: "ALSA").line() == "ok      audio: the default output opens (ALSA)"
+    # no sound output at all: music shows still keep time, silent; a note, with the fix
+    quiet = audio_output(will_not_open)
+    assert quiet.level == NOTE and "music shows play silent on the null output" in quiet.text and "aplay -l" in quiet.fix
+    # an output the user asked for that does not open is a problem
+    asked = audio_output(will_not_open, "USB")
+    assert asked.level == PROBLEM and asked.text.startswith("output 'USB': it will not open") and asked.fix
+    assert audio_output(lambda: "Null", "null").level == NOTE
+    assert audio_output(lambda: "PulseAudio", "2").level == OK
+
+
+def test_doctor_checks_the_null_output_and_refuses_an_unknown_one(capsys):
+    assert main(["doctor", "--no-probe", "--audio-device", "null"]) in (0, 1)
+    assert "note    audio: output 'null' is the null output: music shows play silent" in capsys.readouterr().out
+    assert main(["doctor", "--no-probe", "--audio-device", "no-such-output-anywhere"]) == 1
+    out = capsys.readouterr().out
+    assert "PROBLEM audio: --audio-device no-such-output-anywhere: no such output" in out

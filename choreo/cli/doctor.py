@@ -10,13 +10,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "doctor",
         help="check what stands between you and a working show, with the fix for each problem",
         description="Check the serial ports and Kondo's USB adapter (165C:0008), whether a driver "
-        "serves it, permission on the device, its FTDI latency timer, and whether a board answers "
-        "(a read-only probe: the robot does not move). One line a check; a problem comes with the "
-        "command that fixes it. Exit 1 if there is a problem.",
+        "serves it, permission on the device, its FTDI latency timer, whether a board answers "
+        "(a read-only probe: the robot does not move), and whether the music's audio output opens. "
+        "One line a check; a problem comes with the command that fixes it. Exit 1 if there is a problem.",
     )
     parser.add_argument("--port", help="the port to check and probe (default: the one Kondo adapter "
                         "plugged in); sim:// probes the built-in simulator")
     parser.add_argument("--no-probe", action="store_true", help="do not talk to the board")
+    parser.add_argument("--audio-device", metavar="OUTPUT", help="the audio output to check (as `choreo run` "
+                        "takes it; default: the system's output)")
     parser.set_defaults(handler=run)
 
 
@@ -31,7 +33,13 @@ def run(args: argparse.Namespace) -> int:
     def probe_port(port: str):  # type: ignore[no-untyped-def]
         return probe(port, time_source=args.time_source)
 
-    findings = examine(ports, args.port, probe=None if args.no_probe else probe_port)
+    def audio():  # type: ignore[no-untyped-def]
+        from choreo.doctor import audio_output
+        from choreo.music import pick_output, try_output
+
+        return audio_output(lambda: try_output(pick_output(args.audio_device)), args.audio_device)
+
+    findings = examine(ports, args.port, probe=None if args.no_probe else probe_port, audio=audio)
     for finding in findings:
         print(finding.line())
     return 1 if any(f.level == PROBLEM for f in findings) else 0
