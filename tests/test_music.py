@@ -224,6 +224,10 @@ def test_a_music_show_plays_on_the_music_clock_with_tempo_cues_and_a_cue_at_0(tm
     log = read_log(log_path)
     # the plan's cues are the log's: bar 1 beat 3 at 150 bpm from 0.2 s is 1.0 s
     assert [round(cue, 6) for cue, _, _ in cue_and_start(log)] == [0.0, round(0.2 + 2 * 60 / 150, 6), 1.2]
+    assert main(["plan", str(show), "--json"]) == 0
+    plan = json.loads(capsys.readouterr().out)
+    assert [s["cue"] for s in plan["plan"]] == [cue for cue, _, _ in cue_and_start(log)]
+    assert plan["music"] == {"file": "song.wav", "start": 0.25} and plan["plan"][1]["cue_beat"] == 3
     for cue, start, began in cue_and_start(log):
         # the motion starts on its cue on the music's clock (generous: a loaded machine)
         assert abs(start - cue) < 0.02, (cue, start)
@@ -293,3 +297,12 @@ def test_with_no_sound_output_the_null_output_keeps_time_and_says_so(tmp_path, c
     monkeypatch.setattr("choreo.music.outputs", lambda: [Output(1, "USB Audio", "ALSA", "id")])
     assert main(["run", str(show), "--audio-device", "usb", "--no-log"]) == 2
     assert "audio output 'USB Audio' will not open" in capsys.readouterr().err
+
+
+def test_the_plan_says_what_its_times_are_measured_on(tmp_path, capsys):
+    write_song(tmp_path / "song.wav", 1.6)
+    assert main(["plan", str(write_show(tmp_path, TEMPO_SHOW))]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[1] == "music: song.wav from 0.25 s: show time is the music's position (--no-music: the machine's clock)"
+    assert out[2] == "tempo: 150 bpm, 4 beats a bar, bar 1 at 0.2 s"
+    assert any("1.000 s (at 1 = bar 1 beat 3)" in line for line in out)

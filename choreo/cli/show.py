@@ -71,7 +71,29 @@ def _problem_record(problem) -> dict:  # type: ignore[no-untyped-def]
 
 def _show_record(show, plan) -> dict:  # type: ignore[no-untyped-def]
     return {"name": show.name, "layout": plan.layout, "steps": len(plan.steps),
-            "motions": plan.motions_used(), "estimated_s": plan.estimated_s}
+            "motions": plan.motions_used(), "estimated_s": plan.estimated_s, **_clock_record(show)}
+
+
+def _clock_record(show) -> dict:  # type: ignore[no-untyped-def]
+    """The show's music and tempo, where it has them."""
+    record: dict = {}
+    if show.music is not None:
+        record["music"] = {"file": show.music.file, "start": show.music.start}
+    if show.tempo is not None:
+        record["tempo"] = {"bpm": show.tempo.bpm, "offset": show.tempo.offset, "meter": show.tempo.meter}
+    return record
+
+
+def _clock_lines(show) -> list[str]:  # type: ignore[no-untyped-def]
+    """What the start times are measured on: the music's position, and its bars."""
+    lines = []
+    if show.music is not None:
+        lines.append(f"music: {show.music.file} from {show.music.start:g} s: show time is the music's position "
+                     "(--no-music: the machine's clock)")
+    if show.tempo is not None:
+        tempo = show.tempo
+        lines.append(f"tempo: {tempo.bpm:g} bpm, {tempo.meter} beats a bar, bar 1 at {tempo.offset:g} s")
+    return lines
 
 
 def _plan_record(show, plan) -> dict:  # type: ignore[no-untyped-def]
@@ -130,14 +152,14 @@ def _plans_record(show, plans) -> dict:  # type: ignore[no-untyped-def]
         mine = replace(plan, steps=tuple(step for step in plan.steps if step.is_for(name)))
         robots[name] = {key: value for key, value in _plan_record(show, mine).items() if key not in ("path", "name")}
     return {"path": show.path, "name": show.name, "tracks": bool(show.tracks),
-            "estimated_s": max(plan.estimated_s for plan in plans.values()), "robots": robots}
+            "estimated_s": max(plan.estimated_s for plan in plans.values()), **_clock_record(show), "robots": robots}
 
 
 def ensemble_lines(show, plans) -> list[str]:  # type: ignore[no-untyped-def]
     """A section per robot: the steps it does (shared steps keep their index, so a gap is a step
     for other robots), then the show's total."""
     form = "tracks, one per robot" if show.tracks else "shared steps"
-    lines = [f"{show.name} ({show.path}): {len(plans)} robots, {form}, one show clock"]
+    lines = [f"{show.name} ({show.path}): {len(plans)} robots, {form}, one show clock", *_clock_lines(show)]
     for name, plan in plans.items():
         lines.append("")
         lines.append(f"robot {name}: layout {plan.layout}{_layout_note(plan)}")
@@ -151,7 +173,7 @@ def ensemble_lines(show, plans) -> list[str]:  # type: ignore[no-untyped-def]
 
 def plan_lines(show, plan) -> list[str]:  # type: ignore[no-untyped-def]
     """The plan as aligned text: a header, one line a step, the total."""
-    lines = [f"{show.name} ({show.path}), layout {plan.layout}{_layout_note(plan)}"]
+    lines = [f"{show.name} ({show.path}), layout {plan.layout}{_layout_note(plan)}", *_clock_lines(show)]
     lines.extend(_step_table(plan.steps))
     lines.append(f"estimated total {_seconds(plan.estimated_s)} ({len(plan.steps)} steps){_late_note(plan)}")
     return lines
