@@ -306,3 +306,33 @@ def test_the_plan_says_what_its_times_are_measured_on(tmp_path, capsys):
     assert out[1] == "music: song.wav from 0.25 s: show time is the music's position (--no-music: the machine's clock)"
     assert out[2] == "tempo: 150 bpm, 4 beats a bar, bar 1 at 0.2 s"
     assert any("1.000 s (at 1 = bar 1 beat 3)" in line for line in out)
+
+
+def test_several_robots_share_the_music_clock(tmp_path, capsys):
+    write_song(tmp_path / "song.wav", 1.2)
+    show = write_show(tmp_path, """\
+        version: 1
+        music: {file: song.wav}
+        robots:
+          left: {}
+          right: {}
+        tracks:
+          left:
+            - play: 1
+              at: 0
+            - play: 2
+              at: 0.6
+          right:
+            - play: 3
+              at: 0.3
+            - play: 4
+              at: 0.6
+        """)
+    log_path = tmp_path / "run.mcap"
+    assert main(["run", str(show), "--audio-device", "null", "--log", str(log_path)]) == 0
+    log = read_log(log_path)
+    for robot in ("left", "right"):
+        ends = [m for m in log.topic(f"/choreo/{robot}/step") if m["event"] == "end"]
+        assert [m["cue"] for m in ends] == ([0.0, 0.6] if robot == "left" else [0.3, 0.6])
+        assert all(abs(m["start_s"] - m["cue"]) < 0.02 for m in ends), ends
+    assert {m["source"] for m in log.topic("/choreo/clock")} == {"music"}
