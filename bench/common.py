@@ -168,5 +168,5 @@ def run_show(show_path: Path, port: str, *, log_path: Path | None = None) -> Sho
         session.result = runner.run()
         run_s = time.perf_counter() - began
     clock = session.clock
-    return ShowRun(capture, session.result, round(runner._zero * 1e9),
+    return ShowRun(capture, session.result, round(runner.show.mono_at(0.0) * 1e9),
                    clock.mono_anchor_ns - clock.wall_anchor_ns, run_s)
