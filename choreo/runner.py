@@ -145,9 +145,9 @@ class Runner:
         self.link.listeners.append(_RetryReporter(self))
         self.link.should_stop = self.stop
         try:
-            for step in steps:
+            for i, step in enumerate(steps):
                 mine = step.is_for(self.robot) if self.robot is not None else True
-                end = self._run_step(step, cursor) if mine else None
+                end = self._run_step(step, cursor, steps[i + 1] if i + 1 < len(steps) else None) if mine else None
                 if self.cues is not None:
                     # a step for others takes, if none of them is left to do it, its planned time
                     idle = None if mine else cursor + step.expected_s
@@ -183,11 +183,22 @@ class Runner:
     def show_time(self) -> float:
         return self.show.show_at(self.clock.mono())
 
-    def _run_step(self, step: PlannedStep, cursor: float) -> float:
-        # A cued play goes out early by the exchanges before its start frame, so that the frame
-        # that starts the motion is written on the cue (never before the step before has ended).
-        lead = self.link.start_lead_s(step.motion) if step.kind is StepKind.PLAY and step.at is not None else 0.0
-        due = max(step.at - lead, cursor) if step.at is not None else cursor
+    def _lead(self, step: PlannedStep | None) -> float:
+        """How early a step's first frame goes out: a cued play's lead, so that the frame that
+        starts its motion is written on the cue; 0 for anything else."""
+        if step is None or step.kind is not StepKind.PLAY or step.at is None:
+            return 0.0
+        if self.robot is not None and not step.is_for(self.robot):
+            return 0.0
+        return self.link.start_lead_s(step.motion)
+
+    def _run_step(self, step: PlannedStep, cursor: float, following: PlannedStep | None = None) -> float:
+        # A cued play goes out early by its lead, so that its start frame is written on the cue,
+        # or (a cue the show has overrun) when the step before ends: a `wait:` before a cued
+        # play ends its sleep that much early for it (`following`), so a cue on the very end of
+        # a wait is still met.
+        lead = self._lead(step)
+        due = max(step.at, cursor) - lead if step.at is not None else cursor
         if not self._sleep_until(due):
             raise Interrupted(self.stop.reason)
         started = self.show_time()
@@ -207,7 +218,7 @@ class Runner:
         slip_ms = 0.0
         self._played = Played(1, 0.0)
         try:
-            end = self._do(step, due + lead)
+            end = self._do(step, due + lead, self._lead(following))
             outcome = "ok"
             if step.kind is StepKind.PLAY:
                 slip_ms = self._slip(step, planned, already_late=late_ms > LATE_MS)
@@ -240,8 +251,9 @@ class Runner:
                                f"late ({played.tries} tries)")
         return slip_ms
 
-    def _do(self, step: PlannedStep, due: float) -> float:
-        """Carry out a step; returns when the next step is due on the show clock."""
+    def _do(self, step: PlannedStep, due: float, lead_after: float = 0.0) -> float:
+        """Carry out a step; returns when the next step is due on the show clock (a wait wakes
+        `lead_after` before it: the next step's frames go out that early)."""
         tag = Tag(step.index, step.label)
         if step.kind is StepKind.PLAY:
             assert step.motion is not None
@@ -251,7 +263,7 @@ class Runner:
             return due
         if step.kind is StepKind.WAIT:
             end = due + (step.seconds or 0.0)
-            if not self._sleep_until(end):
+            if not self._sleep_until(end - lead_after):
                 raise Interrupted(self.stop.reason)
             return end
         return self.show.show_at(self._wait_done(step, tag))

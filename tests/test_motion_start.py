@@ -52,6 +52,32 @@ def test_a_cue_at_the_very_start_is_not_late(tmp_path):
     assert ends[0]["start_s"] == pytest.approx(0.0, abs=0.002)  # the run began early by the lead
 
 
+def test_a_cue_on_the_end_of_a_wait_is_met(tmp_path):
+    """`play, wait: 2, play at 2`: the wait wakes early by the next play's lead, so the bar's
+    next motion starts on its cue, not a lead late (as in shows/music.yaml's sways)."""
+    show = tmp_path / "show.yaml"
+    show.write_text("version: 1\nsteps:\n  - play: 1\n    at: 0\n  - wait: 2\n  - play: 2\n    at: 2\n"
+                    "  - wait: 2\n  - play: 3\n    at: 4\n")
+    session = prepare(RunRequest(str(show), port="sim://?motion_s=0.1&reply_ms=1", log_path=str(tmp_path / "r.mcap")))
+    with session:
+        result = session.run()
+    assert result.late_steps == 0
+    steps = read_log(tmp_path / "r.mcap").steps
+    ends = [m for m in steps if m["event"] == "end" and m["kind"] == "play"]
+    assert [m["cue"] for m in ends] == [0, 2, 4]
+    assert all(abs(m["start_s"] - m["cue"]) < 0.0005 for m in ends[1:]), ends  # the first teaches the lead
+    # the waits keep their places on the show clock: each ends where the plan says
+    wait_ends = [m["actual_s"] for m in steps if m["event"] == "end" and m["kind"] == "wait"]
+    assert all(end < cue for end, cue in zip(wait_ends, (2, 4))) and all(cue - end < 0.02 for end, cue in zip(wait_ends, (2, 4)))
+    # an uncued play after a wait still goes out when the wait ends (as before)
+    show.write_text("version: 1\nsteps:\n  - play: 1\n  - wait: 1\n  - play: 2\n")
+    session = prepare(RunRequest(str(show), port="sim://?motion_s=0.1", log_path=str(tmp_path / "u.mcap")))
+    with session:
+        session.run()
+    starts = [m["actual_s"] for m in read_log(tmp_path / "u.mcap").steps if m["event"] == "start"]
+    assert starts[2] >= 1.0
+
+
 def test_the_summary_reports_motion_starts_against_their_cues(tmp_path, capsys):
     from runlog import vmain
 
