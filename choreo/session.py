@@ -216,7 +216,7 @@ class Session:
             else:
                 self.result = self._run_ensemble(ensemble, show)
             if self.result.outcome == "done":
-                self._play_out(show, stop, sampler)
+                self._play_out(show, stop, sampler, everyone)
             if sampler is not None:
                 sampler.sample(force=True)
         finally:
@@ -272,12 +272,17 @@ class Session:
                                              "audio.backend": self.player.backend if self.player else ""})
         return show
 
-    def _play_out(self, show: ShowClock, stop: StopRequest, sampler: ClockSampler | None) -> None:
+    def _play_out(self, show: ShowClock, stop: StopRequest, sampler: ClockSampler | None,
+                  listeners: list[RunListener]) -> None:
         """The show's last step is done: its music plays to the end (Ctrl-C stops it there; the
-        show itself is done)."""
+        show itself is done). Listeners with `on_play_out(end_s)` hear when it will end."""
         if self.player is None:
             return
         end = self.player.end_show_s
+        if show.show_at(self.clock.mono()) < end:
+            for listener in listeners:
+                if hasattr(listener, "on_play_out"):
+                    listener.on_play_out(end)
         while show.show_at(self.clock.mono()) < end and not stop():
             self.clock.sleep(min(0.05, max(0.0, show.mono_at(end) - self.clock.mono())))
             if sampler is not None:

@@ -336,3 +336,26 @@ def test_several_robots_share_the_music_clock(tmp_path, capsys):
         assert [m["cue"] for m in ends] == ([0.0, 0.6] if robot == "left" else [0.3, 0.6])
         assert all(abs(m["start_s"] - m["cue"]) < 0.02 for m in ends), ends
     assert {m["source"] for m in log.topic("/choreo/clock")} == {"music"}
+
+
+def test_the_music_plays_out_after_the_last_step_and_ctrl_c_stops_it(tmp_path):
+    import signal
+
+    from runlog import log_has_steps, start_choreo, wait_for
+
+    write_song(tmp_path / "song.wav", 30.0)
+    show = music_show(tmp_path, "{file: song.wav}", "  - play: 1\n    at: 0.1\n")
+    log_path = tmp_path / "run.mcap"
+    process = start_choreo("run", str(show), "--audio-device", "null", "--log", str(log_path))
+    try:
+        assert wait_for(lambda: log_has_steps(log_path, 2))  # the one step started and ended
+        assert process.poll() is None  # the song plays on
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=20)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0, err  # the show was done: Ctrl-C only stopped its music
+    assert "music: the steps are done; the music plays to its end at 30.0 s (Ctrl-C stops it)" in err
+    result = read_log(log_path).metadata["choreo.result"]
+    assert result["outcome"] == "done" and result["exit_code"] == "0"

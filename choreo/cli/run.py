@@ -408,6 +408,15 @@ class Progress:
             if self._current:
                 self._draw()
 
+    def on_play_out(self, end_s: float) -> None:
+        """The steps are done; the music plays on to its end."""
+        if self.quiet:
+            return
+        with self._lock:
+            self._clear()
+            self._current = ""
+            self._write(f"music: the steps are done; the music plays to its end at {end_s:.1f} s (Ctrl-C stops it)\n")
+
     def finish(self) -> None:
         self._done.set()
         with self._lock:
