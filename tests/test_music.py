@@ -266,8 +266,10 @@ def test_from_a_label_plays_the_music_from_that_moment(tmp_path, capsys):
     write_song(tmp_path / "song.wav", 1.6)
     show = write_show(tmp_path, TEMPO_SHOW)
     log_path = tmp_path / "run.mcap"
-    assert main(["run", str(show), "--audio-device", "null", "--from", "beat", "--log", str(log_path)]) == 0
-    assert "music: song.wav from 1.2 s of 1.6 s" in capsys.readouterr().err  # 0.25 + 1.0 (the cue)
+    assert main(["run", str(show), "--audio-device", "null", "--from", "beat", "--log", str(log_path), "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert "music: song.wav from 1.2 s of 1.6 s" in err  # 0.25 + 1.0 (the cue)
+    assert json.loads(out)["music"] == {"file": "song.wav", "start": 0.25, "output": "null"}
     plays = cue_and_start(read_log(log_path))
     assert [round(cue, 6) for cue, _, _ in plays] == [1.0, 1.2]
     assert abs(plays[0][1] - 1.0) < 0.02

@@ -167,6 +167,9 @@ class _RunReport:
                                     for link in session.links.values()}
                 record["dropouts"] = [{"robot": d.robot, "show_s": round(d.show_s, 6), "error": str(d.error)}
                                       for d in session.dropouts]
+            if session.song is not None:
+                record["music"] = {"file": session.song.music.file, "start": session.song.music.start,
+                                   "output": session.output.name if session.output is not None else None}
         else:
             record.update(log=None)
         if result is not None:
