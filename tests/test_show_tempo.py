@@ -81,3 +81,19 @@ def test_tempo_mistakes_are_located(tmp_path, text, where, message):
         load_show(write(tmp_path, text))
     found = [(p.line, p.column, p.path, p.message) for p in info.value.problems]
     assert any((line, column, path) == where and message in said for line, column, path, said in found), found
+
+
+@pytest.mark.parametrize("at, tempo", [
+    ("{bar: }", "{bpm: 120}"),
+    ("{beat: 2}", "{bpm: 120}"),
+    ("{bar: play3}", "{bpm: 120}"),
+    ("{bar: 2, beat: x}", "{bpm: 120}"),
+    ("{bar: 2}", "{bpm: }"),
+    ("{bar: 2}", "{bpm: 120, meter: four}"),
+])
+def test_a_broken_bar_and_beat_cue_or_tempo_is_a_located_error_not_a_crash(tmp_path, at, tempo):
+    """Found by tests/test_show_fuzz.py once shows/music.yaml had bar-and-beat cues."""
+    show = write(tmp_path, f"version: 1\ntempo: {tempo}\nsteps:\n  - play: 1\n    at: {at}\n")
+    with pytest.raises(ShowError) as error:
+        load_show(show)
+    assert all(line.startswith(str(show) + ":") for line in error.value.lines())

@@ -1059,14 +1059,18 @@ def _beat_seconds(walk: _Walk, at: dict[str, Any], path: JsonPath) -> float | No
             walk.report.add(walk.doc.mark(path), path, "a cue in bars and beats needs the music's `tempo:` "
                             "(e.g. `tempo: {bpm: 120, offset: 0.5, meter: 4}`), or give seconds")
         return None
+    bar, beat = at.get("bar"), at.get("beat", 1)
+    fields_ok = all(walk.ok(("tempo", key)) for key in tempo) and all(walk.ok(path + (key,)) for key in at)
+    if not fields_ok or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (bar, beat)):
+        return None  # the schema has said what is wrong with them
     built = _tempo(tempo)
-    beat = float(at.get("beat", 1))
+    beat = float(beat)
     if beat >= built.meter + 1:  # type: ignore[union-attr]
         walk.report.add(walk.doc.mark(path + ("beat",)), path + ("beat",),
                         f"beat {_value(at.get('beat'))}: a bar has {built.meter} beats (tempo.meter), "  # type: ignore[union-attr]
                         f"so beats run from 1 to below {built.meter + 1}")  # type: ignore[union-attr]
         return None
-    return built.seconds(int(at["bar"]), beat)  # type: ignore[union-attr]
+    return built.seconds(int(bar), beat)  # type: ignore[union-attr, arg-type]
 
 
 def _check_visible(walk: _Walk, path: JsonPath, text: str, what: str) -> bool:
