@@ -312,6 +312,12 @@ class Link:
         self.clock.sleep_until(start_sent + self.status_spacing_s)
         return self.layout.started(self.exchange(self.layout.start_read, tag).data)
 
+    def halt(self, tag: Tag | None = None) -> Reply:
+        """The play sequence's stop frame alone: the board's program halts, and the motion with
+        it, where it is (the operator's panic on a robot with no abort motion)."""
+        stop = self.layout.play_sequence(0, self.config, self.baud)[0]
+        return self.exchange(replace(stop, motion=None), tag)  # it stops whatever plays: no motion of its own
+
     def query_status(self, tag: Tag | None = None) -> Reply:
         """Ask whether a motion is executing; the reply's `executing` says."""
         return self.exchange(self.layout.status, tag)

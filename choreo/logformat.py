@@ -21,6 +21,7 @@ STEP_TOPIC = "/choreo/step"
 LOG_TOPIC = "/choreo/log"
 CLOCK_TOPIC = "/choreo/clock"
 CLOCK_EVERY_S = 0.5  # how often (show time) /choreo/clock samples the show clock
+COMMAND_TOPIC = "/choreo/command"
 # topic -> (schema name, schema file under schemas/)
 CHANNELS = {
     TX_TOPIC: ("choreo.Tx", "log.tx.schema.json"),
@@ -28,6 +29,7 @@ CHANNELS = {
     STEP_TOPIC: ("choreo.Step", "log.step.schema.json"),
     LOG_TOPIC: ("foxglove.Log", "foxglove.Log.schema.json"),
     CLOCK_TOPIC: ("choreo.Clock", "log.clock.schema.json"),
+    COMMAND_TOPIC: ("choreo.Command", "log.command.schema.json"),
 }
 CHOREO_TOPICS = frozenset(CHANNELS)
 PER_ROBOT = (TX_TOPIC, RX_TOPIC, STEP_TOPIC)  # split by robot in a show for several robots
@@ -58,7 +60,8 @@ def channels_for(robots: tuple[str, ...] = ()) -> dict[str, tuple[str, str]]:
     if not robots:
         return dict(CHANNELS)
     split = {robot_topic(topic, robot): CHANNELS[topic] for robot in robots for topic in PER_ROBOT}
-    return {**split, LOG_TOPIC: CHANNELS[LOG_TOPIC], CLOCK_TOPIC: CHANNELS[CLOCK_TOPIC]}
+    shared = (LOG_TOPIC, CLOCK_TOPIC, COMMAND_TOPIC)
+    return {**split, **{topic: CHANNELS[topic] for topic in shared}}
 METADATA_NAME = "choreo"
 RESULT_METADATA_NAME = "choreo.result"
 
@@ -180,6 +183,7 @@ class StepRecord(_Record):
     robot: str | None = None  # whose step, in a show for several robots
     start_s: float | None = None  # end of a play: when the frame that started the motion was written
     lead_ms: float | None = None  # end of a cued play: how far ahead of its cue the first frame was due
+    go: bool | None = None  # a GO cue (`at: go`): it waited for the operator's GO
 
     @property
     def ref(self) -> str:
@@ -220,9 +224,23 @@ class ClockRecord(_Record):
     source: str = "machine"  # machine | music: what keeps the show clock
 
 
-Record = TxRecord | RxRecord | StepRecord | LogRecord | ClockRecord
+@dataclass(frozen=True, slots=True)
+class CommandRecord(_Record):
+    """An operator's command (GO, panic, start, stop, a cue's GO), where it came from (`key`,
+    `osc udp 127.0.0.1:53001`), and what it did: a review shows who pressed what and when."""
+
+    topic: ClassVar[str] = COMMAND_TOPIC
+    command: str
+    source: str
+    status: str  # ok | error
+    message: str = ""
+    label: str | None = None  # a cue's GO: which cue
+    show_s: float | None = None  # the show clock when it came (absent before the show started)
+
+
+Record = TxRecord | RxRecord | StepRecord | LogRecord | ClockRecord | CommandRecord
 RECORD_TYPES: dict[str, type] = {TX_TOPIC: TxRecord, RX_TOPIC: RxRecord, STEP_TOPIC: StepRecord,
-                                 LOG_TOPIC: LogRecord, CLOCK_TOPIC: ClockRecord}
+                                 LOG_TOPIC: LogRecord, CLOCK_TOPIC: ClockRecord, COMMAND_TOPIC: CommandRecord}
 
 
 _scan_once = json.JSONDecoder().scan_once

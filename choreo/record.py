@@ -46,11 +46,12 @@ from mcap.writer import CompressionType, Writer
 
 from choreo import __version__
 from choreo.errors import LogError
-from choreo.logformat import (CLOCK_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC, STEP_TOPIC,
-                              TX_TOPIC, ClockRecord, LogRecord, RxRecord, TxRecord, channels_for, robot_topic)
+from choreo.logformat import (CLOCK_TOPIC, COMMAND_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC, STEP_TOPIC,
+                              TX_TOPIC, ClockRecord, CommandRecord, LogRecord, RxRecord, TxRecord, channels_for, robot_topic)
 
 if TYPE_CHECKING:
     from choreo.link import RxEvent, TxEvent
+    from choreo.live import CommandEvent
     from choreo.runner import StepEvent
 
 FLUSH_EVERY_S = 0.5
@@ -173,7 +174,7 @@ def _step_message(event: StepEvent) -> dict:
     return event.record().to_json()
 
 
-def _clock_message(record: ClockRecord) -> dict:
+def _record_message(record: ClockRecord | CommandRecord) -> dict:
     return record.to_json()
 
 
@@ -308,7 +309,14 @@ class Recorder:
 
     def on_clock(self, record: ClockRecord, time_ns: int) -> None:
         """Queued only: a sample of the show clock (`choreo.clocks.ClockSampler`)."""
-        self._queue((CLOCK_TOPIC, time_ns, _clock_message, record))
+        self._queue((CLOCK_TOPIC, time_ns, _record_message, record))
+
+    def on_command(self, event: CommandEvent) -> None:
+        """Queued only: an operator's command and its answer (`choreo.live`)."""
+        command, answer = event.command, event.answer
+        record = CommandRecord(command.name, command.source, answer.status, answer.message, command.label,
+                               None if event.show_s is None else round(event.show_s, 6))
+        self._queue((COMMAND_TOPIC, event.time_ns, _record_message, record))
 
     def _queue(self, item: _Pending) -> None:
         """One append, and one comparison: is the message still inside the reserve? If not, the

@@ -12,15 +12,19 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from choreo.clock import MachineShowClock, RunClock, ShowClock, sleep_until_show
 from choreo.logformat import ABORT_LABEL, ERROR, INFO, LATE_MS, WARNING, StepRecord
-from choreo.errors import Interrupted, LinkError
+from choreo.errors import ChoreoError, Interrupted, LinkError
 from choreo.link import Link, Played, RxEvent, Tag, TxEvent
-from choreo.show.model import Plan, PlannedStep, StepKind
+from choreo.show.model import SOLO, Plan, PlannedStep, StepKind
+
+if TYPE_CHECKING:
+    from choreo.live import Live
 
 POLL_S = 0.05  # the board refreshes its status every 50 ms: never poll faster
+PANIC = "panic"  # a stop request's reason for the operator's panic: stop frames, then every abort
 
 
 
@@ -45,7 +49,7 @@ class StepEvent:
                           round(self.planned_s, 6), round(step.planned_s, 6), round(self.late_ms, 3),
                           step.path, step.label, step.motion, step.at, self.outcome, self.robot,
                           None if self.start_s is None else round(self.start_s, 6),
-                          round(self.lead_ms, 3) if self.lead_ms else None)
+                          round(self.lead_ms, 3) if self.lead_ms else None, True if step.go else None)
 
 
 class RunListener(Protocol):
@@ -112,14 +116,16 @@ class Runner:
                  listeners: Iterable[RunListener] = (), start: int = 0, on_abort: int | None = None,
                  stop: StopRequest | None = None, poll_s: float = POLL_S,
                  on_idle: Callable[[], None] | None = None, robot: str | None = None,
-                 cues: Cues | None = None) -> None:
+                 cues: Cues | None = None, live: Live | None = None, end: int | None = None) -> None:
         self.robot = robot
         self.cues = cues
+        self.live = live  # where GO cues wait for the operator (None: a show without them)
         self.plan = plan
         self.link = link
         self.clock = clock or link.clock
         self.listeners = list(listeners)
         self.start = start
+        self.end = end  # where the plan stops (--loop's last step + 1), None: at its end
         self.on_abort = on_abort
         self.stop = stop or StopRequest()
         self.poll_s = poll_s
@@ -138,7 +144,7 @@ class Runner:
 
         `show`: the show clock, when several robots share it or the music keeps it (by default
         the machine's, with the show starting now)."""
-        steps = self.plan.steps[self.start:]
+        steps = self.plan.steps[self.start:self.end]
         preroll = self.preroll_s()
         cursor = self._origin() - preroll  # a first play cued at the start may go out before it
         self.show = show if show is not None else MachineShowClock(self.clock.mono() - cursor)
@@ -197,6 +203,8 @@ class Runner:
         # or (a cue the show has overrun) when the step before ends: a `wait:` before a cued
         # play ends its sleep that much early for it (`following`), so a cue on the very end of
         # a wait is still met.
+        if step.go:
+            cursor = self._await_go(step, cursor)
         lead = self._lead(step)
         due = max(step.at, cursor) - lead if step.at is not None else cursor
         if not self._sleep_until(due):
@@ -236,6 +244,21 @@ class Runner:
             start_s = self.show.show_at(self._played.started) if self._played.started is not None else None
             self._emit(StepEvent(step, "end", planned, self.show_time(), self._now_ns(), slip_ms, outcome,
                                  self.robot, start_s, lead * 1e3))
+
+    def _await_go(self, step: PlannedStep, cursor: float) -> float:
+        """A GO cue: reached when the step before ends, then held until the operator's GO; the
+        show time the show goes on from (on the machine's clock, held: where it stopped)."""
+        if not self._sleep_until(cursor):
+            raise Interrupted(self.stop.reason)
+        if self.live is None:
+            raise ChoreoError(f"{step_ref(step)} waits for GO, but nothing can give it: run on a terminal "
+                              "(the console) or with --osc PORT")
+        self._log(INFO, f"{step_ref(step)} waits for GO")
+        went = self.live.await_go(step, self.robot or SOLO, cursor, self.stop,
+                                  shared=self.cues is not None or self.robot is None)
+        if went is None:
+            raise Interrupted(self.stop.reason)
+        return max(cursor, went)
 
     def _slip(self, step: PlannedStep, planned: float, already_late: bool) -> float:
         """How late the motion really started: retries delay the sequence that worked.
@@ -313,6 +336,8 @@ class Runner:
     def _abort(self) -> RunResult:
         """No more show frames; play the show's abort motion if it has one."""
         self._log(WARNING, f"show {self.stop.reason} at {self.show_time():.3f} s")
+        if self.stop.reason == PANIC and self.on_abort is None and self.link.moved:
+            self._halt()
         if self.on_abort is not None and self.link.moved:  # a robot the show never moved stays as it is
             self._log(INFO, f"playing abort motion {self.on_abort}")
             self.link.should_stop = lambda: False
@@ -322,6 +347,16 @@ class Runner:
                 self._log(ERROR, f"abort motion {self.on_abort} failed: {exc}")
                 raise
         return RunResult("aborted", self._run, self._late, self.show_time())
+
+    def _halt(self) -> None:
+        """Panic on a robot without an abort motion: the stop frame halts the motion it plays."""
+        self._log(INFO, "panic: stop frame")
+        self.link.should_stop = lambda: False
+        try:
+            self.link.halt(Tag(None, ABORT_LABEL))
+        except LinkError as exc:
+            self._log(ERROR, f"panic stop frame failed: {exc}")
+            raise
 
     # -- reporting ---------------------------------------------------------------------------
 

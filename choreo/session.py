@@ -20,6 +20,7 @@ from choreo.clock import SWITCH_S, MachineShowClock, RunClock, ShowClock, System
 from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError, did_you_mean
 from choreo.layouts import SEED, Layout, layout_named
 from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
+from choreo.live import HoldingShowClock, Live
 from choreo.logformat import CLOCK_EVERY_S, ERROR, INFO, WARNING, ClockRecord
 from choreo.music import LEAD_IN_S, Output, Player, Song, pick_output
 from choreo.record import Recorder, RobotInfo, RunInfo, default_log_path
@@ -45,6 +46,8 @@ class RunRequest:
     robot_ports: Mapping[str, str] = field(default_factory=dict)  # `--port NAME=URL`
     no_music: bool = False  # `--no-music`: silent, on the machine's clock
     audio_device: str | None = None  # `--audio-device`: an output from `choreo devices`
+    loop: str | None = None  # `--loop FROM..TO`: labels (or indices) of a section to repeat until stopped
+    rehearse: bool = False  # `--rehearse`: every robot on the simulator, whatever the show or --port say
 
 
 @dataclass(frozen=True)
@@ -86,6 +89,8 @@ class Session:
     output: Output | None = None  # where it plays (None: the default output)
     player: Player | None = None  # while it plays
     _switch: float = 0.005  # Python's thread switch interval before the music started
+    loop: tuple[str, str] | None = None  # `--loop FROM..TO`, as given
+    ends: dict[str, int] = field(default_factory=dict)  # where each robot's plan stops (--loop), by robot
 
     @classmethod
     def prepare(cls, request: RunRequest, time_source: TimeSource | None = None) -> Session:
@@ -105,7 +110,11 @@ class Session:
         links = {name: replace(link, port=_for_robot(name, show, lambda: with_show_durations(
                      link.port, show, plans[name], link.baud, link.layout, show.abort_motion(name))))
                  for name, link in links.items()}
-        starts, origin = _starts(show, plans, request.from_step)
+        if request.loop is not None and request.from_step is not None:
+            raise UsageError(f"--loop {request.loop}: it starts where it says; leave out --from")
+        loop = _loop_range(request.loop) if request.loop is not None else None
+        starts, origin = _starts(show, plans, loop[0] if loop else request.from_step, "--loop" if loop else "--from")
+        ends = _ends(show, plans, loop[1], starts, "--loop") if loop else {}
         song, output = _music(show, request, time_source)
         log_path = None
         if request.log_path and not request.no_log:
@@ -114,7 +123,7 @@ class Session:
             log_path = Path(request.log_path) if request.log_path else default_log_path(
                 show.name, request.log_dir)
         return cls(show, plans, starts, links, log_path, origin, unique_log=request.log_path is None,
-                   clock=RunClock(time_source or SystemTime()), song=song, output=output)
+                   clock=RunClock(time_source or SystemTime()), song=song, output=output, loop=loop, ends=ends)
 
     # -- the first (or only) robot: what a one-robot run reports ------------------------------
 
@@ -189,21 +198,53 @@ class Session:
 
     # -- running ---------------------------------------------------------------------------
 
-    def run(self, listeners: list[RunListener] = (), stop: StopRequest | None = None) -> RunResult:
-        """Play the show; a log that cannot take more stops it like a stop request (the
-        exchange in flight, then the abort motion) and its LogError is the run's outcome."""
+    def run(self, listeners: list[RunListener] = (), stop: StopRequest | None = None,
+            live: Live | None = None) -> RunResult:
+        """Play the show (with --loop, its section again and again until stopped); a log that
+        cannot take more stops it like a stop request (the exchange in flight, then the abort
+        motion) and its LogError is the run's outcome. `live`: the operator's controls (GO cues
+        wait on them; --wait-start waits for start)."""
         assert self.stage is not None, "open the session first (with session:)"
-        stop = stop if stop is not None else StopRequest()
+        stop = live.stop if live is not None else stop if stop is not None else StopRequest()
         everyone = ([self.recorder] if self.recorder else []) + list(listeners)
         if self.recorder is not None:
             self.recorder.on_stop = stop.request
+            if live is not None:
+                live.listeners.append(self.recorder)
+        if live is not None and not live.await_start():
+            self.result = RunResult("aborted", 0, 0, 0.0)
+        else:
+            self.result = self._run_passes(everyone, stop, live)
+        if self.recorder is not None:
+            self.recorder.check()
+        self.stage.outcome = self.result.metadata()
+        return self.result
+
+    def _run_passes(self, everyone: list[RunListener], stop: StopRequest, live: Live | None) -> RunResult:
+        """One pass of the show, or with --loop as many of its section as run before a stop."""
+        result = self._run_pass(everyone, stop, live)
+        passes, steps, late = 1, result.steps_run, result.late_steps
+        while self.loop is not None and result.outcome == "done" and not stop():
+            passes += 1
+            self._tell(everyone, INFO, f"loop: pass {passes} from {self.loop[0]!r} to {self.loop[1]!r}")
+            result = self._run_pass(everyone, stop, live)
+            steps, late = steps + result.steps_run, late + result.late_steps
+        return RunResult(result.outcome, steps, late, result.show_s)
+
+    def _run_pass(self, everyone: list[RunListener], stop: StopRequest, live: Live | None) -> RunResult:
+        """The runners from the start (or --from, --loop's first step) to the end (or --loop's
+        last step), on a show clock started for them."""
+        assert self.stage is not None
         runners = {name: Runner(self.plans[name], self.stage.links[name], clock=self.clock, listeners=everyone,
                                 start=self.starts[name], on_abort=self.show.abort_motion(name), stop=stop,
-                                robot=name if self.show.ensemble else None)
+                                robot=name if self.show.ensemble else None, live=live,
+                                end=self.ends.get(name))
                    for name in self.links}
         ensemble = self._ensemble(runners, stop, everyone) if self.show.ensemble else None
         preroll = ensemble.preroll_s() if ensemble is not None else runners[self.first.robot].preroll_s()
-        show = self._start_show_clock(preroll, everyone)
+        show = self._start_show_clock(preroll, everyone, holding=live is not None)
+        if live is not None:
+            live.show = show
         sampler = ClockSampler(self.recorder, self.clock, show, "music" if self.player else "machine") \
             if self.recorder is not None else None
         for runner in runners.values():
@@ -211,20 +252,14 @@ class Session:
         try:
             if sampler is not None:
                 sampler.sample(force=True)
-            if ensemble is None:
-                self.result = runners[self.first.robot].run(show)
-            else:
-                self.result = self._run_ensemble(ensemble, show)
-            if self.result.outcome == "done":
+            result = runners[self.first.robot].run(show) if ensemble is None else self._run_ensemble(ensemble, show)
+            if result.outcome == "done" and self.loop is None:
                 self._play_out(show, stop, sampler, everyone)
             if sampler is not None:
                 sampler.sample(force=True)
+            return result
         finally:
             self._stop_music(everyone)
-        if self.recorder is not None:
-            self.recorder.check()
-        self.stage.outcome = self.result.metadata()
-        return self.result
 
     def _ensemble(self, runners: dict[str, Runner], stop: StopRequest, listeners: list):  # type: ignore[no-untyped-def]
         from choreo.ensemble import Ensemble, Part
@@ -244,14 +279,16 @@ class Session:
 
     # -- the show clock --------------------------------------------------------------------
 
-    def _start_show_clock(self, preroll: float, listeners: list[RunListener]) -> ShowClock:
+    def _start_show_clock(self, preroll: float, listeners: list[RunListener], holding: bool = False) -> ShowClock:
         """The music's clock, its song started a lead-in before the run's first moment (a play
         cued at the very start goes out ahead of the first sample by its lead), else the
         machine's, with the run's first moment `preroll` from now. The log's metadata gets
         show time 0 as wall-clock and monotonic nanoseconds either way."""
         assert self.stage is not None
         if self.song is None:
-            show: ShowClock = MachineShowClock(self.clock.mono() - (self.origin - preroll))
+            zero = self.clock.mono() - (self.origin - preroll)
+            # live, the machine's clock holds while a GO cue waits
+            show: ShowClock = HoldingShowClock(zero, self.clock.mono) if holding else MachineShowClock(zero)
         else:
             self.player = Player(self.song, self.output, self.origin, max(LEAD_IN_S, preroll + LEAD_IN_S))
             show = self.player.start()
@@ -298,6 +335,7 @@ class Session:
         if problem is not None:
             self._tell(listeners, WARNING, f"music: {self.player.song.music.file} stopped decoding early "
                                            f"({problem}); the show clock ran on in silence")
+        self.player = None
 
     def _tell(self, listeners: list[RunListener], level: int, message: str) -> None:
         for listener in listeners:
@@ -431,7 +469,11 @@ def _robot_link(name: str, robot: RobotSettings, request: RunRequest, show: Show
     if not 0 <= retries <= MAX_RETRIES:
         raise UsageError(f"--retries {retries}: give 0..{MAX_RETRIES} retries after a failed try")
     given = request.robot_ports.get(name) if show.ensemble else request.port
-    if given is not None:
+    if request.rehearse:
+        if given is not None and not is_simulator(given):
+            raise UsageError(f"--rehearse runs every robot on the simulator: leave out --port {given}")
+        port, source = given or "sim://", "simulator (--rehearse)"
+    elif given is not None:
         if not given.strip():
             raise UsageError("--port: empty; give a device (/dev/ttyUSB0, COM3) or a URL (sim://)")
         port, source = given, "command line"
@@ -571,7 +613,8 @@ def check_timeout(timeout: float) -> float:
     return timeout
 
 
-def _starts(show: Show, plans: dict[str, Plan], ref: str | None) -> tuple[dict[str, int], float]:
+def _starts(show: Show, plans: dict[str, Plan], ref: str | None,
+            option: str = "--from") -> tuple[dict[str, int], float]:
     """Where each robot's plan starts with `--from`, and that step's show time.
 
     Shared steps: the step by index or label, for every robot. Tracks: the labelled step's
@@ -581,19 +624,48 @@ def _starts(show: Show, plans: dict[str, Plan], ref: str | None) -> tuple[dict[s
         return dict.fromkeys(plans, 0), 0.0
     if not show.tracks:
         first = next(iter(plans.values()))
-        index = _start_index(first, ref)
+        index = _start_index(first, ref, option)
         return dict.fromkeys(plans, index), first.steps[index].planned_s if index < len(first.steps) else 0.0
     moment = next((step.planned_s for plan in plans.values() for step in plan.steps if step.label == ref), None)
     if moment is None:
         labels = [s.label for plan in plans.values() for s in plan.steps if s.label]
-        raise UsageError(f"--from {ref}: no step with that label in any track{did_you_mean(ref, labels)}"
+        raise UsageError(f"{option} {ref}: no step with that label in any track{did_you_mean(ref, labels)}"
                          f"{'; labels: ' + ', '.join(labels[:12]) if labels else ''} (tracks are named by labels, "
                          "not indices)")
     return {name: next((s.index for s in plan.steps if s.planned_s >= moment - 1e-9), len(plan.steps))
             for name, plan in plans.items()}, moment
 
 
-def _start_index(plan: Plan, ref: str | None) -> int:
+def _loop_range(text: str) -> tuple[str, str]:
+    """`--loop verse..chorus` -> ("verse", "chorus")."""
+    first, sep, last = text.partition("..")
+    if not sep or not first.strip() or not last.strip():
+        raise UsageError(f"--loop {text}: give FROM..TO, two labels (or step indices from `choreo plan`), "
+                         "e.g. --loop verse..chorus")
+    return first.strip(), last.strip()
+
+
+def _ends(show: Show, plans: dict[str, Plan], ref: str, starts: dict[str, int], option: str) -> dict[str, int]:
+    """Where each robot's plan stops for --loop's TO (that step included): shared steps by index
+    or label; tracks, each at its last step planned at or before the labelled moment."""
+    if not show.tracks:
+        first = next(iter(plans.values()))
+        index = _start_index(first, ref, f"{option} ..") + 1
+        if index <= starts[first.robot]:
+            raise UsageError(f"{option} ..{ref}: it comes before the loop's first step")
+        return dict.fromkeys(plans, index)
+    moment = next((step.planned_s for plan in plans.values() for step in plan.steps if step.label == ref), None)
+    if moment is None:
+        labels = [s.label for plan in plans.values() for s in plan.steps if s.label]
+        raise UsageError(f"{option} ..{ref}: no step with that label in any track{did_you_mean(ref, labels)}")
+    ends = {name: 1 + max((s.index for s in plan.steps if s.planned_s <= moment + 1e-9), default=-1)
+            for name, plan in plans.items()}
+    if all(ends[name] <= starts[name] for name in plans):
+        raise UsageError(f"{option} ..{ref}: it comes before the loop's first step")
+    return ends
+
+
+def _start_index(plan: Plan, ref: str | None, option: str = "--from") -> int:
     if ref is None:
         return 0
     try:
@@ -602,7 +674,7 @@ def _start_index(plan: Plan, ref: str | None) -> int:
         labels = [s.label for s in plan.steps if s.label]
         shown = ", ".join(labels[:12]) + (", ..." if len(labels) > 12 else "")
         known = f"; labels: {shown}" if labels else ""
-        raise UsageError(f"--from {ref}: no step with that index (0..{len(plan.steps) - 1}) "
+        raise UsageError(f"{option}{'' if option.endswith('..') else ' '}{ref}: no step with that index (0..{len(plan.steps) - 1}) "
                          f"or label{did_you_mean(ref, labels)}{known}") from None
 
 

@@ -55,7 +55,7 @@ def test_reads_every_message_as_the_mcap_library_does(synthetic):
     assert reader.result["outcome"] == "done"
     assert reader.show_source().startswith(b"version: 1")
     assert {c.topic for c in reader.channels.values()} == {"/rcb4/tx", "/rcb4/rx", "/choreo/step", "/choreo/log",
-                                                                   "/choreo/clock"}
+                                                                   "/choreo/clock", "/choreo/command"}
 
 
 def test_topic_filter_and_a_second_pass(synthetic):

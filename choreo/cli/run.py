@@ -42,6 +42,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     logs.add_argument("--no-log", action="store_true", help="do not record a log")
     parser.add_argument("--from", dest="from_step", metavar="STEP",
                         help="start at this step (index from `choreo plan`, or label)")
+    parser.add_argument("--loop", metavar="FROM..TO", help="rehearse a section: play from step FROM to step TO "
+                        "(labels or indices) again and again until stopped")
+    parser.add_argument("--rehearse", action="store_true", help="every robot on the built-in simulator, in real "
+                        "time (the show's ports are left alone), with the console on a terminal")
     parser.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for a reply, 0 < S <= 10 (default 0.2)")
     parser.add_argument("--retries", type=int, metavar="N",
                         help="retries of a failed frame or play sequence, 0..10 (default 2: 3 tries)")
@@ -51,6 +55,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     music.add_argument("--audio-device", metavar="OUTPUT", help="where the music plays: a number or "
                        "name from `choreo devices`, or null (silent, keeps the music's time); default: "
                        "the system's output")
+    live = parser.add_argument_group("live control", "GO cues (`at: go`), the console and OSC; see "
+                                     "README, Running a show live")
+    live.add_argument("--osc", type=int, metavar="PORT", help="take OSC commands (/choreo/go, /panic, /start, "
+                      "/stop, /cue/LABEL/go) on this UDP and TCP (SLIP) port, and answer each with /reply/...")
+    live.add_argument("--osc-host", metavar="HOST", default="127.0.0.1",
+                      help="the address OSC listens on (default 127.0.0.1: this machine only)")
+    live.add_argument("--osc-allow", action="append", metavar="ADDRESS", default=[],
+                      help="a sender (IP address) OSC takes commands from besides this machine (repeatable)")
+    live.add_argument("--osc-notify", metavar="HOST:PORT", help="send the show's progress there as OSC "
+                      "(step started, GO cue waiting, fault, done)")
+    live.add_argument("--wait-start", action="store_true", help="load, open the ports, then wait for "
+                      "/choreo/start (or the console's GO) before the show starts")
+    live.add_argument("--no-console", action="store_true", help="on a terminal, the plain progress "
+                      "line instead of the console (GO then comes only over OSC)")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress output")
     parser.add_argument("--json", action="store_true", help="at the end, the run's result and log "
                         "path as one JSON object on stdout (also when it fails; stderr as without)")
@@ -82,7 +100,8 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     request = RunRequest(args.show, port=port, baud=args.baud, log_path=args.log,
                          no_log=args.no_log, from_step=args.from_step, timeout=args.timeout,
                          retries=args.retries, layout=args.layout, robot_ports=robot_ports,
-                         no_music=args.no_music, audio_device=args.audio_device)
+                         no_music=args.no_music, audio_device=args.audio_device, loop=args.loop,
+                         rehearse=args.rehearse)
     session = Session.prepare(request, args.time_source)
     report.session = session
     say = _Say(sys.stderr, quiet=args.quiet)
@@ -95,14 +114,17 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     say(_show_line(session))
     if session.show.music is not None:
         say(_music_line(session))
-    progress = Progress(session, sys.stderr, live=sys.stderr.isatty(), quiet=args.quiet)
+    console = _wants_console(args)
+    _check_go_sources(session, console, args)
+    progress = Progress(session, sys.stderr, live=sys.stderr.isatty() and not console, quiet=args.quiet or console)
     signals = _StopOnSignals()
     try:
         with _log_named_on_failure(session, say), signals as stop, session:
             say(f"log: {session.log_path}" if session.log_path else "log: off (--no-log)")
             for note in session.stage.notes:
                 say(f"warning: {note}")
-            result = session.run([progress], stop)
+            with _controls(args, session, stop, console, say) as (live, listeners):
+                result = session.run([progress, *listeners], stop, live)
         report.result = result
         progress.finish()
         say.quiet = args.quiet and result.outcome == "done"
@@ -111,11 +133,85 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
         if session.log_path:
             say(f"log: {session.log_path}")
         if result.outcome != "done":
-            raise Interrupted(f"show {stop.reason}")
+            from choreo.runner import PANIC
+
+            raise Interrupted("show stopped by panic: stop frames, then the abort motions"
+                              if stop.reason == PANIC else f"show {stop.reason}")
         return 0
     finally:
         progress.finish()
         signals.restore()
+
+
+def _wants_console(args: argparse.Namespace) -> bool:
+    """The console runs where an operator can press its keys: a terminal on both ends."""
+    return (not args.quiet and not args.json and not args.no_console and sys.stdin.isatty()
+            and sys.stderr.isatty())
+
+
+def _check_go_sources(session, console: bool, args: argparse.Namespace) -> None:  # type: ignore[no-untyped-def]
+    """A show with GO cues (or --wait-start) needs someone to give the GO: refused before any
+    port opens, not a show that waits for ever."""
+    from choreo.errors import UsageError
+
+    if console or args.osc is not None:
+        return
+    if args.wait_start:
+        raise UsageError("--wait-start: nothing can start the show: run on a terminal (the console) or with --osc PORT")
+    for plan in session.plans.values():
+        step = next((s for s in plan.steps[session.starts[plan.robot]:] if s.go), None)
+        if step is not None:
+            from choreo.runner import step_ref
+
+            raise UsageError(f"{step_ref(step)} waits for GO, but nothing can give it: run on a terminal "
+                             "(the console) or with --osc PORT")
+
+
+@contextmanager
+def _controls(args, session, stop, console: bool, say):  # type: ignore[no-untyped-def]
+    """The operator's controls for the run: (None, []) for a show run as before; else the Live
+    that GO cues wait on, with the console and the OSC server that command it (and listen to
+    the show: their progress lines and notifications)."""
+    if not console and args.osc is None:
+        yield None, []
+        return
+    from choreo.live import Live
+
+    live = Live(stop, wait_start=args.wait_start)
+    listeners: list = []
+    opened: list = []
+    try:
+        if args.osc is not None:
+            from choreo.osc import OscServer
+
+            server = OscServer(live, args.osc, host=args.osc_host, allow=args.osc_allow,
+                               notify=_host_port(args.osc_notify, "--osc-notify") if args.osc_notify else None)
+            server.start()
+            opened.append(server)
+            live.listeners.append(server)
+            listeners.append(server)
+            say(server.listening)
+        if console:
+            from choreo.cli.console import Console
+
+            screen = Console(session, live)
+            screen.start()
+            opened.append(screen)
+            live.listeners.append(screen)
+            listeners.append(screen)
+        yield live, listeners
+    finally:
+        for control in reversed(opened):
+            control.close()
+
+
+def _host_port(text: str, option: str) -> tuple[str, int]:
+    from choreo.errors import UsageError
+
+    host, _, port = text.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise UsageError(f"{option} {text}: give HOST:PORT, e.g. 127.0.0.1:53001")
+    return host.strip("[]"), int(port)
 
 
 def port_arguments(values: list[str] | None) -> tuple[str | None, dict[str, str]]:
@@ -250,7 +346,8 @@ def _robot_lines(session) -> list[str]:
     """With several robots: a line per robot, its port and layout and where they came from."""
     lines = []
     for link in session.links.values():
-        source = {"simulator": "built-in simulator", "show": "from the show"}.get(link.port_source, "from --port")
+        source = {"simulator": "built-in simulator", "show": "from the show",
+                  "simulator (--rehearse)": "built-in simulator, --rehearse"}.get(link.port_source, "from --port")
         assumed = ", layout assumed" if link.assumes_layout else ""
         lines.append(f"robot {link.robot}: {link.port} at {link.baud} baud ({source}), "
                      f"layout {link.layout.name}{assumed}")
@@ -271,6 +368,7 @@ def _music_line(session) -> str:  # type: ignore[no-untyped-def]
 def _port_line(session) -> str:
     where = {
         "simulator": "the built-in simulator (no --port given and the show names no robot.port)",
+        "simulator (--rehearse)": "the built-in simulator (--rehearse: in real time, the show's ports left alone)",
         "show": "the show's robot.port",
     }.get(session.port_source, "the command line")
     return f"port: {session.port} at {session.baud} baud, from {where}"

@@ -99,7 +99,8 @@ def _clock_lines(show) -> list[str]:  # type: ignore[no-untyped-def]
 def _plan_record(show, plan) -> dict:  # type: ignore[no-untyped-def]
     steps = [{"index": step.index, "path": step.path, "label": step.label, "kind": step.kind.value,
               "start_s": step.planned_s, "cue": step.at,
-              **({"cue_bar": step.at_beat[0], "cue_beat": step.at_beat[1]} if step.at_beat else {}), "motion": step.motion,
+              **({"cue_bar": step.at_beat[0], "cue_beat": step.at_beat[1]} if step.at_beat else {}),
+              **({"go": True} if step.go else {}), "motion": step.motion,
               "motion_name": step.motion_name, "seconds": step.seconds, "text": step.describe(),
               "frames": [frame.hex for frame in step.frames]} for step in plan.steps]
     return {"path": show.path, **_show_record(show, plan), "plan": steps}
@@ -211,6 +212,8 @@ def _layout_note(plan) -> str:  # type: ignore[no-untyped-def]
 def _start(step, digits: int) -> str:  # type: ignore[no-untyped-def]
     """` 4.000 s`, with the cue when the step has one: `14.000 s (at 14)`, late ones flagged."""
     text = f"{step.planned_s:{digits}.3f} s"
+    if step.go:
+        return f"{text} (waits for GO)"
     if step.at is None:
         return text
     cue = f"{step.at:g}" if step.at_beat is None else f"{step.at:g} = bar {step.at_beat[0]} beat {step.at_beat[1]:g}"

@@ -53,6 +53,7 @@ from choreo.show.model import (
 # An hour-long show with a step a second is about 50 KiB. The limit bounds the work a file can
 # cause: checking costs about 0.1 ms a step, so the largest file answers in a few seconds.
 MAX_BYTES = 256 * 1024
+GO = "go"  # `at: go`
 MAX_DEPTH = 40  # nesting levels of YAML lists and mappings (repeats inside repeats, ...)
 MAX_PLAN_STEPS = 100_000  # steps after repeats expand
 SCHEMA_FILE = "show.schema.json"
@@ -1033,8 +1034,8 @@ def _check_steps(walk: _Walk, steps: list[Any], path: JsonPath, looping: bool) -
 def _check_cue(walk: _Walk, step: dict[str, Any], here: JsonPath, looping: bool) -> None:
     at = step.get("at")
     path = here + ("at",)
-    if at is None or not walk.ok(path) or isinstance(at, bool):
-        return
+    if at is None or not walk.ok(path) or isinstance(at, bool) or at == GO:
+        return  # a GO cue may be anywhere: in a repeat, every pass waits for its GO
     mark = walk.doc.mark(path)
     if isinstance(at, dict):
         at = _beat_seconds(walk, at, path)
@@ -1189,9 +1190,10 @@ def _build_steps(steps: list[dict[str, Any]], path: JsonPath, doc: _Doc, motions
         here = path + (index,)
         line, column = doc.mark(here)
         robots = tuple(step["robots"]) if "robots" in step else None
-        at, at_beat = _cue(step.get("at"), tempo)
+        go = step.get("at") == GO
+        at, at_beat = _cue(None if go else step.get("at"), tempo)
         common = dict(path=format_path(here), line=line, column=column, label=step.get("label"),
-                      at=at, at_beat=at_beat, robots=robots)
+                      at=at, at_beat=at_beat, go=go, robots=robots)
         if "repeat" in step:
             inner = _build_steps(step["steps"], here + ("steps",), doc, motions, tempo)
             built.append(Repeat(count=int(step["repeat"]), steps=inner, **common))

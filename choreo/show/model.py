@@ -84,6 +84,7 @@ class Step:
     label: str | None = None
     at: float | None = None  # the cue, if the step has one (seconds, bars and beats resolved)
     at_beat: tuple[int, float] | None = None  # the cue as written in bars and beats, if it was
+    go: bool = False  # `at: go`: waits for the operator's GO
     motion: int | None = None  # PLAY: the slot
     motion_name: str | None = None  # PLAY: the name it was played by, if any
     seconds: float | None = None  # WAIT: how long; WAIT_DONE: the timeout
@@ -102,6 +103,7 @@ class Repeat:
     label: str | None = None  # names the first step of the first iteration
     at: float | None = None  # cues the first step of the first iteration
     at_beat: tuple[int, float] | None = None  # that cue as written in bars and beats, if it was
+    go: bool = False  # `at: go`: the first step of the first iteration waits for GO
     robots: tuple[str, ...] | None = None  # the robots its steps are for, unless a step says
 
 
@@ -200,6 +202,7 @@ class PlannedStep:
     seconds: float | None = None  # WAIT: how long; WAIT_DONE: the timeout
     at: float | None = None  # the cue: not before this many seconds after the show's start
     at_beat: tuple[int, float] | None = None  # the cue as written in bars and beats, if it was
+    go: bool = False  # `at: go`: waits for the operator's GO (planned as if it came at once)
     planned_s: float = 0.0
     expected_s: float = 0.0  # how long the step is expected to take (WAIT_DONE: the motion's rest)
     frames: tuple[Frame, ...] = ()  # what it sends (WAIT_DONE: one status query, repeated)

@@ -1,0 +1,254 @@
+"""Running a show live: the operator's commands (GO, panic, start, stop, a cue's GO), from
+whichever source gives them (the console's keys, OSC), and the GO cues that wait for them.
+
+One `Live` a run, shared by every robot's runner and every source: a command is answered the
+same way from the keyboard as from QLab, and every command, accepted or refused, is reported to
+the listeners (the log records who pressed what and when). Sources never touch the runners:
+they call `command`, which sets state the runners read (a GO cue released, the stop request).
+
+The show clock holds while a GO cue waits (on the machine's clock: the steps after it are timed
+from the GO, as if it came at once); on the music's clock it cannot hold, so the music plays on
+and the step is reported against it.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from choreo.clock import MachineShowClock, ShowClock
+from choreo.runner import PANIC, StopRequest
+from choreo.show.model import PlannedStep
+
+LOCKOUT_S = 0.5  # a second GO this soon after one is taken for a double press, and refused
+COMMANDS = ("go", "panic", "start", "stop", "cue_go")
+
+
+@dataclass(frozen=True)
+class Command:
+    """An operator's command: what, from where (`key`, `osc udp 127.0.0.1:53001`), and for
+    `cue_go` which cue (its label)."""
+
+    name: str
+    source: str
+    label: str | None = None
+
+
+@dataclass(frozen=True)
+class Answer:
+    """What a command did: `ok`, or `error` with why; `data` says more (the cue released)."""
+
+    status: str  # ok | error
+    message: str = ""
+    data: dict = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+@dataclass(frozen=True)
+class CommandEvent:
+    """A command and its answer, when it came (wall-clock ns and show time)."""
+
+    command: Command
+    answer: Answer
+    time_ns: int
+    show_s: float | None
+
+
+class CommandListener(Protocol):
+    def on_command(self, event: CommandEvent) -> None: ...
+
+
+@dataclass
+class GoCue:
+    """A GO cue some robot is waiting at: its step (same index for every robot of a shared
+    step), who waits, and when the show reached it."""
+
+    step: PlannedStep
+    robots: set[str]
+    reached_s: float
+    released: bool = False
+    key: object = None
+
+    @property
+    def name(self) -> str:
+        return self.step.label or f"step {self.step.index}"
+
+
+class HoldingShowClock:
+    """The machine's show clock, which stops at a GO cue's time while the cue waits: show time
+    stands still there, and every runner's later due times move on with the hold. Times up to
+    the cue keep their places (another robot still on its way to the same cue gets there).
+    (A runner asleep towards a later due time re-reads it each sleep slice, so one due within a
+    slice after the GO wakes up to 50 ms late: only a track's step due right as another track's
+    GO comes.)"""
+
+    def __init__(self, zero: float, mono: Callable[[], float]) -> None:
+        self._zero = zero
+        self._mono = mono
+        self._hold_s: float | None = None  # the show time the clock stops at
+
+    @property
+    def held(self) -> bool:
+        return self._hold_s is not None
+
+    def hold_at(self, show_s: float) -> None:
+        """Stop the clock when it reaches `show_s` (at once if it has)."""
+        self._hold_s = show_s if self._hold_s is None else min(self._hold_s, show_s)
+
+    def resume(self) -> None:
+        """Go on from the held time: the time spent holding is taken out of the show."""
+        if self._hold_s is not None:
+            reached = self._zero + self._hold_s
+            now = self._mono()
+            if now > reached:
+                self._zero += now - reached
+            self._hold_s = None
+
+    def mono_at(self, show_s: float) -> float:
+        if self._hold_s is not None and show_s > self._hold_s + 1e-9:
+            return float("inf")
+        return self._zero + show_s
+
+    def show_at(self, mono: float) -> float:
+        show_s = mono - self._zero
+        return show_s if self._hold_s is None else min(show_s, self._hold_s)
+
+
+class Live:
+    """A running show's controls; see the module's docstring."""
+
+    def __init__(self, stop: StopRequest, *, wait_start: bool = False, lockout_s: float = LOCKOUT_S,
+                 now: Callable[[], float] = time.monotonic, wall_ns: Callable[[], int] = time.time_ns) -> None:
+        self.stop = stop
+        self.lockout_s = lockout_s
+        self.listeners: list[CommandListener] = []
+        self.show: ShowClock | None = None  # set when the show starts
+        self.panicked = False
+        self._now = now
+        self._wall_ns = wall_ns
+        self._changed = threading.Condition()
+        self._started = not wait_start
+        self._waiting: dict[object, GoCue] = {}  # the GO cues robots wait at, by `_key`
+        self._released: set[object] = set()  # GO cues already given their GO
+        self._last_go: float | None = None
+
+    # -- what the show asks ------------------------------------------------------------------
+
+    def await_start(self) -> bool:
+        """Block until `/choreo/start` (with --wait-start); False if stopped first."""
+        with self._changed:
+            while not self._started:
+                if self.stop():
+                    return False
+                self._changed.wait(0.05)
+        return True
+
+    def await_go(self, step: PlannedStep, robot: str, reached_s: float, should_stop: Callable[[], bool],
+                 shared: bool = True) -> float | None:
+        """`robot` has reached GO cue `step` (`shared`: a step of shared `steps:`, which every
+        robot it is for waits at, released by one GO; else its own track's): hold the machine's
+        show clock and block until a GO releases it. Returns the show time it goes on from
+        (None: stopped while waiting). `reached_s`: the show time the robot reached it at."""
+        show = self.show
+        key = step.index if shared else (robot, step.index)
+        with self._changed:
+            if key in self._released:  # the others were given their GO as this robot arrived
+                return show.show_at(self._now()) if show is not None else step.planned_s
+            cue = self._waiting.get(key)
+            if cue is None:
+                cue = self._waiting[key] = GoCue(step, set(), reached_s, key=key)
+            cue.robots.add(robot)
+            if isinstance(show, HoldingShowClock):
+                show.hold_at(reached_s)
+            self._changed.notify_all()
+            while not cue.released:
+                if should_stop():
+                    return None
+                self._changed.wait(0.05)
+        return show.show_at(self._now()) if show is not None else cue.reached_s
+
+    @property
+    def waiting(self) -> list[GoCue]:
+        """The GO cues waiting now, the earliest first."""
+        with self._changed:
+            return self._in_order()
+
+    def _in_order(self) -> list[GoCue]:
+        return sorted((c for c in self._waiting.values() if not c.released),
+                      key=lambda c: (c.reached_s, c.step.planned_s, c.step.index))
+
+    # -- what the operator says --------------------------------------------------------------
+
+    def command(self, command: Command) -> Answer:
+        """Carry out one command from any source, and tell the listeners."""
+        handler = {"go": self._go, "panic": self._panic, "start": self._start, "stop": self._stop,
+                   "cue_go": self._cue_go}.get(command.name)
+        answer = handler(command) if handler else Answer("error", f"unknown command {command.name!r}")
+        show = self.show
+        event = CommandEvent(command, answer, self._wall_ns(), show.show_at(self._now()) if show is not None else None)
+        for listener in self.listeners:
+            listener.on_command(event)
+        return answer
+
+    def _go(self, command: Command) -> Answer:
+        with self._changed:
+            now = self._now()
+            if self._last_go is not None and now - self._last_go < self.lockout_s:
+                return Answer("error", f"GO ignored: {now - self._last_go:.2f} s after the last one "
+                              f"(a double press? GOs {self.lockout_s:g} s apart at least)")
+            waiting = self._in_order()
+            if not waiting:
+                return Answer("error", "nothing waits for GO now" + ("" if self._started else " (the show has not started)"))
+            self._last_go = now
+            return self._release(waiting[0])
+
+    def _cue_go(self, command: Command) -> Answer:
+        with self._changed:
+            waiting = [c for c in self._waiting.values() if not c.released]
+            match = [c for c in waiting if c.step.label == command.label]
+            if not match:
+                at = ", ".join(repr(c.name) for c in waiting) or "no cue"
+                return Answer("error", f"cue {command.label!r} is not waiting for GO (waiting: {at})")
+            self._last_go = self._now()
+            return self._release(match[0])
+
+    def _release(self, cue: GoCue) -> Answer:
+        """The lock is held."""
+        cue.released = True
+        del self._waiting[cue.key]
+        self._released.add(cue.key)
+        if isinstance(self.show, HoldingShowClock) and not any(not c.released for c in self._waiting.values()):
+            self.show.resume()
+        self._changed.notify_all()
+        return Answer("ok", f"GO: {cue.name}", {"cue": cue.name, "step": cue.step.index})
+
+    def _panic(self, command: Command) -> Answer:
+        self.panicked = True
+        self.stop.request(PANIC)
+        self._wake()
+        return Answer("ok", "panic: no more show frames; stop frames and every robot's abort motion")
+
+    def _stop(self, command: Command) -> Answer:
+        if self.stop():
+            return Answer("error", f"the show is already stopping ({self.stop.reason})")
+        self.stop.request("stopped")
+        self._wake()
+        return Answer("ok", "stopping: the exchange in flight, then the abort motion")
+
+    def _start(self, command: Command) -> Answer:
+        with self._changed:
+            if self._started:
+                return Answer("error", "the show has started already")
+            self._started = True
+            self._changed.notify_all()
+        return Answer("ok", "starting")
+
+    def _wake(self) -> None:
+        with self._changed:
+            self._changed.notify_all()

@@ -1,0 +1,270 @@
+"""GO cues (`at: go`) and the operator's commands: the show waits for GO (the machine's show clock
+holding, the music playing on), panic, stop, start, a cue's GO; every command in the log.
+
+Runs keep real time (a GO comes from another thread, as from the console or OSC) on the
+in-process simulator; bounds are generous for a loaded machine.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from choreo.cli import main
+from choreo.live import Command, Live
+from choreo.runner import PANIC, StopRequest
+from choreo.session import RunRequest, Session
+from runlog import read_log, write_show
+
+GO_SHOW = """\
+version: 1
+motions:
+  bow: {number: 2, duration: 0.1}
+steps:
+  - play: 1
+  - play: bow
+    at: go
+    label: applause
+  - wait: 0.2
+  - play: 3
+    at: 0.5
+    label: after
+"""
+
+
+def wait_until(predicate, timeout: float = 10.0) -> None:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.005)
+
+
+class Running:
+    """A session playing in a thread, with its Live for the test to command."""
+
+    def __init__(self, tmp_path: Path, body: str, *, wait_start: bool = False, port: str | None = None,
+                 **request) -> None:  # type: ignore[no-untyped-def]
+        show = write_show(tmp_path, body)
+        self.log_path = tmp_path / "run.mcap"
+        self.session = Session.prepare(RunRequest(str(show), log_path=str(self.log_path), port=port, **request))
+        self.live = Live(StopRequest(), wait_start=wait_start)
+        self.result = None
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        try:
+            with self.session:
+                self.result = self.session.run([], live=self.live)
+        except BaseException as exc:  # noqa: BLE001 - the test asserts on it
+            self.error = exc
+
+    def go(self, name: str = "go", **kwargs):  # type: ignore[no-untyped-def]
+        return self.live.command(Command(name, "test", **kwargs))
+
+    def finish(self) -> None:
+        self.thread.join(20)
+        assert not self.thread.is_alive()
+
+    def log(self):  # type: ignore[no-untyped-def]
+        return read_log(self.log_path)
+
+
+def starts(log, robot: str | None = None) -> dict:  # type: ignore[no-untyped-def]
+    topic = f"/choreo/{robot}/step" if robot else "/choreo/step"
+    return {m.get("label") or m["index"]: m for m in log.topic(topic) if m["event"] == "start"}
+
+
+def test_the_plan_shows_where_the_show_waits_for_go(tmp_path, capsys):
+    show = write_show(tmp_path, GO_SHOW + "  - repeat: 2\n    at: go\n    steps:\n      - play: 4\n      - play: 5\n"
+                                "        at: go\n")
+    assert main(["plan", str(show)]) == 0
+    out = capsys.readouterr().out
+    assert "0.000 s (waits for GO)  play 2 (bow)" in out
+    assert main(["plan", str(show), "--json"]) == 0
+    plan = json.loads(capsys.readouterr().out)["plan"]
+    # the repeat's GO is its first pass's first step; a GO inside a repeat waits on every pass
+    assert [s["index"] for s in plan if s.get("go")] == [1, 4, 5, 7]
+
+
+def test_the_machine_clock_holds_while_a_go_cue_waits(tmp_path):
+    run = Running(tmp_path, GO_SHOW)
+    wait_until(lambda: run.live.waiting)
+    assert run.live.waiting[0].name == "applause"
+    time.sleep(0.4)  # the operator takes a while: the show clock holds
+    answer = run.go()
+    assert answer.ok and answer.data == {"cue": "applause", "step": 1}
+    run.finish()
+    assert run.error is None and run.result.outcome == "done" and run.result.late_steps == 0
+    log = run.log()
+    steps = starts(log)
+    # the show time the GO cue went on from is where the show reached it, not 0.4 s later
+    assert steps["applause"]["actual_s"] < 0.1 and steps["applause"]["go"] is True
+    # the cue at 0.5 s counts on the held clock: on time, 0.5 s of show after the start, not late
+    assert steps["after"]["actual_s"] == pytest.approx(0.5, abs=0.01)
+    assert steps["after"]["late_ms"] < 1.0
+    go = [m for m in log.topic("/choreo/command") if m["command"] == "go"]
+    assert go == [{"command": "go", "source": "test", "status": "ok", "message": "GO: applause",
+                   "show_s": go[0]["show_s"], "_log_time": go[0]["_log_time"]}]
+    # on the wall clock, the cue came 0.5 - (where the GO cue was reached) after the GO
+    waited = (steps["after"]["_log_time"] - go[0]["_log_time"]) / 1e9
+    assert 0.35 < waited < 0.6
+
+
+def test_go_refuses_a_double_press_and_a_go_with_nothing_waiting(tmp_path):
+    run = Running(tmp_path, "version: 1\nsteps:\n  - play: 1\n    at: go\n    label: bow\n"
+                            "  - play: 4\n    at: go\n    label: encore\n")
+    wait_until(lambda: run.live.waiting)
+    assert run.go().ok
+    wait_until(lambda: run.live.waiting and run.live.waiting[0].name == "encore")  # right after the bow
+    double = run.go()
+    assert not double.ok and "a double press?" in double.message
+    time.sleep(0.5)
+    assert run.go().ok
+    run.finish()
+    time.sleep(0.5)
+    late = run.go()
+    assert not late.ok and late.message == "nothing waits for GO now"
+    commands = [(m["command"], m["status"]) for m in run.log().topic("/choreo/command")]
+    assert commands == [("go", "ok"), ("go", "error"), ("go", "ok")]  # the last came after the log closed
+
+
+def test_a_cues_go_by_its_label(tmp_path):
+    run = Running(tmp_path, GO_SHOW)
+    wait_until(lambda: run.live.waiting)
+    wrong = run.go("cue_go", label="encore")
+    assert not wrong.ok and wrong.message == "cue 'encore' is not waiting for GO (waiting: 'applause')"
+    assert run.go("cue_go", label="applause").ok
+    run.finish()
+    assert [m["label"] for m in run.log().topic("/choreo/command")] == ["encore", "applause"]
+
+
+def test_panic_halts_every_robot_and_plays_the_aborts(tmp_path):
+    body = """\
+        version: 1
+        robots:
+          a: {on_abort: 9}
+          b: {}
+        steps:
+          - play: 1
+          - play: 2
+            at: go
+        """
+    run = Running(tmp_path, body)
+    wait_until(lambda: run.live.waiting)
+    assert run.live.waiting[0].robots == {"a", "b"}
+    assert run.go("panic").ok
+    run.finish()
+    assert run.result.outcome == "aborted" and run.live.stop.reason == PANIC
+    log = run.log()
+    a = [(m["kind"], m.get("motion"), m.get("label")) for m in log.topic("/rcb4/a/tx")]
+    b = [(m["kind"], m.get("motion"), m.get("label")) for m in log.topic("/rcb4/b/tx")]
+    assert a[-3:] == [("stop", 9, "on_abort"), ("play", 9, "on_abort"), ("restore", 9, "on_abort")]
+    assert b[-1] == ("stop", None, "on_abort")  # no abort motion: the stop frame halts what plays
+    assert log.metadata["choreo.result"]["outcome"] == "aborted"
+
+
+def test_one_go_releases_a_shared_step_for_every_robot(tmp_path):
+    body = """\
+        version: 1
+        robots: {a: {}, b: {}}
+        steps:
+          - play: 1
+          - play: 2
+            at: go
+            label: together
+        """
+    run = Running(tmp_path, body)
+    wait_until(lambda: run.live.waiting and run.live.waiting[0].robots == {"a", "b"})
+    assert run.go().ok
+    run.finish()
+    log = run.log()
+    assert starts(log, "a")["together"]["go"] and starts(log, "b")["together"]["go"]
+    assert len([m for m in log.topic("/choreo/command")]) == 1
+
+
+def test_wait_start_holds_the_show_until_start(tmp_path):
+    run = Running(tmp_path, GO_SHOW.replace("    at: go\n", ""), wait_start=True)
+    time.sleep(0.2)
+    assert run.result is None and run.thread.is_alive()  # loaded, ports open, waiting for start
+    assert not run.go("go").ok
+    assert run.go("start").ok and not run.go("start").ok
+    run.finish()
+    assert run.result.outcome == "done"
+
+
+def test_a_go_cue_needs_a_console_or_osc(tmp_path, capsys):
+    show = write_show(tmp_path, GO_SHOW)
+    assert main(["run", str(show), "--no-log"]) == 2
+    err = capsys.readouterr().err
+    assert "step 1 'applause' waits for GO, but nothing can give it" in err
+
+
+def test_in_a_music_show_a_go_cue_waits_while_the_music_plays_on(tmp_path):
+    from test_music import write_song
+
+    write_song(tmp_path / "song.wav", 2.0)
+    body = ("version: 1\nmusic: {file: song.wav}\nsteps:\n  - play: 1\n  - play: 2\n    at: go\n    label: bow\n"
+            "  - play: 3\n    at: 0.8\n    label: later\n")
+    run = Running(tmp_path, body, audio_device="null")
+    wait_until(lambda: run.live.waiting)
+    time.sleep(0.3)
+    assert run.go().ok
+    run.finish()
+    assert run.error is None, run.error
+    steps = starts(run.log())
+    # the GO came about 0.3 s into the music: the step went then, reported against the music
+    assert 0.25 < steps["bow"]["actual_s"] < 0.6 and steps["bow"]["go"]
+    # the cue after it stays where it is in the music (the clock did not hold)
+    end = next(m for m in run.log().topic("/choreo/step") if m["event"] == "end" and m.get("label") == "later")
+    assert abs(end["start_s"] - 0.8) < 0.02
+
+
+def test_a_go_cue_in_a_repeat_waits_on_every_pass(tmp_path):
+    body = "version: 1\nsteps:\n  - repeat: 3\n    steps:\n      - play: 1\n        at: go\n        label: bow\n"
+    run = Running(tmp_path, body)
+    for name in ("bow", "bow#2", "bow#3"):
+        wait_until(lambda: run.live.waiting and run.live.waiting[0].name == name)
+        time.sleep(0.5)  # past the lockout
+        assert run.go().ok
+    run.finish()
+    assert [m["message"] for m in run.log().topic("/choreo/command")] == ["GO: bow", "GO: bow#2", "GO: bow#3"]
+
+
+def test_loop_repeats_a_section_until_stopped(tmp_path):
+    body = ("version: 1\nsteps:\n  - play: 1\n    label: intro\n  - play: 2\n    label: verse\n  - wait: 0.1\n"
+            "  - play: 3\n    label: chorus\n  - play: 4\n    label: outro\n")
+    show = write_show(tmp_path, body)
+    log_path = tmp_path / "run.mcap"
+    session = Session.prepare(RunRequest(str(show), log_path=str(log_path), loop="verse..chorus"))
+    stop = StopRequest()
+    timer = threading.Timer(0.45, stop.request)
+    timer.start()
+    with session:
+        result = session.run([], stop)
+    timer.cancel()
+    played = [m.get("motion") for m in read_log(log_path).topic("/rcb4/tx") if m["kind"] == "play"]
+    assert played[:6] == [2, 3, 2, 3, 2, 3] and 1 not in played and 4 not in played
+    assert result.outcome == "aborted" and result.steps_run >= 9  # three steps a pass
+
+
+def test_loop_and_rehearse_options_are_checked(tmp_path, capsys):
+    show = write_show(tmp_path, GO_SHOW.replace("    at: go\n", ""))
+    for args, message in ((["--loop", "after"], "--loop after: give FROM..TO"),
+                          (["--loop", "after..applause"], "--loop ..applause: it comes before the loop's first step"),
+                          (["--loop", "applause..nope"], "--loop ..nope: no step with that index"),
+                          (["--loop", "applause..after", "--from", "after"], "leave out --from"),
+                          (["--rehearse", "--port", "/dev/ttyUSB0"], "--rehearse runs every robot on the simulator")):
+        assert main(["run", str(show), "--no-log", *args]) == 2, args
+        assert message in capsys.readouterr().err, args
+
+
+def test_rehearse_runs_on_the_simulator_whatever_the_show_says(tmp_path, capsys):
+    show = write_show(tmp_path, "version: 1\nrobot: {port: /dev/ttyUSB9}\nsteps:\n  - play: 1\n")
+    assert main(["run", str(show), "--rehearse", "--no-log"]) == 0
+    assert "port: sim://" in capsys.readouterr().err
