@@ -268,3 +268,19 @@ def test_rehearse_runs_on_the_simulator_whatever_the_show_says(tmp_path, capsys)
     show = write_show(tmp_path, "version: 1\nrobot: {port: /dev/ttyUSB9}\nsteps:\n  - play: 1\n")
     assert main(["run", str(show), "--rehearse", "--no-log"]) == 0
     assert "port: sim://" in capsys.readouterr().err
+
+
+def test_the_summary_lists_who_pressed_what_and_when(tmp_path, capsys):
+    run = Running(tmp_path, GO_SHOW)
+    wait_until(lambda: run.live.waiting)
+    run.go("cue_go", label="nope")
+    run.go()
+    run.finish()
+    assert main(["log", "summary", str(run.log_path)]) == 0
+    out = capsys.readouterr().out
+    assert "commands  2 from the operator (1 refused)" in out
+    assert "cue_go nope  test ERROR: cue 'nope' is not waiting for GO (waiting: 'applause')" in out
+    assert "go           test: GO: applause" in out
+    assert main(["log", "summary", str(run.log_path), "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert [c["command"] for c in record["commands"]] == ["cue_go", "go"] and record["commands_total"] == 2

@@ -15,14 +15,15 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from choreo.logformat import (CHOREO_TOPICS, CLOCK_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING,
-                              ClockRecord, LogRecord, MotionPlay, MotionTracker, RxRecord, StepRecord, TxRecord, is_late,
+from choreo.logformat import (CHOREO_TOPICS, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING,
+                              ClockRecord, CommandRecord, LogRecord, MotionPlay, MotionTracker, RxRecord, StepRecord, TxRecord, is_late,
                               parse, slipped)
 from choreo.review.reader import Cut, LogReader
 FRAME_KINDS = ("stop", "play", "restore", "status")
 REPLY_KINDS = ("ack", "nak", "status", "timeout", "invalid")
 LISTED_PLAYS = 30  # plays listed one by one; past this, per motion slot only
 LISTED_LOG_LINES = 10
+LISTED_COMMANDS = 20
 
 
 class Distribution:
@@ -180,6 +181,8 @@ class Summary:
     robots: dict[str, Summary] = field(default_factory=dict)  # a show for several robots: each one's figures
     skew: Distribution = field(default_factory=Distribution)  # ms, unison plays: first to last motion start
     clock: ClockSpan | None = None  # the show clock against the machine's (/choreo/clock)
+    commands: list[CommandRecord] = field(default_factory=list)  # the operator's, the first LISTED_COMMANDS
+    commands_total: int = 0
 
     @property
     def frames_sent(self) -> int:
@@ -221,6 +224,8 @@ def summary_record(summary: Summary) -> dict:
             "show_zero_wall_ns": _int(summary.result, "show_zero_wall_ns")},
         "motions": [{"motion": m.motion, "plays": m.plays, "measured": m.measured, "median_s": m.median_s}
                     for m in sorted(summary.motions.values(), key=lambda m: m.motion)],
+        "commands": [command.to_json() for command in summary.commands],
+        "commands_total": summary.commands_total,
         "warnings": summary.warnings,
         "errors": summary.errors,
         **({"unison_skew": spread(summary.skew),
@@ -284,6 +289,11 @@ def summarize_reader(reader: LogReader) -> Summary:
                 continue
             if topic == CLOCK_TOPIC:
                 _clock_sample(summary, record)
+                continue
+            if topic == COMMAND_TOPIC:
+                summary.commands_total += 1
+                if len(summary.commands) < LISTED_COMMANDS:
+                    summary.commands.append(record)
                 continue
             robot = record.robot  # type: ignore[union-attr]
             part = solo if robot is None else parts.get(robot) or parts.setdefault(robot, _Part.named(reader, robot, tally))
@@ -568,6 +578,7 @@ def render(summary: Summary) -> Iterable[str]:
     yield from _render_clock(summary)
     yield from _render_motions(summary)
     yield from _render_robots(summary)
+    yield from _render_commands(summary)
     yield f"log lines {summary.warnings} warnings, {summary.errors} errors"
     for line in summary.log_lines:
         word = "error  " if line.level >= ERROR else "warning"
@@ -590,6 +601,21 @@ def _render_clock(summary: Summary) -> Iterable[str]:
         kept = "the machine's"
     drift = f"; show clock minus machine clock {clock.drift_ms:+.3f} ms over {clock.span_s:.1f} s" if clock.samples > 1 else ""
     yield f"clock     {kept}: {clock.samples} samples{drift}"
+
+
+def _render_commands(summary: Summary) -> Iterable[str]:
+    """Who pressed what and when: every GO, panic, start and stop, refused ones included."""
+    if not summary.commands_total:
+        return
+    refused = sum(1 for c in summary.commands if c.status != "ok")
+    yield f"commands  {summary.commands_total} from the operator ({refused} refused)"
+    for command in summary.commands:
+        when = f"{command.show_s:9.3f} s" if command.show_s is not None else "   before  "
+        what = command.command + (f" {command.label}" if command.label else "")
+        verdict = "" if command.status == "ok" else f" {command.status.upper()}"
+        yield f"  {when}  {what:<12} {command.source}{verdict}: {command.message}"
+    if summary.commands_total > len(summary.commands):
+        yield f"  ... and {summary.commands_total - len(summary.commands)} more (choreo log export)"
 
 
 def _int(result: dict[str, str] | None, key: str) -> int | None:
