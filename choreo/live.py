@@ -61,6 +61,9 @@ class CommandEvent:
 
 
 class CommandListener(Protocol):
+    """Hears every command and its answer; may also have `on_waiting(cue: GoCue)`, called once
+    when the show reaches a GO cue (from the runner's thread: be quick)."""
+
     def on_command(self, event: CommandEvent) -> None: ...
 
 
@@ -161,12 +164,18 @@ class Live:
             if key in self._released:  # the others were given their GO as this robot arrived
                 return show.show_at(self._now()) if show is not None else step.planned_s
             cue = self._waiting.get(key)
+            new = cue is None
             if cue is None:
                 cue = self._waiting[key] = GoCue(step, set(), reached_s, key=key)
             cue.robots.add(robot)
             if isinstance(show, HoldingShowClock):
                 show.hold_at(reached_s)
             self._changed.notify_all()
+        if new:
+            for listener in self.listeners:
+                if hasattr(listener, "on_waiting"):  # optional: the console, OSC notify, progress lines
+                    listener.on_waiting(cue)
+        with self._changed:
             while not cue.released:
                 if should_stop():
                     return None

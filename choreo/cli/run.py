@@ -123,7 +123,7 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
             say(f"log: {session.log_path}" if session.log_path else "log: off (--no-log)")
             for note in session.stage.notes:
                 say(f"warning: {note}")
-            with _controls(args, session, stop, console, say) as (live, listeners):
+            with _controls(args, session, stop, console, say, progress) as (live, listeners):
                 result = session.run([progress, *listeners], stop, live)
         report.result = result
         progress.finish()
@@ -168,7 +168,7 @@ def _check_go_sources(session, console: bool, args: argparse.Namespace) -> None:
 
 
 @contextmanager
-def _controls(args, session, stop, console: bool, say):  # type: ignore[no-untyped-def]
+def _controls(args, session, stop, console: bool, say, progress):  # type: ignore[no-untyped-def]
     """The operator's controls for the run: (None, []) for a show run as before; else the Live
     that GO cues wait on, with the console and the OSC server that command it (and listen to
     the show: their progress lines and notifications)."""
@@ -178,6 +178,7 @@ def _controls(args, session, stop, console: bool, say):  # type: ignore[no-untyp
     from choreo.live import Live
 
     live = Live(stop, wait_start=args.wait_start)
+    live.listeners.append(progress)  # off the console, the plain lines say what waits and what was pressed
     listeners: list = []
     opened: list = []
     try:
@@ -506,6 +507,25 @@ class Progress:
         with self._lock:
             self._clear()
             self._write(f"warning: {message}\n")
+            if self._current:
+                self._draw()
+
+    def on_waiting(self, cue) -> None:  # type: ignore[no-untyped-def]
+        """A GO cue is reached (live control): say so, it is what the operator waits for."""
+        self._say_line(f"[{cue.reached_s:8.3f} s] waiting for GO: {cue.name}")
+
+    def on_command(self, event) -> None:  # type: ignore[no-untyped-def]
+        """An operator's command (live control): its answer, with who gave it."""
+        answer = event.answer
+        verdict = "" if answer.ok else "refused: "
+        self._say_line(f"{event.command.name} ({event.command.source}): {verdict}{answer.message}")
+
+    def _say_line(self, text: str) -> None:
+        if self.quiet:
+            return
+        with self._lock:
+            self._clear()
+            self._write(text + "\n")
             if self._current:
                 self._draw()
 
