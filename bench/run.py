@@ -38,6 +38,7 @@ BENCHMARKS = (
     ("skew", "8. unison skew (several robots)"),
     ("motion_start", "9. motion start against the cue"),
     ("music_clock", "10. the music's clock (5-minute song)"),
+    ("go", "11. GO over OSC to the wire"),
 )
 RESULTS = BENCH / "RESULTS.md"
 

@@ -24,7 +24,8 @@ from choreo.runner import PANIC, StopRequest
 from choreo.show.model import PlannedStep
 
 LOCKOUT_S = 0.5  # a second GO this soon after one is taken for a double press, and refused
-COMMANDS = ("go", "panic", "start", "stop", "cue_go")
+COMMANDS = ("go", "panic", "start", "stop", "cue_go")  # what `command` carries out
+REPORTED = ("unknown", "refused")  # what a source reports without carrying out (OSC: an address it does not know, a sender not allowed)
 
 
 @dataclass(frozen=True)
@@ -199,13 +200,20 @@ class Live:
         handler = {"go": self._go, "panic": self._panic, "start": self._start, "stop": self._stop,
                    "cue_go": self._cue_go}.get(command.name)
         answer = handler(command) if handler else Answer("error", f"unknown command {command.name!r}")
-        show = self.show
-        event = CommandEvent(command, answer, self._wall_ns(), show.show_at(self._now()) if show is not None else None)
-        for listener in self.listeners:
-            listener.on_command(event)
+        self.report(command, answer)
         return answer
 
+    def report(self, command: Command, answer: Answer) -> None:
+        """Tell the listeners of a command and its answer: one carried out here, or one a
+        source refused itself (a sender not allowed, an address it does not know)."""
+        show = self.show
+        event = CommandEvent(command, answer, self._wall_ns(), show.show_at(self._now()) if show is not None else None)
+        for listener in list(self.listeners):
+            listener.on_command(event)
+
     def _go(self, command: Command) -> Answer:
+        if not self._started:
+            return self._start(command)  # a show loaded with --wait-start: GO starts it
         with self._changed:
             now = self._now()
             if self._last_go is not None and now - self._last_go < self.lockout_s:
@@ -213,7 +221,7 @@ class Live:
                               f"(a double press? GOs {self.lockout_s:g} s apart at least)")
             waiting = self._in_order()
             if not waiting:
-                return Answer("error", "nothing waits for GO now" + ("" if self._started else " (the show has not started)"))
+                return Answer("error", "nothing waits for GO now")
             self._last_go = now
             return self._release(waiting[0])
 

@@ -232,9 +232,9 @@ class CommandRecord(_Record):
     topic: ClassVar[str] = COMMAND_TOPIC
     command: str
     source: str
-    status: str  # ok | error
+    status: str  # ok | error | denied (a sender not allowed)
     message: str = ""
-    label: str | None = None  # a cue's GO: which cue
+    label: str | None = None  # a cue's GO: which cue; unknown or refused: the OSC address
     show_s: float | None = None  # the show clock when it came (absent before the show started)
 
 

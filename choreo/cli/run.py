@@ -57,16 +57,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        "the system's output")
     live = parser.add_argument_group("live control", "GO cues (`at: go`), the console and OSC; see "
                                      "README, Running a show live")
-    live.add_argument("--osc", type=int, metavar="PORT", help="take OSC commands (/choreo/go, /panic, /start, "
-                      "/stop, /cue/LABEL/go) on this UDP and TCP (SLIP) port, and answer each with /reply/...")
+    live.add_argument("--osc", type=int, metavar="PORT", help="take OSC commands (go, panic, start, stop, "
+                      "cue/LABEL/go under /choreo) on this UDP and TCP (SLIP) port, and answer each with /reply/... "
+                      "(QLab itself listens on 53000: choose another, e.g. 53200)")
     live.add_argument("--osc-host", metavar="HOST", default="127.0.0.1",
                       help="the address OSC listens on (default 127.0.0.1: this machine only)")
     live.add_argument("--osc-allow", action="append", metavar="ADDRESS", default=[],
-                      help="a sender (IP address) OSC takes commands from besides this machine (repeatable)")
+                      help="a sender (IP address, or a network such as 192.168.1.0/24) OSC takes commands from "
+                      "besides this machine (repeatable)")
     live.add_argument("--osc-notify", metavar="HOST:PORT", help="send the show's progress there as OSC "
                       "(step started, GO cue waiting, fault, done)")
     live.add_argument("--wait-start", action="store_true", help="load, open the ports, then wait for "
-                      "/choreo/start (or the console's GO) before the show starts")
+                      "the OSC start command (or the console's GO) before the show starts")
     live.add_argument("--no-console", action="store_true", help="on a terminal, the plain progress "
                       "line instead of the console (GO then comes only over OSC)")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress output")
@@ -125,6 +127,9 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
                 say(f"warning: {note}")
             with _controls(args, session, stop, console, say, progress) as (live, listeners):
                 result = session.run([progress, *listeners], stop, live)
+                for listener in listeners:
+                    if hasattr(listener, "on_result"):  # OSC notify: the run is over
+                        listener.on_result(result)
         report.result = result
         progress.finish()
         say.quiet = args.quiet and result.outcome == "done"

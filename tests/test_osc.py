@@ -1,0 +1,530 @@
+"""OSC control (`choreo.osc`), driven with python-osc's own clients over UDP and TCP (SLIP): every
+command and its QLab-style reply, unknown commands, refused senders, notifications, a port in
+use, and one run through the CLI.
+
+Shows run in real time on the in-process simulator, in a thread, as `choreo run` runs them; the
+OSC server listens on a port the OS chose. Nothing sleeps: replies and notifications are waited
+for with a deadline.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from pythonosc.dispatcher import Dispatcher
+from pythonosc.osc_server import ThreadingOSCUDPServer
+from pythonosc.tcp_client import SimpleTCPClient
+from pythonosc.udp_client import SimpleUDPClient
+
+from choreo.errors import UsageError
+from choreo.live import Live
+from choreo.logformat import ERROR, WARNING
+from choreo.osc import Budget, OscServer, SlipStream, command_for, parse_allow, sender_allowed
+from choreo.runner import PANIC, StopRequest
+from choreo.session import RunRequest, Session
+from runlog import read_log, start_choreo, write_show
+
+GO_SHOW = """\
+    version: 1
+    motions:
+      bow: {number: 2, duration: 0.05}
+    steps:
+      - play: 1
+      - play: bow
+        at: go
+        label: applause
+      - play: 3
+        at: go
+        label: encore
+    """
+TIMEOUT_S = 5.0
+
+
+def wait_until(predicate, timeout: float = TIMEOUT_S) -> None:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.002)
+
+
+class Commands:
+    """A command listener keeping every event (what the log would record)."""
+
+    def __init__(self) -> None:
+        self.events: list = []
+
+    def on_command(self, event) -> None:  # type: ignore[no-untyped-def]
+        self.events.append(event)
+
+    def seen(self) -> list[tuple]:
+        return [(e.command.name, e.command.source, e.command.label, e.answer.status) for e in self.events]
+
+
+def serve(live: Live, **options) -> OscServer:  # type: ignore[no-untyped-def]
+    server = OscServer(live, 0, **options)
+    server.start()
+    live.listeners.append(server)
+    return server
+
+
+def client(transport: str, port: int, host: str = "127.0.0.1"):  # type: ignore[no-untyped-def]
+    if transport == "udp":
+        return SimpleUDPClient(host, port)
+    return SimpleTCPClient(host, port, timeout=TIMEOUT_S)
+
+
+def ask(osc, address: str, *args) -> tuple[str, dict]:  # type: ignore[no-untyped-def]
+    """Send one message, wait for its reply: (reply address, its JSON)."""
+    osc.send_message(address, list(args))
+    reply = next(osc.get_messages(TIMEOUT_S), None)
+    assert reply is not None, f"no reply to {address}"
+    assert len(reply.params) == 1
+    return reply.address, json.loads(reply.params[0])
+
+
+def source_of(osc, transport: str) -> str:  # type: ignore[no-untyped-def]
+    """How the server names this client: an unbound UDP socket's source is the address it sends
+    to (all of them are this machine's)."""
+    sock = osc._sock if transport == "udp" else osc.socket
+    host, port = sock.getsockname()[:2]
+    if host == "0.0.0.0":
+        host = osc._address
+    return f"osc {transport} {host}:{port}"
+
+
+class ShowRun:
+    """A show playing in a thread with a Live and an OscServer, wired as `choreo run` wires them."""
+
+    def __init__(self, tmp_path: Path, body: str = GO_SHOW, *, wait_start: bool = False,
+                 **options) -> None:  # type: ignore[no-untyped-def]
+        self.log_path = tmp_path / "run.mcap"
+        show = write_show(tmp_path, body)
+        self.session = Session.prepare(RunRequest(str(show), log_path=str(self.log_path)))
+        self.live = Live(StopRequest(), wait_start=wait_start, lockout_s=0.0)
+        self.server = serve(self.live, **options)
+        self.result = None
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        try:
+            with self.session:
+                self.result = self.session.run([self.server], live=self.live)
+        except BaseException as exc:  # noqa: BLE001 - the test asserts on it
+            self.error = exc
+
+    def waiting(self) -> list[str]:
+        return [cue.name for cue in self.live.waiting]
+
+    def join(self) -> None:
+        self.thread.join(TIMEOUT_S * 2)
+        assert not self.thread.is_alive()
+        assert self.error is None
+
+    def close(self) -> None:
+        self.server.close()
+
+    def finish(self) -> None:
+        self.join()
+        self.close()
+
+
+@pytest.fixture
+def shows(tmp_path):  # type: ignore[no-untyped-def]
+    """ShowRun(...) for a test; one the test left running (it failed) is stopped and closed."""
+    started: list[ShowRun] = []
+
+    def start(body: str = GO_SHOW, **options) -> ShowRun:  # type: ignore[no-untyped-def]
+        started.append(ShowRun(tmp_path, body, **options))
+        return started[-1]
+
+    yield start
+    for run in started:
+        run.live.stop.request()
+        run.thread.join(TIMEOUT_S)
+        run.close()
+
+
+@pytest.fixture
+def live():  # type: ignore[no-untyped-def]
+    return Live(StopRequest(), wait_start=True, lockout_s=0.0)
+
+
+@pytest.fixture
+def server(live):  # type: ignore[no-untyped-def]
+    server = serve(live)
+    yield server
+    server.close()
+
+
+# -- every command and its reply ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("transport", ["udp", "tcp"])
+def test_every_command_is_answered_in_qlabs_manner(transport, live, server):
+    commands = Commands()
+    live.listeners.append(commands)
+    with client(transport, server.port) as osc:
+        address, go = ask(osc, "/choreo/go")
+        assert address == "/reply/choreo/go"
+        # a show loaded with --wait-start: GO starts it, as /choreo/start does
+        assert go == {"address": "/choreo/go", "status": "ok", "data": {}, "message": "starting"}
+        _, cue = ask(osc, "/choreo/cue/encore/go")
+        assert cue["status"] == "error" and cue["message"].startswith("cue 'encore' is not waiting for GO")
+        assert ask(osc, "/choreo/start") == ("/reply/choreo/start", {
+            "address": "/choreo/start", "status": "error", "message": "the show has started already", "data": {}})
+        assert ask(osc, "/choreo/go")[1]["message"] == "nothing waits for GO now"
+        assert ask(osc, "/choreo/stop")[1]["status"] == "ok"
+        assert ask(osc, "/choreo/stop")[1] == {"address": "/choreo/stop", "status": "error", "data": {},
+                                               "message": "the show is already stopping (stopped)"}
+        assert ask(osc, "/choreo/panic")[1]["status"] == "ok"
+        source = source_of(osc, transport)
+    assert live.panicked and live.stop.reason == PANIC
+    assert commands.seen() == [("go", source, None, "ok"), ("cue_go", source, "encore", "error"),
+                               ("start", source, None, "error"), ("go", source, None, "error"),
+                               ("stop", source, None, "ok"), ("stop", source, None, "error"),
+                               ("panic", source, None, "ok")]
+
+
+@pytest.mark.parametrize("transport", ["udp", "tcp"])
+def test_an_unknown_command_is_answered_with_an_error_and_logged(transport, live, server):
+    commands = Commands()
+    live.listeners.append(commands)
+    with client(transport, server.port) as osc:
+        _, typo = ask(osc, "/choreo/stpo")
+        assert typo == {"address": "/choreo/stpo", "status": "error", "data": {},
+                        "message": "unknown command /choreo/stpo: did you mean '/choreo/stop'?"}
+        address, qlab = ask(osc, "/cue/1/go")
+        assert address == "/reply/cue/1/go"
+        assert qlab["message"] == "unknown command /cue/1/go: did you mean '/choreo/cue/1/go'?"
+        _, other = ask(osc, "/workspace/x/thump")
+        assert other["message"] == ("unknown command /workspace/x/thump (choreo takes /choreo/go, /choreo/panic, "
+                                    "/choreo/start, /choreo/stop, /choreo/cue/LABEL/go)")
+        # a pattern is not expanded: it could reach GO and panic at once
+        _, pattern = ask(osc, "/choreo/*")
+        assert pattern["status"] == "error" and "address patterns are not taken" in pattern["message"]
+        source = source_of(osc, transport)
+    assert not live.stop() and not live.panicked
+    assert commands.seen() == [("unknown", source, address, "error") for address in
+                               ("/choreo/stpo", "/cue/1/go", "/workspace/x/thump", "/choreo/*")]
+
+
+def test_a_buttons_release_is_not_a_second_command(live, server):
+    """TouchOSC sends 1 on press and 0 on release: the release must not be a second GO."""
+    commands = Commands()
+    live.listeners.append(commands)
+    with client("udp", server.port) as osc:
+        assert ask(osc, "/choreo/start", 1.0)[1]["status"] == "ok"
+        release = ask(osc, "/choreo/start", 0.0)[1]
+        assert release["status"] == "ok" and release["data"] == {"ignored": True}
+    assert [name for name, *_ in commands.seen()] == ["start"]
+
+
+def test_the_addresses():
+    assert command_for("/choreo/go") == ("go", None)
+    assert command_for("/choreo/cue/applause/go") == ("cue_go", "applause")
+    assert command_for("/choreo/cue/a b/go") == ("cue_go", "a b")
+    for address in ("/choreo/cue//go", "/choreo/cue/a/b/go", "/choreo/cue/go", "/go", "/choreo/go/"):
+        assert command_for(address) is None
+
+
+# -- a show commanded over OSC -----------------------------------------------------------------
+
+
+def test_go_releases_the_waiting_cue_and_the_show_goes_on(shows):
+    run = shows()
+    with client("tcp", run.server.port) as tcp, client("udp", run.server.port) as udp:
+        wait_until(lambda: run.waiting() == ["applause"])
+        _, first = ask(tcp, "/choreo/cue/applause/go")
+        assert first == {"address": "/choreo/cue/applause/go", "status": "ok", "message": "GO: applause",
+                         "data": {"cue": "applause", "step": 1}}
+        wait_until(lambda: run.waiting() == ["encore"])
+        _, second = ask(udp, "/choreo/go")
+        assert second["status"] == "ok" and second["data"] == {"cue": "encore", "step": 2}
+        sources = [source_of(tcp, "tcp"), source_of(udp, "udp")]
+    run.finish()
+    assert run.result.outcome == "done" and run.result.steps_run == 3
+    log = read_log(run.log_path)
+    commands = [(m["command"], m["source"], m["status"], m.get("label")) for m in log.topic("/choreo/command")]
+    assert commands == [("cue_go", sources[0], "ok", "applause"), ("go", sources[1], "ok", None)]
+
+
+def test_start_begins_a_show_loaded_with_wait_start(shows):
+    run = shows(GO_SHOW.replace("        at: go\n", ""), wait_start=True)
+    with client("udp", run.server.port) as osc:
+        assert ask(osc, "/choreo/cue/x/go")[1]["status"] == "error"
+        assert run.result is None
+        assert ask(osc, "/choreo/start")[1]["status"] == "ok"
+    run.finish()
+    assert run.result.outcome == "done" and run.result.steps_run == 3
+
+
+@pytest.mark.parametrize("command", ["stop", "panic"])
+def test_stop_and_panic_end_a_waiting_show(shows, command):
+    run = shows()
+    with client("udp", run.server.port) as osc:
+        wait_until(lambda: run.waiting() == ["applause"])
+        assert ask(osc, f"/choreo/{command}")[1]["status"] == "ok"
+    run.finish()
+    assert run.result.outcome == "aborted"
+    assert run.live.stop.reason == (PANIC if command == "panic" else "stopped")
+
+
+# -- notifications -----------------------------------------------------------------------------
+
+
+class Receiver:
+    """What QLab (or a logger) would receive on --osc-notify's port: python-osc's own UDP server."""
+
+    def __init__(self) -> None:
+        self.messages: list[tuple] = []
+        dispatcher = Dispatcher()
+        dispatcher.map("/choreo/notify/*", lambda address, *args: self.messages.append((address, *args)))
+        self.server = ThreadingOSCUDPServer(("127.0.0.1", 0), dispatcher)
+        self.address = ("127.0.0.1", self.server.server_address[1])
+        threading.Thread(target=self.server.serve_forever, args=(0.05,), daemon=True).start()
+
+    def of(self, kind: str) -> list[tuple]:
+        return [m[1:] for m in self.messages if m[0] == f"/choreo/notify/{kind}"]
+
+    def close(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+
+
+@pytest.fixture
+def receiver():  # type: ignore[no-untyped-def]
+    receiver = Receiver()
+    yield receiver
+    receiver.close()
+
+
+def test_the_shows_progress_is_notified(shows, receiver):
+    run = shows(notify=receiver.address)
+    assert run.server.listening.endswith(f"; progress to 127.0.0.1:{receiver.address[1]}")
+    with client("udp", run.server.port) as osc:
+        wait_until(lambda: receiver.of("go"))  # announced as the show reaches it, before any GO
+        assert receiver.of("go")[0][:2] == ("applause", 1)
+        ask(osc, "/choreo/go")
+        wait_until(lambda: [cue[0] for cue in receiver.of("go")] == ["applause", "encore"])
+        ask(osc, "/choreo/stop")
+        source = source_of(osc, "udp")
+    run.join()
+    server = run.server
+    server.on_log(WARNING, "a warning")
+    server.on_log(ERROR, "a fault")
+    server.on_log(2, "an info line is not sent")
+    server.on_result(run.result)
+    wait_until(lambda: receiver.of("done"))
+    run.close()
+    steps = receiver.of("step")  # robot, index, label, event, show_s, outcome
+    assert steps[0][:4] == ("", 0, "", "start") and steps[1][:4] == ("", 0, "", "end") and steps[1][5] == "ok"
+    assert [s[:4] for s in steps if s[1] == 1] == [("", 1, "applause", "start"), ("", 1, "applause", "end")]
+    assert ("go", source, "ok", "GO: applause", "") in receiver.of("command")
+    stop = ("stop", source, "ok", "stopping: the exchange in flight, then the abort motion", "")
+    assert stop in receiver.of("command")
+    assert any(w[0].startswith("show stopped at") for w in receiver.of("warning"))  # the runner's own
+    assert ("a warning",) in receiver.of("warning") and receiver.of("fault") == [("a fault",)]
+    assert receiver.of("done") == [("aborted", 2, 0, pytest.approx(run.result.show_s, abs=1e-5))]
+
+
+def test_a_notify_address_that_does_not_resolve_is_a_usage_error(live):
+    server = OscServer(live, 0, notify=("no-such-host.invalid", 53001))
+    with pytest.raises(UsageError, match=r"^--osc-notify no-such-host.invalid:53001: "):
+        server.start()
+    server.close()
+
+
+# -- who may command the show ------------------------------------------------------------------
+
+
+def outside_address() -> str | None:
+    """This machine's address on its network (not loopback), if it has one."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect(("10.255.255.255", 9))  # no packet is sent: only a route is chosen
+            host = probe.getsockname()[0]
+        except OSError:
+            return None
+    return None if host.startswith("127.") or host == "0.0.0.0" else host
+
+
+@pytest.mark.parametrize("transport", ["udp", "tcp"])
+def test_a_sender_from_elsewhere_is_refused_unless_allowed(transport, live):
+    host = outside_address()
+    if host is None:
+        pytest.skip("this machine has no address but loopback")
+    commands = Commands()
+    live.listeners.append(commands)
+    server = serve(live, host="0.0.0.0")
+    assert server.listening == (f"osc: listening on 0.0.0.0:{server.port} (udp and tcp/SLIP), "
+                                "commands from this machine only")
+    try:
+        with client(transport, server.port, host) as osc:  # sent to our own outside address: it comes from there
+            _, refused = ask(osc, "/choreo/start")
+            source = source_of(osc, transport)
+    finally:
+        server.close()
+    assert refused == {"address": "/choreo/start", "status": "denied", "data": {},
+                       "message": f"refused: {host} may not command this show (give --osc-allow {host} to let it)"}
+    assert commands.seen() == [("refused", source, "/choreo/start", "denied")]
+
+    allowed = serve(live, host="0.0.0.0", allow=[host])
+    try:
+        with client(transport, allowed.port, host) as osc:
+            assert ask(osc, "/choreo/start")[1]["status"] == "ok"  # the refused one did not start it
+    finally:
+        allowed.close()
+
+
+def test_a_dual_stack_server_names_an_ipv4_sender_as_ipv4(live):
+    if not socket.has_ipv6:
+        pytest.skip("no IPv6")
+    commands = Commands()
+    live.listeners.append(commands)
+    try:
+        server = serve(live, host="::")
+    except UsageError as exc:
+        pytest.skip(str(exc))
+    try:
+        with client("udp", server.port) as osc:
+            assert ask(osc, "/choreo/start")[1]["status"] == "ok"
+            source = source_of(osc, "udp")
+    finally:
+        server.close()
+    assert commands.seen() == [("start", source, None, "ok")]
+    assert server.listening.startswith(f"osc: listening on [::]:{server.port} ")
+
+
+def test_the_allow_check():
+    allow = parse_allow(["10.0.0.0/24", "192.168.1.20", "fd00::/8"])
+    for host in ("127.0.0.1", "127.3.4.5", "::1", "::ffff:127.0.0.1", "10.0.0.77", "192.168.1.20",
+                 "::ffff:10.0.0.1", "fd00::2"):
+        assert sender_allowed(host, allow), host
+    for host in ("10.0.1.1", "192.168.1.21", "fe80::1%eth0", "8.8.8.8", "", "localhost"):
+        assert not sender_allowed(host, allow), host
+    assert not sender_allowed("192.168.1.20")  # loopback only by default
+    with pytest.raises(UsageError, match=r"^--osc-allow qlab.local: give an IP address"):
+        parse_allow(["qlab.local"])
+
+
+def test_refusals_are_answered_and_logged_within_a_budget():
+    """A forged UDP sender must not make the server a reflector, nor fill the log."""
+    now = [0.0]
+    budget = Budget(burst=3, per_s=1.0, now=lambda: now[0])
+    assert [budget.take() for _ in range(5)] == [0, 0, 0, None, None]
+    now[0] = 1.0
+    assert budget.take() == 2 and budget.take() is None
+
+
+def test_the_start_up_line_says_who_may_command(live):
+    server = OscServer(live, 53000, allow=["192.168.1.20"])
+    assert server.listening == ("osc: listening on 127.0.0.1:53000 (udp and tcp/SLIP), commands from this machine "
+                                "and 192.168.1.20 (but 127.0.0.1 is reachable from this machine only: give "
+                                "--osc-host 0.0.0.0)")
+
+
+# -- transports --------------------------------------------------------------------------------
+
+
+def test_slip_frames_as_any_sender_frames_them():
+    stream = SlipStream()
+    assert stream.feed(b"\xc0one\xc0\xc0tw") == [b"one"]  # double END, a frame cut in two
+    assert stream.feed(b"o\xc0three\xc0") == [b"two", b"three"]  # END-terminated only
+    assert stream.feed(b"\xdb\xdc\xdb\xdd\xc0") == [b"\xc0\xdb"]  # escaped END and ESC
+    assert stream.feed(b"bad\xdbx\xc0ok\xc0") == [b"ok"]  # a malformed frame is dropped, not the stream
+    with pytest.raises(ValueError):
+        stream.feed(b"x" * 70000)
+
+
+def test_a_tcp_message_cut_in_pieces_and_end_terminated_is_answered(live, server):
+    from pythonosc.osc_message_builder import build_msg
+
+    packet = build_msg("/choreo/start", []).dgram
+    with socket.create_connection(("127.0.0.1", server.port), timeout=TIMEOUT_S) as sock:
+        sock.sendall(packet[:5])
+        time.sleep(0.01)  # a second segment
+        sock.sendall(packet[5:] + b"\xc0")
+        reply = b""
+        while not reply.endswith(b"\xc0") or len(reply) < 2:
+            reply += sock.recv(4096)
+    assert b"/reply/choreo/start" in reply and b'"status": "ok"' in reply
+
+
+def test_a_port_in_use_is_a_usage_error(live):
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        with pytest.raises(UsageError) as caught:
+            OscServer(live, port).start()
+    assert str(caught.value) == (f"--osc {port}: cannot listen on 127.0.0.1:{port}: Address already in use "
+                                 "(another program listens there: choose another port)")
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with pytest.raises(UsageError, match=rf"^--osc {port}: cannot listen on 127.0.0.1:{port} \(tcp\): "):
+            OscServer(live, port).start()
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
+            udp.bind(("127.0.0.1", port))  # the UDP half was let go
+
+
+def test_close_ends_open_connections_and_can_be_called_twice(live):
+    server = serve(live)
+    with client("tcp", server.port) as osc:
+        assert ask(osc, "/choreo/start")[1]["status"] == "ok"
+        server.close()
+        assert osc.socket.recv(10) == b""  # the connection was closed
+    server.close()
+
+
+# -- through the CLI ---------------------------------------------------------------------------
+
+
+def free_port() -> int:
+    """A port number free for both UDP and TCP right now."""
+    while True:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp, \
+                socket.socket(socket.AF_INET, socket.SOCK_STREAM) as tcp:
+            udp.bind(("127.0.0.1", 0))
+            port = udp.getsockname()[1]
+            try:
+                tcp.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+
+
+def test_choreo_run_takes_go_over_osc(tmp_path):
+    one_cue = GO_SHOW.replace("        label: encore\n", "").replace("      - play: 3\n        at: go\n", "")
+    show = write_show(tmp_path, one_cue)
+    log_path = tmp_path / "run.mcap"
+    port = free_port()
+    process = start_choreo("run", str(show), "--osc", str(port), "--log", str(log_path))
+    try:
+        with client("udp", port) as osc:
+            deadline = time.monotonic() + 30
+            while True:  # until choreo listens and the show has reached its GO cue
+                assert time.monotonic() < deadline and process.poll() is None, "no GO taken"
+                osc.send_message("/choreo/go", [])
+                reply = next(osc.get_messages(0.1), None)
+                if reply is not None and json.loads(reply.params[0])["status"] == "ok":
+                    break
+            source = source_of(osc, "udp")
+        _, err = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert process.returncode == 0, err
+    assert f"osc: listening on 127.0.0.1:{port} (udp and tcp/SLIP), commands from this machine only" in err
+    commands = read_log(log_path).topic("/choreo/command")
+    taken = {"command": "go", "source": source, "status": "ok", "message": "GO: applause"}
+    assert taken.items() <= commands[-1].items()
+    assert all(m["message"].startswith("nothing waits for GO now") for m in commands[:-1])
