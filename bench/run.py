@@ -39,6 +39,7 @@ BENCHMARKS = (
     ("motion_start", "9. motion start against the cue"),
     ("music_clock", "10. the music's clock (5-minute song)"),
     ("go", "11. GO over OSC to the wire"),
+    ("go_key", "12. GO by a key on the console to the wire"),
 )
 RESULTS = BENCH / "RESULTS.md"
 

@@ -142,6 +142,11 @@ class Live:
         self._released: set[object] = set()  # GO cues already given their GO
         self._last_go: float | None = None
 
+    @property
+    def started(self) -> bool:
+        """False until the show may start (with --wait-start, until start or GO)."""
+        return self._started
+
     # -- what the show asks ------------------------------------------------------------------
 
     def await_start(self) -> bool:

@@ -156,3 +156,53 @@ def prepare(request):  # type: ignore[no-untyped-def]
     from choreo.session import Session
 
     return Session.prepare(request, VirtualTime())
+
+
+class LiveRun:
+    """A show playing in a thread with a `Live`, as `choreo run` plays it with live control:
+    the test gives the commands (as the console or OSC would), and `attach(live)` may add
+    controls that also listen to the run (an OscServer). Real time, the in-process simulator."""
+
+    def __init__(self, tmp_path: Path, body: str, *, wait_start: bool = False, lockout_s: float | None = None,
+                 attach=None, **request) -> None:  # type: ignore[no-untyped-def]
+        import threading
+
+        from choreo.live import Live
+        from choreo.runner import StopRequest
+        from choreo.session import RunRequest, Session
+
+        show = write_show(tmp_path, body)
+        self.log_path = tmp_path / "run.mcap"
+        self.session = Session.prepare(RunRequest(str(show), log_path=str(self.log_path), **request))
+        timing = {} if lockout_s is None else {"lockout_s": lockout_s}
+        self.live = Live(StopRequest(), wait_start=wait_start, **timing)
+        self.listeners = attach(self.live) if attach is not None else []
+        self.result = None
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        try:
+            with self.session:
+                self.result = self.session.run(self.listeners, live=self.live)
+        except BaseException as exc:  # noqa: BLE001 - the test asserts on it
+            self.error = exc
+
+    def go(self, name: str = "go", **kwargs):  # type: ignore[no-untyped-def]
+        """A command from the test, as from a key or an OSC message."""
+        from choreo.live import Command
+
+        return self.live.command(Command(name, "test", **kwargs))
+
+    def until_waiting(self, name: str | None = None, timeout: float = 10.0) -> None:
+        """Until the show waits at a GO cue (`name`: that one)."""
+        assert wait_for(lambda: bool(self.live.waiting) and name in (None, self.live.waiting[0].name),
+                        timeout, every=0.005), f"no GO cue {name or ''} waiting"
+
+    def finish(self, timeout: float = 20.0) -> None:
+        self.thread.join(timeout)
+        assert not self.thread.is_alive()
+
+    def log(self) -> RunLog:
+        return read_log(self.log_path)

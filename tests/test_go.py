@@ -10,15 +10,13 @@ from __future__ import annotations
 import json
 import threading
 import time
-from pathlib import Path
 
 import pytest
 
 from choreo.cli import main
-from choreo.live import Command, Live
 from choreo.runner import PANIC, StopRequest
 from choreo.session import RunRequest, Session
-from runlog import read_log, write_show
+from runlog import LiveRun as Running, read_log, wait_for, write_show
 
 GO_SHOW = """\
 version: 1
@@ -34,45 +32,6 @@ steps:
     at: 0.5
     label: after
 """
-
-
-def wait_until(predicate, timeout: float = 10.0) -> None:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.005)
-
-
-class Running:
-    """A session playing in a thread, with its Live for the test to command."""
-
-    def __init__(self, tmp_path: Path, body: str, *, wait_start: bool = False, port: str | None = None,
-                 **request) -> None:  # type: ignore[no-untyped-def]
-        show = write_show(tmp_path, body)
-        self.log_path = tmp_path / "run.mcap"
-        self.session = Session.prepare(RunRequest(str(show), log_path=str(self.log_path), port=port, **request))
-        self.live = Live(StopRequest(), wait_start=wait_start)
-        self.result = None
-        self.error: BaseException | None = None
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
-
-    def _run(self) -> None:
-        try:
-            with self.session:
-                self.result = self.session.run([], live=self.live)
-        except BaseException as exc:  # noqa: BLE001 - the test asserts on it
-            self.error = exc
-
-    def go(self, name: str = "go", **kwargs):  # type: ignore[no-untyped-def]
-        return self.live.command(Command(name, "test", **kwargs))
-
-    def finish(self) -> None:
-        self.thread.join(20)
-        assert not self.thread.is_alive()
-
-    def log(self):  # type: ignore[no-untyped-def]
-        return read_log(self.log_path)
 
 
 def starts(log, robot: str | None = None) -> dict:  # type: ignore[no-untyped-def]
@@ -94,7 +53,7 @@ def test_the_plan_shows_where_the_show_waits_for_go(tmp_path, capsys):
 
 def test_the_machine_clock_holds_while_a_go_cue_waits(tmp_path):
     run = Running(tmp_path, GO_SHOW)
-    wait_until(lambda: run.live.waiting)
+    run.until_waiting()
     assert run.live.waiting[0].name == "applause"
     time.sleep(0.4)  # the operator takes a while: the show clock holds
     answer = run.go()
@@ -119,9 +78,9 @@ def test_the_machine_clock_holds_while_a_go_cue_waits(tmp_path):
 def test_go_refuses_a_double_press_and_a_go_with_nothing_waiting(tmp_path):
     run = Running(tmp_path, "version: 1\nsteps:\n  - play: 1\n    at: go\n    label: bow\n"
                             "  - play: 4\n    at: go\n    label: encore\n")
-    wait_until(lambda: run.live.waiting)
+    run.until_waiting()
     assert run.go().ok
-    wait_until(lambda: run.live.waiting and run.live.waiting[0].name == "encore")  # right after the bow
+    run.until_waiting("encore")  # right after the bow
     double = run.go()
     assert not double.ok and "a double press?" in double.message
     time.sleep(0.5)
@@ -136,7 +95,7 @@ def test_go_refuses_a_double_press_and_a_go_with_nothing_waiting(tmp_path):
 
 def test_a_cues_go_by_its_label(tmp_path):
     run = Running(tmp_path, GO_SHOW)
-    wait_until(lambda: run.live.waiting)
+    run.until_waiting()
     wrong = run.go("cue_go", label="encore")
     assert not wrong.ok and wrong.message == "cue 'encore' is not waiting for GO (waiting: 'applause')"
     assert run.go("cue_go", label="applause").ok
@@ -156,7 +115,7 @@ def test_panic_halts_every_robot_and_plays_the_aborts(tmp_path):
             at: go
         """
     run = Running(tmp_path, body)
-    wait_until(lambda: run.live.waiting)
+    run.until_waiting()
     assert run.live.waiting[0].robots == {"a", "b"}
     assert run.go("panic").ok
     run.finish()
@@ -180,7 +139,7 @@ def test_one_go_releases_a_shared_step_for_every_robot(tmp_path):
             label: together
         """
     run = Running(tmp_path, body)
-    wait_until(lambda: run.live.waiting and run.live.waiting[0].robots == {"a", "b"})
+    assert wait_for(lambda: bool(run.live.waiting) and run.live.waiting[0].robots == {"a", "b"}, 10, 0.005)
     assert run.go().ok
     run.finish()
     log = run.log()
@@ -212,7 +171,7 @@ def test_in_a_music_show_a_go_cue_waits_while_the_music_plays_on(tmp_path):
     body = ("version: 1\nmusic: {file: song.wav}\nsteps:\n  - play: 1\n  - play: 2\n    at: go\n    label: bow\n"
             "  - play: 3\n    at: 0.8\n    label: later\n")
     run = Running(tmp_path, body, audio_device="null")
-    wait_until(lambda: run.live.waiting)
+    run.until_waiting()
     time.sleep(0.3)
     assert run.go().ok
     run.finish()
@@ -229,7 +188,7 @@ def test_a_go_cue_in_a_repeat_waits_on_every_pass(tmp_path):
     body = "version: 1\nsteps:\n  - repeat: 3\n    steps:\n      - play: 1\n        at: go\n        label: bow\n"
     run = Running(tmp_path, body)
     for name in ("bow", "bow#2", "bow#3"):
-        wait_until(lambda: run.live.waiting and run.live.waiting[0].name == name)
+        run.until_waiting(name)
         time.sleep(0.5)  # past the lockout
         assert run.go().ok
     run.finish()
@@ -272,7 +231,7 @@ def test_rehearse_runs_on_the_simulator_whatever_the_show_says(tmp_path, capsys)
 
 def test_the_summary_lists_who_pressed_what_and_when(tmp_path, capsys):
     run = Running(tmp_path, GO_SHOW)
-    wait_until(lambda: run.live.waiting)
+    run.until_waiting()
     run.go("cue_go", label="nope")
     run.go()
     run.finish()

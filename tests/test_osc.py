@@ -26,8 +26,7 @@ from choreo.live import Live
 from choreo.logformat import ERROR, WARNING
 from choreo.osc import Budget, OscServer, SlipStream, command_for, parse_allow, sender_allowed
 from choreo.runner import PANIC, StopRequest
-from choreo.session import RunRequest, Session
-from runlog import read_log, start_choreo, write_show
+from runlog import LiveRun, read_log, start_choreo, write_show
 
 GO_SHOW = """\
     version: 1
@@ -97,27 +96,17 @@ def source_of(osc, transport: str) -> str:  # type: ignore[no-untyped-def]
     return f"osc {transport} {host}:{port}"
 
 
-class ShowRun:
+class ShowRun(LiveRun):
     """A show playing in a thread with a Live and an OscServer, wired as `choreo run` wires them."""
 
     def __init__(self, tmp_path: Path, body: str = GO_SHOW, *, wait_start: bool = False,
                  **options) -> None:  # type: ignore[no-untyped-def]
-        self.log_path = tmp_path / "run.mcap"
-        show = write_show(tmp_path, body)
-        self.session = Session.prepare(RunRequest(str(show), log_path=str(self.log_path)))
-        self.live = Live(StopRequest(), wait_start=wait_start, lockout_s=0.0)
-        self.server = serve(self.live, **options)
-        self.result = None
-        self.error: BaseException | None = None
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
+        super().__init__(tmp_path, body, wait_start=wait_start, lockout_s=0.0,
+                         attach=lambda live: [self._serve(live, options)])
 
-    def _run(self) -> None:
-        try:
-            with self.session:
-                self.result = self.session.run([self.server], live=self.live)
-        except BaseException as exc:  # noqa: BLE001 - the test asserts on it
-            self.error = exc
+    def _serve(self, live: Live, options: dict) -> OscServer:
+        self.server = serve(live, **options)
+        return self.server
 
     def waiting(self) -> list[str]:
         return [cue.name for cue in self.live.waiting]

@@ -1,0 +1,637 @@
+"""The live console of `choreo run` on a terminal: where the show is, what comes next, how the
+links are doing, and the operator's keys (GO, panic, stop).
+
+It is a listener like the others (the run's steps and log lines, the operator's commands, each
+link's frames and replies) and keeps only what it draws; the commands go through `Live`, so a
+key is answered exactly as an OSC message would be, and the log records it the same way.
+
+Two things it must never do. Delay the show: the runners call its listener methods on their
+own path, so those only note what happened under a short lock; drawing happens in its own
+thread, which also keeps clear of the moments a step falls due or a GO was just given (a redraw
+holds Python's lock for a few milliseconds, and a runner woken then would wait for it), and
+draws only what changed: while a GO cue waits, the clock holds and the screen stays still, so
+the GO, when it comes, finds nothing drawing.
+And leave the terminal unusable: the key mode (cbreak, no echo) is undone on every way out.
+
+rich lays the screen out (a table whose columns share the width, every cell cut with `…`), so
+it fits any width from 60 columns; everything goes to `out` (stderr): stdout is for --json.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import statistics
+import sys
+import termios
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TextIO
+
+from rich.console import Console as RichConsole
+from rich.console import Group, RenderableType
+from rich.live import Live as RichLive
+from rich.rule import Rule
+from rich.table import Table
+from rich.text import Text
+
+from choreo.link import Link, RxEvent, TxEvent
+from choreo.live import Command, CommandEvent, HoldingShowClock, Live
+from choreo.logformat import ERROR, INFO, WARNING
+from choreo.runner import StepEvent
+from choreo.show.model import SOLO, PlannedStep, StepKind
+
+REFRESH_S = 0.2  # five looks a second: the show time moves smoothly enough (and is drawn to 0.1 s)
+QUIET_BEFORE_S = 0.06  # no redraw starts this close before a step falls due (a cue's lead included)
+QUIET_AFTER_S = 0.03  # nor this soon after it, or after a GO (its frames go out then)
+MAX_POSTPONE_S = 0.5  # cues closer together than this still let the screen move
+ESCAPE_WAIT_S = 0.03  # a byte this soon after Esc makes it an escape sequence (an arrow key), not Esc
+KEY_POLL_S = 0.05  # how often the key reader looks up from the terminal to see whether to stop
+NOTES = 5  # lines of log and answers on screen
+LATENCIES = 20  # the replies link health is the median of
+
+LEGEND = "Space/Enter GO · Esc panic · q stop · Ctrl-C stop"
+QUESTION = "stop the show? y/n"
+WAITING_STYLE = "bold black on yellow"
+STYLES = {ERROR: "bold red", WARNING: "yellow", INFO: ""}
+
+
+# -- what is drawn -----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Note:
+    """A line of the console's log pane: a run's log line or a command's answer."""
+
+    text: str
+    style: str = ""
+    show_s: float | None = None
+
+
+@dataclass(frozen=True)
+class Row:
+    """A robot's line: its step now, its next step, its link's health."""
+
+    robot: str
+    now: str
+    next: str
+    latency_ms: float | None  # the median of the last replies (None: no reply yet)
+    retries: int = 0
+    now_style: str = ""
+    trouble: bool = False  # a retry or a failed reply so far
+
+
+@dataclass(frozen=True)
+class Screen:
+    """Everything the console draws at one moment, taken under the lock and drawn outside it."""
+
+    title: str
+    show_s: float | None  # None: the show clock has not started
+    clock: str  # which clock keeps the show, and whether it holds
+    cue: str  # the countdown to the next timed cue
+    go: str  # the next GO cue (waiting now, or coming)
+    go_waiting: bool
+    rows: tuple[Row, ...]
+    notes: tuple[Note, ...]
+    prompt: str | None = None  # a question the next key answers
+    legend: str = LEGEND
+
+
+NARROW = 80  # below this many columns the link column is written short
+
+
+def render(screen: Screen, width: int = NARROW) -> RenderableType:
+    """The console as rich renderables: every line kept to one line of the terminal, whatever
+    its width (cells cut with `…`, never wrapped)."""
+    parts: list[RenderableType] = [_title(screen), _line(screen.cue),
+                                   _line(screen.go, WAITING_STYLE if screen.go_waiting else "bold"),
+                                   _robots(screen.rows, width < NARROW), Rule(style="dim")]
+    parts += [_line(_note_text(note), note.style) for note in screen.notes] or [_line("(no messages yet)", "dim")]
+    if screen.prompt is not None:
+        parts.append(_line(screen.prompt, "bold reverse"))
+    else:
+        parts.append(_line(screen.legend, "dim"))
+    return Group(*parts)
+
+
+def _line(text: str, style: str = "") -> Text:
+    return Text(text, style=style, no_wrap=True, overflow="ellipsis", end="\n")
+
+
+def _note_text(note: Note) -> str:
+    return f"{note.show_s:7.1f} s  {note.text}" if note.show_s is not None else f"{'':11}{note.text}"
+
+
+def _title(screen: Screen) -> Table:
+    """The show's name, cut first; its time and clock, kept whole as long as they fit."""
+    grid = Table.grid(expand=True)
+    grid.add_column(ratio=1, no_wrap=True, overflow="ellipsis")
+    grid.add_column(no_wrap=True, overflow="ellipsis", justify="right")
+    time = f"{screen.show_s:.1f} s" if screen.show_s is not None else "not started"
+    grid.add_row(Text(screen.title, style="bold"), Text(f" show {time} · {screen.clock}"))
+    return grid
+
+
+def _robots(rows: tuple[Row, ...], narrow: bool) -> Table:
+    """A row a robot; `now` and `next` share what the name and link columns leave."""
+    table = Table(expand=True, box=None, show_edge=False, pad_edge=False, padding=(0, 1, 0, 0),
+                  header_style="dim")
+    table.add_column("robot", no_wrap=True, overflow="ellipsis", max_width=12)
+    table.add_column("now", ratio=1, no_wrap=True, overflow="ellipsis")
+    table.add_column("next", ratio=1, no_wrap=True, overflow="ellipsis")
+    table.add_column("link" if narrow else "link (median, retries)", no_wrap=True, overflow="ellipsis",
+                     max_width=24)
+    for row in rows:
+        table.add_row(row.robot, Text(row.now, style=row.now_style), row.next,
+                      Text(_link_text(row, narrow), style="yellow" if row.trouble else ""))
+    return table
+
+
+def _link_text(row: Row, narrow: bool) -> str:
+    """`1.6 ms, 0 retries`; narrow, `1.6ms r0`."""
+    if narrow:
+        latency = f"{row.latency_ms:.1f}ms" if row.latency_ms is not None else "-ms"
+        return f"{latency} r{row.retries}"
+    latency = f"{row.latency_ms:.1f} ms" if row.latency_ms is not None else "- ms"
+    return f"{latency}, {row.retries} retr{'y' if row.retries == 1 else 'ies'}"
+
+
+# -- what the console keeps --------------------------------------------------------------------
+
+
+@dataclass
+class _Robot:
+    """One robot as the console knows it: its steps, where it is in them, its link's replies."""
+
+    name: str
+    steps: tuple[PlannedStep, ...]  # its own steps, from where it starts
+    at: int = -1  # position in `steps` of its current step (-1: none started)
+    ended: bool = False  # the current step has ended
+    started_s: float = 0.0  # show time the current step started
+    latencies_ms: deque[float] = field(default_factory=lambda: deque(maxlen=LATENCIES))
+    retries: int = 0
+    failed: int = 0  # tries without a good reply
+
+    @property
+    def current(self) -> PlannedStep | None:
+        return self.steps[self.at] if self.at >= 0 else None
+
+    @property
+    def ahead(self) -> tuple[PlannedStep, ...]:
+        return self.steps[self.at + 1:]
+
+    @property
+    def done(self) -> bool:
+        return self.ended and self.at == len(self.steps) - 1
+
+    def moved_to(self, step: PlannedStep, show_s: float) -> None:
+        self.at = next((i for i, s in enumerate(self.steps) if s.index == step.index), self.at)
+        self.ended = False
+        self.started_s = show_s
+
+    def dues_s(self) -> list[float]:
+        """When, on the show clock, this robot's runner next wakes to send: the end of the wait
+        it is in, and its next timed cue (a step after a play goes at once: no wake-up)."""
+        step = self.current
+        dues = [s.at for s in self.ahead if s.at is not None][:1]
+        if step is not None and step.kind is StepKind.WAIT and not self.ended:
+            dues.append(self.started_s + (step.seconds or 0.0))
+        return dues
+
+
+def _step_text(step: PlannedStep) -> str:
+    label = f" '{step.label}'" if step.label else ""
+    when = "GO " if step.go else f"@{step.at:g} s " if step.at is not None else ""
+    return f"{when}{step.index}{label}: {step.describe()}"
+
+
+@dataclass
+class _LinkWatch:
+    """A robot's link listener: reply latencies and retries, for the robot's link column."""
+
+    console: Console
+    robot: str
+
+    def on_tx(self, event: TxEvent) -> None:
+        if event.attempt > 1:
+            self.console._note_retry(self.robot)
+
+    def on_rx(self, event: RxEvent) -> None:
+        self.console._note_reply(self.robot, event.latency_s * 1e3, event.reply.ok)
+
+
+# -- the terminal and its keys -----------------------------------------------------------------
+
+
+class TerminalMode:
+    """The terminal in cbreak without echo (a key arrives when pressed, and is not printed over
+    the console), signals left on (Ctrl-C still stops the show); `restore` puts back the
+    settings exactly as they were."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self._saved: list | None = None
+
+    def enter(self) -> None:
+        saved = termios.tcgetattr(self.fd)
+        mode = [*saved[:6], list(saved[6])]
+        mode[3] &= ~(termios.ICANON | termios.ECHO)
+        mode[6][termios.VMIN] = 1
+        mode[6][termios.VTIME] = 0
+        termios.tcsetattr(self.fd, termios.TCSANOW, mode)
+        self._saved = saved
+
+    def restore(self) -> None:
+        """Unread keys are dropped (TCSAFLUSH): a GO pressed once too often must not land on
+        the shell's prompt."""
+        saved, self._saved = self._saved, None
+        if saved is not None:
+            termios.tcsetattr(self.fd, termios.TCSAFLUSH, saved)
+
+
+def _in_foreground(fd: int) -> bool:
+    """Whether this process has the terminal's foreground: a background job that set the
+    terminal's mode would be stopped by SIGTTOU, and its keys go to the shell anyway."""
+    try:
+        return os.tcgetpgrp(fd) == os.getpgrp()
+    except OSError:
+        return True  # not our controlling terminal: no job control to get in the way
+
+
+KEYS = {b" ": "go", b"\r": "go", b"\n": "go", b"q": "q", b"Q": "q"}
+
+
+class KeyReader:
+    """Reads keys off the terminal in a thread of its own and hands each to `on_key` by name:
+    `go`, `escape`, `q`, or the character itself (an answer to a question).
+
+    Esc starts the escape sequences of arrow and function keys too: an Esc followed by another
+    byte within ESCAPE_WAIT_S is such a sequence, read to its end and ignored."""
+
+    def __init__(self, fd: int, on_key: Callable[[str], None], escape_wait_s: float = ESCAPE_WAIT_S) -> None:
+        self.fd = fd
+        self.on_key = on_key
+        self.escape_wait_s = escape_wait_s
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="choreo-keys", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def close(self) -> None:
+        self._done.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join(1.0)
+
+    def _loop(self) -> None:
+        while not self._done.is_set():
+            byte = self._read(KEY_POLL_S)
+            if byte is None:
+                continue
+            key = self._escape() if byte == b"\x1b" else KEYS.get(byte, byte.decode("latin-1"))
+            if key is not None:
+                self.on_key(key)
+
+    def _escape(self) -> str | None:
+        """A lone Esc, or None for an escape sequence (read to its final byte)."""
+        second = self._read(self.escape_wait_s)
+        if second is None or second == b"\x1b":  # Esc pressed twice in a hurry is still Esc
+            return "escape"
+        if second == b"[":  # CSI: parameters and intermediates, then a final byte @..~
+            while (byte := self._read(self.escape_wait_s)) is not None and not 0x40 <= byte[0] <= 0x7E:
+                pass
+        elif second == b"O":  # SS3: one more byte (F1-F4, arrows in application mode)
+            self._read(self.escape_wait_s)
+        return None
+
+    def _read(self, timeout: float) -> bytes | None:
+        """One byte, or None if none came within `timeout`; the end of input stops the reader."""
+        if self._done.is_set():
+            return None
+        try:
+            ready, _, _ = select.select([self.fd], [], [], timeout)
+            if not ready:
+                return None
+            byte = os.read(self.fd, 1)
+        except (OSError, ValueError):
+            byte = b""
+        if not byte:
+            self._done.set()
+            return None
+        return byte
+
+
+# -- the console -------------------------------------------------------------------------------
+
+
+class Console:
+    """The live console; see the module's docstring. Created by `choreo run` when stdin and
+    stderr are terminals, started once the ports are open, closed when the run is over."""
+
+    def __init__(self, session, live: Live, *, out: TextIO | None = None,  # type: ignore[no-untyped-def]
+                 keys: TextIO | None = None, width: int | None = None) -> None:
+        """`out`: where it draws (default stderr); `keys`: the terminal it reads (default
+        stdin; one that is not a terminal gives no keys); `width`: fixed, for tests."""
+        out = out if out is not None else sys.stderr
+        self.session = session
+        self.live = live
+        self.out = out
+        self.keys = keys if keys is not None else sys.stdin
+        self._lock = threading.Lock()
+        self._robots = {name: _Robot(name, tuple(s for s in plan.steps[session.starts[name]:] if s.is_for(name)))
+                        for name, plan in session.plans.items()}
+        self._notes: deque[Note] = deque(maxlen=NOTES)
+        self._asking = False
+        self._closing = False
+        self._quiet_until = 0.0  # monotonic time before which no redraw starts (a GO's frames)
+        self._done = threading.Event()
+        self._watches: list[tuple[Link, _LinkWatch]] = []
+        self._mode: TerminalMode | None = None
+        self._reader: KeyReader | None = None
+        self._redraw: threading.Thread | None = None
+        self._width = width  # fixed (tests); None: the terminal's, measured at each redraw
+        self._screen = RichConsole(file=out, width=width, highlight=False, emoji=False, markup=False)
+        self._rich = RichLive(console=self._screen, auto_refresh=False, transient=False,
+                              redirect_stdout=False, redirect_stderr=out is sys.__stderr__)
+        self._drawn: tuple[Screen, int] | None = None  # what is on the terminal, at which width
+
+    # -- starting and stopping -----------------------------------------------------------------
+
+    def start(self) -> None:
+        """Keys, link listeners and the screen; if any of them fails, the terminal is put back."""
+        try:
+            self._take_keys()
+            self._watch_links()
+            self._rich.start()
+            self._draw()
+            self._redraw = threading.Thread(target=self._redraw_loop, name="choreo-console", daemon=True)
+            self._redraw.start()
+        except BaseException:
+            self.close()
+            raise
+
+    def _take_keys(self) -> None:
+        if not self.keys.isatty():
+            return
+        fd = self.keys.fileno()
+        if not _in_foreground(fd):
+            self._add(Note("keys off: choreo runs in the background (bring it back with fg)", "yellow"))
+            return
+        self._mode = TerminalMode(fd)
+        self._mode.enter()
+        self._reader = KeyReader(fd, self.on_key)
+        self._reader.start()
+
+    def close(self) -> None:
+        """Stop reading keys and drawing, leave the last screen (saying how the show ended) and
+        put the terminal back as it was, whatever fails on the way."""
+        self._done.set()
+        try:
+            if self._reader is not None:
+                self._reader.close()
+            if self._redraw is not None and self._redraw is not threading.current_thread():
+                self._redraw.join(1.0)
+            for link, watch in self._watches:
+                if watch in link.listeners:
+                    link.listeners.remove(watch)
+            self._watches.clear()
+            with self._lock:
+                self._closing = True
+                self._asking = False
+            for last in (self._draw, self._rich.stop):  # stop also shows the cursor again
+                try:
+                    last()
+                except (OSError, ValueError):
+                    pass  # the terminal went away: nothing left to draw on
+        finally:
+            self._restore_terminal()
+
+    def _restore_terminal(self) -> None:
+        mode, self._mode = self._mode, None
+        if mode is not None:
+            try:
+                mode.restore()
+            except (termios.error, OSError):
+                pass  # the terminal is gone (hung up): no mode left to restore
+
+    def _watch_links(self) -> None:
+        stage = getattr(self.session, "stage", None)
+        for name, link in (stage.links.items() if stage is not None else ()):
+            watch = _LinkWatch(self, name)
+            link.listeners.append(watch)
+            self._watches.append((link, watch))
+
+    def _redraw_loop(self) -> None:
+        """Redraw REFRESH_S apart, each put off past any moment a runner is about to send."""
+        while not self._done.wait(REFRESH_S):
+            if self._done.wait(self._quiet_left()):
+                return
+            try:
+                self._draw()
+            except (OSError, ValueError):
+                return  # the terminal is gone; the show goes on without its screen
+
+    def _draw(self) -> None:
+        """Redraw, if anything on screen would change (the terminal's width included)."""
+        screen = self.screen()
+        self._fit_terminal()
+        drawn = (screen, self._screen.width)
+        if drawn != self._drawn:
+            self._rich.update(render(screen, drawn[1]), refresh=True)
+            self._drawn = drawn
+
+    def _quiet_left(self) -> float:
+        """How long until no runner is about to send (0: now), at most MAX_POSTPONE_S."""
+        now = self.session.clock.mono()
+        with self._lock:
+            windows = [(self._quiet_until - QUIET_AFTER_S, self._quiet_until)] + self._due_windows()
+        until = now
+        for start, end in sorted(windows):
+            if start <= until < end:
+                until = end
+        return min(until - now, MAX_POSTPONE_S)
+
+    def _fit_terminal(self) -> None:
+        """The terminal's own size, measured on `out`: it may be resized mid-show, and an
+        exported COLUMNS or LINES (which rich would take over it) may say otherwise."""
+        if self._width is not None:
+            return
+        try:
+            size = os.get_terminal_size(self.out.fileno())
+        except (OSError, ValueError, AttributeError):
+            return  # not a terminal: rich's own guess
+        if size.columns > 0 and size.lines > 0:
+            self._screen.size = (size.columns, size.lines)
+
+    def _due_windows(self) -> list[tuple[float, float]]:
+        """The lock is held. Monotonic windows around each robot's next due time."""
+        show = self.live.show
+        if show is None:
+            return []
+        windows = []
+        for robot in self._robots.values():
+            for due in robot.dues_s():
+                mono = show.mono_at(due)
+                windows.append((mono - QUIET_BEFORE_S, mono + QUIET_AFTER_S))
+        return windows
+
+    # -- keys ----------------------------------------------------------------------------------
+
+    def on_key(self, key: str) -> None:
+        """A key from the reader; a command that fails is said on screen, and the keys go on."""
+        try:
+            self._on_key(key)
+        except Exception as exc:  # noqa: BLE001 - the next key must still work (Esc above all)
+            self._add(Note(f"key {key!r} failed: {exc}", "bold red", self._show_s()))
+
+    def _on_key(self, key: str) -> None:
+        """Esc panics whatever else is going on; a question takes the next key as its answer;
+        Space or Enter is GO (which also starts a show loaded with --wait-start)."""
+        if key == "escape":
+            self._ask(False)
+            self.live.command(Command("panic", "key"))
+            return
+        with self._lock:
+            asking = self._asking
+        if asking:
+            self._ask(False)
+            if key in ("y", "Y"):
+                self.live.command(Command("stop", "key"))
+            else:
+                self._add(Note("stop cancelled: the show goes on", "dim", self._show_s()))
+        elif key == "go":
+            self.live.command(Command("go", "key"))
+        elif key == "q":
+            self._ask(True)
+
+    def _ask(self, asking: bool) -> None:
+        with self._lock:
+            self._asking = asking
+
+    # -- listeners -----------------------------------------------------------------------------
+
+    def on_step(self, event: StepEvent) -> None:
+        robot = self._robots.get(event.robot or SOLO)
+        if robot is None:
+            return
+        with self._lock:
+            if event.event == "start":
+                robot.moved_to(event.step, event.actual_s)
+            elif robot.current is not None and robot.current.index == event.step.index:
+                robot.ended = True
+
+    def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
+        if level >= INFO:
+            self._add(Note(message, STYLES.get(level, "bold red"), self._show_s()))
+
+    def on_command(self, event: CommandEvent) -> None:
+        command, answer = event.command, event.answer
+        source = "" if command.source == "key" else f" ({command.source})"
+        text = f"{answer.message}{source}"
+        if answer.ok and command.name in ("go", "cue_go", "start"):
+            with self._lock:  # the frames it releases go out now: no redraw in their way
+                self._quiet_until = self.session.clock.mono() + QUIET_AFTER_S
+        self._add(Note(text, "green" if answer.ok else "bold red", event.show_s))
+
+    def on_play_out(self, end_s: float) -> None:
+        self._add(Note(f"the steps are done; the music plays to its end at {end_s:.1f} s", "",
+                       self._show_s()))
+
+    def _note_retry(self, robot: str) -> None:
+        with self._lock:
+            self._robots[robot].retries += 1
+
+    def _note_reply(self, robot: str, latency_ms: float, ok: bool) -> None:
+        with self._lock:
+            state = self._robots[robot]
+            if ok:
+                state.latencies_ms.append(latency_ms)
+            else:
+                state.failed += 1
+
+    def _add(self, note: Note) -> None:
+        with self._lock:
+            self._notes.append(note)
+
+    def _show_s(self) -> float | None:
+        show = self.live.show
+        return show.show_at(self.session.clock.mono()) if show is not None else None
+
+    # -- drawing -------------------------------------------------------------------------------
+
+    def renderable(self, width: int = NARROW) -> RenderableType:
+        return render(self.screen(), width)
+
+    def screen(self) -> Screen:
+        """What to draw now."""
+        stopping = self.live.stop()
+        waiting = [] if stopping else self.live.waiting  # a stopped show's GO cues wait for nothing
+        show_s = self._show_s()
+        with self._lock:
+            rows = tuple(self._row(robot, waiting) for robot in self._robots.values())
+            cue = "next cue: none, the show is stopping" if stopping else self._cue_line(show_s)
+            go, go_waiting = self._go_line(waiting, stopping)
+            return Screen(self.session.show.name, None if show_s is None else round(show_s, 1),
+                          self._clock_text(stopping), cue, go, go_waiting, rows, tuple(self._notes),
+                          QUESTION if self._asking else None,
+                          self._final_line() if self._closing else LEGEND)
+
+    def _clock_text(self, stopping: bool) -> str:
+        clock = "music" if getattr(self.session, "song", None) is not None else "machine"
+        show = self.live.show
+        held = isinstance(show, HoldingShowClock) and show.held and not stopping
+        return f"{clock} clock" + (", held for GO" if held else "")
+
+    def _cue_line(self, show_s: float | None) -> str:
+        """The lock is held. The next timed cue of any robot, and how long until it."""
+        ahead = [(step.at, robot.name, step) for robot in self._robots.values()
+                 for step in robot.ahead if step.at is not None]
+        if not ahead:
+            return "next cue: none ahead"
+        at, name, step = min(ahead, key=lambda c: (c[0], c[2].index))
+        who = f"{name}: " if self.session.show.tracks else ""  # shared steps: everyone's cue
+        label = f" '{step.label}'" if step.label else ""
+        if show_s is None:
+            return f"next cue: {who}step {step.index}{label} at {at:g} s"
+        left = f"in {at - show_s:.1f} s" if at >= show_s else "due now"
+        return f"next cue {left}: {who}step {step.index}{label} at {at:g} s"
+
+    def _go_line(self, waiting: list, stopping: bool) -> tuple[str, bool]:  # type: ignore[type-arg]
+        """The lock is held. The GO cue waiting now, else the next one coming; before a show
+        run with --wait-start, the start it waits for."""
+        if not self.live.started and not stopping:
+            return "the show waits for its start: press Space or Enter", True
+        if waiting:
+            more = f" (+{len(waiting) - 1} more)" if len(waiting) > 1 else ""
+            return f"GO waits: '{waiting[0].name}'{more}: press Space or Enter", True
+        coming = [step for robot in self._robots.values() for step in robot.ahead if step.go]
+        if not coming or stopping:
+            return "next GO: none ahead", False
+        step = min(coming, key=lambda s: (s.planned_s, s.index))
+        return f"next GO: '{step.name}' (step {step.index})", False
+
+    def _row(self, robot: _Robot, waiting: list) -> Row:  # type: ignore[type-arg]
+        cue = next((c for c in waiting if robot.name in c.robots), None)
+        step = robot.current
+        if cue is not None:
+            now, style = f"waits for GO: '{cue.name}'", WAITING_STYLE
+        elif step is None:
+            now, style = "not started", "dim"
+        elif robot.done:
+            now, style = "done", "green"
+        else:  # a step over is dim: the robot is between steps (a play's motion may still run)
+            now, style = _step_text(step), "dim" if robot.ended else ""
+        following = next(iter(robot.ahead), None)
+        latency = statistics.median(robot.latencies_ms) if robot.latencies_ms else None
+        return Row(robot.name, now, _step_text(following) if following is not None else "-", latency,
+                   robot.retries, style, bool(robot.retries or robot.failed))
+
+    def _final_line(self) -> str:
+        stop = self.live.stop
+        if self.live.panicked:
+            return "the show was stopped by panic; keys off"
+        if stop():
+            return f"the show was {stop.reason}; keys off"
+        return "the run is over; keys off"

@@ -1,0 +1,440 @@
+"""The live console of `choreo run` on a terminal: what it draws at 60, 80 and 120 columns, the
+keys (GO, the double-press lockout, panic, q then y or n), and the terminal put back after.
+
+Unit tests draw the console of a prepared session (nothing opened) through rich into a string;
+the rest run `choreo run` inside tmux (a private server a test, killed after), press keys with
+send-keys and read the screen with capture-pane, polling with a deadline, never a fixed sleep.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import pty
+import shlex
+import shutil
+import subprocess
+import termios
+import threading
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+from rich.console import Console as RichConsole
+
+from choreo.clock import MachineShowClock
+from choreo.cli.console import (LEGEND, Console, KeyReader, Note, Row, Screen, TerminalMode, _LinkWatch,
+                                render)
+from choreo.link import RxEvent, TxEvent
+from choreo.live import Answer, Command, CommandEvent, Live
+from choreo.logformat import WARNING
+from choreo.protocol import Reply, ReplyKind
+from choreo.runner import StepEvent, StopRequest
+from choreo.session import RunRequest, Session
+from runlog import REPO, read_log, write_show
+
+GO_SHOW = """\
+version: 1
+name: console test
+motions:
+  bow: {number: 2, duration: 0.1}
+steps:
+  - play: 1
+  - play: bow
+    at: go
+    label: applause
+  - wait: 0.2
+  - play: 3
+    at: 0.5
+    label: after
+  - play: 4
+    at: go
+    label: encore
+"""
+
+TWO_ROBOTS = """\
+version: 1
+name: a show for two robots with a name long enough to be cut at sixty columns
+robots:
+  alpha: {on_abort: 9}
+  beta_with_a_long_name: {}
+steps:
+  - play: 1
+  - play: 2
+    at: go
+    label: the-first-of-the-go-cues-with-a-long-label
+"""
+
+WIDTHS = (60, 80, 120)
+
+
+def drawn(console: Console, width: int) -> list[str]:
+    out = io.StringIO()
+    RichConsole(file=out, width=width, color_system=None).print(console.renderable(width))
+    return out.getvalue().splitlines()
+
+
+def prepared(tmp_path: Path, body: str) -> tuple[Console, Session, Live]:
+    session = Session.prepare(RunRequest(str(write_show(tmp_path, body)), no_log=True))
+    live = Live(StopRequest())
+    return Console(session, live, out=io.StringIO(), keys=io.StringIO()), session, live
+
+
+def started(step, robot=None, at_s: float = 0.0) -> StepEvent:  # type: ignore[no-untyped-def]
+    return StepEvent(step, "start", at_s, at_s, 0, robot=robot)
+
+
+# -- what it draws -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("width", WIDTHS)
+def test_every_line_fits_the_width_and_the_key_parts_stay(tmp_path, width):
+    console, session, live = prepared(tmp_path, TWO_ROBOTS)
+    steps = session.plans["alpha"].steps
+    console.on_step(started(steps[0], "alpha"))
+    console.on_step(started(steps[0], "beta_with_a_long_name"))
+    console.on_log(WARNING, "robot alpha: step 0: NAK (04 0c 15 25) to 'play 1' (play frame, seq 3), " * 3)
+    lines = drawn(console, width)
+    assert all(len(line) <= width for line in lines), lines
+    text = "\n".join(lines)
+    assert lines[0].startswith("a show for two robots") and "show not started · machine clock" in lines[0]
+    assert "next GO: 'the-first-of-the-go-cues" in text
+    assert any(line.startswith("alpha ") and "0: play 1" in line for line in lines)
+    assert any(line.startswith("beta_with_a") for line in lines)
+    assert lines[-1] == LEGEND
+    assert any(line.endswith("…") for line in lines)  # cut, not wrapped
+
+
+def test_the_screen_says_where_each_robot_is_and_what_comes(tmp_path):
+    console, session, live = prepared(tmp_path, GO_SHOW)
+    steps = session.plan.steps
+    console.on_step(started(steps[0]))
+    screen = console.screen()
+    (row,) = screen.rows
+    assert (row.robot, row.now, row.next) == ("robot", "0: play 1", "GO 1 'applause': play 2 (bow)")
+    assert screen.go == "next GO: 'applause' (step 1)" and not screen.go_waiting
+    assert screen.cue == "next cue: step 3 'after' at 0.5 s"  # the clock has not started
+    assert screen.show_s is None and screen.clock == "machine clock"
+    console.on_step(started(steps[2], at_s=0.1))
+    assert console.screen().rows[0].next == "@0.5 s 3 'after': play 3"
+    console.on_step(StepEvent(steps[4], "start", 0.6, 0.6, 0))
+    console.on_step(StepEvent(steps[4], "end", 0.6, 0.6, 0, outcome="ok"))
+    screen = console.screen()
+    assert screen.rows[0].now == "done" and screen.rows[0].next == "-"
+    assert screen.cue == "next cue: none ahead" and screen.go == "next GO: none ahead"
+
+
+def test_the_countdown_runs_on_the_show_clock(tmp_path):
+    console, session, live = prepared(tmp_path, GO_SHOW)
+    console.on_step(started(session.plan.steps[2], at_s=0.1))
+    live.show = MachineShowClock(session.clock.mono() - 0.2)  # 0.2 s into the show
+    screen = console.screen()
+    assert screen.cue == "next cue in 0.3 s: step 3 'after' at 0.5 s" and screen.show_s == 0.2
+    live.show = MachineShowClock(session.clock.mono() - 0.7)  # the cue overrun
+    assert console.screen().cue == "next cue due now: step 3 'after' at 0.5 s"
+
+
+def test_redraws_keep_clear_of_a_cue_and_of_a_go_and_draw_only_changes(tmp_path, monkeypatch):
+    console, session, live = prepared(tmp_path, GO_SHOW)
+    console.on_step(started(session.plan.steps[2], at_s=0.1))  # the wait before the cue at 0.5 s
+    live.show = MachineShowClock(session.clock.mono() - 10.0)  # both long past: nothing in the way
+    assert console._quiet_left() == 0.0
+    live.show = MachineShowClock(session.clock.mono() - 0.48)  # the cue 20 ms from now
+    assert 0.04 < console._quiet_left() <= 0.05 + 1e-3
+    live.show = MachineShowClock(session.clock.mono() - 10.0)
+    console.on_command(CommandEvent(Command("go", "key"), Answer("ok", "GO: applause"), 0, 10.0))
+    assert 0.02 < console._quiet_left() <= 0.03  # the GO's frames go out now
+
+    updates = []
+    monkeypatch.setattr(console._rich, "update", lambda renderable, refresh: updates.append(renderable))
+    live.show = HeldAt(10.0)
+    console._draw()
+    console._draw()  # nothing changed: not drawn again
+    console.on_log(WARNING, "something")
+    console._draw()
+    assert len(updates) == 2
+
+
+class HeldAt:
+    """A show clock standing still."""
+
+    def __init__(self, show_s: float) -> None:
+        self.show_s = show_s
+
+    def show_at(self, mono: float) -> float:
+        return self.show_s
+
+    def mono_at(self, show_s: float) -> float:
+        return float("inf")
+
+
+def test_the_link_column_is_the_median_latency_and_the_retries(tmp_path):
+    console, session, live = prepared(tmp_path, GO_SHOW)
+    watch = _LinkWatch(console, "robot")
+    frame = session.plan.steps[0].frames[0]
+    for ms in (1.0, 2.0, 9.0):
+        watch.on_rx(RxEvent(1, frame, Reply(ReplyKind.ACK), 0, ms / 1e3, None))
+    watch.on_tx(TxEvent(2, frame, 2, 0, None))
+    watch.on_rx(RxEvent(2, frame, Reply(ReplyKind.TIMEOUT), 0, 0.2, None))
+    row = console.screen().rows[0]
+    assert (row.latency_ms, row.retries, row.trouble) == (2.0, 1, True)
+    assert "2.0 ms, 1 retry" in "\n".join(drawn(console, 80))
+    assert "2.0ms r1" in "\n".join(drawn(console, 60))
+
+
+def test_a_waiting_go_cue_is_highlighted_and_commands_are_answered_on_screen(tmp_path):
+    console, session, live = prepared(tmp_path, GO_SHOW)
+    live.listeners.append(console)
+    live.await_go(session.plan.steps[1], "robot", reached_s=0.0, should_stop=lambda: True)  # reached, then gave up
+    screen = console.screen()
+    assert screen.go_waiting and screen.go == "GO waits: 'applause': press Space or Enter"
+    assert screen.rows[0].now == "waits for GO: 'applause'"
+    live.command(Command("go", "osc udp 127.0.0.1:53001"))
+    live.command(Command("go", "key"))
+    notes = [note.text for note in console.screen().notes]
+    assert notes[0] == "GO: applause (osc udp 127.0.0.1:53001)"
+    assert notes[1].startswith("GO ignored: 0.") and "a double press?" in notes[1]
+
+
+def test_a_screen_renders_whole_at_120_columns():
+    screen = Screen("show", 12.34, "music clock", "next cue in 1.0 s: step 3 at 13 s", "next GO: none ahead", False,
+                    (Row("robot", "2: play 1", "-", 1.25, 0),), (Note("hello", "", 1.0),))
+    lines = [line.rstrip() for line in _render_text(screen, 120)]
+    assert lines[0].endswith("show 12.3 s · music clock") and len(lines[0]) == 120
+    assert lines[3].split() == ["robot", "now", "next", "link", "(median,", "retries)"]
+    assert lines[4].split() == ["robot", "2:", "play", "1", "-", "1.2", "ms,", "0", "retries"]
+    assert lines[6] == "    1.0 s  hello" and lines[7] == LEGEND
+
+
+def _render_text(screen: Screen, width: int) -> list[str]:
+    out = io.StringIO()
+    RichConsole(file=out, width=width, color_system=None).print(render(screen, width))
+    return out.getvalue().splitlines()
+
+
+# -- keys --------------------------------------------------------------------------------------
+
+
+class Commands:
+    """A Live stand-in that keeps the commands it is given."""
+
+    def __init__(self) -> None:
+        self.given: list[str] = []
+        self.show = MachineShowClock(time.monotonic())
+        self.stop = StopRequest()
+        self.panicked = False
+        self.started = True
+        self.waiting: list = []
+
+    def command(self, command: Command):  # type: ignore[no-untyped-def]
+        assert command.source == "key"
+        self.given.append(command.name)
+
+
+def test_keys_become_commands_and_q_asks_first(tmp_path):
+    console, session, _ = prepared(tmp_path, GO_SHOW)
+    console.live = commands = Commands()  # type: ignore[assignment]
+    for key in ("go", "q", "n", "go", "q", "escape", "q", "y", "x"):
+        console.on_key(key)
+    # q then n: nothing; q then Esc: panic all the same; q then y: stop; a stray key: nothing
+    assert commands.given == ["go", "go", "panic", "stop"]
+    assert [n.text for n in console.screen().notes] == ["stop cancelled: the show goes on"]
+
+
+def test_the_key_reader_tells_esc_from_an_arrow_key():
+    read, write = os.pipe()
+    keys: list[str] = []
+    got = threading.Event()
+    reader = KeyReader(read, lambda key: (keys.append(key), got.set()))
+    reader.start()
+    try:
+        for sent, expected in ((b"\x1b[A", None), (b"\x1bOB", None), (b"\x1b[1;5C", None), (b" ", "go"),
+                               (b"\r", "go"), (b"\x1b", "escape"), (b"\x1b\x1b", "escape"), (b"q", "q"), (b"y", "y")):
+            got.clear()
+            os.write(write, sent)
+            if expected is None:
+                assert not got.wait(0.1), keys
+            else:
+                assert got.wait(2) and keys.pop() == expected
+        assert keys == []
+    finally:
+        reader.close()
+        os.close(write)
+        os.close(read)
+
+
+class BrokenTerminal(io.StringIO):
+    """A terminal that has gone away."""
+
+    def isatty(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        raise OSError(5, "Input/output error")
+
+
+def test_the_terminal_is_put_back_exactly_even_when_the_screen_fails(tmp_path):
+    primary, secondary = pty.openpty()
+    with os.fdopen(secondary, "r") as tty:
+        before = termios.tcgetattr(secondary)
+        mode = TerminalMode(secondary)
+        mode.enter()
+        lflag = termios.tcgetattr(secondary)[3]
+        assert not lflag & termios.ICANON and not lflag & termios.ECHO and lflag & termios.ISIG
+        mode.restore()
+        assert termios.tcgetattr(secondary) == before
+
+        session = Session.prepare(RunRequest(str(write_show(tmp_path, GO_SHOW)), no_log=True))
+        console = Console(session, Live(StopRequest()), out=io.StringIO(), keys=tty)
+        console.start()
+        assert not termios.tcgetattr(secondary)[3] & termios.ICANON
+        console.close()
+        assert termios.tcgetattr(secondary) == before
+
+        console = Console(session, Live(StopRequest()), out=BrokenTerminal(), keys=tty)
+        with pytest.raises(OSError):  # the screen cannot be drawn: start fails, the terminal is restored
+            console.start()
+        assert termios.tcgetattr(secondary) == before
+    os.close(primary)
+
+
+# -- the console in a terminal (tmux) ----------------------------------------------------------
+
+needs_tmux = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
+
+
+class Pane:
+    """`choreo run ...` in a tmux pane of its own server; after it exits, its exit status and
+    `stty -a` go to files (the terminal as choreo left it)."""
+
+    def __init__(self, tmp_path: Path, args: list[str], width: int = 80, height: int = 24,
+                 env: dict[str, str] | None = None) -> None:
+        # the pane's environment is the server's, which is this one: an explicit copy, since
+        # readline (which pytest loads) exports COLUMNS and LINES behind os.environ's back
+        self.env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES", "TMUX")}
+        self.env.update(env or {})
+        self.socket = f"choreo-console-{uuid.uuid4().hex[:12]}"
+        self.exit_file = tmp_path / "exit"
+        self.stty_file = tmp_path / "stty"
+        choreo = shlex.join([str(REPO / ".venv" / "bin" / "choreo"), "run", *args])
+        script = (f"cd {shlex.quote(str(REPO))} && {choreo}; echo $? > {self.exit_file}.tmp; "
+                  f"stty -a > {self.stty_file}; mv {self.exit_file}.tmp {self.exit_file}; sleep 60")
+        self._tmux("new-session", "-d", "-x", str(width), "-y", str(height), "-s", "run", f"sh -c {shlex.quote(script)}")
+
+    def _tmux(self, *args: str) -> str:
+        return subprocess.run(["tmux", "-L", self.socket, "-f", "/dev/null", *args], check=True,
+                              capture_output=True, text=True, timeout=10, env=self.env).stdout
+
+    def keys(self, *keys: str) -> None:
+        self._tmux("send-keys", "-t", "run", *keys)
+
+    def screen(self) -> str:
+        return self._tmux("capture-pane", "-p", "-t", "run")
+
+    def wait_for(self, text: str, timeout: float = 10.0) -> str:
+        deadline = time.monotonic() + timeout
+        while True:
+            screen = self.screen()
+            if text in screen:
+                return screen
+            assert time.monotonic() < deadline, f"{text!r} never appeared; the screen:\n{screen}"
+            time.sleep(0.02)
+
+    def exit_code(self, timeout: float = 10.0) -> int:
+        deadline = time.monotonic() + timeout
+        while not self.exit_file.exists():
+            assert time.monotonic() < deadline, f"choreo run did not exit; the screen:\n{self.screen()}"
+            time.sleep(0.02)
+        return int(self.exit_file.read_text())
+
+    def terminal_restored(self) -> bool:
+        flags = self.stty_file.read_text().split()
+        return "icanon" in flags and "echo" in flags and "-icanon" not in flags and "-echo" not in flags
+
+    def close(self) -> None:
+        subprocess.run(["tmux", "-L", self.socket, "kill-server"], capture_output=True, timeout=10)
+
+
+@pytest.fixture
+def pane(tmp_path):
+    panes: list[Pane] = []
+
+    def open_pane(body: str, width: int = 80, env: dict[str, str] | None = None) -> Pane:
+        show = write_show(tmp_path, body)
+        panes.append(Pane(tmp_path, [str(show), "--log", str(tmp_path / "run.mcap")], width, env=env))
+        return panes[-1]
+
+    yield open_pane
+    for opened in panes:
+        opened.close()
+
+
+def commands_in(tmp_path: Path) -> list[tuple[str, str, str]]:
+    return [(m["command"], m["source"], m["status"]) for m in read_log(tmp_path / "run.mcap").topic("/choreo/command")]
+
+
+@needs_tmux
+def test_go_releases_the_waiting_cue_and_a_double_press_is_refused(tmp_path, pane):
+    run = pane(GO_SHOW)
+    run.wait_for("GO waits: 'applause'")
+    run.keys("Space", "Space")  # one press too many, well within the lockout
+    screen = run.wait_for("GO waits: 'encore'")
+    assert "GO: applause" in screen and "a double press?" in screen
+    run.keys("Enter")  # the encore waits 0.5 s of show after the GO: past the lockout
+    assert run.exit_code() == 0
+    assert "GO: encore" in run.screen() and "the run is over; keys off" in run.screen()
+    assert commands_in(tmp_path) == [("go", "key", "ok"), ("go", "key", "error"), ("go", "key", "ok")]
+    assert run.terminal_restored()
+
+
+@needs_tmux
+def test_esc_panics_every_robot_and_exits_130(tmp_path, pane):
+    run = pane(TWO_ROBOTS)
+    run.wait_for("GO waits")
+    run.keys("Escape")
+    assert run.exit_code() == 130
+    assert "the show was stopped by panic" in run.screen()
+    assert commands_in(tmp_path) == [("panic", "key", "ok")]
+    log = read_log(tmp_path / "run.mcap")
+    a = [(m["kind"], m.get("motion"), m.get("label")) for m in log.topic("/rcb4/alpha/tx")]
+    b = [(m["kind"], m.get("motion"), m.get("label")) for m in log.topic("/rcb4/beta_with_a_long_name/tx")]
+    assert a[-3:] == [("stop", 9, "on_abort"), ("play", 9, "on_abort"), ("restore", 9, "on_abort")]
+    assert (b[-1][0], b[-1][2]) == ("stop", "on_abort")  # no abort motion: the stop frame
+    assert run.terminal_restored()
+
+
+@needs_tmux
+def test_q_asks_n_goes_on_y_stops(tmp_path, pane):
+    run = pane(GO_SHOW)
+    run.wait_for("GO waits: 'applause'")
+    run.keys("Up")  # an arrow key's escape sequence is not Esc
+    run.keys("q")
+    run.wait_for("stop the show? y/n")
+    run.keys("n")
+    run.wait_for("stop cancelled")
+    run.keys("Space")
+    run.wait_for("GO waits: 'encore'")
+    run.keys("q")
+    run.wait_for("stop the show? y/n")
+    run.keys("y")
+    assert run.exit_code() == 130
+    assert "the show was stopped; keys off" in run.screen()
+    assert commands_in(tmp_path) == [("go", "key", "ok"), ("stop", "key", "ok")]
+    assert run.terminal_restored()
+
+
+@needs_tmux
+def test_sixty_columns_draw_without_wrapping(tmp_path, pane):
+    run = pane(TWO_ROBOTS, 60, {"COLUMNS": "132", "LINES": "50"})  # the terminal's own size wins
+    screen = run.wait_for("GO waits")
+    lines = screen.splitlines()
+    assert all(len(line) <= 60 for line in lines)
+    title = [line for line in lines if "show 0.0 s · machine clock, held for GO" in line]
+    assert len(title) == 1 and title[0].startswith("a show for two"), screen  # one line, drawn once
+    assert any(line.startswith("alpha ") and "waits for GO" in line for line in lines)
+    assert any(line.startswith("beta_with_a… ") for line in lines)
+    assert LEGEND in lines
+    run.keys("Escape")
+    assert run.exit_code() == 130
+    assert run.terminal_restored()
