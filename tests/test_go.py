@@ -243,3 +243,27 @@ def test_the_summary_lists_who_pressed_what_and_when(tmp_path, capsys):
     assert main(["log", "summary", str(run.log_path), "--json"]) == 0
     record = json.loads(capsys.readouterr().out)
     assert [c["command"] for c in record["commands"]] == ["cue_go", "go"] and record["commands_total"] == 2
+
+
+def test_loop_in_a_music_show_restarts_the_music_with_each_pass(tmp_path):
+    from test_music import write_song
+
+    write_song(tmp_path / "song.wav", 3.0)
+    body = ("version: 1\nmusic: {file: song.wav}\nsteps:\n  - play: 1\n    at: 0.5\n    label: a\n"
+            "  - play: 2\n    at: 0.7\n    label: b\n  - play: 3\n    at: 2.5\n")
+    show = write_show(tmp_path, body)
+    log_path = tmp_path / "run.mcap"
+    session = Session.prepare(RunRequest(str(show), log_path=str(log_path), loop="a..b", audio_device="null"))
+    stop = StopRequest()
+    with session:
+        timer = threading.Timer(1.6, stop.request)
+        timer.start()
+        session.run([], stop)
+        timer.cancel()
+    log = read_log(log_path)
+    ends = [m for m in log.topic("/choreo/step") if m["event"] == "end"]
+    assert [m["label"] for m in ends][:4] == ["a", "b", "a", "b"] and 3 not in [m.get("motion") for m in ends]
+    # each pass starts the music again from a's moment: the motions start on its cues every time
+    assert all(abs(m["start_s"] - m["cue"]) < 0.02 for m in ends if m["outcome"] == "ok")
+    shows = [m["show_s"] for m in log.topic("/choreo/clock")]
+    assert any(later < earlier for earlier, later in zip(shows, shows[1:]))  # the clock went back to a
