@@ -188,6 +188,11 @@ class Live:
                 self._changed.wait(0.05)
         return show.show_at(self._now()) if show is not None else cue.reached_s
 
+    def new_pass(self) -> None:
+        """A --loop pass begins: its GO cues wait for a GO of their own again."""
+        with self._changed:
+            self._released.clear()
+
     @property
     def waiting(self) -> list[GoCue]:
         """The GO cues waiting now, the earliest first."""
@@ -217,8 +222,6 @@ class Live:
             listener.on_command(event)
 
     def _go(self, command: Command) -> Answer:
-        if not self._started:
-            return self._start(command)  # a show loaded with --wait-start: GO starts it
         with self._changed:
             now = self._now()
             if self._last_go is not None and now - self._last_go < self.lockout_s:
@@ -226,7 +229,8 @@ class Live:
                               f"(a double press? GOs {self.lockout_s:g} s apart at least)")
             waiting = self._in_order()
             if not waiting:
-                return Answer("error", "nothing waits for GO now")
+                return Answer("error", "nothing waits for GO now" + ("" if self._started else
+                              " (the show waits for its start: /choreo/start)"))
             self._last_go = now
             return self._release(waiting[0])
 

@@ -36,7 +36,12 @@ PERIODS = 3  # periods in the device's buffer
 LATENCY_S = (PERIODS - 1) * PERIOD_MS / 1000  # how long a sample handed over waits to be heard
 WINDOW_S = 2.0  # the clock's earliest reading over this long is its estimate
 LOCK_CALLBACKS = PERIODS + 4  # readings before the clock is trusted: past the buffer's prefill
+LOCK_S = 0.1  # and machine time they must span: long enough to see an output that is not real time
 LOCK_TIMEOUT_S = 2.0
+# An output that takes samples faster or slower than this against the machine's clock is not
+# playing them in real time (ALSA's "Discard all samples" takes them as fast as they come): its
+# position would be no clock. Sound cards drift by parts per million, not per cent.
+RATE_TOLERANCE = 0.05
 LEAD_IN_S = 0.25  # silence before the show's first moment: time for the clock to settle
 CHANNELS = 2
 NULL_DEVICE = "null"  # --audio-device null: miniaudio's null backend, silent, in real time
@@ -108,6 +113,9 @@ class MusicClock:
     latency_s: float = LATENCY_S
     window_s: float = WINDOW_S
     readings: int = 0
+    first_mono: float | None = None  # when the device first asked
+    handed_s: float = 0.0  # the samples handed over so far, in seconds
+    last_mono: float | None = None  # when the device last asked
     _zero: float | None = None  # monotonic time the first sample is heard (estimate)
     _window: deque = field(default_factory=deque)  # (mono, zero) with increasing zeros
 
@@ -115,6 +123,9 @@ class MusicClock:
         """The device asked for samples at `mono`, `frames_before` having been handed over
         already: the sample handed over now is heard `latency_s` later."""
         zero = mono - frames_before / self.sample_rate + self.latency_s
+        if self.first_mono is None:
+            self.first_mono = mono
+        self.last_mono, self.handed_s = mono, frames_before / self.sample_rate
         window = self._window
         while window and window[-1][1] >= zero:
             window.pop()  # a later reading that is also earlier: the old ones can never win again
@@ -126,7 +137,18 @@ class MusicClock:
 
     @property
     def locked(self) -> bool:
-        return self.readings >= LOCK_CALLBACKS
+        return self.readings >= LOCK_CALLBACKS and self.span_s >= LOCK_S
+
+    @property
+    def span_s(self) -> float:
+        """Machine time between the device's first request and its last."""
+        return 0.0 if self.first_mono is None or self.last_mono is None else self.last_mono - self.first_mono
+
+    def real_time(self) -> bool:
+        """Whether the output takes samples at the pace it plays them: what it was handed,
+        less its buffer, against the machine time that passed."""
+        played = self.handed_s - self.latency_s  # a request comes as a period's room frees
+        return abs(played - self.span_s) <= RATE_TOLERANCE * self.span_s + 2 * PERIOD_MS / 1000
 
     @property
     def zero(self) -> float:
@@ -343,8 +365,8 @@ class Player:
             if self.output is not None:
                 raise AudioError(f"audio output {self.output.name!r} will not open ({_reason(exc)}): "
                                  "see `choreo devices`, or run with --no-music") from None
-            self.note = ("no sound output opens on this machine: the music's clock runs on the null output "
-                         "(silent, in real time); `choreo devices` lists outputs")
+            self.note = ("the default sound output does not open: the music's clock runs on the null output "
+                         "(silent, in real time); `choreo devices` lists the outputs, --audio-device picks one")
             device = open_device(Output(0, NULL_DEVICE, "Null"), self.song.sample_rate)
         self.backend = device.backend
         return device
@@ -358,6 +380,12 @@ class Player:
                 raise AudioError(f"the audio output ({self.backend}) did not start playing within "
                                  f"{LOCK_TIMEOUT_S:g} s: see `choreo devices`, or run with --no-music")
             time.sleep(0.002)
+        if not self.clock.real_time():
+            pace = self.clock.handed_s / max(self.clock.span_s, 1e-6)
+            self.close()
+            name = self.output.name if self.output is not None else "the default output"
+            raise AudioError(f"audio output {name!r} ({self.backend}) takes samples at {pace:.1f}x real time: "
+                             "it cannot keep the show's time; pick another (choreo devices) or --audio-device null")
 
     @property
     def end_show_s(self) -> float:

@@ -314,7 +314,8 @@ class Recorder:
     def on_command(self, event: CommandEvent) -> None:
         """Queued only: an operator's command and its answer (`choreo.live`)."""
         command, answer = event.command, event.answer
-        record = CommandRecord(command.name, command.source, answer.status, answer.message, command.label,
+        label = command.label or answer.data.get("cue")  # a plain GO: the cue it released
+        record = CommandRecord(command.name, command.source, answer.status, answer.message, label,
                                None if event.show_s is None else round(event.show_s, 6))
         self._queue((COMMAND_TOPIC, event.time_ns, _record_message, record))
 

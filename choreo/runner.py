@@ -134,6 +134,7 @@ class Runner:
         self._last_play_done: float | None = None  # monotonic time the last restore was answered
         self._last_motion: int | None = None
         self._played = Played(1, 0.0)  # how the last play sequence went
+        self._ready_s = float("-inf")  # show time the step before was done with (its frames answered)
         self._late = 0
         self._run = 0
 
@@ -213,7 +214,9 @@ class Runner:
         # A cue is measured against its own time: one the show has already overrun (a motion
         # ran long before it) starts at once and counts as late by the overrun.
         planned = step.at - lead if step.at is not None else due
-        late_ms = (started - planned) * 1e3
+        # An uncued step waits for the step before to be answered (a play's frames take the
+        # wire's time after its start): it is late only by what came after that.
+        late_ms = (started - (planned if step.at is not None else max(planned, self._ready_s))) * 1e3
         self._emit(StepEvent(step, "start", planned, started, self._now_ns(), late_ms, robot=self.robot))
         self._run += 1
         if late_ms > LATE_MS and step.kind is StepKind.PLAY:
@@ -241,6 +244,7 @@ class Runner:
             self._log(ERROR, str(exc))
             raise
         finally:
+            self._ready_s = self.show_time()
             start_s = self.show.show_at(self._played.started) if self._played.started is not None else None
             self._emit(StepEvent(step, "end", planned, self.show_time(), self._now_ns(), slip_ms, outcome,
                                  self.robot, start_s, lead * 1e3))

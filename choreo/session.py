@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from choreo.clock import SWITCH_S, MachineShowClock, RunClock, ShowClock, SystemTime, TimeSource
+from choreo.clock import SWITCH_S, MachineShowClock, RunClock, ShowClock, SystemTime, TimeSource, sleep_until_show
 from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError, did_you_mean
 from choreo.layouts import SEED, Layout, layout_named
 from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
@@ -224,9 +224,13 @@ class Session:
         """One pass of the show, or with --loop as many of its section as run before a stop."""
         result = self._run_pass(everyone, stop, live)
         passes, steps, late = 1, result.steps_run, result.late_steps
-        while self.loop is not None and result.outcome == "done" and not stop():
+        # A loop ends only when stopped: a stop between passes is seen by the next pass's
+        # runners, which play the abort motions as on any stop.
+        while self.loop is not None and result.outcome == "done":
             passes += 1
             self._tell(everyone, INFO, f"loop: pass {passes} from {self.loop[0]!r} to {self.loop[1]!r}")
+            if live is not None:
+                live.new_pass()  # its GO cues wait again
             result = self._run_pass(everyone, stop, live)
             steps, late = steps + result.steps_run, late + result.late_steps
         return RunResult(result.outcome, steps, late, result.show_s)
@@ -255,6 +259,8 @@ class Session:
             result = runners[self.first.robot].run(show) if ensemble is None else self._run_ensemble(ensemble, show)
             if result.outcome == "done" and self.loop is None:
                 self._play_out(show, stop, sampler, everyone)
+            elif result.outcome == "done":
+                self._end_of_section(show, stop)
             if sampler is not None:
                 sampler.sample(force=True)
             return result
@@ -324,6 +330,13 @@ class Session:
             self.clock.sleep(min(0.05, max(0.0, show.mono_at(end) - self.clock.mono())))
             if sampler is not None:
                 sampler()
+
+    def _end_of_section(self, show: ShowClock, stop: StopRequest) -> None:
+        """A --loop pass lasts until the step after its last one is planned (or the last
+        motion's expected end): the section's last motion plays out before the next pass."""
+        end = max(plan.steps[self.ends[name]].planned_s if self.ends[name] < len(plan.steps) else plan.estimated_s
+                  for name, plan in self.plans.items())
+        sleep_until_show(self.clock, show, end, stop)
 
     def _stop_music(self, listeners: list[RunListener]) -> None:
         if self.player is None:

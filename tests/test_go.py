@@ -69,7 +69,7 @@ def test_the_machine_clock_holds_while_a_go_cue_waits(tmp_path):
     assert steps["after"]["late_ms"] < 1.0
     go = [m for m in log.topic("/choreo/command") if m["command"] == "go"]
     assert go == [{"command": "go", "source": "test", "status": "ok", "message": "GO: applause",
-                   "show_s": go[0]["show_s"], "_log_time": go[0]["_log_time"]}]
+                   "label": "applause", "show_s": go[0]["show_s"], "_log_time": go[0]["_log_time"]}]
     # on the wall clock, the cue came 0.5 - (where the GO cue was reached) after the GO
     waited = (steps["after"]["_log_time"] - go[0]["_log_time"]) / 1e9
     assert 0.35 < waited < 0.6
@@ -151,8 +151,9 @@ def test_wait_start_holds_the_show_until_start(tmp_path):
     run = Running(tmp_path, GO_SHOW.replace("    at: go\n", ""), wait_start=True)
     time.sleep(0.2)
     assert run.result is None and run.thread.is_alive()  # loaded, ports open, waiting for start
-    assert run.go("go").message == "starting"  # GO starts a show that waits for its start
-    assert not run.go("start").ok
+    go = run.go("go")  # GO is for GO cues: only start starts it (the console's GO key sends start)
+    assert not go.ok and go.message == "nothing waits for GO now (the show waits for its start: /choreo/start)"
+    assert run.go("start").ok and not run.go("start").ok
     run.finish()
     assert run.result.outcome == "done"
 
@@ -239,7 +240,7 @@ def test_the_summary_lists_who_pressed_what_and_when(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "commands  2 from the operator (1 refused)" in out
     assert "cue_go nope  test ERROR: cue 'nope' is not waiting for GO (waiting: 'applause')" in out
-    assert "go           test: GO: applause" in out
+    assert "go applause  test: GO: applause" in out
     assert main(["log", "summary", str(run.log_path), "--json"]) == 0
     record = json.loads(capsys.readouterr().out)
     assert [c["command"] for c in record["commands"]] == ["cue_go", "go"] and record["commands_total"] == 2
@@ -250,13 +251,13 @@ def test_loop_in_a_music_show_restarts_the_music_with_each_pass(tmp_path):
 
     write_song(tmp_path / "song.wav", 3.0)
     body = ("version: 1\nmusic: {file: song.wav}\nsteps:\n  - play: 1\n    at: 0.5\n    label: a\n"
-            "  - play: 2\n    at: 0.7\n    label: b\n  - play: 3\n    at: 2.5\n")
+            "  - play: 2\n    at: 0.7\n    label: b\n  - play: 3\n    at: 1.0\n")
     show = write_show(tmp_path, body)
     log_path = tmp_path / "run.mcap"
     session = Session.prepare(RunRequest(str(show), log_path=str(log_path), loop="a..b", audio_device="null"))
     stop = StopRequest()
     with session:
-        timer = threading.Timer(1.6, stop.request)
+        timer = threading.Timer(2.2, stop.request)  # a pass lasts until step 3's time: 0.5 s of show
         timer.start()
         session.run([], stop)
         timer.cancel()

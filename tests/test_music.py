@@ -78,6 +78,21 @@ def test_the_clock_follows_a_sound_card_that_drifts():
     assert machine_now - heard - 60.0 == pytest.approx(0.012, abs=1e-4)  # the machine's clock would be 12 ms off
 
 
+def test_an_output_that_is_not_real_time_is_no_clock():
+    """ALSA's "Discard all samples" output takes samples as fast as they come: its position
+    runs hundreds of times faster than real time, and a show on it would fire every cue at once."""
+    steady = MusicClock(RATE, first_show_s=0.0)
+    callbacks(steady, 0.3, jitter_s=0.004)
+    assert steady.real_time()
+    racing = MusicClock(RATE, first_show_s=0.0)
+    for n in range(250):
+        racing.handed_over(100.0 + n * 0.0005, n * 80)  # 10 ms of music every 0.5 ms
+    assert racing.locked and not racing.real_time()
+    slow = MusicClock(RATE, first_show_s=0.0)
+    callbacks(slow, 0.5, card_ppm=200_000)  # a fifth slow: not a sound card's drift
+    assert not slow.real_time()
+
+
 def test_the_clock_is_not_trusted_before_the_buffer_is_full():
     clock = MusicClock(RATE, first_show_s=0.0)
     with pytest.raises(AudioError):
@@ -292,7 +307,7 @@ def test_with_no_sound_output_the_null_output_keeps_time_and_says_so(tmp_path, c
     show = music_show(tmp_path, "{file: song.wav}", "  - play: 1\n    at: 0.1\n")
     assert main(["run", str(show), "--log", str(tmp_path / "run.mcap")]) == 0
     err = capsys.readouterr().err
-    assert err.count("warning: no sound output opens on this machine: the music's clock runs on the null output") == 1
+    assert err.count("warning: the default sound output does not open: the music's clock runs on the null output") == 1
     assert "ALSA" not in err
     assert read_log(tmp_path / "run.mcap").metadata["choreo.result"]["audio.backend"] == "Null"
     # an output asked for by name that will not open is an error, not a silent show

@@ -162,21 +162,22 @@ def test_every_command_is_answered_in_qlabs_manner(transport, live, server):
     with client(transport, server.port) as osc:
         address, go = ask(osc, "/choreo/go")
         assert address == "/reply/choreo/go"
-        # a show loaded with --wait-start: GO starts it, as /choreo/start does
-        assert go == {"address": "/choreo/go", "status": "ok", "data": {}, "message": "starting"}
+        # a show loaded with --wait-start starts only on /choreo/start: a GO meant for a cue must not start it
+        assert go == {"address": "/choreo/go", "status": "error", "data": {},
+                      "message": "nothing waits for GO now (the show waits for its start: /choreo/start)"}
         _, cue = ask(osc, "/choreo/cue/encore/go")
         assert cue["status"] == "error" and cue["message"].startswith("cue 'encore' is not waiting for GO")
         assert ask(osc, "/choreo/start") == ("/reply/choreo/start", {
-            "address": "/choreo/start", "status": "error", "message": "the show has started already", "data": {}})
-        assert ask(osc, "/choreo/go")[1]["message"] == "nothing waits for GO now"
+            "address": "/choreo/start", "status": "ok", "message": "starting", "data": {}})
+        assert ask(osc, "/choreo/start")[1]["message"] == "the show has started already"
         assert ask(osc, "/choreo/stop")[1]["status"] == "ok"
         assert ask(osc, "/choreo/stop")[1] == {"address": "/choreo/stop", "status": "error", "data": {},
                                                "message": "the show is already stopping (stopped)"}
         assert ask(osc, "/choreo/panic")[1]["status"] == "ok"
         source = source_of(osc, transport)
     assert live.panicked and live.stop.reason == PANIC
-    assert commands.seen() == [("go", source, None, "ok"), ("cue_go", source, "encore", "error"),
-                               ("start", source, None, "error"), ("go", source, None, "error"),
+    assert commands.seen() == [("go", source, None, "error"), ("cue_go", source, "encore", "error"),
+                               ("start", source, None, "ok"), ("start", source, None, "error"),
                                ("stop", source, None, "ok"), ("stop", source, None, "error"),
                                ("panic", source, None, "ok")]
 
@@ -241,7 +242,7 @@ def test_go_releases_the_waiting_cue_and_the_show_goes_on(shows):
     assert run.result.outcome == "done" and run.result.steps_run == 3
     log = read_log(run.log_path)
     commands = [(m["command"], m["source"], m["status"], m.get("label")) for m in log.topic("/choreo/command")]
-    assert commands == [("cue_go", sources[0], "ok", "applause"), ("go", sources[1], "ok", None)]
+    assert commands == [("cue_go", sources[0], "ok", "applause"), ("go", sources[1], "ok", "encore")]
 
 
 def test_start_begins_a_show_loaded_with_wait_start(shows):

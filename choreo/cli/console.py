@@ -502,7 +502,8 @@ class Console:
             else:
                 self._add(Note("stop cancelled: the show goes on", "dim", self._show_s()))
         elif key == "go":
-            self.live.command(Command("go", "key"))
+            # before a show loaded with --wait-start, the operator's GO key starts it
+            self.live.command(Command("go" if self.live.started else "start", "key"))
         elif key == "q":
             self._ask(True)
 

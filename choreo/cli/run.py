@@ -106,6 +106,8 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
                          rehearse=args.rehearse)
     session = Session.prepare(request, args.time_source)
     report.session = session
+    console = _wants_console(args)
+    _check_go_sources(session, console, args)
     say = _Say(sys.stderr, quiet=args.quiet)
     if session.show.ensemble:
         for line in _robot_lines(session):
@@ -116,8 +118,6 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     say(_show_line(session))
     if session.show.music is not None:
         say(_music_line(session))
-    console = _wants_console(args)
-    _check_go_sources(session, console, args)
     progress = Progress(session, sys.stderr, live=sys.stderr.isatty() and not console, quiet=args.quiet or console)
     signals = _StopOnSignals()
     try:
@@ -159,17 +159,23 @@ def _check_go_sources(session, console: bool, args: argparse.Namespace) -> None:
     port opens, not a show that waits for ever."""
     from choreo.errors import UsageError
 
+    if args.osc is None:
+        given = [name for name, value in (("--osc-allow", args.osc_allow), ("--osc-notify", args.osc_notify),
+                                          ("--osc-host", args.osc_host != "127.0.0.1")) if value]
+        if given:
+            raise UsageError(f"{given[0]}: it is for OSC: give --osc PORT too")
     if console or args.osc is not None:
         return
+    where = ("leave out --quiet/--no-console/--json on a terminal (the console takes GO)" if sys.stdin.isatty()
+             else "run on a terminal (the console) or with --osc PORT")
     if args.wait_start:
-        raise UsageError("--wait-start: nothing can start the show: run on a terminal (the console) or with --osc PORT")
+        raise UsageError(f"--wait-start: nothing can start the show: {where}")
     for plan in session.plans.values():
         step = next((s for s in plan.steps[session.starts[plan.robot]:] if s.go), None)
         if step is not None:
             from choreo.runner import step_ref
 
-            raise UsageError(f"{step_ref(step)} waits for GO, but nothing can give it: run on a terminal "
-                             "(the console) or with --osc PORT")
+            raise UsageError(f"{step_ref(step)} waits for GO, but nothing can give it: {where}")
 
 
 @contextmanager
@@ -522,7 +528,7 @@ class Progress:
     def on_command(self, event) -> None:  # type: ignore[no-untyped-def]
         """An operator's command (live control): its answer, with who gave it."""
         answer = event.answer
-        verdict = "" if answer.ok else "refused: "
+        verdict = "" if answer.ok or answer.message.startswith("refused") else "refused: "
         self._say_line(f"{event.command.name} ({event.command.source}): {verdict}{answer.message}")
 
     def _say_line(self, text: str) -> None:

@@ -9,7 +9,6 @@ loads (an older format, a tampered log) only costs those niceties, never the rev
 
 from __future__ import annotations
 
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,27 +41,25 @@ class AttachedShow:
 
 
 def attached_show(reader: LogReader) -> AttachedShow:
-    """Load the show attached to the log (through a temporary file: the loader reads paths)."""
+    """Load the show attached to the log, from its bytes: its music file is not looked for
+    (the review needs the plan, not the song, and the song may be elsewhere now)."""
     attachment = reader.show_attachment()
     if attachment is None:
         return AttachedShow(problem="the log has no show attached")
     source = reader.attachment_data(attachment)
     try:
         from choreo.errors import ChoreoError
-        from choreo.show.load import load_show
+        from choreo.show.load import load_show_bytes
         from choreo.show.plan import compile_plans
     except ImportError as exc:  # pragma: no cover - the loader ships with choreo
         return AttachedShow(problem=f"cannot load shows here: {exc}")
     name = Path(attachment.name).name or "show.yaml"
-    with tempfile.TemporaryDirectory(prefix="choreo-review-") as tmp:
-        path = Path(tmp) / name
-        path.write_bytes(source)
-        try:
-            show = load_show(path)
-            plans = compile_plans(show)
-        except ChoreoError as exc:
-            first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            return AttachedShow(problem=f"the attached show {attachment.name} does not load: {first}")
+    try:
+        show = load_show_bytes(source, name)
+        plans = compile_plans(show)
+    except ChoreoError as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        return AttachedShow(problem=f"the attached show {attachment.name} does not load: {first}")
     names: dict[int, str] = {}
     durations: dict[int, float] = {}
     for motion in show.motions.values():
