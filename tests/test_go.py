@@ -268,3 +268,43 @@ def test_loop_in_a_music_show_restarts_the_music_with_each_pass(tmp_path):
     assert all(abs(m["start_s"] - m["cue"]) < 0.02 for m in ends if m["outcome"] == "ok")
     shows = [m["show_s"] for m in log.topic("/choreo/clock")]
     assert any(later < earlier for earlier, later in zip(shows, shows[1:]))  # the clock went back to a
+
+
+def test_a_loops_go_cue_waits_on_every_pass(tmp_path):
+    body = "version: 1\nsteps:\n  - play: 1\n    label: a\n  - play: 2\n    at: go\n    label: b\n  - play: 3\n"
+    run = Running(tmp_path, body, loop="a..b", lockout_s=0.0)
+    for _ in range(3):
+        run.until_waiting("b")
+        assert run.go().ok
+    run.until_waiting("b")
+    run.go("stop")
+    run.finish()
+    assert run.result.outcome == "aborted"
+    assert [m["status"] for m in run.log().topic("/choreo/command")] == ["ok"] * 4
+
+
+def test_a_play_after_a_play_is_not_late_by_its_exchanges(tmp_path):
+    from runlog import vmain
+
+    show = write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n  - play: 2\n  - play: 3\n    at: 1\n  - play: 4\n")
+    assert vmain(["run", str(show), "--port", "sim://?reply_ms=2", "--log", str(tmp_path / "r.mcap"), "-q"]) == 0
+    starts = [m for m in read_log(tmp_path / "r.mcap").steps if m["event"] == "start"]
+    assert all(m["late_ms"] < 1.0 for m in starts), starts
+    assert starts[1]["actual_s"] > 0.005  # it did wait for the play before to be answered
+
+
+def test_osc_options_need_osc(tmp_path, capsys):
+    show = write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n")
+    assert main(["run", str(show), "--no-log", "--osc-allow", "10.0.0.2"]) == 2
+    assert "--osc-allow: it is for OSC: give --osc PORT too" in capsys.readouterr().err
+
+
+def test_a_music_shows_log_reviews_with_its_planned_lengths(tmp_path, capsys):
+    from runlog import vmain
+    from test_music import TEMPO_SHOW, write_song
+
+    write_song(tmp_path / "song.wav", 1.6)
+    show = write_show(tmp_path, TEMPO_SHOW)
+    assert vmain(["run", str(show), "--no-music", "--log", str(tmp_path / "r.mcap"), "-q"]) == 0
+    assert main(["log", "timeline", str(tmp_path / "r.mcap")]) == 0
+    assert "does not load" not in capsys.readouterr().out
