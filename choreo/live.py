@@ -96,6 +96,7 @@ class HoldingShowClock:
         self._zero = zero
         self._mono = mono
         self._hold_s: float | None = None  # the show time the clock stops at
+        self.on_resume: list[Callable[[], None]] = []  # told when it goes on (the log's clock samples)
 
     @property
     def held(self) -> bool:
@@ -113,6 +114,8 @@ class HoldingShowClock:
             if now > reached:
                 self._zero += now - reached
             self._hold_s = None
+            for listener in self.on_resume:
+                listener()
 
     def mono_at(self, show_s: float) -> float:
         if self._hold_s is not None and show_s > self._hold_s + 1e-9:

@@ -253,6 +253,9 @@ class Session:
             if self.recorder is not None else None
         for runner in runners.values():
             runner.on_idle = sampler
+        if sampler is not None and isinstance(show, HoldingShowClock):
+            # the log marks where show time goes on after a GO: the reviews place later frames by it
+            show.on_resume.append(lambda: sampler.sample(force=True))
         try:
             if sampler is not None:
                 sampler.sample(force=True)

@@ -308,3 +308,29 @@ def test_a_music_shows_log_reviews_with_its_planned_lengths(tmp_path, capsys):
     assert vmain(["run", str(show), "--no-music", "--log", str(tmp_path / "r.mcap"), "-q"]) == 0
     assert main(["log", "timeline", str(tmp_path / "r.mcap")]) == 0
     assert "does not load" not in capsys.readouterr().out
+
+
+def test_the_reviews_place_frames_on_the_held_clock(tmp_path, capsys):
+    """After a GO cue held the clock 0.4 s, `log frames`, `log summary` and `log timeline` put
+    the later frames at their show times, not 0.4 s later."""
+    run = Running(tmp_path, GO_SHOW)
+    run.until_waiting()
+    time.sleep(0.4)
+    assert run.go().ok
+    run.finish()
+    assert main(["log", "frames", str(run.log_path), "--kind", "play"]) == 0
+    plays = [line for line in capsys.readouterr().out.splitlines() if "CALL" in line]
+    assert len(plays) == 3 and 0.49 < float(plays[2].split()[0]) < 0.505  # cued at 0.5 (not 0.9: the hold is out)
+    assert main(["log", "summary", str(run.log_path), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["clock"]["samples"] >= 3
+    from choreo.review.summary import summarize
+
+    starts = [play.start_s for play in summarize(run.log_path).plays]
+    assert abs(starts[2] - 0.5) < 0.002, starts  # the motion on its cue, on the show clock
+    from choreo.review.timeline import build
+    from choreo.review.reader import LogReader
+
+    with LogReader(run.log_path) as reader:
+        runs = [r for r in build(reader).runs if r.motion == 3]
+    assert len(runs) == 1 and abs(runs[0].start_s - 0.5) < 0.002

@@ -12,39 +12,10 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from choreo.protocol import describe_frame, describe_reply
-from choreo.logformat import ABORT_LABEL, RX_TOPIC, STEP_TOPIC, TX_TOPIC, RxRecord, StepRecord, TxRecord, parse
+from choreo.logformat import ABORT_LABEL, CLOCK_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, RxRecord, TxRecord, parse
 from choreo.review.reader import LogReader
-from choreo.review.summary import show_zero_ns, stale_replies
-
-class ShowClock:
-    """Wall-clock log times to show-clock seconds.
-
-    The show clock's zero is not in the metadata (the run's `start_ns` is taken when the run is
-    prepared, before the port opens), but every step start carries its show time: the first
-    one fixes the zero to the microsecond. Until one is seen, the metadata's start stands in.
-    """
-
-    def __init__(self, reader: LogReader) -> None:
-        self.zero_ns = show_zero_ns(reader)
-        self.from_step = False
-
-    def see_step(self, log_time: int, step: StepRecord) -> None:
-        if step.event == "start":
-            self.see_start(log_time, step.actual_s)
-
-    def see_start(self, log_time: int, actual_s: float) -> None:
-        """A step started at `actual_s` on the show clock: the first one fixes the zero."""
-        if not self.from_step:
-            self.zero_ns = log_time - round(actual_s * 1e9)
-            self.from_step = True
-
-    def seconds(self, log_time: int | None) -> float | None:
-        if log_time is None:
-            return None
-        if self.zero_ns is None:
-            self.zero_ns = log_time  # no metadata and no step: the first frame is zero
-        return (log_time - self.zero_ns) / 1e9
-
+from choreo.review.showtime import ShowTimes
+from choreo.review.summary import stale_replies
 
 @dataclass(frozen=True, slots=True)
 class Exchange:
@@ -76,17 +47,20 @@ class Exchange:
         return self.rx.kind if self.rx else None
 
 
-def exchanges(reader: LogReader, clock: ShowClock | None = None) -> Iterator[Exchange]:
+def exchanges(reader: LogReader, clock: ShowTimes | None = None) -> Iterator[Exchange]:
     """Frames paired with their replies, in the order they were sent."""
-    clock = clock or ShowClock(reader)
+    clock = clock or ShowTimes.of(reader)
     held: dict[str | None, tuple[TxRecord, int]] = {}  # by robot: a frame whose reply has not come yet
     topic, number = None, 0
     try:
-        for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC)):
+        for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC, CLOCK_TOPIC)):
             number += 1
             if topic == STEP_TOPIC:
                 if not clock.from_step:
                     clock.see_step(log_time, parse(topic, data))
+                continue
+            if topic == CLOCK_TOPIC:
+                clock.see_clock(log_time, parse(topic, data))
                 continue
             message = parse(topic, data, partial=True)  # shown as it is, whoever wrote it
             waiting = held.pop(message.robot, None)
@@ -106,7 +80,7 @@ def exchanges(reader: LogReader, clock: ShowClock | None = None) -> Iterator[Exc
         yield _pair(clock, frame, sent_ns, None, None)
 
 
-def _pair(clock: ShowClock, tx: TxRecord | None, tx_ns: int | None, rx: RxRecord | None,
+def _pair(clock: ShowTimes, tx: TxRecord | None, tx_ns: int | None, rx: RxRecord | None,
           rx_ns: int | None) -> Exchange:
     seq = (tx or rx).seq  # type: ignore[union-attr]
     return Exchange(seq, tx, tx_ns, clock.seconds(tx_ns), rx, rx_ns, clock.seconds(rx_ns))

@@ -25,7 +25,8 @@ from choreo.clock import TimeSource
 from choreo.errors import UsageError
 from choreo.protocol import Frame, FrameKind
 from choreo.review.attached import AttachedShow, attached_show
-from choreo.review.frames import ShowClock, reply_meaning
+from choreo.review.frames import reply_meaning
+from choreo.review.showtime import ShowTimes
 from choreo.logformat import (LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, RxRecord, StepRecord, TxRecord,
                               parse)
 from choreo.review.reader import Cut, LogReader
@@ -351,7 +352,7 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
     from choreo.link import Tag
 
     at_end = _polls_at_motion_ends(reader, robot)
-    recorded_clock = ShowClock(reader)
+    recorded_clock = ShowTimes.of(reader)
     zero_mono: float | None = start  # replay's monotonic time of recorded show time 0
     first_s = 0.0
     last: tuple[float, float] | None = None  # the last event: (recorded show s, replay monotonic)

@@ -19,6 +19,7 @@ from choreo.logformat import (CHOREO_TOPICS, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, 
                               ClockRecord, CommandRecord, LogRecord, MotionPlay, MotionTracker, RxRecord, StepRecord, TxRecord, is_late,
                               parse, slipped)
 from choreo.review.reader import Cut, LogReader
+from choreo.review.showtime import ShowTimes
 FRAME_KINDS = ("stop", "play", "restore", "status")
 REPLY_KINDS = ("ack", "nak", "status", "timeout", "invalid")
 LISTED_PLAYS = 30  # plays listed one by one; past this, per motion slot only
@@ -265,15 +266,9 @@ def summarize(path: str | Path) -> Summary:
         return summarize_reader(reader)
 
 
-def show_zero_ns(reader: LogReader) -> int | None:
-    """The run's start as the metadata gives it (wall-clock ns), before a step says better."""
-    start = reader.run_info.get("start_ns")
-    return int(start) if start and start.isdigit() else None
-
-
 def summarize_reader(reader: LogReader) -> Summary:
     summary = Summary(reader.path, dict(reader.run_info), None, False, None)
-    tally = _Tally(show_zero_ns(reader))
+    tally = _Tally(ShowTimes.of(reader))
     parts: dict[str, _Part] = {}  # a show for several robots: each robot's own tally and tracker
     solo = _Part(summary, tally, MotionTracker())
     topic, count, last_time = None, 0, None
@@ -289,6 +284,7 @@ def summarize_reader(reader: LogReader) -> Summary:
                 continue
             if topic == CLOCK_TOPIC:
                 _clock_sample(summary, record)
+                tally.times.see_clock(log_time, record)
                 continue
             if topic == COMMAND_TOPIC:
                 summary.commands_total += 1
@@ -305,7 +301,7 @@ def summarize_reader(reader: LogReader) -> Summary:
     summary.result = reader.result
     summary.complete = reader.complete
     for part in [solo, *parts.values()]:
-        part.finish(tally.zero)
+        part.finish(tally.times)
     tally.fill(summary)
     if parts:
         order = [name for name in reader.robots if name in parts]
@@ -314,8 +310,8 @@ def summarize_reader(reader: LogReader) -> Summary:
     result_s = _seconds((reader.result or {}).get("show_s"))
     if result_s is not None:
         summary.duration_s = result_s
-    elif last_time is not None and tally.zero is not None:
-        summary.duration_s = _show_s(last_time, tally.zero)
+    elif last_time is not None:
+        summary.duration_s = tally.times.seconds(last_time)
     return summary
 
 
@@ -340,7 +336,7 @@ class _Part:
         run = {"port": reader.run_info.get(f"robot.{robot}.port", "?"),
                "baud": reader.run_info.get(f"robot.{robot}.baud", "?"),
                "layout": reader.run_info.get(f"robot.{robot}.layout", "?")}
-        return cls(Summary(reader.path, run, None, False, None), _Tally(whole.zero), MotionTracker())
+        return cls(Summary(reader.path, run, None, False, None), _Tally(whole.times), MotionTracker())
 
     def see(self, topic: str, record, log_time: int, whole: _Tally) -> None:  # type: ignore[no-untyped-def]
         tallies = (whole,) if self.tally is whole else (whole, self.tally)
@@ -356,22 +352,22 @@ class _Part:
             for tally in tallies:
                 tally.step(record, log_time)
         if len(self.tracker.plays) > 256:
-            self._plays(whole.zero)
+            self._plays(whole.times)
 
-    def finish(self, zero: int | None) -> None:
+    def finish(self, times: ShowTimes) -> None:
         if self.tally.pending_seq != -1:
             self.summary.unanswered += 1
         self.tracker.finish(None)
-        self._plays(zero)
+        self._plays(times)
         if self.tally is not None:
-            self.tally.zero = zero
+            self.tally.times = times
             self.tally.fill(self.summary)
 
-    def _plays(self, zero: int | None) -> None:
+    def _plays(self, times: ShowTimes) -> None:
         for play in self.tracker.plays:
             if play.start_ns is not None and play.step is not None:
                 self.starts.setdefault(play.step, play.start_ns)
-        _add_plays(self.summary, self.tracker.plays, zero)
+        _add_plays(self.summary, self.tracker.plays, times)
 
 
 def _gather(summary: Summary, parts: dict[str, _Part], unison: bool) -> None:
@@ -396,9 +392,8 @@ def _gather(summary: Summary, parts: dict[str, _Part], unison: bool) -> None:
 class _Tally:
     """The counts of one pass: frames, replies, latencies, steps and their lateness."""
 
-    def __init__(self, zero: int | None) -> None:
-        self.zero = zero  # the show clock's zero in wall-clock ns (a step start fixes it)
-        self.zero_from_step = False
+    def __init__(self, times: ShowTimes) -> None:
+        self.times = times  # log times to show time (one for the whole log, shared by each robot's)
         self.frames = dict.fromkeys(FRAME_KINDS, 0)
         self.replies = dict.fromkeys(REPLY_KINDS, 0)
         self.latency = Distribution()
@@ -441,9 +436,7 @@ class _Tally:
             if step.kind == "play":  # a wait starts when the play before it is answered
                 self.lateness.add(step.late_ms)
                 self.late += is_late(step)
-            if not self.zero_from_step:
-                self.zero = log_time - round(step.actual_s * 1e9)
-                self.zero_from_step = True
+            self.times.see_start(log_time, step.actual_s)
             return
         if step.kind == "play" and step.cue is not None and step.start_s is not None:
             self.motion_starts.add((step.start_s - step.cue) * 1e3)
@@ -463,7 +456,7 @@ class _Tally:
         else:
             summary.warnings += 1
         if len(summary.log_lines) < LISTED_LOG_LINES:
-            summary.log_lines.append(LogLine(_show_s(log_time, self.zero), line.level, str(line.message)))
+            summary.log_lines.append(LogLine(self.times.seconds(log_time) or 0.0, line.level, str(line.message)))
 
     def fill(self, summary: Summary) -> None:
         summary.frames = self.frames
@@ -492,18 +485,14 @@ def _seconds(text: str | None) -> float | None:
     return value if value is not None and math.isfinite(value) else None
 
 
-def _show_s(log_time: int, zero: int | None) -> float:
-    return (log_time - zero) / 1e9 if zero is not None else 0.0
-
-
-def _add_plays(summary: Summary, plays: list[MotionPlay], zero: int | None) -> None:
+def _add_plays(summary: Summary, plays: list[MotionPlay], times: ShowTimes) -> None:
     """Move the tracker's plays into the summary's per-slot statistics (and the listed first
     few); a play that never started is no play of its motion."""
     for done in plays:
         if done.start_ns is None or done.motion is None:
             continue
         duration = (done.end_ns - done.start_ns) / 1e9 if done.measured and done.end_ns is not None else None
-        play = Play(done.motion, done.step, done.label, _show_s(done.start_ns, zero), duration, done.ended_by)
+        play = Play(done.motion, done.step, done.label, times.seconds(done.start_ns) or 0.0, duration, done.ended_by)
         summary.plays_total += 1
         if len(summary.plays) < LISTED_PLAYS:
             summary.plays.append(play)

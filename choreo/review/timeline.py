@@ -17,8 +17,8 @@ from typing import BinaryIO
 
 from choreo.errors import ChoreoError
 from choreo.review.attached import AttachedShow, attached_show
-from choreo.review.frames import ShowClock
-from choreo.logformat import (ABORT_LABEL, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, MotionPlay, MotionTracker,
+from choreo.review.showtime import ShowTimes
+from choreo.logformat import (ABORT_LABEL, CLOCK_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, MotionPlay, MotionTracker,
                               RxRecord, StepRecord, is_late, parse, slipped)
 from choreo.review.reader import Cut, LogReader
 from choreo.textfit import fit
@@ -142,15 +142,18 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
     marks (late plays by the same rule), the cues, and the plan's plays the run never reached."""
     show = show or attached_show(reader)
     timeline = Timeline(reader.run_info.get("show") or reader.path.stem, show_problem=show.problem)
-    clock = ShowClock(reader)
+    clock = ShowTimes.of(reader)
     trackers: dict[str | None, MotionTracker] = {}  # by robot: each robot's motions are its own
     steps: dict[tuple[str | None, int], _Step] = {}
     last_ns: int | None = None
     topic, number = None, 0
     try:
-        for topic, log_time, data in reader.messages((STEP_TOPIC, TX_TOPIC, RX_TOPIC, LOG_TOPIC)):
+        for topic, log_time, data in reader.messages((STEP_TOPIC, TX_TOPIC, RX_TOPIC, LOG_TOPIC, CLOCK_TOPIC)):
             number += 1
             record = parse(topic, data)
+            if topic == CLOCK_TOPIC:
+                clock.see_clock(log_time, record)
+                continue
             last_ns = log_time if last_ns is None else max(last_ns, log_time)
             if topic == STEP_TOPIC:
                 if record.event == "start":
@@ -217,7 +220,7 @@ def _fault(rx: RxRecord, now: float | None) -> Mark:
     return Mark(now or 0.0, "fault", f"{whose}{rx.kind.upper()} to frame #{rx.seq}: {what}")
 
 
-def _run_of(play: MotionPlay, step: _Step | None, show: AttachedShow, clock: ShowClock,
+def _run_of(play: MotionPlay, step: _Step | None, show: AttachedShow, clock: ShowTimes,
             robot: str | None = None) -> MotionRun:
     start = step.start if step is not None else None
     motion = play.motion if play.motion is not None else -1
