@@ -115,8 +115,8 @@ def test_panic_halts_every_robot_and_plays_the_aborts(tmp_path):
             at: go
         """
     run = Running(tmp_path, body)
-    run.until_waiting()
-    assert run.live.waiting[0].robots == {"a", "b"}
+    # both robots reach the shared GO cue (the second a moment after the first)
+    assert wait_for(lambda: bool(run.live.waiting) and run.live.waiting[0].robots == {"a", "b"}, 10, 0.005)
     assert run.go("panic").ok
     run.finish()
     assert run.result.outcome == "aborted" and run.live.stop.reason == PANIC
