@@ -13,10 +13,12 @@ on a loaded machine as on an idle one: timing logic is tested exactly, not by lu
 
 from __future__ import annotations
 
+import contextlib
 import math
+import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -28,6 +30,19 @@ IDLE_S = 0.01
 # Python's thread switch interval while other threads share a show (several robots' runners,
 # the music's audio callback): a thread due to send must not wait 5 ms (the default) for the lock.
 SWITCH_S = 0.0001
+
+
+@contextlib.contextmanager
+def quick_thread_switches() -> Iterator[None]:
+    """Python hands its lock between threads every 5 ms by default: while other threads share
+    a show, a thread due to send could wait that long behind another's work. Every SWITCH_S
+    inside the block, as it was after it."""
+    before = sys.getswitchinterval()
+    sys.setswitchinterval(SWITCH_S)
+    try:
+        yield
+    finally:
+        sys.setswitchinterval(before)
 
 
 class TimeSource(Protocol):

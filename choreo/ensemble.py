@@ -20,12 +20,11 @@ at the end, saying who dropped out and when).
 
 from __future__ import annotations
 
-import sys
 import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from choreo.clock import SWITCH_S, MachineShowClock, RunClock, ShowClock, sleep_until_show
+from choreo.clock import MachineShowClock, RunClock, ShowClock, quick_thread_switches, sleep_until_show
 from choreo.errors import LinkError
 from choreo.logformat import ERROR, WARNING
 from choreo.runner import Runner, RunResult, StopRequest
@@ -222,16 +221,10 @@ class Ensemble:
         threads = [threading.Thread(target=self._play, args=(part,), name=f"choreo-{part.robot}", daemon=True)
                    for part in self.parts]
         self.clock.source.admit(len(threads))
-        switch = sys.getswitchinterval()
-        # Python hands its lock between threads every 5 ms by default: a robot's thread due to
-        # send could wait that long behind another's work. Handed every 0.1 ms during the show.
-        sys.setswitchinterval(SWITCH_S)
-        try:
+        with quick_thread_switches():
             for thread in threads:
                 thread.start()
             self._join(threads)
-        finally:
-            sys.setswitchinterval(switch)
         return self._finish()
 
     @property

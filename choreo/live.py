@@ -24,8 +24,6 @@ from choreo.runner import PANIC, StopRequest
 from choreo.show.model import PlannedStep
 
 LOCKOUT_S = 0.5  # a second GO this soon after one is taken for a double press, and refused
-COMMANDS = ("go", "panic", "start", "stop", "cue_go")  # what `command` carries out
-REPORTED = ("unknown", "refused")  # what a source reports without carrying out (OSC: an address it does not know, a sender not allowed)
 
 
 @dataclass(frozen=True)
@@ -136,7 +134,6 @@ class Live:
         self.lockout_s = lockout_s
         self.listeners: list[CommandListener] = []
         self.show: ShowClock | None = None  # set when the show starts
-        self.panicked = False
         self._now = now
         self._wall_ns = wall_ns
         self._changed = threading.Condition()
@@ -144,6 +141,11 @@ class Live:
         self._waiting: dict[object, GoCue] = {}  # the GO cues robots wait at, by `_key`
         self._released: set[object] = set()  # GO cues already given their GO
         self._last_go: float | None = None
+
+    @property
+    def panicked(self) -> bool:
+        """The show was stopped by a panic (not by stop, Ctrl-C or a fault)."""
+        return self.stop() and self.stop.reason == PANIC
 
     @property
     def started(self) -> bool:
@@ -203,8 +205,8 @@ class Live:
             return self._in_order()
 
     def _in_order(self) -> list[GoCue]:
-        return sorted((c for c in self._waiting.values() if not c.released),
-                      key=lambda c: (c.reached_s, c.step.planned_s, c.step.index))
+        """The lock is held. A cue given its GO leaves `_waiting` at once (`_release`)."""
+        return sorted(self._waiting.values(), key=lambda c: (c.reached_s, c.step.planned_s, c.step.index))
 
     # -- what the operator says --------------------------------------------------------------
 
@@ -239,7 +241,7 @@ class Live:
 
     def _cue_go(self, command: Command) -> Answer:
         with self._changed:
-            waiting = [c for c in self._waiting.values() if not c.released]
+            waiting = list(self._waiting.values())
             match = [c for c in waiting if c.step.label == command.label]
             if not match:
                 at = ", ".join(repr(c.name) for c in waiting) or "no cue"
@@ -252,13 +254,12 @@ class Live:
         cue.released = True
         del self._waiting[cue.key]
         self._released.add(cue.key)
-        if isinstance(self.show, HoldingShowClock) and not any(not c.released for c in self._waiting.values()):
+        if isinstance(self.show, HoldingShowClock) and not self._waiting:
             self.show.resume()
         self._changed.notify_all()
         return Answer("ok", f"GO: {cue.name}", {"cue": cue.name, "step": cue.step.index})
 
     def _panic(self, command: Command) -> Answer:
-        self.panicked = True
         self.stop.request(PANIC)
         self._wake()
         return Answer("ok", "panic: no more show frames; stop frames and every robot's abort motion")

@@ -180,7 +180,6 @@ class Feed:
         self.lead_in = song.frames(lead_in_s)
         self.skip = song.frames(song.music.start + skip_s)  # where in the file the show starts
         self.handed = 0  # frames handed over so far
-        self.song_frames = 0  # of those, from the file
         self.ended_at: int | None = None  # frames handed over when the file ran out
         self.problem: str | None = None  # why the file stopped decoding early
         self._source: Iterator[Any] | None = None
@@ -205,7 +204,6 @@ class Feed:
         take = min(need, len(self._pending))
         out += self._pending[:take]
         del self._pending[:take]
-        self.song_frames += take // self.frame_bytes
         out += bytes(need - take)
         return bytes(out)
 
@@ -246,6 +244,14 @@ class Output:
     device_id: Any = None  # miniaudio's id (None: the backend's default)
 
 
+NULL_OUTPUT = Output(0, NULL_DEVICE, "Null")
+
+
+def output_name(output: Output | None) -> str:
+    """How messages name an output (None: the system's default)."""
+    return output.name if output is not None else "the default output"
+
+
 def outputs() -> list[Output]:
     """The playback devices miniaudio finds on this machine (none where it finds no sound
     system), and the null output last, which every machine has."""
@@ -259,7 +265,7 @@ def outputs() -> list[Output]:
                      for n, d in enumerate(devices.get_playbacks(), 1)]
         except miniaudio.MiniaudioError:
             pass
-    return found + [Output(0, NULL_DEVICE, "Null")]
+    return found + [NULL_OUTPUT]
 
 
 def pick_output(given: str | None, listed: Callable[[], list[Output]] | None = None) -> Output | None:
@@ -268,7 +274,7 @@ def pick_output(given: str | None, listed: Callable[[], list[Output]] | None = N
     if given is None:
         return None
     if given.strip().lower() == NULL_DEVICE:
-        return Output(0, NULL_DEVICE, "Null")
+        return NULL_OUTPUT
     choices = [o for o in (listed or outputs)() if o.name != NULL_DEVICE]
     if given.strip().isdigit():
         match = [o for o in choices if o.number == int(given)]
@@ -367,7 +373,7 @@ class Player:
                                  "see `choreo devices`, or run with --no-music") from None
             self.note = ("the default sound output does not open: the music's clock runs on the null output "
                          "(silent, in real time); `choreo devices` lists the outputs, --audio-device picks one")
-            device = open_device(Output(0, NULL_DEVICE, "Null"), self.song.sample_rate)
+            device = open_device(NULL_OUTPUT, self.song.sample_rate)
         self.backend = device.backend
         return device
 
@@ -383,9 +389,12 @@ class Player:
         if not self.clock.real_time():
             pace = self.clock.handed_s / max(self.clock.span_s, 1e-6)
             self.close()
-            name = self.output.name if self.output is not None else "the default output"
-            raise AudioError(f"audio output {name!r} ({self.backend}) takes samples at {pace:.1f}x real time: "
+            raise AudioError(f"audio output {self.output_name!r} ({self.backend}) takes samples at {pace:.1f}x real time: "
                              "it cannot keep the show's time; pick another (choreo devices) or --audio-device null")
+
+    @property
+    def output_name(self) -> str:
+        return output_name(self.output)
 
     @property
     def end_show_s(self) -> float:
@@ -400,6 +409,5 @@ class Player:
 
     def describe(self) -> str:
         """`song.wav from 0.0 s on ALSA`: what the run's first lines say."""
-        name = self.output.name if self.output is not None else "the default output"
         start = self.song.music.start + self.origin
-        return f"{self.song.music.file} from {start:.1f} s on {name} ({self.backend})"
+        return f"{self.song.music.file} from {start:.1f} s on {self.output_name} ({self.backend})"

@@ -8,6 +8,7 @@ run's outcome in its metadata.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 import sys
@@ -16,7 +17,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from choreo.clock import SWITCH_S, MachineShowClock, RunClock, ShowClock, SystemTime, TimeSource, sleep_until_show
+from choreo.clock import (MachineShowClock, RunClock, ShowClock, SystemTime, TimeSource, quick_thread_switches,
+                          sleep_until_show)
 from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError, did_you_mean
 from choreo.layouts import SEED, Layout, layout_named
 from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
@@ -88,7 +90,6 @@ class Session:
     song: Song | None = None  # the music that keeps the show clock (None: the machine's clock)
     output: Output | None = None  # where it plays (None: the default output)
     player: Player | None = None  # while it plays
-    _switch: float = 0.005  # Python's thread switch interval before the music started
     loop: tuple[str, str] | None = None  # `--loop FROM..TO`, as given
     ends: dict[str, int] = field(default_factory=dict)  # where each robot's plan stops (--loop), by robot
 
@@ -246,17 +247,17 @@ class Session:
                    for name in self.links}
         ensemble = self._ensemble(runners, stop, everyone) if self.show.ensemble else None
         preroll = ensemble.preroll_s() if ensemble is not None else runners[self.first.robot].preroll_s()
-        show = self._start_show_clock(preroll, everyone, holding=live is not None)
-        if live is not None:
-            live.show = show
-        sampler = ClockSampler(self.recorder, self.clock, show, "music" if self.player else "machine") \
-            if self.recorder is not None else None
-        for runner in runners.values():
-            runner.on_idle = sampler
-        if sampler is not None and isinstance(show, HoldingShowClock):
-            # the log marks where show time goes on after a GO: the reviews place later frames by it
-            show.on_resume.append(lambda: sampler.sample(force=True))
-        try:
+        with contextlib.ExitStack() as music:
+            show = self._start_show_clock(preroll, everyone, music, holding=live is not None)
+            if live is not None:
+                live.show = show
+            sampler = ClockSampler(self.recorder, self.clock, show, "music" if self.player else "machine") \
+                if self.recorder is not None else None
+            for runner in runners.values():
+                runner.on_idle = sampler
+            if sampler is not None and isinstance(show, HoldingShowClock):
+                # the log marks where show time goes on after a GO: the reviews place later frames by it
+                show.on_resume.append(lambda: sampler.sample(force=True))
             if sampler is not None:
                 sampler.sample(force=True)
             result = runners[self.first.robot].run(show) if ensemble is None else self._run_ensemble(ensemble, show)
@@ -267,18 +268,13 @@ class Session:
             if sampler is not None:
                 sampler.sample(force=True)
             return result
-        finally:
-            self._stop_music(everyone)
 
     def _ensemble(self, runners: dict[str, Runner], stop: StopRequest, listeners: list):  # type: ignore[no-untyped-def]
         from choreo.ensemble import Ensemble, Part
 
-        def log(level: int, message: str) -> None:
-            for listener in listeners:
-                listener.on_log(level, message, self.clock.wall_ns())
-
         parts = [Part(name, runner, self.links[name].on_fault) for name, runner in runners.items()]
-        return Ensemble(parts, self.clock, stop, unison=self.plan.unison, log=log, origin=self.origin)
+        return Ensemble(parts, self.clock, stop, unison=self.plan.unison, origin=self.origin,
+                        log=lambda level, message: self._tell(listeners, level, message))
 
     def _run_ensemble(self, ensemble, show: ShowClock) -> RunResult:  # type: ignore[no-untyped-def]
         try:
@@ -288,11 +284,12 @@ class Session:
 
     # -- the show clock --------------------------------------------------------------------
 
-    def _start_show_clock(self, preroll: float, listeners: list[RunListener], holding: bool = False) -> ShowClock:
+    def _start_show_clock(self, preroll: float, listeners: list[RunListener], music: contextlib.ExitStack,
+                          holding: bool = False) -> ShowClock:
         """The music's clock, its song started a lead-in before the run's first moment (a play
-        cued at the very start goes out ahead of the first sample by its lead), else the
-        machine's, with the run's first moment `preroll` from now. The log's metadata gets
-        show time 0 as wall-clock and monotonic nanoseconds either way."""
+        cued at the very start goes out ahead of the first sample by its lead) and stopped when
+        `music` closes, else the machine's, with the run's first moment `preroll` from now. The
+        log's metadata gets show time 0 as wall-clock and monotonic nanoseconds either way."""
         assert self.stage is not None
         if self.song is None:
             zero = self.clock.mono() - (self.origin - preroll)
@@ -301,11 +298,12 @@ class Session:
         else:
             self.player = Player(self.song, self.output, self.origin, max(LEAD_IN_S, preroll + LEAD_IN_S))
             show = self.player.start()
+            music.callback(self._stop_music, listeners)
             # The audio thread shares the interpreter: spinning towards a cue yields to it, and
-            # Python hands its lock over every SWITCH_S, not every 5 ms.
+            # Python hands its lock over quickly.
             self.clock.source.admit(1)
-            self._switch = sys.getswitchinterval()
-            sys.setswitchinterval(SWITCH_S)
+            music.callback(self.clock.source.leave)
+            music.enter_context(quick_thread_switches())
             if self.player.note is not None:
                 self._tell(listeners, WARNING, self.player.note)
             self._tell(listeners, INFO, f"music: {self.player.describe()}")
@@ -345,8 +343,6 @@ class Session:
         if self.player is None:
             return
         self.player.close()
-        self.clock.source.leave()
-        sys.setswitchinterval(self._switch)
         problem = self.player.feed.problem if self.player.feed is not None else None
         if problem is not None:
             self._tell(listeners, WARNING, f"music: {self.player.song.music.file} stopped decoding early "
@@ -642,14 +638,20 @@ def _starts(show: Show, plans: dict[str, Plan], ref: str | None,
         first = next(iter(plans.values()))
         index = _start_index(first, ref, option)
         return dict.fromkeys(plans, index), first.steps[index].planned_s if index < len(first.steps) else 0.0
+    moment = _moment(plans, ref, f"{option} {ref}")
+    return {name: next((s.index for s in plan.steps if s.planned_s >= moment - 1e-9), len(plan.steps))
+            for name, plan in plans.items()}, moment
+
+
+def _moment(plans: dict[str, Plan], ref: str, given: str) -> float:
+    """The show time of the step labelled `ref` in any track: tracks are named by labels."""
     moment = next((step.planned_s for plan in plans.values() for step in plan.steps if step.label == ref), None)
     if moment is None:
         labels = [s.label for plan in plans.values() for s in plan.steps if s.label]
-        raise UsageError(f"{option} {ref}: no step with that label in any track{did_you_mean(ref, labels)}"
+        raise UsageError(f"{given}: no step with that label in any track{did_you_mean(ref, labels)}"
                          f"{'; labels: ' + ', '.join(labels[:12]) if labels else ''} (tracks are named by labels, "
                          "not indices)")
-    return {name: next((s.index for s in plan.steps if s.planned_s >= moment - 1e-9), len(plan.steps))
-            for name, plan in plans.items()}, moment
+    return moment
 
 
 def _loop_range(text: str) -> tuple[str, str]:
@@ -670,10 +672,7 @@ def _ends(show: Show, plans: dict[str, Plan], ref: str, starts: dict[str, int], 
         if index <= starts[first.robot]:
             raise UsageError(f"{option} ..{ref}: it comes before the loop's first step")
         return dict.fromkeys(plans, index)
-    moment = next((step.planned_s for plan in plans.values() for step in plan.steps if step.label == ref), None)
-    if moment is None:
-        labels = [s.label for plan in plans.values() for s in plan.steps if s.label]
-        raise UsageError(f"{option} ..{ref}: no step with that label in any track{did_you_mean(ref, labels)}")
+    moment = _moment(plans, ref, f"{option} ..{ref}")
     ends = {name: 1 + max((s.index for s in plan.steps if s.planned_s <= moment + 1e-9), default=-1)
             for name, plan in plans.items()}
     if all(ends[name] <= starts[name] for name in plans):

@@ -26,7 +26,7 @@ from choreo.live import Live
 from choreo.logformat import ERROR, WARNING
 from choreo.osc import Budget, OscServer, SlipStream, command_for, parse_allow, sender_allowed
 from choreo.runner import PANIC, StopRequest
-from runlog import LiveRun, read_log, start_choreo, write_show
+from runlog import LiveRun, read_log, start_choreo, wait_for, write_show
 
 GO_SHOW = """\
     version: 1
@@ -45,10 +45,7 @@ TIMEOUT_S = 5.0
 
 
 def wait_until(predicate, timeout: float = TIMEOUT_S) -> None:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.002)
+    assert wait_for(predicate, timeout, every=0.002), "timed out"
 
 
 class Commands:

@@ -373,7 +373,9 @@ def _music_line(session) -> str:  # type: ignore[no-untyped-def]
         return f"music: {session.show.music.file} not played (--no-music): the machine's clock keeps the show"
     song = session.song
     start = song.music.start + session.origin
-    where = session.output.name if session.output is not None else "the default output"
+    from choreo.music import output_name
+
+    where = output_name(session.output)
     return f"music: {song.music.file} from {start:.1f} s of {song.duration_s:.1f} s, on {where}: the show clock"
 
 
@@ -513,13 +515,9 @@ class Progress:
             self.out = None
 
     def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
-        if level < 3 or level >= 4 or self.quiet:
+        if level < 3 or level >= 4:
             return  # errors reach the user once, as the command's final line
-        with self._lock:
-            self._clear()
-            self._write(f"warning: {message}\n")
-            if self._current:
-                self._draw()
+        self._say_line(f"warning: {message}")
 
     def on_waiting(self, cue) -> None:  # type: ignore[no-untyped-def]
         """A GO cue is reached (live control): say so, it is what the operator waits for."""
@@ -531,23 +529,22 @@ class Progress:
         verdict = "" if answer.ok or answer.message.startswith("refused") else "refused: "
         self._say_line(f"{event.command.name} ({event.command.source}): {verdict}{answer.message}")
 
-    def _say_line(self, text: str) -> None:
+    def _say_line(self, text: str, last_step_done: bool = False) -> None:
+        """A line above the live one (which is drawn again below it, unless the steps are done)."""
         if self.quiet:
             return
         with self._lock:
             self._clear()
+            if last_step_done:
+                self._current = ""
             self._write(text + "\n")
             if self._current:
                 self._draw()
 
     def on_play_out(self, end_s: float) -> None:
         """The steps are done; the music plays on to its end."""
-        if self.quiet:
-            return
-        with self._lock:
-            self._clear()
-            self._current = ""
-            self._write(f"music: the steps are done; the music plays to its end at {end_s:.1f} s (Ctrl-C stops it)\n")
+        self._say_line(f"music: the steps are done; the music plays to its end at {end_s:.1f} s (Ctrl-C stops it)",
+                       last_step_done=True)
 
     def finish(self) -> None:
         self._done.set()
