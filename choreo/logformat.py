@@ -73,11 +73,6 @@ ABORT_LABEL = "on_abort"  # the label of the abort motion's frames (they belong 
 LATE_MS = 1.0
 
 
-def without_absent(message: dict) -> dict:
-    """The message with its absent (None) fields left out."""
-    return {key: value for key, value in message.items() if value is not None}
-
-
 @lru_cache(maxsize=None)
 def _field_names(cls: type) -> tuple[str, ...]:
     """A record type's field names, worked out once (the recorder serialises every frame)."""

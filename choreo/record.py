@@ -308,7 +308,7 @@ class Recorder:
         self._queue((LOG_TOPIC, time_ns, _log_message, (level, message, time_ns)))
 
     def on_clock(self, record: ClockRecord, time_ns: int) -> None:
-        """Queued only: a sample of the show clock (`choreo.clocks.ClockSampler`)."""
+        """Queued only: a sample of the show clock (`choreo.session.ClockSampler`)."""
         self._queue((CLOCK_TOPIC, time_ns, _record_message, record))
 
     def on_command(self, event: CommandEvent) -> None:

@@ -301,7 +301,7 @@ def summarize_reader(reader: LogReader) -> Summary:
     summary.result = reader.result
     summary.complete = reader.complete
     for part in [solo, *parts.values()]:
-        part.finish(tally.times)
+        part.finish()
     tally.fill(summary)
     if parts:
         order = [name for name in reader.robots if name in parts]
@@ -352,22 +352,21 @@ class _Part:
             for tally in tallies:
                 tally.step(record, log_time)
         if len(self.tracker.plays) > 256:
-            self._plays(whole.times)
+            self._plays()
 
-    def finish(self, times: ShowTimes) -> None:
+    def finish(self) -> None:
         if self.tally.pending_seq != -1:
             self.summary.unanswered += 1
         self.tracker.finish(None)
-        self._plays(times)
-        if self.tally is not None:
-            self.tally.times = times
-            self.tally.fill(self.summary)
+        self._plays()
+        self.tally.fill(self.summary)
 
-    def _plays(self, times: ShowTimes) -> None:
+    def _plays(self) -> None:
+        """Plays on the show clock: one ShowTimes for the whole log, every robot's tally shares it."""
         for play in self.tracker.plays:
             if play.start_ns is not None and play.step is not None:
                 self.starts.setdefault(play.step, play.start_ns)
-        _add_plays(self.summary, self.tracker.plays, times)
+        _add_plays(self.summary, self.tracker.plays, self.tally.times)
 
 
 def _gather(summary: Summary, parts: dict[str, _Part], unison: bool) -> None:
