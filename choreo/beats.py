@@ -28,10 +28,10 @@ import miniaudio
 import numpy as np
 
 from choreo.errors import UsageError
-from choreo.show.model import Tempo
+from choreo.show.model import MUSIC_FORMATS_TEXT, Tempo
 
 SAMPLE_RATE = 22050  # Hz: enough for onsets, half the work of 44.1 kHz
-SONG_FORMATS = "wav, mp3, flac or ogg"
+SONG_FORMATS = MUSIC_FORMATS_TEXT
 BPM_RANGE = (40.0, 240.0)  # searched by default; `tempo.bpm` itself may be up to 400
 BPM_LIMITS = (1.0, 400.0)  # what a search range may span: the show schema's bpm range
 METER_LIMITS = (1, 16)  # beats a bar, as the show schema allows

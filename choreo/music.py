@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from choreo.errors import ChoreoError, UsageError
-from choreo.show.model import Music
+from choreo.show.model import MUSIC_FORMATS_TEXT, Music
 
 PERIOD_MS = 10  # how much the device asks for at a time
 PERIODS = 3  # periods in the device's buffer
@@ -81,7 +81,7 @@ class Song:
         except FileNotFoundError:
             raise AudioError(f"{where}: no such file ({music.path})") from None
         except (miniaudio.DecodeError, OSError) as exc:
-            raise AudioError(f"{where}: cannot decode it ({_reason(exc)}): is it a wav, mp3, flac or ogg file?") from None
+            raise AudioError(f"{where}: cannot decode it ({_reason(exc)}): is it a {MUSIC_FORMATS_TEXT} file?") from None
         if info.sample_rate <= 0 or info.num_frames <= 0:
             raise AudioError(f"{where}: the file holds no sound")
         song = cls(music, int(info.sample_rate), info.num_frames / info.sample_rate)

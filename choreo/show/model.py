@@ -121,6 +121,7 @@ class Tempo:
 
 
 MUSIC_FORMATS = (".wav", ".mp3", ".flac", ".ogg")  # what miniaudio decodes
+MUSIC_FORMATS_TEXT = ", ".join(f[1:] for f in MUSIC_FORMATS[:-1]) + " or " + MUSIC_FORMATS[-1][1:]  # in messages
 
 
 @dataclass(frozen=True)
