@@ -48,9 +48,37 @@ def test_plan_json_has_every_step_with_its_frames(capsys):
     assert record["estimated_s"] == 1.0 and record["steps"] == 2
 
 
-def test_plan_json_of_a_bad_show_prints_nothing_on_stdout(capsys):
+def test_plan_json_of_a_bad_show_is_a_json_failure_object(capsys, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\nsteps: [{play: nosuchmotion}]\n")
+    record = json_of(capsys, "plan", str(bad), "--json", code=2)
+    assert record["ok"] is False and record["exit"] == 2 and "nosuchmotion" in record["error"]
+    assert record["problems"] and all(p["file"] == str(bad) for p in record["problems"])
+
+
+@pytest.mark.parametrize("argv, code", [
+    (["plan", "/nonexistent.yaml", "--json"], 2),
+    (["validate", "/nonexistent.yaml", "--json"], 2),
+    (["run", "/nonexistent.yaml", "--json"], 2),
+    (["run", "shows/minimal.yaml", "--port", "sim://?nosuch=1", "--json", "-q"], 2),
+    (["run", "shows/minimal.yaml", "--port", "/nonexistent-tty", "--json", "-q", "--no-log"], 3),
+])
+def test_every_json_command_prints_one_json_object_on_failure(capsys, argv, code):
+    """A script that asked for JSON reads stdout only: a failure is a JSON object there too,
+    with the exit status; stderr says what it says without --json."""
+    assert main(argv) == code
+    captured = capsys.readouterr()
+    record = json.loads(captured.out)
+    assert record["ok"] is False and record["exit"] == code
+    assert captured.err.strip()
+
+
+def test_the_failure_object_is_the_same_shape_everywhere(capsys):
     assert main(["plan", "/nonexistent.yaml", "--json"]) == 2
-    assert capsys.readouterr().out == ""
+    plan = json.loads(capsys.readouterr().out)
+    assert main(["run", "/nonexistent.yaml", "--json"]) == 2
+    run = json.loads(capsys.readouterr().out)
+    assert {key: plan[key] for key in ("ok", "exit", "error")} == {key: run[key] for key in ("ok", "exit", "error")}
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +107,7 @@ def test_run_json_when_the_port_fails_still_names_the_log(capsys, tmp_path):
 
 def test_run_json_of_a_bad_show_has_no_log(capsys):
     record = json_of(capsys, "run", "/nonexistent.yaml", "--json", code=2)
-    assert record == {"show": "/nonexistent.yaml", "exit": 2, "log": None, "outcome": "failed",
+    assert record == {"show": "/nonexistent.yaml", "ok": False, "exit": 2, "log": None, "outcome": "failed",
                       "error": "/nonexistent.yaml: cannot read the show file: No such file or directory"}
 
 

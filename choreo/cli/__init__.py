@@ -121,7 +121,13 @@ def _command(argv: Sequence[str] | None, signals: SignalGuard | None,
         if extra:
             getattr(args, "parser", parser).unknown_arguments(extra)
         args.time_source = time_source
-        code = int(args.handler(args) or 0)
+        try:
+            code = int(args.handler(args) or 0)
+        except (ChoreoError, KeyboardInterrupt) as exc:
+            from choreo.cli.jsonout import report_failure
+
+            report_failure(args, exc)  # --json: the failure as JSON on stdout too
+            raise
         sys.stdout.flush()  # a full output fails here, inside the one place errors are mapped
         return code
     finally:

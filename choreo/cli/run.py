@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import signal
 import sys
@@ -74,7 +73,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress output")
     parser.add_argument("--json", action="store_true", help="at the end, the run's result and log "
                         "path as one JSON object on stdout (also when it fails; stderr as without)")
-    parser.set_defaults(handler=run)
+    parser.set_defaults(handler=run, own_json_failure=True)  # its result record says the failure
 
 
 def run(args: argparse.Namespace) -> int:
@@ -91,7 +90,9 @@ def run(args: argparse.Namespace) -> int:
         raise
     finally:
         if args.json:
-            _print_json(report.record)
+            from choreo.cli.jsonout import print_json
+
+            print_json(report.record)
     return code
 
 
@@ -260,13 +261,15 @@ class _RunReport:
         self.exit_code = 0
 
     def failed(self, exc: ChoreoError) -> None:
-        self.error = " / ".join(exc.lines())
-        self.exit_code = exc.exit_code
+        from choreo.cli.jsonout import error_record
+
+        failure = error_record(exc)
+        self.error, self.exit_code = failure["error"], failure["exit"]
 
     @property
     def record(self) -> dict:
         session, result = self.session, self.result
-        record: dict = {"show": self.show, "exit": self.exit_code}
+        record: dict = {"show": self.show, "ok": self.exit_code == 0, "exit": self.exit_code}
         if session is not None:
             record.update(name=session.show.name, port=session.port, baud=session.baud, layout=session.layout.name,
                           log=str(session.log_path) if session.log_path and session.recorder else None)
@@ -288,13 +291,6 @@ class _RunReport:
         if self.error is not None:
             record["error"] = self.error
         return record
-
-
-def _print_json(record: dict) -> None:
-    try:
-        print(json.dumps(record, ensure_ascii=False), flush=True)
-    except BrokenPipeError:
-        pass
 
 
 @contextmanager

@@ -22,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     validate.add_argument("shows", nargs="+", metavar="SHOW", help="a show file (YAML)")
     validate.add_argument("--json", action="store_true", help="one JSON object on stdout: every file, "
                           "ok with its figures or its problems (exit status as without)")
-    validate.set_defaults(handler=run_validate)
+    validate.set_defaults(handler=run_validate, own_json_failure=True)  # its files' record says the problems
 
     plan = subparsers.add_parser(
         "plan",
@@ -37,6 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_validate(args: argparse.Namespace) -> int:
+    from choreo.cli.jsonout import problem_record
     from choreo.errors import ShowError
     from choreo.show.load import load_show
     from choreo.show.plan import compile_plans
@@ -48,7 +49,7 @@ def run_validate(args: argparse.Namespace) -> int:
             show = load_show(path)
         except ShowError as exc:
             problems.extend(exc.problems)
-            files.append({"path": path, "ok": False, "problems": [_problem_record(p) for p in exc.problems]})
+            files.append({"path": path, "ok": False, "problems": [problem_record(p) for p in exc.problems]})
             continue
         plans = compile_plans(show)
         if args.json:
@@ -57,16 +58,10 @@ def run_validate(args: argparse.Namespace) -> int:
         else:
             print(summary_line(show, plans), flush=True)
     if args.json:
-        print(json.dumps({"ok": not problems, "files": files}, ensure_ascii=False))
-        return 2 if problems else 0
+        print(json.dumps({"ok": not problems, "exit": 2 if problems else 0, "files": files}, ensure_ascii=False))
     if problems:
         raise ShowError(problems)
     return 0
-
-
-def _problem_record(problem) -> dict:  # type: ignore[no-untyped-def]
-    return {"file": problem.file, "line": problem.line, "column": problem.column,
-            "path": problem.path, "message": problem.message}
 
 
 def _show_record(show, plan) -> dict:  # type: ignore[no-untyped-def]
