@@ -59,6 +59,9 @@ class TimeSource(Protocol):
     def sleep(self, seconds: float) -> None:
         """Let `seconds` pass."""
 
+    def doze(self, seconds: float) -> None:
+        """Let up to `seconds` pass: `notify` ends it early (a deadline that moved)."""
+
     def spin(self) -> None:
         """One turn of a busy wait (the last SPIN_S before a cue)."""
 
@@ -91,6 +94,10 @@ class SystemTime:
 
     def sleep(self, seconds: float) -> None:
         time.sleep(max(seconds, 0.0))
+
+    def doze(self, seconds: float) -> None:
+        with self._changed:
+            self._changed.wait(max(seconds, 0.0))
 
     def __init__(self) -> None:
         self._changed = threading.Condition()
@@ -153,6 +160,7 @@ class VirtualTime:
         self._running: int | None = None
         self._sleepers: dict[object, int] = {}  # token -> wake-up time (ns)
         self._waiting: dict[object, Callable[[], bool]] = {}  # token -> what it waits for
+        self._dozing: set[object] = set()  # sleepers `notify` wakes early
 
     def now(self) -> float:
         return self._ns / 1e9
@@ -168,6 +176,20 @@ class VirtualTime:
             token = object()
             self._sleepers[token] = self._ns + max(1, math.ceil(seconds * 1e9))
             self._block(token, self._sleepers)
+
+    def doze(self, seconds: float) -> None:
+        """A sleep that `notify` ends early; alone (no other thread to notify), a sleep."""
+        if self._running is None:
+            self.advance(seconds)
+            return
+        with self._lock:
+            token = object()
+            self._sleepers[token] = self._ns + max(1, math.ceil(seconds * 1e9))
+            self._dozing.add(token)
+            try:
+                self._block(token, self._sleepers)
+            finally:
+                self._dozing.discard(token)
 
     def spin(self) -> None:
         if self._running is None:
@@ -204,7 +226,16 @@ class VirtualTime:
                 self._schedule()
 
     def notify(self) -> None:
-        """Predicates are read when time would move: nothing to wake here."""
+        """Dozers wake now, at this instant (their deadline moved); `wait_for` predicates
+        are read when time would move: nothing to wake for them."""
+        with self._lock:
+            woken = [token for token in self._dozing if token in self._sleepers]
+            if not woken:
+                return
+            for token in woken:
+                del self._sleepers[token]
+            self._running = (self._running or 0) + len(woken)
+            self._lock.notify_all()
 
     def wait_for(self, ready: Callable[[], bool], should_stop: Callable[[], bool]) -> bool:
         """Block until `ready()`; no time passes for it unless every other thread waits too."""
@@ -287,10 +318,13 @@ class RunClock:
         Sleeps in slices so that a stop request (Ctrl-C) is seen within `slice_s`. Before each
         slice with more than IDLE_S to spare, `on_idle` runs: the time to write the log. A
         deadline given as a function is read again each slice: a show time on the music's
-        clock falls at a monotonic time that moves as the sound card's clock drifts.
+        clock falls at a monotonic time that moves as the sound card's clock drifts, and on a
+        clock held for a GO it moves when the GO comes, so such a sleep is a `doze`, which the
+        clock's `notify` ends at once (a cue due just after the GO is not a slice late).
         """
         source = self.source
         due = deadline if callable(deadline) else lambda: deadline
+        nap = source.doze if callable(deadline) else source.sleep
         while True:
             if should_stop():
                 return False
@@ -303,7 +337,7 @@ class RunClock:
                     left = due() - source.now()
                     if left <= SPIN_S:
                         continue
-                source.sleep(min(left - SPIN_S, slice_s))
+                nap(min(left - SPIN_S, slice_s))
             elif source.virtual:
                 source.sleep(left)  # nothing to gain by spinning on time that only sleeping moves
             else:

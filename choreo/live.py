@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from choreo.clock import MachineShowClock, ShowClock
+from choreo.limits import LIMITS, UNLOGGED, Held, Limits, ReportGate
 from choreo.runner import PANIC, StopRequest
 from choreo.show.model import PlannedStep
 
@@ -86,13 +87,14 @@ class HoldingShowClock:
     """The machine's show clock, which stops at a GO cue's time while the cue waits: show time
     stands still there, and every runner's later due times move on with the hold. Times up to
     the cue keep their places (another robot still on its way to the same cue gets there).
-    (A runner asleep towards a later due time re-reads it each sleep slice, so one due within a
-    slice after the GO wakes up to 50 ms late: only a track's step due right as another track's
-    GO comes.)"""
+    A runner asleep towards a later due time (another track's cue) dozes: `wake` (its time
+    source's `notify`) ends the doze when the clock goes on, so it sleeps again towards the due
+    time as moved by the GO, not to the end of a sleep slice."""
 
-    def __init__(self, zero: float, mono: Callable[[], float]) -> None:
+    def __init__(self, zero: float, mono: Callable[[], float], wake: Callable[[], None] = lambda: None) -> None:
         self._zero = zero
         self._mono = mono
+        self._wake = wake
         self._hold_s: float | None = None  # the show time the clock stops at
         self.on_resume: list[Callable[[], None]] = []  # told when it goes on (the log's clock samples)
 
@@ -112,6 +114,7 @@ class HoldingShowClock:
             if now > reached:
                 self._zero += now - reached
             self._hold_s = None
+            self._wake()
             for listener in self.on_resume:
                 listener()
 
@@ -129,7 +132,8 @@ class Live:
     """A running show's controls; see the module's docstring."""
 
     def __init__(self, stop: StopRequest, *, wait_start: bool = False, lockout_s: float = LOCKOUT_S,
-                 now: Callable[[], float] = time.monotonic, wall_ns: Callable[[], int] = time.time_ns) -> None:
+                 now: Callable[[], float] = time.monotonic, wall_ns: Callable[[], int] = time.time_ns,
+                 limits: Limits = LIMITS) -> None:
         self.stop = stop
         self.lockout_s = lockout_s
         self.listeners: list[CommandListener] = []
@@ -141,6 +145,8 @@ class Live:
         self._waiting: dict[object, GoCue] = {}  # the GO cues robots wait at, by `_key`
         self._released: set[object] = set()  # GO cues already given their GO
         self._last_go: float | None = None
+        self._reports = ReportGate(limits, now)  # what of the commands the listeners hear
+        self._over: str | None = None  # why no command is taken any more (`close`)
 
     @property
     def panicked(self) -> bool:
@@ -211,20 +217,55 @@ class Live:
     # -- what the operator says --------------------------------------------------------------
 
     def command(self, command: Command) -> Answer:
-        """Carry out one command from any source, and tell the listeners."""
+        """Carry out one command from any source, and tell the listeners. Once the show is
+        stopping (or over) every command is refused: a GO then releases nothing, whatever still
+        waits, and a stop or panic cannot change the stop under way."""
         handler = {"go": self._go, "panic": self._panic, "start": self._start, "stop": self._stop,
                    "cue_go": self._cue_go}.get(command.name)
-        answer = handler(command) if handler else Answer("error", f"unknown command {command.name!r}")
+        refusal = self._refusal()
+        if refusal is not None:
+            answer = refusal
+        else:
+            answer = handler(command) if handler else Answer("error", f"unknown command {command.name!r}")
         self.report(command, answer)
         return answer
 
+    def _refusal(self) -> Answer | None:
+        if self._over is not None:
+            return Answer("error", f"refused: the show is over ({self._over})")
+        if self.stop():
+            return Answer("error", f"refused: the show is stopping ({self.stop.reason})")
+        return None
+
     def report(self, command: Command, answer: Answer) -> None:
         """Tell the listeners of a command and its answer: one carried out here, or one a
-        source refused itself (a sender not allowed, an address it does not know)."""
+        source refused itself (a sender not allowed, an address it does not know). Refused
+        ones only within the limits (`choreo.limits.ReportGate`): the rest are counted and told
+        later as one `unlogged` summary."""
+        if not self._reports.passes(command.name, command.source, answer.ok):
+            self.flush_reports()
+            return
+        self.flush_reports()  # the summary of what came before, first
+        self._tell(command, answer)
+
+    def flush_reports(self, force: bool = False) -> None:
+        """Tell the listeners the commands held back since the last summary, if it is time
+        (called on every command, and by a ticker while the show runs; `force`: at the end)."""
+        held = self._reports.due(force)
+        if held is not None:
+            self._tell(*summary_of(held))
+
+    def _tell(self, command: Command, answer: Answer) -> None:
         show = self.show
         event = CommandEvent(command, answer, self._wall_ns(), show.show_at(self._now()) if show is not None else None)
         for listener in list(self.listeners):
             listener.on_command(event)
+
+    def close(self, outcome: str = "done") -> None:
+        """The run is over: later commands are refused, and what was held back is told."""
+        self._over = outcome
+        self._wake()
+        self.flush_reports(force=True)
 
     def _go(self, command: Command) -> Answer:
         with self._changed:
@@ -265,8 +306,6 @@ class Live:
         return Answer("ok", "panic: no more show frames; stop frames and every robot's abort motion")
 
     def _stop(self, command: Command) -> Answer:
-        if self.stop():
-            return Answer("error", f"the show is already stopping ({self.stop.reason})")
         self.stop.request("stopped")
         self._wake()
         return Answer("ok", "stopping: the exchange in flight, then the abort motion")
@@ -282,3 +321,10 @@ class Live:
     def _wake(self) -> None:
         with self._changed:
             self._changed.notify_all()
+
+
+def summary_of(held: Held) -> tuple[Command, Answer]:
+    """The `unlogged` event summing up commands held back: `data` carries the counts (the log
+    records them as the record's `count` and `counts`)."""
+    return (Command(UNLOGGED, held.source),
+            Answer("error", held.message(), {"count": held.count, "counts": held.counts}))

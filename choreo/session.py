@@ -294,7 +294,7 @@ class Session:
         if self.song is None:
             zero = self.clock.mono() - (self.origin - preroll)
             # live, the machine's clock holds while a GO cue waits
-            show: ShowClock = HoldingShowClock(zero, self.clock.mono) if holding else MachineShowClock(zero)
+            show: ShowClock = HoldingShowClock(zero, self.clock.mono, self.clock.source.notify) if holding else MachineShowClock(zero)
         else:
             self.player = Player(self.song, self.output, self.origin, max(LEAD_IN_S, preroll + LEAD_IN_S))
             show = self.player.start()
