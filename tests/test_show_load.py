@@ -336,6 +336,75 @@ def test_nesting_is_bounded(tmp_path):
     assert problem.message == f"nested more than {MAX_DEPTH} levels deep"
 
 
+class _StrictScanner(yaml.scanner.Scanner):
+    """A scanner with a nesting limit of twice choreo's, far below libyaml's 1,000.
+
+    choreo hands the parser text nested at most `MAX_DEPTH` deep in flow plus `MAX_DEPTH` in
+    block context, so a parser whose limit is at least twice choreo's never decides the message.
+    """
+
+    def _check_level(self) -> None:
+        if self.flow_level + len(self.indents) > 2 * MAX_DEPTH + 2:
+            raise yaml.scanner.ScannerError("while increasing level", None, "exceeded maximum nesting depth", self.get_mark())
+
+    def add_indent(self, column):
+        added = super().add_indent(column)
+        self._check_level()
+        return added
+
+    def fetch_flow_collection_start(self, TokenClass):
+        super().fetch_flow_collection_start(TokenClass)
+        self._check_level()
+
+
+class _StrictLoader(yaml.reader.Reader, _StrictScanner, yaml.parser.Parser, yaml.composer.Composer,
+                    yaml.constructor.SafeConstructor, yaml.resolver.Resolver):
+    def __init__(self, stream):
+        yaml.reader.Reader.__init__(self, stream)
+        _StrictScanner.__init__(self)
+        yaml.parser.Parser.__init__(self)
+        yaml.composer.Composer.__init__(self)
+        yaml.constructor.SafeConstructor.__init__(self)
+        yaml.resolver.Resolver.__init__(self)
+
+
+_PARSERS = {"libyaml": getattr(yaml, "CSafeLoader", yaml.SafeLoader), "python": yaml.SafeLoader, "strict": _StrictLoader}
+_DEEP = {
+    "flow lists": "[" * 5000,
+    "flow maps": "{a: " * 5000,
+    "lists of maps": "[{a: " * 3000,
+    "flow in a step": "version: 1\nsteps:\n  - play: " + "[" * 5000,
+    "flow after commas": "steps: [" + "1, [" * 3000,
+    "flow over lines": "steps:\n" + "  [ # a comment\n" * 2000,
+    "block lists": "- " * 3000 + "x",
+    "block maps": "".join(" " * i + "a:\n" for i in range(300)),
+    "explicit keys": "? " * 3000,
+}
+
+
+@pytest.mark.parametrize("parser", sorted(_PARSERS))
+@pytest.mark.parametrize("shape", sorted(_DEEP))
+def test_nesting_is_reported_in_choreos_words_whatever_the_parsers_limits(tmp_path, monkeypatch, parser, shape):
+    """PyYAML 6.0.4's scanner stops `[[[[…` at its own limit before any event reaches choreo."""
+    monkeypatch.setattr("choreo.show.load._Parser", _PARSERS[parser])
+    found = problems(tmp_path, _DEEP[shape])
+    assert f"nested more than {MAX_DEPTH} levels deep" in [p.message for p in found]
+    assert not any("YAML syntax error" in p.message for p in found)
+
+
+@pytest.mark.parametrize("parser", sorted(_PARSERS))
+@pytest.mark.parametrize("text", [
+    'version: 1\nname: "' + "[" * 150 + '"\nsteps:\n  - play: 1\n',
+    "version: 1\nname: '" + "[{" * 75 + "'\nsteps:\n  - play: 1\n",
+    "version: 1\nname: a" + "[" * 150 + "\nsteps:\n  - play: 1\n",
+    "version: 1\nname: |-\n  " + "[" * 150 + "\nsteps:\n  - play: 1\n",
+    "# " + "[" * 200 + "\nversion: 1\nsteps: [{play: 1}, " + ", ".join(["{wait: 1}"] * 100) + "]\n",
+], ids=["double-quoted", "single-quoted", "plain", "block scalar", "comment and many flat maps"])
+def test_brackets_that_are_text_or_flat_are_not_nesting(tmp_path, monkeypatch, parser, text):
+    monkeypatch.setattr("choreo.show.load._Parser", _PARSERS[parser])
+    assert load_show(write(tmp_path, text)).steps
+
+
 # ------------------------------------------------------------------ schema
 
 

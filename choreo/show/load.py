@@ -34,6 +34,7 @@ from typing import Any, Union
 
 import yaml
 
+from choreo.show.nesting import too_deep_at
 from choreo.errors import Problem, ShowError
 from choreo.show.model import (
     SOLO,
@@ -493,6 +494,33 @@ _HIDE_BREAKS = str.maketrans(_BREAKS_1_1)
 _SHOW_BREAKS = str.maketrans({v: k for k, v in _BREAKS_1_1.items()})
 
 
+def _too_deep(text: str, report: _Report) -> bool:
+    """True (and the depth reported in choreo's words) if the text nests past `MAX_DEPTH`.
+
+    The parser's scanner reads ahead of its events and has nesting limits of its own that vary
+    between PyYAML releases; handing it only the text before the first bracket past the limit
+    (found by `nesting.too_deep_at`) keeps its limits out of reach, and the event walk then
+    places the problem exactly. Shows rarely hold that many brackets, so most skip the scan.
+    """
+    if text.count("[") + text.count("{") <= MAX_DEPTH:
+        return False
+    cut = too_deep_at(text, MAX_DEPTH)
+    if cut is None:
+        return False
+    scratch = _Report(report.file)
+    builder = _Builder(scratch)
+    try:
+        for event in yaml.parse(text[:cut + 1], Loader=_Parser):
+            builder.feed(event)
+    except _Stop:
+        for problem in scratch.problems():
+            report.add((problem.line, problem.column), problem.path, problem.message)
+        return True
+    except yaml.YAMLError:
+        pass  # the prefix ends mid-document; only a depth stop counts here
+    return False
+
+
 def _restore_breaks(text: str) -> str:
     return text.translate(_SHOW_BREAKS)
 
@@ -504,6 +532,8 @@ def _tag(tag: str) -> str:
 
 def _is_empty(event: yaml.Event) -> bool:
     return isinstance(event, yaml.ScalarEvent) and event.value == "" and event.implicit[0] and event.tag is None
+    if _too_deep(text, report):
+        return None
 
 
 def _parse(text: str, report: _Report) -> _Doc | None:
