@@ -56,11 +56,13 @@ def examine(ports: Sequence[SerialPort], port: str | None = None, *, sysfs: Path
     target = port or _only_kondo(ports)
     if target is not None and not target.lower().startswith(("sim://", "socket://", "rfc2217://", "loop://")):
         findings += _device(target, sysfs)
-    if probe is not None and target is not None:
+    if target is None:  # a show could not run either: a problem, not a note
+        several = sum(1 for p in ports if p.is_kondo) > 1
+        findings.append(Finding(PROBLEM, "board", "no port to check: no --port given and "
+                                f"{'several Kondo adapters' if several else 'no Kondo adapter'} found",
+                                "choreo doctor --port /dev/ttyUSB0 (or sim:// to try the simulator)"))
+    elif probe is not None:
         findings.append(_board(target, probe))
-    elif target is None:
-        findings.append(Finding(NOTE, "board", "not probed: no port given and no single Kondo adapter "
-                                "found", "choreo doctor --port /dev/ttyUSB0 (or sim:// to try the simulator)"))
     if audio is not None:
         findings.append(audio())
     return findings
@@ -90,7 +92,12 @@ def _adapters(ports: Sequence[SerialPort], sysfs: Path) -> list[Finding]:
 def _device(device: str, sysfs: Path) -> list[Finding]:
     """Permission on the device and its latency timer."""
     path = Path(device)
-    if not path.exists():
+    try:
+        exists = path.exists()
+    except (OSError, ValueError) as exc:  # a name too long, a NUL in it, a link loop
+        return [Finding(PROBLEM, "device", f"{device}: {getattr(exc, 'strerror', None) or exc}",
+                        "choreo ports lists the serial ports")]
+    if not exists:
         return [Finding(PROBLEM, "device", f"{device} does not exist", "choreo ports lists the serial ports")]
     findings = [_permission(path)]
     timer = latency_timer_ms(device, sysfs)

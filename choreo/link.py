@@ -32,6 +32,18 @@ STATUS_SPACING_S = 0.05  # the board refreshes its status every 50 ms: never que
 MAX_STALE = 3  # late replies to earlier frames set aside while waiting for one frame's reply
 SYNC_TRIES = 3  # ACK checks after a timeout: one may reach a board still sending a late reply
 
+try:
+    from termios import error as _TermiosError
+
+    _TERMIOS_ERRORS: tuple[type[Exception], ...] = (_TermiosError,)
+except ImportError:  # Windows: pyserial raises only OSError there
+    _TERMIOS_ERRORS = ()
+# Everything a port raises when its device fails or refuses a setting, at open, at a baud
+# change or mid-exchange: OSError (pyserial's SerialException is one), termios.error (pyserial
+# lets tcsetattr's and tcflush's through, and it is not an OSError) and ValueError (pyserial: a
+# baud or setting the driver refuses). The link turns each into one line naming the port.
+PORT_ERRORS: tuple[type[Exception], ...] = (OSError, ValueError, *_TERMIOS_ERRORS)
+
 
 @dataclass(frozen=True)
 class Tag:
@@ -119,8 +131,8 @@ def open_port(url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TI
             raise ValueError("only the in-process simulator (sim://) runs on virtual time")
         port.open()
         return port
-    except (serial.SerialException, OSError, ValueError) as exc:
-        raise LinkError(f"port {url}: cannot open: {_reason(exc)}{_open_hint(exc)}") from None
+    except PORT_ERRORS as exc:
+        raise LinkError(f"port {url}: cannot open: {_reason(exc)} (at {baud} baud, 8E1){_open_hint(exc)}") from None
 
 
 def usb_latency_note(port: serial.SerialBase) -> str | None:
@@ -140,8 +152,12 @@ def usb_latency_note(port: serial.SerialBase) -> str | None:
 
 
 def _reason(exc: BaseException) -> str:
-    text = str(exc).strip() or type(exc).__name__
-    return text.splitlines()[0]
+    """The first line of what went wrong; termios.error's (errno, text) pair as its text."""
+    if len(exc.args) == 2 and isinstance(exc.args[0], int) and isinstance(exc.args[1], str):
+        text = exc.args[1].strip()
+    else:
+        text = str(exc).strip()
+    return (text or type(exc).__name__).splitlines()[0]
 
 
 def _open_hint(exc: BaseException) -> str:
@@ -435,7 +451,7 @@ class Link:
         end (the board must finish a reply before it takes the next frame) and set them aside."""
         try:
             waiting = self.port.in_waiting
-        except OSError as exc:
+        except PORT_ERRORS as exc:
             raise PortLost(_reason(exc)) from None
         return self._drain(QUIET_S) if waiting else b""
 
@@ -443,7 +459,7 @@ class Link:
         """One write call for the whole frame: the board drops a frame with gaps in it."""
         try:
             self.port.write(data)
-        except OSError as exc:  # serial.SerialException is an OSError
+        except PORT_ERRORS as exc:
             raise PortLost(_reason(exc)) from None
 
     def _write_for(self, data: bytes) -> Callable[[], None]:
@@ -465,7 +481,7 @@ class Link:
     def _read(self, count: int) -> bytes:
         try:
             return bytes(self.port.read(count))
-        except OSError as exc:
+        except PORT_ERRORS as exc:
             raise PortLost(_reason(exc)) from None
 
     def _drain(self, quiet_s: float, limit_s: float | None = None) -> bytes:
@@ -480,7 +496,7 @@ class Link:
                 return bytes(got)
             try:
                 waiting = self.port.in_waiting
-            except OSError as exc:
+            except PORT_ERRORS as exc:
                 raise PortLost(_reason(exc)) from None
             if waiting:
                 got += self._read(waiting)

@@ -148,18 +148,28 @@ def probe(url: str, *, bauds: Iterable[int] = BAUD_RATES, timeout: float = DEFAU
           time_source: TimeSource | None = None) -> BoardInfo:
     """Find the baud that answers, then read what the board says; LinkError if none answers."""
     clock = RunClock(time_source or SystemTime())
-    tried = []
+    tried: list[str] = []
+    refused: list[LinkError] = []  # a baud the port (a pty, an adapter) will not take: the next may do
     for baud in bauds:
-        link = Link.open(url, baud, timeout=timeout, tries=2, clock=clock)
+        try:
+            link = Link.open(url, baud, timeout=timeout, tries=2, clock=clock)
+        except LinkError as exc:
+            refused.append(exc)
+            continue
         try:
             if _answers(link):
-                return _read(link, url, baud)
+                info = _read(link, url, baud)
+                info.notes[:0] = [f"note: {exc}: not tried at that baud" for exc in refused]
+                return info
         finally:
             link.close()
         tried.append(str(baud))
+    if not tried:
+        raise refused[0]  # no baud opens: the port itself is the problem
+    also = "".join(f"; {exc}" for exc in refused)
     raise LinkError(f"port {url}: no answer to the ACK check (04 fe 06 08) at {', '.join(tried)} "
                     "baud, even parity: check that the board is powered, the adapter (Kondo's USB "
-                    "adapter, or 5 V inverted logic without it), the cable, and the parity (8E1)")
+                    f"adapter, or 5 V inverted logic without it), the cable, and the parity (8E1){also}")
 
 
 def _answers(link: Link) -> bool:

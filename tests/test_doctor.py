@@ -36,7 +36,7 @@ def by_check(findings) -> dict[str, tuple[str, str, str | None]]:
 def test_no_ports_and_no_adapter_is_a_problem_with_what_to_do(tmp_path):
     found = by_check(examine([], sysfs=fake_sysfs(tmp_path)))
     assert found["adapter"][0] == PROBLEM and "no serial ports" in found["adapter"][1]
-    assert found["board"][0] == NOTE and "choreo doctor --port" in found["board"][2]
+    assert found["board"][0] == PROBLEM and "choreo doctor --port" in found["board"][2]
 
 
 def test_an_adapter_without_a_driver_gets_the_new_id_line(tmp_path):
@@ -142,3 +142,22 @@ def test_doctor_checks_the_null_output_and_refuses_an_unknown_one(capsys):
     assert main(["doctor", "--no-probe", "--audio-device", "no-such-output-anywhere"]) == 1
     out = capsys.readouterr().out
     assert "PROBLEM audio: --audio-device no-such-output-anywhere: no such output" in out
+
+
+@pytest.mark.parametrize("ports", [[], [SerialPort("/dev/ttyS0")],
+                                   [SerialPort("/dev/ttyUSB0", 0x165C, 0x0008), SerialPort("/dev/ttyUSB1", 0x165C, 0x0008)]])
+def test_no_port_to_run_a_show_on_is_a_problem_and_exit_1(tmp_path, monkeypatch, capsys, ports):
+    """No Kondo adapter (or several, and no --port): a show would not start, so doctor fails."""
+    from serial.tools import list_ports
+
+    monkeypatch.setattr(list_ports, "comports", lambda: ports)
+    found = by_check(examine(ports, sysfs=fake_sysfs(tmp_path)))
+    assert found["board"][0] == PROBLEM
+    assert main(["doctor", "--no-probe"]) == 1
+    assert "PROBLEM board: no port to check" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("name", ["/dev/" + "x" * 300, "/dev/tty\0USB0"])
+def test_a_device_name_the_system_refuses_is_a_problem_not_a_traceback(tmp_path, name):
+    found = by_check(examine([], name, sysfs=fake_sysfs(tmp_path)))
+    assert found["device"][0] == PROBLEM
