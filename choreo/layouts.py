@@ -15,12 +15,17 @@ or fixed), and which status read says "still running". Nothing here does I/O.
   0x0B80 + N*0x800). Suspend and resume are the board's config word, read once when the port
   opens, with only bits 0-3 changed; the program counter is set to the main loop 0x00044B; a
   motion runs while the program counter is inside the slots with a return address pushed.
+
+Both layouts leave the board in one known state just before the frame that starts the motion
+(run bit clear, counter at the slot, the main loop pushed, depth 1): `Layout.start_state` reads a
+lost start reply's outcome from that (see `StartState`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from enum import Enum
 from functools import lru_cache
 
 from choreo import protocol as p
@@ -51,10 +56,8 @@ class Layout:
     reads_config: bool  # the play sequence is built from the config word read from the board
     status: Frame  # the read whose answer says whether a motion is still running
     build: Callable[[Layout, int, int, int], tuple[Frame, ...]]  # (layout, motion, config, baud)
-    # After a start frame whose reply was lost: the read, and whether its answer (the whole
-    # reply) shows the start frame was carried out.
-    start_read: Frame
-    started: Callable[[bytes], bool]
+    # After a start frame whose reply was lost: the read whose answer `start_state` judges.
+    start_read: Frame = p.read_frame(p.CONFIG_ADDRESS, p.PROGRAM_STATE_BYTES)
 
     def slot_address(self, motion: int) -> int:
         return self.first_slot + p.check_motion(motion) * p.SLOT_SIZE
@@ -80,6 +83,40 @@ class Layout:
     def play_frame(self, motion: int) -> Frame:
         return Frame(FrameKind.PLAY, p.call(self.slot_address(motion)), motion)
 
+    def start_state(self, motion: int, reply: bytes) -> StartState:
+        """What the answer to `start_read` says of a start frame whose reply was lost.
+
+        Every frame before the start frame was acknowledged, so the board was left with the run
+        bit clear, the counter at the slot, the main loop pushed as the return address, depth 1.
+        Only the start frame sets the run bit, and only a started motion moves the counter: that
+        state unchanged is a start frame never carried out. The read goes out one status refresh
+        after the start frame, so it cannot show the state from before the CALL.
+        """
+        state = p.program_state(reply)
+        if state is None:
+            return StartState.UNCLEAR
+        if state.run:
+            return StartState.RUNNING
+        if (state.counter, state.return_address, state.depth) == (self.slot_address(motion), self.main_loop, 1):
+            return StartState.NOT_STARTED
+        if state.counter == self.main_loop and state.depth == 0:
+            return StartState.DONE  # the motion returned: the board cleared the run bit at its end
+        return StartState.UNCLEAR
+
+
+class StartState(str, Enum):
+    """A lost start reply's outcome, as the board's program state shows it."""
+
+    NOT_STARTED = "never started"  # the state the frames before the start frame left, unchanged
+    RUNNING = "running"  # the run bit the start frame sets is set
+    DONE = "started and already over"  # back at the return address, the call returned
+    UNCLEAR = "unclear"  # none of these: the cautious case, counted as started
+
+    @property
+    def started(self) -> bool:
+        """Only a provably never-started motion may be sent again: a robot never moves twice."""
+        return self is not StartState.NOT_STARTED
+
 
 @lru_cache(maxsize=1024)
 def _sequence(layout: Layout, motion: int, config: int, baud: int) -> tuple[Frame, ...]:
@@ -103,24 +140,6 @@ def _hth4_sequence(layout: Layout, motion: int, config: int, baud: int) -> tuple
             layout.play_frame(motion), Frame(FrameKind.RESTORE, resume, motion))
 
 
-def _seed_started(reply: bytes) -> bool:
-    """The config word's low byte is 0x23 only between the restore and the motion's end."""
-    return len(reply) > 2 and reply[2] == p.EXECUTING_BYTE
-
-
-def _hth4_started(reply: bytes) -> bool:
-    """RAM 0x0000-0x000B: the resume not carried out leaves the program halted (run bit clear)
-    with the counter in the called slot and its return address pushed. Any other state means
-    it was: the motion runs (run bit set) or has already ended (back at the return address).
-    Kondo's running rule alone cannot tell: the CALL alone puts the counter in the slot."""
-    ram = reply[2:-1]
-    if len(ram) < 12:
-        return False
-    halted = not ram[0] & 0x02
-    in_slot = int.from_bytes(ram[2:5], "little") >= p.FIRST_CALLED_ADDRESS and any(ram[5:10])
-    return not (halted and in_slot)
-
-
 def _le(value: int, width: int) -> bytes:
     return value.to_bytes(width, "little")
 
@@ -133,8 +152,6 @@ SEED = Layout(
     reads_config=False,
     status=p.status_frame(),
     build=_seed_sequence,
-    start_read=p.status_frame(),
-    started=_seed_started,
 )
 HTH4_22 = Layout(
     name="hth4-2.2",
@@ -144,8 +161,6 @@ HTH4_22 = Layout(
     reads_config=True,
     status=Frame(FrameKind.STATUS, p.mov_read(p.PROGRAM_COUNTER_ADDRESS, p.COUNTER_READ_BYTES)),
     build=_hth4_sequence,
-    start_read=p.read_frame(p.CONFIG_ADDRESS, 12),
-    started=_hth4_started,
 )
 LAYOUTS: dict[str, Layout] = {layout.name: layout for layout in (SEED, HTH4_22)}
 LAYOUT_NAMES = tuple(LAYOUTS)

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Protocol
 
 from choreo import protocol
 from choreo.clock import RunClock
-from choreo.layouts import SEED, Layout
+from choreo.layouts import SEED, Layout, StartState
 from choreo.errors import Interrupted, LinkError
 from choreo.protocol import Frame, FrameKind, Reply, ReplyKind
 
@@ -87,8 +87,8 @@ class Played:
 
     tries: int
     began: float
-    # Set when the start frame's reply was lost but the board showed the motion running: the
-    # play counts as done and was not sent again (what was lost, for the run's warning).
+    # Set when the start frame's reply was lost but the board's state showed the motion started
+    # (or could not tell): the play counts as done and was not sent again (the run's warning).
     recovered: str | None = None
     started: float | None = None  # monotonic time the frame that starts the motion was written
 
@@ -287,10 +287,12 @@ class Link:
                 return Played(attempt, began, started=started)
             if frame is frames[-1] and reply.kind is not ReplyKind.NAK:
                 # The start frame may have been carried out with only its answer lost.
-                if self._started(start_sent, tag, what):
+                state = self._start_state(motion, start_sent, tag, what)
+                if state.started:
                     lost = f"the reply to '{what}' ({frame.kind.value} frame) was lost ({reply.describe()})"
-                    return Played(attempt, began, recovered=lost, started=self.last_tx_mono)
-                # The status answer came after any late reply: the line is idle for the retry.
+                    return Played(attempt, began, recovered=_not_sent_again(lost, motion, state),
+                                  started=self.last_tx_mono)
+                # The state's answer came after any late reply: the line is idle for the retry.
             elif attempt < self.tries and not self._settle(reply, tag, what):
                 raise self._failed(what, frame, reply, tag, attempt, silent=True)
         raise self._failed(what, frame, reply, tag, self.tries)
@@ -312,21 +314,20 @@ class Link:
             self._lead_s = measured_s if known is None else known + LEAD_WEIGHT * (measured_s - known)
             self._lead_measured = True
 
-    def _started(self, start_sent: float, tag: Tag | None, what: str) -> bool:
+    def _start_state(self, motion: int, start_sent: float, tag: Tag | None, what: str) -> StartState:
         """Did the start frame whose reply was lost start the motion? Ask the board.
 
         The board may have carried out the frame and only its answer got lost: sending the
         sequence again would start the same motion twice. A NAK is a refusal (the frame was
-        not carried out), so only silence or a garbled answer needs asking. The layout's read
-        (seed: the status; hth4-2.2: the config word and program state) waits one status refresh
-        after the start frame, so it cannot show the state from before, and goes out at once
-        after that (no ACK check first: a late ACK cannot be taken for a read's answer, it is
-        set aside). Seed only: a motion shorter than the reply timeout can end before the board
-        is asked; it then counts as not started and is played again.
+        not carried out), so only silence or a garbled answer needs asking. The read of the
+        program state (the layout's `start_state` judges it: running, over, never started)
+        waits one status refresh after the start frame, so it cannot show the state from before,
+        and goes out at once after that (no ACK check first: a late ACK cannot be taken for a
+        read's answer, it is set aside). A motion already over by then still counts as started.
         """
         self._check_stop(what)
         self.clock.sleep_until(start_sent + self.status_spacing_s)
-        return self.layout.started(self.exchange(self.layout.start_read, tag).data)
+        return self.layout.start_state(motion, self.exchange(self.layout.start_read, tag).data)
 
     def halt(self, tag: Tag | None = None) -> Reply:
         """The play sequence's stop frame alone: the board's program halts, and the motion with
@@ -570,6 +571,15 @@ class Link:
         if reply.kind is ReplyKind.NAK:
             return f"the board refused the frame: {settings}, and the cable (noise corrupts bytes)"
         return f"{settings}, the cable, and that no other program talks on the port"
+
+
+def _not_sent_again(lost: str, motion: int, state: StartState) -> str:
+    """The run's warning for a play counted as done although its start reply was lost."""
+    if state is StartState.UNCLEAR:
+        return (f"{lost}, and the board's program state shows neither motion {motion} running, "
+                "over, nor never started: counted as started (a robot never moves twice), it was "
+                "not sent again: check the robot")
+    return f"{lost}, but the board shows motion {motion} {state.value}: it was not sent again"
 
 
 def _where(tag: Tag | None) -> str:

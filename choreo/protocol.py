@@ -30,7 +30,9 @@ NAK_BYTE = 0x15
 EXECUTING_BYTE = 0x23
 
 CONFIG_ADDRESS = 0x0000
+RUN_BIT = 0x0002  # config word bit 1, "ROM program run": stop frames clear it, the start frame sets it
 PROGRAM_COUNTER_ADDRESS = 0x0002  # program counter (3 bytes), return address (3), call depth
+PROGRAM_STATE_BYTES = 12  # RAM 0x0000-0x000B: config word, counter, return address, depth, 3 more
 COUNTER_READ_BYTES = 10  # Kondo's library reads this much at 0x0002 to see whether a motion runs
 FIRST_CALLED_ADDRESS = 0x0B80  # no slot of any layout starts lower: a counter at or above is in one
 DEFAULT_BAUD = 115200
@@ -312,6 +314,31 @@ def _status(frame: Frame, data: bytes) -> Reply:
         return Reply(ReplyKind.STATUS, data, executing=running, status=counter)
     word = data[2] | data[3] << 8
     return Reply(ReplyKind.STATUS, data, executing=data[2] == EXECUTING_BYTE, status=word)
+
+
+@dataclass(frozen=True)
+class ProgramState:
+    """The board's program as RAM 0x0000-0x000B shows it: what tells a motion that never started
+    from one that started (and perhaps already ended)."""
+
+    config: int
+    counter: int  # where the program is
+    return_address: int  # what a CALL pushed: where the program goes back to
+    depth: int  # call depth: return addresses pushed
+
+    @property
+    def run(self) -> bool:
+        return bool(self.config & RUN_BIT)
+
+
+def program_state(data: bytes) -> ProgramState | None:
+    """The state in a read of PROGRAM_STATE_BYTES at 0x0000 (the framed reply), or None when the
+    reply does not hold that many bytes."""
+    ram = bytes(data)[2:-1]
+    if len(ram) < PROGRAM_STATE_BYTES:
+        return None
+    return ProgramState(config=int.from_bytes(ram[0:2], "little"), counter=int.from_bytes(ram[2:5], "little"),
+                        return_address=int.from_bytes(ram[5:8], "little"), depth=ram[8])
 
 
 def ack(command: int) -> bytes:

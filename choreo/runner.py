@@ -306,12 +306,11 @@ class Runner:
 
     def _play(self, motion: int, tag: Tag, where: str,
               before_start: Callable[[Callable[[], None]], int | None] | None = None) -> Played:
-        """One play sequence; a start whose reply was lost but which the board shows running
-        is a play done (never sent twice), said in a warning."""
+        """One play sequence; a start whose reply was lost but which the board shows started
+        (running or over) is a play done (never sent twice), said in a warning."""
         played = self.link.play(motion, tag, before_start)
         if played.recovered:
-            self._log(WARNING, f"{where}: {played.recovered}, but the board shows motion {motion} "
-                               "running: it was not sent again")
+            self._log(WARNING, f"{where}: {played.recovered}")
         return played
 
     def _wait_done(self, step: PlannedStep, tag: Tag) -> float:

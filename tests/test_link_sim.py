@@ -368,7 +368,7 @@ def test_play_retries_never_push_a_second_return_address(kind, every):
         assert any(e.attempt > 1 for e in rec.tx)  # the faults made the link retry
 
 
-def test_a_late_restore_ack_is_never_taken_for_the_retried_stop_frames():
+def test_a_late_restore_ack_is_never_taken_for_the_answer_to_a_later_frame():
     rec = Recorder()
     timeout = 0.1
     # The second play's restore (frame 6) is answered 250 ms late: the link gives up at 100 ms
@@ -382,13 +382,14 @@ def test_a_late_restore_ack_is_never_taken_for_the_retried_stop_frames():
         board = link.port.board
         assert board.ignored == 1
         assert board.stack_faults == 0
-    # The restore's reply is missing, so the board is asked whether motion 3 started: that status
-    # query reaches a board still replying (ignored) and times out; the ACK check after it reads
-    # the late ACK (set aside); the status read again finds the 0.1 s motion over, so it counts
-    # as not started, and the sequence starts again from its stop frame.
-    assert played.tries == 2 and played.recovered is None
+    # The restore's reply is missing, so the board is asked whether motion 3 started: that read
+    # of its program state reaches a board still replying (ignored) and times out; the ACK check
+    # after it reads the late ACK (set aside); the read again finds the 0.1 s motion over (back
+    # at the return address): it started, so the play is done and nothing is sent again.
+    assert played.tries == 1 and "motion 3 started and already over" in played.recovered
+    assert board.starts == 2  # each play's motion once
     kinds = [e.frame.kind.value for e in rec.tx[3:]]
-    assert kinds == ["stop", "play", "restore", "status", "sync", "status", "stop", "play", "restore"]
+    assert kinds == ["stop", "play", "restore", "read", "sync", "read"]
     assert rec.rx[7].reply.stale == bytes.fromhex("04 00 06 0a")  # the late restore ACK, set aside
 
 
