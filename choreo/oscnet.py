@@ -1,0 +1,417 @@
+"""The sockets of OSC control: UDP and TCP on one port number, served by one thread around a
+selector, not a thread a connection, so that what a peer sends (or does not send) costs bounded
+memory, descriptors and time, and the operator's GO still gets through:
+
+- Who sends is checked first: per datagram (UDP), at accept (TCP: a denied peer is closed before
+  a byte of it is read). The packet handler decides; this module only asks.
+- TCP connections are capped, in total and per sender address (`OscLimits`). When full, a new
+  connection takes the place of the oldest one that has not sent a whole message yet (so idle
+  sockets cannot lock out a QLab that connects and speaks), else the new one is closed.
+- A connection must complete a message within `message_timeout_s` of opening or of beginning
+  it (a trickle of bytes does not keep it open); one that has sent messages is closed after
+  `idle_timeout_s` of silence. Buffered bytes are bounded by the frame limit.
+- Out of descriptors (EMFILE), accepting pauses for `ACCEPT_PAUSE_S` instead of spinning on a
+  listener that stays readable.
+- A reply never blocks the thread: what a peer does not read is queued up to `max_unsent`
+  bytes, then the connection is closed; a UDP reply that cannot go at once is dropped.
+- Any datagram up to 64 KB is read whole (a smaller buffer would cut it without a word).
+"""
+
+from __future__ import annotations
+
+import errno
+import selectors
+import socket
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from choreo.oscwire import FrameReader
+from choreo.osclimits import LIMITS, OscLimits
+
+Sender = tuple  # (host, port) or, over IPv6, (host, port, flowinfo, scope)
+ACCEPT_PAUSE_S = 0.1  # out of descriptors: try accepting again this much later
+ACCEPT_BATCH = 64  # connections accepted a wake-up (the backlog drained quickly, others served)
+UDP_BATCH = 64  # datagrams read a wake-up, then TCP peers get their turn
+LISTEN_BACKLOG = 128  # connections the OS holds until accepted (accepting is quick)
+RECV_BYTES = 16384  # read at once from a TCP peer
+UDP_BUFFER = 65536  # larger than any UDP payload: a datagram is never cut
+OUT_OF_DESCRIPTORS = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
+
+
+class ListenFailed(Exception):
+    """A port that could not be listened on: which transport, where, and the OS's reason."""
+
+    def __init__(self, transport: str, address: Sender, why: str, in_use: bool = False) -> None:
+        super().__init__(why)
+        self.transport = transport
+        self.address = address
+        self.why = why
+        self.in_use = in_use
+
+
+class PacketHandler(Protocol):
+    """What the sockets ask and tell their user (`choreo.osc.OscServer`); called from the
+    serving thread."""
+
+    def admit(self, sender: Sender) -> bool:
+        """A TCP connection, at accept: False closes it before it is read."""
+
+    def packet(self, transport: str, sender: Sender, data: bytes) -> list[bytes]:
+        """One packet (a datagram, a TCP frame): the encoded replies to send back."""
+
+    def dropped(self, transport: str, sender: Sender, why: str) -> None:
+        """Something was dropped or closed (a bad frame, a cap, a timeout): to count and tell."""
+
+
+# -- the connections' bookkeeping (pure: times are given) -------------------------------------
+
+
+@dataclass
+class _Slot:
+    host: str
+    due: float
+    opened: float
+    proven: bool = False  # has sent a whole message
+    pending: bool = False  # a message begun
+
+
+class ConnectionTable:
+    """Which TCP connections are open, whose, and when each must have spoken: the caps and
+    timeouts as decisions, kept apart from the sockets so they can be tested on a given clock."""
+
+    def __init__(self, limits: OscLimits = LIMITS) -> None:
+        self.limits = limits
+        self._slots: dict[object, _Slot] = {}
+
+    def __len__(self) -> int:
+        return len(self._slots)
+
+    def admit(self, key: object, host: str, now: float) -> tuple[bool, list[object]]:
+        """Take a new connection? And the connections to close to make room for it."""
+        evict: list[object] = []
+        same = [k for k, slot in self._slots.items() if slot.host == host]
+        if len(same) >= self.limits.max_per_sender:
+            evict.append(self._silent(same))
+        if len(self._slots) - len(evict) >= self.limits.max_connections:
+            evict.append(self._silent([k for k in self._slots if k not in evict]))
+        if None in evict:
+            return False, []
+        for old in evict:
+            del self._slots[old]
+        self._slots[key] = _Slot(host, now + self.limits.message_timeout_s, now)
+        return True, evict
+
+    def _silent(self, keys: list[object]) -> object | None:
+        """The oldest of `keys` that has not sent a whole message, if any."""
+        silent = [k for k in keys if not self._slots[k].proven]
+        return min(silent, key=lambda k: self._slots[k].opened, default=None)
+
+    def heard(self, key: object, now: float, *, messages: int, pending: bool) -> None:
+        """Bytes came: `messages` whole ones, and a message is `pending` (begun) after them. A
+        message begun must end within the timeout; only whole messages earn more time."""
+        slot = self._slots.get(key)
+        if slot is None:
+            return
+        if messages:
+            slot.proven = True
+        if pending and (messages or not slot.pending):
+            slot.due = now + self.limits.message_timeout_s
+        elif not pending and messages:
+            slot.due = now + self.limits.idle_timeout_s
+        slot.pending = pending
+
+    def remove(self, key: object) -> None:
+        self._slots.pop(key, None)
+
+    def next_due(self) -> float | None:
+        return min((slot.due for slot in self._slots.values()), default=None)
+
+    def expired(self, now: float) -> list[tuple[object, str]]:
+        """The connections past their time, removed, with why."""
+        late = [(key, slot) for key, slot in self._slots.items() if slot.due <= now]
+        for key, _ in late:
+            del self._slots[key]
+        return [(key, self._why_late(slot)) for key, slot in late]
+
+    def _why_late(self, slot: _Slot) -> str:
+        if slot.pending:
+            return f"closed: a message unfinished after {self.limits.message_timeout_s:g} s"
+        if not slot.proven:
+            return f"closed: no message within {self.limits.message_timeout_s:g} s of connecting"
+        return f"closed: idle for {self.limits.idle_timeout_s:g} s"
+
+
+# -- the sockets --------------------------------------------------------------------------------
+
+
+@dataclass(eq=False)
+class _Connection:
+    sock: socket.socket
+    sender: Sender
+    reader: FrameReader
+    unsent: bytearray = field(default_factory=bytearray)
+
+
+class OscNet:
+    """UDP and TCP on host:port, served by one thread (see the module's docstring)."""
+
+    def __init__(self, handler: PacketHandler, host: str, port: int, limits: OscLimits = LIMITS,
+                 now: Callable[[], float] = time.monotonic) -> None:
+        self.handler = handler
+        self.host = host
+        self.requested_port = port
+        self.limits = limits
+        self._now = now
+        self._table = ConnectionTable(limits)
+        self._connections: set[_Connection] = set()
+        self._selector: selectors.BaseSelector | None = None
+        self._udp: socket.socket | None = None
+        self._tcp: socket.socket | None = None
+        self._wake: tuple[socket.socket, socket.socket] | None = None
+        self._accept_paused_until: float | None = None
+        self._closing = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def port(self) -> int:
+        return self._udp.getsockname()[1] if self._udp is not None else self.requested_port
+
+    @property
+    def connections(self) -> int:
+        """TCP connections open now."""
+        return len(self._connections)
+
+    def start(self) -> None:
+        self._udp, self._tcp = bind(self.host, self.requested_port, self.limits)
+        self._wake = socket.socketpair()
+        self._wake[0].setblocking(False)
+        self._selector = selectors.DefaultSelector()
+        self._selector.register(self._udp, selectors.EVENT_READ, "udp")
+        self._selector.register(self._tcp, selectors.EVENT_READ, "accept")
+        self._selector.register(self._wake[0], selectors.EVENT_READ, "wake")
+        self._thread = threading.Thread(target=self._serve, name="choreo-osc", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop serving; the peers see their connections end. Twice is harmless."""
+        if self._thread is not None:
+            self._closing.set()
+            try:
+                self._wake[1].send(b"x")  # type: ignore[index]
+            except OSError:
+                pass
+            self._thread.join(2.0)
+            self._thread = None
+        for connection in list(self._connections):
+            self._close(connection)
+        for sock in (self._udp, self._tcp, *(self._wake or ())):
+            if sock is not None:
+                sock.close()
+        self._wake = None
+        if self._selector is not None:
+            self._selector.close()
+            self._selector = None
+
+    # -- the loop ---------------------------------------------------------------------------
+
+    def _serve(self) -> None:
+        assert self._selector is not None
+        while not self._closing.is_set():
+            for key, mask in self._selector.select(self._timeout()):
+                if key.data == "udp":
+                    self._read_datagrams()
+                elif key.data == "accept":
+                    self._accept()
+                elif key.data == "wake":
+                    self._drain_wake()
+                elif mask & selectors.EVENT_WRITE:
+                    self._flush(key.data)
+                else:
+                    self._read(key.data)
+            self._expire()
+
+    def _timeout(self) -> float | None:
+        dues = [due for due in (self._table.next_due(), self._accept_paused_until) if due is not None]
+        return max(0.0, min(dues) - self._now()) if dues else None
+
+    def _drain_wake(self) -> None:
+        try:
+            self._wake[0].recv(64)  # type: ignore[index]
+        except OSError:
+            pass
+
+    def _expire(self) -> None:
+        now = self._now()
+        if self._accept_paused_until is not None and now >= self._accept_paused_until:
+            self._accept_paused_until = None
+            self._selector.register(self._tcp, selectors.EVENT_READ, "accept")  # type: ignore[union-attr]
+        for connection, why in self._table.expired(now):
+            self._drop(connection, why)  # type: ignore[arg-type]
+
+    # -- UDP --------------------------------------------------------------------------------
+
+    def _read_datagrams(self) -> None:
+        for _ in range(UDP_BATCH):
+            try:
+                data, sender = self._udp.recvfrom(UDP_BUFFER)  # type: ignore[union-attr]
+            except BlockingIOError:
+                return
+            except OSError:  # e.g. an ICMP error about an earlier reply: not this datagram's fault
+                continue
+            if len(data) > self.limits.max_datagram:
+                self.handler.dropped("udp", sender, f"a datagram of {len(data)} bytes "
+                                                    f"(the limit is {self.limits.max_datagram})")
+                continue
+            for reply in self.handler.packet("udp", sender, data):
+                try:
+                    self._udp.sendto(reply, sender)  # type: ignore[union-attr]
+                except OSError:
+                    pass  # a full buffer or an unreachable sender: the reply is not worth a wait
+
+    # -- TCP --------------------------------------------------------------------------------
+
+    def _accept(self) -> None:
+        for _ in range(ACCEPT_BATCH):
+            try:
+                sock, sender = self._tcp.accept()  # type: ignore[union-attr]
+            except BlockingIOError:
+                return
+            except OSError as exc:
+                if exc.errno in OUT_OF_DESCRIPTORS:
+                    self._pause_accepting(exc)
+                    return
+                continue  # a peer gone before it was accepted
+            self._admit(sock, sender)
+
+    def _pause_accepting(self, exc: OSError) -> None:
+        self._accept_paused_until = self._now() + ACCEPT_PAUSE_S
+        self._selector.unregister(self._tcp)  # type: ignore[union-attr]
+        self.handler.dropped("tcp", (self.host, self.port), f"cannot accept connections now: {exc.strerror}")
+
+    def _admit(self, sock: socket.socket, sender: Sender) -> None:
+        if not self.handler.admit(sender):
+            sock.close()
+            return
+        connection = _Connection(sock, sender, FrameReader(self.limits.max_message))
+        taken, evicted = self._table.admit(connection, sender[0], self._now())
+        for old in evicted:
+            self._drop(old, "closed to make room: it had sent no message")  # type: ignore[arg-type]
+        if not taken:
+            sock.close()
+            self.handler.dropped("tcp", sender, f"refused: too many connections (at most {self.limits.max_connections}, "
+                                                f"{self.limits.max_per_sender} from one address, each sending)")
+            return
+        sock.setblocking(False)
+        try:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # a reply is one small write: now
+        except OSError:
+            pass
+        self._connections.add(connection)
+        self._selector.register(sock, selectors.EVENT_READ, connection)  # type: ignore[union-attr]
+
+    def _read(self, connection: _Connection) -> None:
+        try:
+            data = connection.sock.recv(RECV_BYTES)
+        except BlockingIOError:
+            return
+        except OSError:
+            data = b""
+        if not data:
+            self._close(connection)
+            return
+        fed = connection.reader.feed(data)
+        for why in fed.bad:
+            self.handler.dropped("tcp", connection.sender, why)
+        self._table.heard(connection, self._now(), messages=len(fed.packets) + len(fed.bad),
+                          pending=connection.reader.pending)
+        for packet in fed.packets:
+            for reply in self.handler.packet("tcp", connection.sender, packet):
+                connection.unsent += connection.reader.frame(reply)
+        if fed.fatal is not None:
+            self._drop(connection, f"closed: {fed.fatal}")
+        elif connection.unsent:
+            self._flush(connection)
+
+    def _flush(self, connection: _Connection) -> None:
+        try:
+            sent = connection.sock.send(connection.unsent)
+        except BlockingIOError:
+            sent = 0
+        except OSError:
+            self._close(connection)
+            return
+        del connection.unsent[:sent]
+        if len(connection.unsent) > self.limits.max_unsent:
+            self._drop(connection, f"closed: it does not read its replies ({len(connection.unsent)} bytes unsent)")
+            return
+        events = selectors.EVENT_READ | (selectors.EVENT_WRITE if connection.unsent else 0)
+        self._selector.modify(connection.sock, events, connection)  # type: ignore[union-attr]
+
+    def _drop(self, connection: _Connection, why: str) -> None:
+        self._close(connection)
+        self.handler.dropped("tcp", connection.sender, why)
+
+    def _close(self, connection: _Connection) -> None:
+        self._table.remove(connection)
+        if connection in self._connections:
+            self._connections.discard(connection)
+            try:
+                self._selector.unregister(connection.sock)  # type: ignore[union-attr]
+            except (KeyError, ValueError):
+                pass
+        try:
+            connection.sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        connection.sock.close()
+
+
+# -- binding ------------------------------------------------------------------------------------
+
+
+def bind(host: str, port: int, limits: OscLimits = LIMITS) -> tuple[socket.socket, socket.socket]:
+    """UDP and TCP on one port number; with port 0, a number free for both."""
+    attempts = 20 if port == 0 else 1
+    while True:
+        attempts -= 1
+        udp = _listen(host, port, socket.SOCK_DGRAM, limits)
+        try:
+            return udp, _listen(host, udp.getsockname()[1], socket.SOCK_STREAM, limits)
+        except ListenFailed:
+            udp.close()
+            if attempts == 0:
+                raise
+
+
+def _listen(host: str, port: int, kind: int, limits: OscLimits) -> socket.socket:
+    transport = "udp" if kind == socket.SOCK_DGRAM else "tcp"
+    try:
+        # the port is not given to getaddrinfo: it would wrap 70000 round to 4464
+        family, _, _, _, address = socket.getaddrinfo(host, 0, type=kind, flags=socket.AI_PASSIVE)[0]
+        sock = socket.socket(family, kind)
+    except (OSError, UnicodeError) as exc:
+        raise ListenFailed(transport, (host, port), getattr(exc, "strerror", None) or str(exc)) from None
+    try:
+        if family == socket.AF_INET6:
+            _set(sock, socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 0)  # `::` takes IPv4 senders too
+        if kind == socket.SOCK_STREAM:
+            _set(sock, socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # a restart while old connections wait
+        sock.bind((address[0], port, *address[2:]))
+        if kind == socket.SOCK_STREAM:
+            sock.listen(LISTEN_BACKLOG)
+        sock.setblocking(False)
+    except (OSError, OverflowError) as exc:
+        sock.close()
+        raise ListenFailed(transport, (host, port), getattr(exc, "strerror", None) or str(exc),
+                           getattr(exc, "errno", None) == errno.EADDRINUSE) from None
+    return sock
+
+
+def _set(sock: socket.socket, level: int, option: int, value: int) -> None:
+    try:
+        sock.setsockopt(level, option, value)
+    except OSError:
+        pass
