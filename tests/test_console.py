@@ -24,8 +24,11 @@ import pytest
 from rich.console import Console as RichConsole
 
 from choreo.clock import MachineShowClock
-from choreo.cli.console import (LEGEND, Console, KeyReader, Note, Row, Screen, TerminalMode, _LinkWatch,
-                                render)
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from choreo.cli.console import (LEGEND, Console, KeyParser, KeyReader, Note, Row, Screen, TerminalMode,
+                                _LinkWatch, render)
 from choreo.link import RxEvent, TxEvent
 from choreo.live import Answer, Command, CommandEvent, Live
 from choreo.logformat import WARNING
@@ -249,7 +252,8 @@ def test_the_key_reader_tells_esc_from_an_arrow_key():
     reader = KeyReader(read, lambda key: (keys.append(key), got.set()))
     reader.start()
     try:
-        for sent, expected in ((b"\x1b[A", None), (b"\x1bOB", None), (b"\x1b[1;5C", None), (b" ", "go"),
+        for sent, expected in ((b"\x1b[A", None), (b"\x1bOB", None), (b"\x1b[1;5C", None), (b"\x1b\x1b[D", None),
+                               (b"\x1b\x1bOP", None), (b"\x1b[1;3D", None), (b"\x1bq", None), (b" ", "go"),
                                (b"\r", "go"), (b"\x1b", "escape"), (b"\x1b\x1b", "escape"), (b"q", "q"), (b"y", "y")):
             got.clear()
             os.write(write, sent)
@@ -262,6 +266,91 @@ def test_the_key_reader_tells_esc_from_an_arrow_key():
         reader.close()
         os.close(write)
         os.close(read)
+
+
+# What terminals send for keys that are not Esc (xterm, VTE, Terminal.app, iTerm2, rxvt, tmux,
+# screen, the Linux console, PuTTY): arrows, function keys, Alt with each, replies, mouse, paste.
+NOT_ESC = [
+    b"\x1b[A", b"\x1b[B", b"\x1b[C", b"\x1b[D", b"\x1bOA", b"\x1bOD", b"\x1b[H", b"\x1b[F", b"\x1b[1~",
+    b"\x1b[4~", b"\x1b[5~", b"\x1b[6~", b"\x1b[2~", b"\x1b[3~", b"\x1b[Z",  # arrows, Home/End, PgUp, Ins, Del, S-Tab
+    b"\x1bOP", b"\x1bOQ", b"\x1bOR", b"\x1bOS", b"\x1b[15~", b"\x1b[17~", b"\x1b[24~", b"\x1b[11~",  # F-keys
+    b"\x1b[[A", b"\x1b[[E", b"\x1bO2P", b"\x1b[1;2P", b"\x1b[15;5~",  # Linux console F1/F5; modified F-keys
+    b"\x1b[1;3D", b"\x1b[1;3C", b"\x1b[1;9A", b"\x1b[1;5D", b"\x1b[1;6B",  # Alt/Ctrl/Shift+arrow (xterm)
+    b"\x1b\x1b[D", b"\x1b\x1b[A", b"\x1b\x1bOD", b"\x1b\x1b[1;5C",  # Alt+arrow (Terminal.app, rxvt, PuTTY)
+    b"\x1b\x1bOP", b"\x1b\x1b[15~", b"\x1b\x1b[24~", b"\x1b\x1b[[A", b"\x1b[1;3P", b"\x1b[15;3~",  # Alt+F-keys
+    b"\x1bq", b"\x1b ", b"\x1b\r", b"\x1bQ", b"\x1b\x7f", b"\x1by", b"\x1b\x1bq",  # Alt+key
+    b"\x1b]11;rgb:0000/0000/0000\x07", b"\x1b]10;rgb:ffff/ffff/ffff\x1b\\", b"\x1bP1$r0m\x1b\\",  # replies
+    b"\x1b[?1;2c", b"\x1b[24;80R", b"\x1b[I", b"\x1b[O",  # device attributes, cursor report, focus
+    b"\x1b[M !!", b"\x1b[M#q ", b"\x1b[<0;12;5M", b"\x1b[<0;12;5m",  # mouse: X10 (a space in it), SGR
+    b"\x1b[200~go q y \r\n\x1b[201~",  # a bracketed paste with spaces and q in it
+]
+
+
+@pytest.mark.parametrize("sequence", NOT_ESC, ids=lambda b: b.hex(" "))
+def test_only_a_bare_esc_panics_every_other_sequence_is_read_whole_and_ignored(sequence: bytes) -> None:
+    parser = KeyParser()
+    assert parser.feed(sequence) + parser.timeout() == []
+    bytewise = KeyParser()  # the same, a byte a read
+    assert [k for byte in sequence for k in bytewise.feed(bytes([byte]))] == []
+    assert bytewise.feed(b" ") == ["go"]  # and the next key is a key
+    assert parser.feed(b"\x1b") == [] and parser.timeout() == ["escape"]
+
+
+def test_keys_and_bare_escs() -> None:
+    parser = KeyParser()
+    assert parser.feed(b" \r\nqQyx") == ["go", "go", "go", "q", "q", "y", "x"]
+    assert parser.feed(b"\x03\x00\xe3\x83\xad\t") == []  # control bytes and UTF-8 are not keys
+    assert parser.feed(b"\x1b") == [] and parser.pending and parser.timeout() == ["escape"]
+    assert parser.feed(b"\x1b\x1b") == [] and parser.timeout() == ["escape"]  # Esc twice in a hurry
+    assert parser.feed(b"\x1b\x1b\x1b") == ["escape"] and parser.timeout() == ["escape"]
+    assert parser.feed(b"\x1b[1\x1b") == [] and parser.timeout() == ["escape"]  # broken off by an Esc
+    assert not parser.pending and parser.timeout() == []
+
+
+def test_a_sequence_cut_short_ends_at_the_pause() -> None:
+    parser = KeyParser()
+    for cut in (b"\x1b[1;3", b"\x1b]0;title", b"\x1b[200~abc", b"\x1b[M", b"\x1bO", b"\x1b\x1b["):
+        assert parser.feed(cut) == [] and parser.pending
+        assert parser.timeout() == [] and not parser.pending
+        assert parser.feed(b" ") == ["go"]
+
+
+_final = st.integers(0x40, 0x7E).map(lambda b: bytes([b]))
+_params = st.binary(max_size=12).map(lambda raw: bytes(0x30 + b % 16 for b in raw))
+_csi = st.builds(lambda p, f: b"\x1b[" + p + f, _params, _final.filter(lambda f: f not in (b"M", b"[")))
+_ss3 = st.builds(lambda p, f: b"\x1bO" + p + f, _params, _final)
+_alt = st.integers(0x20, 0x7E).map(lambda b: b"\x1b" + bytes([b])).filter(lambda s: s[1:] not in (b"[", b"O", b"]",
+                                                                                                   b"P", b"X", b"^", b"_"))
+_osc = st.builds(lambda text, end: b"\x1b]" + text + end, st.binary(max_size=20).map(
+    lambda raw: bytes(0x20 + b % 0x5F for b in raw)), st.sampled_from([b"\x07", b"\x1b\\"]))
+_sequence = st.one_of(_csi, _ss3, _alt, _osc, st.sampled_from(NOT_ESC))
+_alt_sequence = st.one_of(_csi, _ss3).map(lambda s: b"\x1b" + s)  # ESC ESC [ ...: Alt with a key's sequence
+
+
+@given(st.lists(st.one_of(_sequence, _alt_sequence), max_size=12), st.lists(st.integers(1, 8), min_size=1))
+@settings(max_examples=400, deadline=None)
+def test_any_run_of_key_sequences_in_any_chunks_gives_no_key(sequences: list[bytes], cuts: list[int]) -> None:
+    data = b"".join(sequences)
+    parser = KeyParser()
+    keys: list[str] = []
+    at = 0
+    for cut in cuts * (len(data) + 1):
+        if at >= len(data):
+            break
+        keys += parser.feed(data[at:at + cut])
+        at += cut
+    assert keys + parser.timeout() == []
+    assert parser.feed(b"\x1b") == [] and parser.timeout() == ["escape"]
+
+
+@given(st.binary(max_size=300))
+@settings(max_examples=400, deadline=None)
+def test_after_any_bytes_and_a_pause_esc_and_go_work(noise: bytes) -> None:
+    parser = KeyParser()
+    keys = parser.feed(noise) + parser.timeout()
+    assert set(keys) <= {"go", "q", "escape"} | {chr(b) for b in range(0x21, 0x7F)}
+    assert parser.feed(b"\x1b") == [] and parser.timeout() == ["escape"]
+    assert parser.feed(b" ") == ["go"]
 
 
 class BrokenTerminal(io.StringIO):
@@ -437,4 +526,19 @@ def test_sixty_columns_draw_without_wrapping(tmp_path, pane):
     assert LEGEND in lines
     run.keys("Escape")
     assert run.exit_code() == 130
+    assert run.terminal_restored()
+
+
+@needs_tmux
+def test_alt_arrows_and_alt_f_keys_do_not_panic(tmp_path, pane):
+    run = pane(GO_SHOW)
+    run.wait_for("GO waits: 'applause'")
+    run.keys("M-Left", "M-F1", "M-Up", "Left")  # tmux's own (xterm) sequences
+    for raw in ("1b 1b 5b 44", "1b 1b 4f 50", "1b 1b 5b 31 35 7e", "1b 1b 5b 43"):  # ESC ESC [ D ...
+        run._tmux("send-keys", "-t", "run", "-H", *raw.split())
+    run.keys("Space")
+    run.wait_for("GO waits: 'encore'")
+    run.keys("Enter")
+    assert run.exit_code() == 0
+    assert commands_in(tmp_path) == [("go", "key", "ok"), ("go", "key", "ok")]
     assert run.terminal_restored()

@@ -260,20 +260,107 @@ def _in_foreground(fd: int) -> bool:
         return True  # not our controlling terminal: no job control to get in the way
 
 
-KEYS = {b" ": "go", b"\r": "go", b"\n": "go", b"q": "q", b"Q": "q"}
+KEYS = {ord(" "): "go", ord("\r"): "go", ord("\n"): "go", ord("q"): "q", ord("Q"): "q"}
+ESC = 0x1B
+LONGEST_SEQUENCE = 256  # bytes: past this a sequence is given up (its rest may read as keys)
+PASTE_START, PASTE_END = b"[200~", b"[201~"  # bracketed paste: the text between is not keys
+
+
+class KeyParser:
+    """Key bytes in, key names out (`go`, `escape`, `q`, or a printable character): no I/O and
+    no clock, so every sequence a terminal sends can be tried on it.
+
+    Esc also starts what other keys send: arrows and function keys (CSI `ESC [ ... final`, SS3
+    `ESC O ...`), Alt+key (`ESC key`), Alt+arrow and Alt+F-key (`ESC ESC [ D`, `ESC ESC O P`),
+    terminal replies (`ESC ] ... BEL`, `ESC P ... ESC \\`), mouse reports and bracketed pastes.
+    Each is read whole and ignored: only a bare Esc panics, an Esc with nothing after it before
+    the reader's wait runs out (`timeout`). Esc pressed twice (`ESC ESC` and nothing) is still
+    Esc, and a third Esc right after makes that pair one. A pause (`timeout`) also ends any
+    sequence or paste cut short, so the next key is read afresh whatever came before; non-ASCII
+    bytes and control bytes other than Enter are not keys."""
+
+    def __init__(self) -> None:
+        self._sequence = bytearray()  # the escape sequence read so far, after its ESC
+        self._in_escape = False
+        self._pasting = False
+
+    @property
+    def pending(self) -> bool:
+        """Whether a sequence or a paste is under way: the reader waits a moment for the rest
+        and calls `timeout` if nothing comes."""
+        return self._in_escape or self._pasting
+
+    def feed(self, data: bytes) -> list[str]:
+        keys = [self._byte(byte) for byte in data]
+        return [key for key in keys if key is not None]
+
+    def timeout(self) -> list[str]:
+        """Nothing more came: a bare Esc (or Esc twice) is Esc; any other sequence is over."""
+        bare = self._in_escape and not self._pasting and bytes(self._sequence) in (b"", b"\x1b")
+        self._sequence.clear()
+        self._in_escape = self._pasting = False
+        return ["escape"] if bare else []
+
+    def _byte(self, byte: int) -> str | None:
+        if not self._in_escape:
+            if byte == ESC:
+                self._in_escape = True
+                return None
+            if self._pasting or byte >= 0x80:
+                return None
+            return KEYS.get(byte, chr(byte) if 0x20 < byte < 0x7F else None)
+        if byte == ESC and self._sequence == b"\x1b" and not self._pasting:
+            self._sequence.clear()  # ESC ESC ESC: Esc twice, and a new sequence starts
+            return "escape"
+        self._sequence.append(byte)
+        sequence = bytes(self._sequence)
+        if _complete(sequence) or len(sequence) >= LONGEST_SEQUENCE:
+            self._sequence.clear()
+            self._in_escape = False
+            self._ended(sequence)
+        return None
+
+    def _ended(self, sequence: bytes) -> None:
+        if sequence == PASTE_START:
+            self._pasting = True
+        elif sequence == PASTE_END:
+            self._pasting = False
+        elif len(sequence) > 1 and sequence[-1] == ESC and not _is_string(sequence):
+            self._in_escape = True  # a sequence broken off by an Esc: that Esc starts the next
+
+
+def _is_string(sequence: bytes) -> bool:
+    """OSC, DCS, SOS, PM, APC: a terminal's reply, ended by BEL or ST (`ESC \\`)."""
+    return sequence[:1] in (b"]", b"P", b"X", b"^", b"_")
+
+
+def _complete(sequence: bytes) -> bool:
+    """Whether the bytes after an ESC make a whole sequence, or one broken off (a byte that
+    does not belong in it ends it there)."""
+    head, body = sequence[:1], sequence[1:]
+    if head == b"\x1b":  # ESC ESC: Alt with a sequence of its own (Alt+Left: ESC ESC [ D)
+        return body != b"" and _complete(body)
+    if _is_string(sequence):
+        return body.endswith((b"\x07", b"\x1b\\"))
+    if head not in (b"[", b"O"):
+        return True  # Alt and a key: one byte
+    if not body or (head == b"[" and body == b"["):  # the Linux console's F1: ESC [ [ A
+        return False
+    if head == b"[" and body[:1] == b"M":  # an X10 mouse report: three raw bytes after the M
+        return len(body) >= 4
+    return not 0x20 <= body[-1] <= 0x3F  # CSI, SS3: parameters, intermediates, a final byte
 
 
 class KeyReader:
-    """Reads keys off the terminal in a thread of its own and hands each to `on_key` by name:
-    `go`, `escape`, `q`, or the character itself (an answer to a question).
-
-    Esc starts the escape sequences of arrow and function keys too: an Esc followed by another
-    byte within ESCAPE_WAIT_S is such a sequence, read to its end and ignored."""
+    """Reads the terminal in a thread of its own and hands each key to `on_key` by name
+    (`KeyParser` tells keys from sequences): it waits ESCAPE_WAIT_S after an Esc for the rest
+    of a sequence before taking it for the Esc key."""
 
     def __init__(self, fd: int, on_key: Callable[[str], None], escape_wait_s: float = ESCAPE_WAIT_S) -> None:
         self.fd = fd
         self.on_key = on_key
         self.escape_wait_s = escape_wait_s
+        self.parser = KeyParser()
         self._done = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="choreo-keys", daemon=True)
 
@@ -287,40 +374,26 @@ class KeyReader:
 
     def _loop(self) -> None:
         while not self._done.is_set():
-            byte = self._read(KEY_POLL_S)
-            if byte is None:
-                continue
-            key = self._escape() if byte == b"\x1b" else KEYS.get(byte, byte.decode("latin-1"))
-            if key is not None:
+            pending = self.parser.pending
+            data = self._read(self.escape_wait_s if pending else KEY_POLL_S)
+            keys = self.parser.feed(data) if data is not None else self.parser.timeout() if pending else []
+            for key in keys:
                 self.on_key(key)
 
-    def _escape(self) -> str | None:
-        """A lone Esc, or None for an escape sequence (read to its final byte)."""
-        second = self._read(self.escape_wait_s)
-        if second is None or second == b"\x1b":  # Esc pressed twice in a hurry is still Esc
-            return "escape"
-        if second == b"[":  # CSI: parameters and intermediates, then a final byte @..~
-            while (byte := self._read(self.escape_wait_s)) is not None and not 0x40 <= byte[0] <= 0x7E:
-                pass
-        elif second == b"O":  # SS3: one more byte (F1-F4, arrows in application mode)
-            self._read(self.escape_wait_s)
-        return None
-
     def _read(self, timeout: float) -> bytes | None:
-        """One byte, or None if none came within `timeout`; the end of input stops the reader."""
-        if self._done.is_set():
-            return None
+        """What the terminal has (None if nothing came within `timeout`); the end of input
+        stops the reader."""
         try:
             ready, _, _ = select.select([self.fd], [], [], timeout)
             if not ready:
                 return None
-            byte = os.read(self.fd, 1)
+            data = os.read(self.fd, 64)
         except (OSError, ValueError):
-            byte = b""
-        if not byte:
+            data = b""
+        if not data:
             self._done.set()
             return None
-        return byte
+        return data
 
 
 # -- the console -------------------------------------------------------------------------------
