@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 
 from choreo import protocol as p
+from choreo.errors import LinkError
 from choreo.link import Link, Tag
 from choreo.runner import Runner, StopRequest
 from choreo.show.load import load_show
@@ -70,6 +71,13 @@ def test_an_unclear_state_counts_as_started_and_says_so(answer):
     played = link.play(3)
     assert played.tries == 1 and kinds(events).count("play") == 1  # cautious: never sent twice
     assert "counted as started" in played.recovered and "check the robot" in played.recovered
+
+
+def test_a_state_read_that_gets_no_answer_fails_the_play_without_a_second_start():
+    link, port, events = link_for(ACK_MOV, ACK_CALL, b"")  # then silence: a dead line
+    with pytest.raises(LinkError, match="no reply to 'read'"):
+        link.play(3)
+    assert kinds(events).count("play") == 1
 
 
 def test_the_state_is_read_one_status_refresh_after_the_start_frame():
@@ -195,3 +203,37 @@ def test_the_boards_state_tells_never_started_from_started_and_over(layout):
     assert board_state(layout, whole, 0.21) is StartState.DONE  # over by 0.18, shown at 0.2
     assert not StartState.NOT_STARTED.started
     assert all(s.started for s in (StartState.RUNNING, StartState.DONE, StartState.UNCLEAR))
+
+
+SEQUENCE = {"seed": ("stop", "play", "restore"), "hth4-2.2": ("stop", "counter", "play", "restore")}
+REPLY_FAULTS = ("drop", "late", "badsum", "short", "junk")  # drop: the frame never arrived
+
+
+@pytest.mark.parametrize("fault", REPLY_FAULTS)
+@pytest.mark.parametrize("layout,frame", [(layout, frame) for layout, frames in SEQUENCE.items()
+                                          for frame in frames])
+def test_a_fault_on_any_frame_of_the_play_sequence_starts_each_motion_once(tmp_path, layout, frame, fault):
+    # Every second frame of that kind is hit (retries count too): plays 2-6 meet it, or plays 2,
+    # 4 and 6 where the play is not sent again.
+    result, board, log = run_short(tmp_path, layout, f"{fault}=2&faults_on={frame}")
+    assert result.outcome == "done"
+    assert board.starts == 6 and board.stack_faults == 0  # the board counts every start
+    hit = [e for e in board.journal if e.kind == "frame" and e.faults]
+    calls = [e for e in board.journal if e.kind == "frame" and e.data[1:2] == b"\x0c"]
+    warned = [m["message"] for m in log.logs if "not sent again" in m["message"]]
+    if frame == "restore" and fault != "drop":  # carried out, its answer lost: read, never re-sent
+        assert len(hit) == 3 and len(calls) == 6 and len(warned) == 3
+        assert all(" running: " in line or " started and already over: " in line for line in warned)
+        return
+    assert len(hit) == 5 and not warned  # never started: the sequence went again from its stop frame
+    assert len(calls) == 6 + (5 if frame in ("play", "restore") else 0)  # the CALL too, if it was sent
+
+
+@pytest.mark.parametrize("layout", SEQUENCE)
+@pytest.mark.parametrize("fault", REPLY_FAULTS)
+def test_a_fault_on_the_state_read_too_still_starts_each_motion_once(tmp_path, layout, fault):
+    # Every start's reply lost, and every second read of the board's state answered badly too.
+    result, board, log = run_short(tmp_path, layout, f"lose_start=1&{fault}=2&faults_on=read")
+    assert result.outcome == "done"
+    assert board.starts == 6 and board.stack_faults == 0
+    assert len([m for m in log.logs if "not sent again" in m["message"]]) == 6

@@ -381,6 +381,38 @@ def test_unknown_fault_kind_is_refused():
     assert set(FAULT_KINDS) == {"lose", "drop", "nak", "badsum", "short", "junk", "late", "lose_start"}
 
 
+@pytest.mark.parametrize("layout", ["seed", "hth4-2.2"])
+def test_frame_kind_names_each_frame_of_both_play_sequences(layout):
+    from choreo.layouts import layout_named
+    from choreo.sim.faults import frame_kind
+
+    chosen = layout_named(layout)
+    frames = chosen.play_sequence(5, 0x821B)
+    assert [frame_kind(f.data) for f in frames] == [f.kind.value for f in frames]
+    assert frame_kind(chosen.status.data) == frame_kind(chosen.start_read.data) == "read"
+    assert frame_kind(p.sync_frame().data) == "sync"
+    assert frame_kind(p.version_frame().data) == frame_kind(b"\xff\x00\xaa") == "other"
+
+
+def test_faults_on_counts_and_hits_only_frames_of_those_kinds():
+    b = board(faults=FaultPlan.parse({"drop": "2"}, on=frozenset({"play"})))
+    frames = p.play_sequence(1) * 3  # CALLs are frames 2, 5, 8: the second CALL is dropped
+    replies = [b.receive(f.data, 0.01 * i) for i, f in enumerate(frames)]
+    assert [i for i, r in enumerate(replies) if r is None] == [4]
+    assert [e.number for e in b.journal if e.kind == "frame" and e.faults] == [5]
+    assert FaultPlan.parse({"drop": "2"}, on=frozenset({"play", "restore"})).describe() == \
+        "drop every 2th play/restore frame"
+
+
+@pytest.mark.parametrize("query,message", [
+    ("drop=2&faults_on=calls", "option faults_on='calls': unknown frame kind 'calls' (known: stop, counter, "),
+    ("drop=2&faults_on=,", "option faults_on=',': no frame kind"),
+])
+def test_faults_on_refuses_unknown_kinds(query, message):
+    with pytest.raises(ValueError, match=message.replace("(", r"\(")):
+        parse_query(query)
+
+
 # -- options -----------------------------------------------------------------------------------
 
 

@@ -89,6 +89,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ):
         faults.add_argument(f"--{kind.replace('_', '-')}", dest=kind, metavar="K|P", help=what)
     faults.add_argument("--late-ms", metavar="MS", help="how late a --late reply is, ms (default 500)")
+    faults.add_argument("--faults-on", dest="faults_on", metavar="KINDS",
+                        help="the frame faults hit (and count) only frames of these kinds, comma-separated: "
+                             "stop, counter, play, restore, read, sync, other (default: every frame)")
     faults.add_argument("--seed", metavar="N", help="seed for faults given as a probability (default 0)")
     parser.add_argument("--boards", type=int, default=1, metavar="N",
                         help=f"serve N boards (1..{MAX_BOARDS}), each on its own pseudo-terminal, one path "

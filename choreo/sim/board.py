@@ -321,7 +321,7 @@ class SimBoard:
             return None
         self.frames_received += 1
         number = self.frames_received
-        kinds = self._injector.decide(number)
+        kinds = self._injector.decide(number, data)
         events: tuple[JournalEntry, ...] = ()
         if NOT_EXECUTED.isdisjoint(kinds):
             outcome = self._execute(data, now)

@@ -26,6 +26,14 @@ generator seeded with ``seed`` (default 0), so a run is repeatable. ``drop=5`` d
 15...; ``drop=0.2`` drops a fifth of them at random; ``drop=1`` drops every frame. ``1.0`` and
 ``0`` are refused (write ``1`` for every frame; leave the option out for never).
 
+``faults_on`` (``faults_on=restore``, ``--faults-on play,restore``) aims the frame faults at
+frames of the named kinds only, as the board reads them: ``stop`` (a config write that clears
+the run bit), ``counter`` (a write of the program counter alone, hth4-2.2), ``play`` (a CALL),
+``restore`` (a config write that sets the run bit: the frame that starts a motion), ``read`` (a
+RAM read: status queries, the state read after a lost start reply, the config read at open),
+``sync`` (the ACK check), ``other``. K then counts only those frames (``drop=2&faults_on=play``
+drops every second CALL), a probability is drawn only for them, and every other frame is spared.
+
 Several kinds may be given at once. When more than one hits the same frame: ``lose`` wins over
 everything, then ``drop`` (nothing is sent), then the reply is built in the order ``nak``,
 ``badsum``, ``short``, ``junk``, ``late`` (so ``junk`` + ``late`` gives a late, junk-prefixed reply).
@@ -39,6 +47,7 @@ import random
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from choreo import protocol as p
 from choreo.protocol import nak
 
 # Order matters: precedence when several hit one frame, and the order of random draws.
@@ -52,6 +61,39 @@ DEFAULT_LATE_S = 0.5
 
 # Faults after which the board did not execute the frame (it never got it, or refused it).
 NOT_EXECUTED = frozenset({"lose", "drop", "nak"})
+# What `faults_on` may name: a frame's kind as the board reads it (see `frame_kind`).
+FRAME_KINDS: tuple[str, ...] = ("stop", "counter", "play", "restore", "read", "sync", "other")
+
+
+def frame_kind(data: bytes) -> str:
+    """What a frame is to the board, from its bytes alone (the layout does not matter): the
+    play sequence's frames by what they write, reads, the ACK check; `other` for the rest."""
+    try:
+        command = p.parse_command(data)
+    except ValueError:
+        return "other"
+    if command.command == p.CMD_CALL and command.address is not None:
+        return "play"
+    if command.move_type == p.MOV_RAM_TO_COM:
+        return "read"
+    if command.move_type == p.MOV_COM_TO_RAM and command.payload:
+        if command.address == p.CONFIG_ADDRESS:
+            return "restore" if command.payload[0] & p.RUN_BIT else "stop"
+        if command.address == p.PROGRAM_COUNTER_ADDRESS:
+            return "counter"
+    if bytes(data) == p.sync_frame().data:
+        return "sync"
+    return "other"
+
+
+def parse_frame_kinds(text: str) -> frozenset[str]:
+    """`play,restore` -> the frame kinds `faults_on` names; ValueError lists the kinds."""
+    kinds = frozenset(part.strip() for part in text.split(",") if part.strip())
+    unknown = sorted(kinds - set(FRAME_KINDS))
+    if unknown or not kinds:
+        what = f"unknown frame kind {unknown[0]!r}" if unknown else "no frame kind"
+        raise ValueError(f"{what} (known: {', '.join(FRAME_KINDS)})")
+    return kinds
 
 
 @dataclass(frozen=True)
@@ -105,16 +147,21 @@ class FaultPlan:
     triggers: Mapping[str, Trigger] = field(default_factory=dict)
     seed: int = 0
     late_s: float = DEFAULT_LATE_S
+    on: frozenset[str] = frozenset()  # frame kinds the frame faults hit (see `frame_kind`); empty: all
 
     def __post_init__(self) -> None:
         unknown = sorted(set(self.triggers) - set(FAULT_KINDS))
         if unknown:
             raise ValueError(f"unknown fault kind {unknown[0]!r} (known: {', '.join(FAULT_KINDS)})")
+        if not self.on <= set(FRAME_KINDS):
+            raise ValueError(f"unknown frame kind {sorted(self.on - set(FRAME_KINDS))[0]!r} "
+                             f"(known: {', '.join(FRAME_KINDS)})")
         if self.late_s < 0:
             raise ValueError(f"late_ms must be >= 0, not {self.late_s * 1000:g}")
 
     @classmethod
-    def parse(cls, values: Mapping[str, str], seed: int = 0, late_s: float = DEFAULT_LATE_S) -> FaultPlan:
+    def parse(cls, values: Mapping[str, str], seed: int = 0, late_s: float = DEFAULT_LATE_S,
+              on: frozenset[str] = frozenset()) -> FaultPlan:
         """Triggers from their spelled values, each error naming its fault kind."""
         triggers = {}
         for kind, text in values.items():
@@ -122,12 +169,13 @@ class FaultPlan:
                 triggers[kind] = Trigger.parse(text)
             except ValueError as exc:
                 raise ValueError(f"{kind}={text}: {exc}") from None
-        return cls(triggers, seed, late_s)
+        return cls(triggers, seed, late_s, on)
 
     def describe(self) -> str:
         if not self.triggers:
             return "no faults"
-        parts = [f"{kind} {self.triggers[kind]}".replace(" frame", " start" if kind in START_FAULTS else " frame")
+        aimed = f" {'/'.join(k for k in FRAME_KINDS if k in self.on)} frame" if self.on else " frame"
+        parts = [f"{kind} {self.triggers[kind]}".replace(" frame", " start" if kind in START_FAULTS else aimed)
                  for kind in FAULT_KINDS if kind in self.triggers]
         return ", ".join(parts) + (f" (seed {self.seed})" if self.uses_random else "")
 
@@ -158,9 +206,16 @@ class FaultInjector:
         self.plan = plan or FaultPlan()
         self._rngs = {kind: random.Random(f"{self.plan.seed}:{kind}") for kind in FAULT_KINDS}
         self._lost = False
+        self._aimed = 0  # frames of the kinds `faults_on` names, so far
 
-    def decide(self, number: int) -> tuple[str, ...]:
-        """The fault kinds that hit frame `number` (1-based), in `FAULT_KINDS` order."""
+    def decide(self, number: int, data: bytes = b"") -> tuple[str, ...]:
+        """The fault kinds that hit frame `number` (1-based; `data`, its bytes), in
+        `FAULT_KINDS` order. With `faults_on`, only frames of its kinds count and are hit."""
+        if self.plan.on:
+            if frame_kind(data) not in self.plan.on:
+                return ()
+            self._aimed += 1
+            number = self._aimed
         hit = []
         for kind in FRAME_FAULTS:
             trigger = self.plan.triggers.get(kind)

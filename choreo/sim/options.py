@@ -21,6 +21,7 @@ with dashes on the command line (`--motion-s 0.5 --drop 5`), and both go through
 | latency_ms | an FTDI USB adapter's latency timer: reply bytes reach the client at its next tick (every MS ms), or at once when 62 are waiting; 0: no adapter | 0 |
 | lose, drop, nak, badsum, short, junk, late | faults: K (every K-th frame) or P (probability) | none |
 | lose_start | no reply to the frame that starts a motion (it still starts): K-th start or P | none |
+| faults_on | the frame faults hit (and count) only frames of these kinds: `stop`, `counter`, `play`, `restore`, `read`, `sync`, `other`, comma-separated | every frame |
 """
 
 from __future__ import annotations
@@ -40,10 +41,10 @@ from choreo.sim.board import (
     POWER_ON_CONFIG,
     SimBoard,
 )
-from choreo.sim.faults import DEFAULT_LATE_S, FAULT_KINDS, FaultPlan
+from choreo.sim.faults import DEFAULT_LATE_S, FAULT_KINDS, FaultPlan, parse_frame_kinds
 
 SETTINGS = ("baud", "motion_s", "durations", "reply_ms", "refresh_ms", "wire", "gap_ms", "seed", "late_ms",
-            "layout", "config", "baud_switch", "latency_ms")
+            "layout", "config", "baud_switch", "latency_ms", "faults_on")
 OPTION_NAMES: tuple[str, ...] = SETTINGS + FAULT_KINDS
 
 
@@ -178,8 +179,9 @@ def parse_options(values: Mapping[str, str]) -> SimOptions:
     faults = {kind: values[kind] for kind in FAULT_KINDS if kind in values}
     seed = _parsed(values, "seed", _whole, 0)
     late_s = _parsed(values, "late_ms", _milliseconds, DEFAULT_LATE_S)
+    aimed = _parsed(values, "faults_on", parse_frame_kinds, frozenset())
     try:
-        plan = FaultPlan.parse(faults, seed=seed, late_s=late_s)
+        plan = FaultPlan.parse(faults, seed=seed, late_s=late_s, on=aimed)
     except ValueError as exc:
         raise ValueError(f"fault {exc}") from None
     return SimOptions(
