@@ -146,7 +146,7 @@ class Live:
         self._released: set[object] = set()  # GO cues already given their GO
         self._last_go: float | None = None
         self._reports = ReportGate(limits, now)  # what of the commands the listeners hear
-        self._over: str | None = None  # why no command is taken any more (`close`)
+        self._over = False  # the run is over (`close`): no command is taken any more
 
     @property
     def panicked(self) -> bool:
@@ -231,8 +231,8 @@ class Live:
         return answer
 
     def _refusal(self) -> Answer | None:
-        if self._over is not None:
-            return Answer("error", f"refused: the show is over ({self._over})")
+        if self._over:
+            return Answer("error", "refused: the show is over")
         if self.stop():
             return Answer("error", f"refused: the show is stopping ({self.stop.reason})")
         return None
@@ -261,9 +261,9 @@ class Live:
         for listener in list(self.listeners):
             listener.on_command(event)
 
-    def close(self, outcome: str = "done") -> None:
+    def close(self) -> None:
         """The run is over: later commands are refused, and what was held back is told."""
-        self._over = outcome
+        self._over = True
         self._wake()
         self.flush_reports(force=True)
 

@@ -1,0 +1,252 @@
+"""What the outside may cost a running show: the limits on commands, replies, log lines and
+printed lines, in one place (README, "Limits on commands"), and the token buckets that keep them.
+
+Why they exist: a command from the network costs the show a log line, a line on the terminal and
+a reply. A flood of them (80,000 GOs in 5 s) would fill the disk, which stops the show, and the
+terminal; one UDP packet (a bundle of 408 GOs) would have choreo send 408 replies to a sender
+whose address may be forged. So:
+
+- each allowed sender may have `commands_per_sender` carried out, and all of them together
+  `commands_total` (a bundle's messages count one by one); the rest are not carried out;
+- each sender gets at most `replies_per_sender` replies, and the senders refused (not allowed)
+  `refusals` replies between them (their addresses are the easiest to forge);
+- a command that is taken (`ok`) is always logged and shown; refused and ignored ones are, one
+  by one, only within `reported`: the rest are counted, and every `summary_every_s` one
+  `unlogged` record (the log, the terminal) carries their counts, by command, so the log's
+  review adds up to the true totals.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass
+
+UNLOGGED = "unlogged"  # the command name of a summary of commands not logged one by one
+
+
+@dataclass(frozen=True)
+class Rate:
+    """A token bucket's shape: `burst` at once, then `per_s` a second."""
+
+    burst: int
+    per_s: float
+
+    def describe(self) -> str:
+        return f"{self.burst} at once, then {self.per_s:g} a second"
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Every limit on what commands from outside may cost (the README lists them)."""
+
+    commands_per_sender: Rate = Rate(10, 5.0)  # commands carried out for one sender (its host)
+    commands_total: Rate = Rate(20, 10.0)  # commands carried out for all allowed senders together
+    replies_per_sender: Rate = Rate(10, 5.0)  # replies sent to one sender
+    refusals: Rate = Rate(10, 1.0)  # replies to senders not allowed, all of them together
+    reported: Rate = Rate(10, 2.0)  # refused/ignored commands logged and printed one by one
+    summary_every_s: float = 1.0  # how often the commands not logged one by one are summed up
+    senders_tracked: int = 256  # senders with a budget of their own; beyond, new ones share one
+    notify_targets: int = 8  # --osc-notify given at most this many times
+
+
+LIMITS = Limits()
+
+
+class Budget:
+    """A token bucket of `Rate`: `take` returns how many were refused since the last one taken
+    (None: over budget now)."""
+
+    def __init__(self, burst: int, per_s: float, now: Callable[[], float] = time.monotonic) -> None:
+        self.burst = burst
+        self.per_s = per_s
+        self._now = now
+        self._tokens = float(burst)
+        self._at = now()
+        self._skipped = 0
+        self._lock = threading.Lock()
+
+    @classmethod
+    def of(cls, rate: Rate, now: Callable[[], float] = time.monotonic) -> Budget:
+        return cls(rate.burst, rate.per_s, now)
+
+    def take(self) -> int | None:
+        with self._lock:
+            self._refill()
+            if self._tokens < 1.0:
+                self._skipped += 1
+                return None
+            self._tokens -= 1.0
+            skipped, self._skipped = self._skipped, 0
+            return skipped
+
+    @property
+    def full(self) -> bool:
+        """Nothing taken lately: the bucket has refilled (its owner is idle)."""
+        with self._lock:
+            self._refill()
+            return self._tokens >= self.burst
+
+    def _refill(self) -> None:
+        """The lock is held."""
+        now = self._now()
+        self._tokens = min(float(self.burst), self._tokens + max(0.0, now - self._at) * self.per_s)
+        self._at = now
+
+
+class Budgets:
+    """A `Budget` for each key (a sender's host), at most `keys` of them: when the table is full,
+    idle senders' buckets go, and if none is idle a new sender shares one overflow bucket (so a
+    flood of forged addresses cannot grow the table, nor take a known sender's budget)."""
+
+    _OVERFLOW = object()
+
+    def __init__(self, rate: Rate, keys: int, now: Callable[[], float] = time.monotonic) -> None:
+        self.rate = rate
+        self.keys = keys
+        self._now = now
+        self._budgets: dict[object, Budget] = {}
+        self._lock = threading.Lock()
+
+    def take(self, key: Hashable) -> bool:
+        return self._budget(key).take() is not None
+
+    def _budget(self, key: Hashable) -> Budget:
+        with self._lock:
+            budget = self._budgets.get(key)
+            if budget is not None:
+                return budget
+            if len(self._budgets) >= self.keys:
+                for idle in [k for k, b in self._budgets.items() if k is not self._OVERFLOW and b.full]:
+                    del self._budgets[idle]
+            if len(self._budgets) >= self.keys:
+                key = self._OVERFLOW
+            return self._budgets.setdefault(key, Budget.of(self.rate, self._now))
+
+
+class SenderLimits:
+    """The network's side of the limits: whether a sender's command is carried out, and whether
+    a reply goes back to it (`Limits` says how many)."""
+
+    def __init__(self, limits: Limits = LIMITS, now: Callable[[], float] = time.monotonic) -> None:
+        self.limits = limits
+        self._commands = Budgets(limits.commands_per_sender, limits.senders_tracked, now)
+        self._total = Budget.of(limits.commands_total, now)
+        self._replies = Budgets(limits.replies_per_sender, limits.senders_tracked, now)
+        self._refusals = Budget.of(limits.refusals, now)
+
+    def admit(self, host: str) -> bool:
+        """May a command from `host` be carried out now? Its own budget first, so a flooding
+        sender spends its own tokens, not the others' share of the total."""
+        return self._commands.take(host) and self._total.take() is not None
+
+    def may_reply(self, host: str) -> bool:
+        return self._replies.take(host)
+
+    def may_answer_refusal(self) -> bool:
+        """A reply to a sender not allowed (shared by all of them: their addresses are forged
+        most easily)."""
+        return self._refusals.take() is not None
+
+    def over_rate(self, host: str) -> str:
+        """Why a command from `host` was not carried out."""
+        return (f"ignored: over the limit of commands ({self.limits.commands_per_sender.describe()} from one "
+                f"sender, {self.limits.commands_total.describe()} from all): is {host} flooding the show?")
+
+
+@dataclass(frozen=True)
+class Held:
+    """Refused or ignored commands not reported one by one since the last summary."""
+
+    counts: dict[str, int]  # by command name
+    sources: tuple[str, ...]  # the sources they came from (the first `SOURCES_KEPT`)
+    more_sources: bool = False  # and others beyond those
+
+    SOURCES_KEPT = 64
+
+    @property
+    def count(self) -> int:
+        return sum(self.counts.values())
+
+    def message(self) -> str:
+        what = ", ".join(f"{n} {name}" for name, n in sorted(self.counts.items(), key=lambda kv: -kv[1]))
+        named = ", ".join(self.sources[:3])
+        others = len(self.sources) - 3
+        more = f" and {others}{'+' if self.more_sources else ''} more" if others > 0 or self.more_sources else ""
+        return (f"{self.count} refused or ignored commands not logged one by one (over the log's limit): {what}; "
+                f"from {named}{more}")
+
+    @property
+    def source(self) -> str:
+        if len(self.sources) == 1 and not self.more_sources:
+            return self.sources[0]
+        return f"{len(self.sources)}{'+' if self.more_sources else ''} sources"
+
+
+class ReportGate:
+    """Which command events reach the listeners (the log, the terminal, notifications): every
+    one taken; refused and ignored ones within `Limits.reported`, the rest held as counts and
+    summed up (`due`) at most every `Limits.summary_every_s`."""
+
+    def __init__(self, limits: Limits = LIMITS, now: Callable[[], float] = time.monotonic) -> None:
+        self.every_s = limits.summary_every_s
+        self._now = now
+        self._budget = Budget.of(limits.reported, now)
+        self._counts: Counter[str] = Counter()
+        self._sources: dict[str, None] = {}  # an ordered set, of at most Held.SOURCES_KEPT
+        self._more_sources = False
+        self._last = now()
+        self._lock = threading.Lock()
+
+    def passes(self, name: str, source: str, ok: bool) -> bool:
+        """Report this one now? If not, it is counted for the next summary."""
+        if ok or self._budget.take() is not None:
+            return True
+        with self._lock:
+            self._counts[name] += 1
+            if source not in self._sources:
+                if len(self._sources) < Held.SOURCES_KEPT:
+                    self._sources[source] = None
+                else:
+                    self._more_sources = True
+        return False
+
+    def due(self, force: bool = False) -> Held | None:
+        """The commands held since the last summary, if it is time to sum them up (`force`:
+        now, at the end)."""
+        with self._lock:
+            now = self._now()
+            if not self._counts or (not force and now - self._last < self.every_s):
+                return None
+            held = Held(dict(self._counts), tuple(self._sources), self._more_sources)
+            self._counts.clear()
+            self._sources.clear()
+            self._more_sources = False
+            self._last = now
+            return held
+
+
+class Ticker:
+    """Calls `tick` every `every_s` from a thread of its own until `close` (the summaries of
+    held commands come out even when no other command does)."""
+
+    def __init__(self, tick: Callable[[], object], every_s: float) -> None:
+        self._tick = tick
+        self._every_s = every_s
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="choreo-summaries", daemon=True)
+
+    def start(self) -> Ticker:
+        self._thread.start()
+        return self
+
+    def _loop(self) -> None:
+        while not self._done.wait(self._every_s):
+            self._tick()
+
+    def close(self) -> None:
+        self._done.set()
+        if self._thread.is_alive():
+            self._thread.join(1.0)

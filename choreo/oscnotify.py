@@ -1,0 +1,149 @@
+"""`--osc-notify HOST:PORT` (repeatable): the show's progress as OSC messages over UDP to every
+target given, sent by a thread of its own from a bounded queue, so nothing on a runner's path
+waits for the network and a message that cannot be sent (or queued) is dropped.
+
+A target that is choreo's own `--osc` port on this machine would loop (each notification
+comes back as an unknown command, which is notified again), so it is refused at start-up:
+loopback, the unspecified address, and every address of this machine's interfaces.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import queue
+import socket
+import threading
+from collections.abc import Sequence
+from typing import Any
+
+from pythonosc.osc_message_builder import build_msg
+
+from choreo.errors import UsageError
+from choreo.limits import LIMITS
+
+QUEUED = 1000  # notifications waiting to be sent; past this they are dropped
+
+Target = tuple[str, int]
+
+
+def parse_target(text: str, option: str = "--osc-notify") -> Target:
+    """HOST:PORT (`[::1]:53001` for IPv6); UsageError on anything else."""
+    host, _, port = text.rpartition(":")
+    host = host.strip()
+    if host.startswith("[") and host.endswith("]"):
+        host = host[1:-1]
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise UsageError(f"{option} {text}: give HOST:PORT, e.g. 127.0.0.1:53001")
+    return host, int(port)
+
+
+def parse_targets(texts: Sequence[str]) -> tuple[Target, ...]:
+    """Every --osc-notify given (each one gets the notifications), none twice."""
+    if len(texts) > LIMITS.notify_targets:
+        raise UsageError(f"--osc-notify {texts[LIMITS.notify_targets]}: at most {LIMITS.notify_targets} "
+                         "notify targets")
+    targets: list[Target] = []
+    for text in texts:
+        target = parse_target(text)
+        if target in targets:
+            raise UsageError(f"--osc-notify {text}: given twice")
+        targets.append(target)
+    return tuple(targets)
+
+
+def show_target(target: Target) -> str:
+    host, port = target
+    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+
+
+def is_this_machine(ip: str, family: int) -> bool:
+    """Does a packet sent to `ip` stay on this machine? Loopback and unspecified addresses do,
+    and so does any address a socket can be bound to (an interface's own)."""
+    try:
+        address = ipaddress.ip_address(ip.split("%")[0])
+    except ValueError:
+        return False
+    mapped = address.ipv4_mapped if isinstance(address, ipaddress.IPv6Address) else None
+    if mapped is not None:
+        return is_this_machine(str(mapped), socket.AF_INET)
+    if address.is_loopback or address.is_unspecified:
+        return True
+    try:
+        with socket.socket(family, socket.SOCK_DGRAM) as probe:
+            probe.bind((ip, 0))
+    except OSError:
+        return False
+    return True
+
+
+class Notifier:
+    """Sends each notification to every target (see the module's docstring)."""
+
+    def __init__(self, targets: Sequence[Target]) -> None:
+        self.targets = tuple(targets)
+        self._queue: queue.Queue[tuple | None] = queue.Queue(QUEUED)
+        self._sockets: dict[int, socket.socket] = {}
+        self._addresses: list[tuple[int, Any]] = []  # (family, address) of each target
+        self._thread: threading.Thread | None = None
+
+    def resolve(self, own_port: int) -> None:
+        """Look every target up and open the sockets; UsageError for a target that does not
+        resolve, or that is choreo's own port on this machine (it would loop)."""
+        for target in self.targets:
+            host, port = target
+            try:
+                found = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
+            except (OSError, UnicodeError) as exc:
+                self.close()
+                raise UsageError(f"--osc-notify {show_target(target)}: {getattr(exc, 'strerror', None) or exc}") \
+                    from None
+            if port == own_port and any(is_this_machine(info[4][0], info[0]) for info in found):
+                self.close()
+                raise UsageError(f"--osc-notify {show_target(target)}: that is choreo's own --osc port on this "
+                                 "machine: each notification would come back as a command (give the port "
+                                 "the receiver listens on)")
+            family, kind, proto, _, address = found[0]
+            if family not in self._sockets:
+                self._sockets[family] = socket.socket(family, kind, proto)
+                self._sockets[family].setblocking(False)
+            self._addresses.append((family, address))
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._loop, name="choreo-osc-notify", daemon=True)
+        self._thread.start()
+
+    def put(self, address: str, *args: Any) -> None:
+        try:
+            self._queue.put_nowait((address, args))
+        except queue.Full:
+            pass  # progress is not worth holding the show, nor memory
+
+    def close(self) -> None:
+        if self._thread is not None:
+            try:
+                self._queue.put((None), timeout=1.0)
+            except queue.Full:
+                pass
+            self._thread.join(1.0)
+            self._thread = None
+        for sock in self._sockets.values():
+            sock.close()
+        self._sockets.clear()
+
+    def _loop(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            self._send(*item)
+
+    def _send(self, address: str, args: tuple) -> None:
+        try:
+            data = build_msg(address, list(args)).dgram
+        except (ValueError, TypeError):
+            return
+        for family, target in self._addresses:
+            try:
+                self._sockets[family].sendto(data, target)
+            except (OSError, KeyError):
+                pass  # nobody listening, a full buffer, closed: progress is not worth holding the show
