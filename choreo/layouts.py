@@ -99,8 +99,10 @@ class Layout:
             return StartState.RUNNING
         if (state.counter, state.return_address, state.depth) == (self.slot_address(motion), self.main_loop, 1):
             return StartState.NOT_STARTED
-        if state.counter == self.main_loop and state.depth == 0:
-            return StartState.DONE  # the motion returned: the board cleared the run bit at its end
+        if state.counter < p.FIRST_CALLED_ADDRESS and state.depth == 0:
+            # The call returned (Kondo's rule: outside the slots, nothing pushed), and the board
+            # cleared the run bit at the motion's end.
+            return StartState.DONE
         return StartState.UNCLEAR
 
 
@@ -109,7 +111,7 @@ class StartState(str, Enum):
 
     NOT_STARTED = "never started"  # the state the frames before the start frame left, unchanged
     RUNNING = "running"  # the run bit the start frame sets is set
-    DONE = "started and already over"  # back at the return address, the call returned
+    DONE = "started and already over"  # back outside the slots, nothing pushed: the call returned
     UNCLEAR = "unclear"  # none of these: the cautious case, counted as started
 
     @property

@@ -36,11 +36,13 @@ def kinds(events: Events) -> list[str]:
     return [e.frame.kind.value for e in events.tx]
 
 
+@pytest.mark.parametrize("answer", [RUNNING, state(0x8723, SLOT_3 + 0x40, MAIN_LOOP, 1)], ids=["at-start", "moved-on"])
 @pytest.mark.parametrize("lost", [b"", BAD_SUM], ids=["silence", "garbled"])
-def test_a_lost_start_reply_with_the_motion_running_is_a_play_done(lost):
-    link, port, events = link_for(ACK_MOV, ACK_CALL, lost, RUNNING)
+def test_a_lost_start_reply_with_the_motion_running_is_a_play_done(lost, answer):
+    link, port, events = link_for(ACK_MOV, ACK_CALL, lost, answer)
     played = link.play(3, Tag(0))
     assert played.recovered and "'play 3' (restore frame) was lost" in played.recovered
+    assert "shows motion 3 running: it was not sent again" in played.recovered
     assert played.tries == 1
     assert kinds(events) == ["stop", "play", "restore", "read"]
     assert kinds(events).count("play") == 1  # one CALL: the motion started once
@@ -53,8 +55,9 @@ def test_a_lost_start_reply_with_the_motion_not_running_is_retried_from_the_stop
     assert kinds(events) == ["stop", "play", "restore", "read", "stop", "play", "restore"]
 
 
-def test_a_lost_start_reply_of_a_motion_already_over_is_a_play_done():
-    link, port, events = link_for(ACK_MOV, ACK_CALL, b"", OVER)
+@pytest.mark.parametrize("answer", [OVER, state(0x8721, MAIN_LOOP + 6, 0, 0)], ids=["at-the-return", "on-in-the-main-loop"])
+def test_a_lost_start_reply_of_a_motion_already_over_is_a_play_done(answer):
+    link, port, events = link_for(ACK_MOV, ACK_CALL, b"", answer)
     played = link.play(3, Tag(0))
     assert played.tries == 1 and "shows motion 3 started and already over" in played.recovered
     assert kinds(events) == ["stop", "play", "restore", "read"]
@@ -64,8 +67,9 @@ def test_a_lost_start_reply_of_a_motion_already_over_is_a_play_done():
     state(0x8721, SLOT_3 + 0x40, MAIN_LOOP, 1),  # halted inside the slot, not at its start
     state(0x8721, SEED.slot_address(4), MAIN_LOOP, 1),  # another slot
     state(0x8721, SLOT_3, MAIN_LOOP, 2),  # a second return address
-    state(0x8721, MAIN_LOOP, MAIN_LOOP, 1),
-], ids=["mid-slot", "other-slot", "depth-2", "main-loop-depth-1"])
+    state(0x8721, MAIN_LOOP, MAIN_LOOP, 1),  # returned, yet something still pushed
+    state(0x8721, SLOT_3 + 0x40, 0, 0),  # inside a slot with nothing pushed
+], ids=["mid-slot", "other-slot", "depth-2", "main-loop-depth-1", "slot-depth-0"])
 def test_an_unclear_state_counts_as_started_and_says_so(answer):
     link, port, events = link_for(ACK_MOV, ACK_CALL, b"", answer)
     played = link.play(3)
