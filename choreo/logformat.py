@@ -231,6 +231,23 @@ class CommandRecord(_Record):
     message: str = ""
     label: str | None = None  # a cue's GO: which cue; unknown or refused: the OSC address
     show_s: float | None = None  # the show clock when it came (absent before the show started)
+    count: int | None = None  # `unlogged`: how many commands it sums up (absent: this one)
+    counts: dict | None = None  # `unlogged`: those commands by name (go, refused, unknown...)
+
+    @property
+    def commands(self) -> int:
+        """How many commands the record stands for: a summary's count, else one (ValueError:
+        a count that is no count, in a log another program wrote)."""
+        if self.count is None:
+            return 1
+        if type(self.count) is not int or self.count < 1:
+            raise ValueError(f"count {self.count!r} is not a number of commands")
+        return self.count
+
+    @property
+    def refused(self) -> int:
+        """How many of them were not carried out (a summary holds refused ones only)."""
+        return self.commands if self.count is not None or self.status != "ok" else 0
 
 
 Record = TxRecord | RxRecord | StepRecord | LogRecord | ClockRecord | CommandRecord

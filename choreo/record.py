@@ -46,6 +46,7 @@ from mcap.writer import CompressionType, Writer
 
 from choreo import __version__
 from choreo.errors import LogError
+from choreo.limits import UNLOGGED
 from choreo.logformat import (CLOCK_TOPIC, COMMAND_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC, STEP_TOPIC,
                               TX_TOPIC, ClockRecord, CommandRecord, LogRecord, RxRecord, TxRecord, channels_for, robot_topic)
 
@@ -315,8 +316,11 @@ class Recorder:
         """Queued only: an operator's command and its answer (`choreo.live`)."""
         command, answer = event.command, event.answer
         label = command.label or answer.data.get("cue")  # a plain GO: the cue it released
+        summed = command.name == UNLOGGED  # commands held back by the limits, summed up
         record = CommandRecord(command.name, command.source, answer.status, answer.message, label,
-                               None if event.show_s is None else round(event.show_s, 6))
+                               None if event.show_s is None else round(event.show_s, 6),
+                               answer.data.get("count") if summed else None,
+                               answer.data.get("counts") if summed else None)
         self._queue((COMMAND_TOPIC, event.time_ns, _record_message, record))
 
     def _queue(self, item: _Pending) -> None:

@@ -182,8 +182,12 @@ class Summary:
     robots: dict[str, Summary] = field(default_factory=dict)  # a show for several robots: each one's figures
     skew: Distribution = field(default_factory=Distribution)  # ms, unison plays: first to last motion start
     clock: ClockSpan | None = None  # the show clock against the machine's (/choreo/clock)
-    commands: list[CommandRecord] = field(default_factory=list)  # the operator's, the first LISTED_COMMANDS
-    commands_total: int = 0
+    commands: list[CommandRecord] = field(default_factory=list)  # the operator's, the first LISTED_COMMANDS records
+    commands_total: int = 0  # every command, those `unlogged` records sum up included
+    commands_refused: int = 0  # of those, refused or ignored
+    commands_unlogged: int = 0  # of those, not logged one by one (summed up by `unlogged` records)
+    command_records: int = 0
+    commands_by: dict[str, int] = field(default_factory=dict)  # command name -> count, summed up ones included
 
     @property
     def frames_sent(self) -> int:
@@ -227,6 +231,9 @@ def summary_record(summary: Summary) -> dict:
                     for m in sorted(summary.motions.values(), key=lambda m: m.motion)],
         "commands": [command.to_json() for command in summary.commands],
         "commands_total": summary.commands_total,
+        "commands_refused": summary.commands_refused,
+        "commands_unlogged": summary.commands_unlogged,
+        "commands_by": summary.commands_by,
         "warnings": summary.warnings,
         "errors": summary.errors,
         **({"unison_skew": spread(summary.skew),
@@ -287,9 +294,7 @@ def summarize_reader(reader: LogReader) -> Summary:
                 tally.times.see_clock(log_time, record)
                 continue
             if topic == COMMAND_TOPIC:
-                summary.commands_total += 1
-                if len(summary.commands) < LISTED_COMMANDS:
-                    summary.commands.append(record)
+                _command(summary, record)
                 continue
             robot = record.robot  # type: ignore[union-attr]
             part = solo if robot is None else parts.get(robot) or parts.setdefault(robot, _Part.named(reader, robot, tally))
@@ -591,19 +596,43 @@ def _render_clock(summary: Summary) -> Iterable[str]:
     yield f"clock     {kept}: {clock.samples} samples{drift}"
 
 
+def _command(summary: Summary, record: CommandRecord) -> None:
+    """Counted from every record: a summary record (`unlogged`) by the counts it carries."""
+    count = record.commands
+    summary.commands_total += count
+    summary.commands_refused += record.refused
+    summary.command_records += 1
+    if record.count is None:
+        by = {record.command: 1}
+    else:
+        summary.commands_unlogged += count
+        by = record.counts if isinstance(record.counts, dict) else {}
+        if sum(by.values()) != count or not all(type(n) is int and n > 0 for n in by.values()):
+            raise ValueError(f"unlogged: counts {record.counts!r} do not add up to count {count}")
+    for name, n in by.items():
+        summary.commands_by[name] = summary.commands_by.get(name, 0) + n
+    if len(summary.commands) < LISTED_COMMANDS:
+        summary.commands.append(record)
+
+
 def _render_commands(summary: Summary) -> Iterable[str]:
-    """Who pressed what and when: every GO, panic, start and stop, refused ones included."""
+    """Who pressed what and when: every GO, panic, start and stop, refused ones included, and
+    the counts of those the limits kept out of the log one by one."""
     if not summary.commands_total:
         return
-    refused = sum(1 for c in summary.commands if c.status != "ok")
-    yield f"commands  {summary.commands_total} from the operator ({refused} refused)"
+    unlogged = ""
+    if summary.commands_unlogged:
+        by = ", ".join(f"{n} {name}" for name, n in sorted(summary.commands_by.items(), key=lambda kv: (-kv[1], kv[0])))
+        unlogged = f"; {summary.commands_unlogged} of them not logged one by one, over the log's limit): {by}"
+    yield f"commands  {summary.commands_total} from the operator ({summary.commands_refused} refused{unlogged or ')'}"
     for command in summary.commands:
         when = f"{command.show_s:9.3f} s" if command.show_s is not None else "   before  "
         what = command.command + (f" {command.label}" if command.label else "")
         verdict = "" if command.status == "ok" else f" {command.status.upper()}"
         yield f"  {when}  {what:<12} {command.source}{verdict}: {command.message}"
-    if summary.commands_total > len(summary.commands):
-        yield f"  ... and {summary.commands_total - len(summary.commands)} more (choreo log export)"
+    if summary.command_records > len(summary.commands):
+        more = summary.command_records - len(summary.commands)
+        yield f"  ... and {more} more (all on the log's /choreo/command topic: open the log in Foxglove)"
 
 
 def _int(result: dict[str, str] | None, key: str) -> int | None:
