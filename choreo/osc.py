@@ -1,7 +1,13 @@
 """OSC control of a running show, in QLab's manner, so that a QLab Network cue (or TouchOSC, Max,
 a lighting desk) can give the GO: `/choreo/go`, `/choreo/panic`, `/choreo/start`, `/choreo/stop`
-and `/choreo/cue/LABEL/go`, over UDP and over TCP framed with SLIP (OSC 1.1, as QLab sends it),
-on one port number.
+and `/choreo/cue/LABEL/go`, over UDP and over TCP framed with SLIP (OSC 1.1, as QLab sends it)
+or with a length prefix (OSC 1.0, as liblo sends it: Pure Data, SuperCollider), on one port number.
+
+Packets are read by choreo's own bounded decoder (`choreo.oscwire`), and the sockets served by
+`choreo.oscnet` (connection caps, timeouts; the sizes and counts are `choreo.osclimits`): a
+malformed packet (a bad size, a type tag choreo does not know) is refused whole, counted, and
+nothing of it is carried out. python-osc does not receive here: its parser loops for ever on a
+bundle element of size 0, and it logs through the root logger.
 
 Every message is answered to its sender as QLab answers: `/reply` + the address, with one JSON
 string `{"address", "status": ok|error|denied, "message", "data"}`; the commands themselves are
@@ -11,12 +17,16 @@ waiting, commands, warnings and faults) from a thread of its own: a slow or abse
 never holds a runner.
 
 Who may command the show: this machine (loopback), and the addresses given with --osc-allow.
-A refused sender still gets a `denied` reply, because the operator setting up a desk on another
-machine needs to see why nothing happens, and a TCP peer's address is proven by its handshake.
-A UDP sender's address is not (it can be forged to make us send replies to a victim, and a
-flood of refusals would fill the log, which stops the show when it cannot take more), so
-refusals are answered and logged only within a small budget shared by every refused sender
-(`REFUSALS_BURST`, then `REFUSALS_PER_S`); the rest are dropped and counted in the next line.
+The sender is checked before a byte of its packet is read. A refused TCP peer is closed at
+accept (its refusal logged: the operator setting up a desk on another machine needs to see why
+nothing happens; a TCP peer's address is proven by its handshake). A refused UDP sender gets a
+`denied` reply, addressed `/reply` (its message is not read). A UDP sender's address is not
+proven (it can be forged to make us send replies to a victim, and a
+flood of refusals would fill the log, which stops the show when it cannot take more), so what
+any message may cost is bounded (`choreo.limits`): refusals are answered within a small budget
+shared by every refused sender, an allowed sender's commands and replies within its own, and
+refused or ignored commands are logged one by one only within a budget, the rest counted.
+A reply or notification sent to our port is never answered nor notified (two would loop).
 
 OSC address patterns (`/choreo/*`) are not expanded: a pattern could match GO and panic at once,
 which no operator means; a command is taken only at its own address.
@@ -24,25 +34,25 @@ which no operator means; a command is taken only at its own address.
 
 from __future__ import annotations
 
-import errno
 import ipaddress
 import json
-import queue
-import socket
-import socketserver
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from pythonosc import osc_server, osc_tcp_server, slip
-from pythonosc.dispatcher import Dispatcher
-from pythonosc.osc_message_builder import build_msg
 
 from choreo.errors import UsageError, did_you_mean
+from choreo.limits import LIMITS, UNLOGGED, Limits, SenderLimits
 from choreo.live import Answer, Command, CommandEvent, GoCue, Live
 from choreo.logformat import ERROR, WARNING
+from choreo.oscnet import ListenFailed, OscNet
+from choreo.osclimits import LIMITS as WIRE_LIMITS
+from choreo.osclimits import OscLimits
+from choreo.oscnotify import Notifier, Target, show_target
+from choreo.oscwire import Message, decode, encode_message
 
 if TYPE_CHECKING:
     from choreo.runner import RunResult, StepEvent
@@ -53,9 +63,8 @@ COMMANDS = {f"{ROOT}/{name}": name for name in ("go", "panic", "start", "stop")}
 CUE_PREFIX, CUE_SUFFIX = f"{ROOT}/cue/", "/go"
 NOTIFY = f"{ROOT}/notify"
 PATTERN_CHARS = frozenset("*?[]{}")
-REFUSALS_BURST, REFUSALS_PER_S = 10, 1.0
-SERVE_POLL_S = 0.1  # how soon `close` stops the servers (a message wakes them at once anyway)
-MAX_FRAME = 64 * 1024  # a SLIP stream this long without an END is not OSC: the connection is closed
+ECHOES = ("/reply", NOTIFY)  # replies and notifications: never commands, never answered (two would loop)
+ECHO = "echo"  # the command name a reply or notification sent to us is logged under
 
 Network = ipaddress.IPv4Network | ipaddress.IPv6Network
 Sender = tuple  # (host, port) or, over IPv6, (host, port, flowinfo, scope)
@@ -71,10 +80,10 @@ class Reply:
     message: str = ""
     data: dict = field(default_factory=dict)
 
-    def osc(self) -> tuple[str, str]:
-        """(address, JSON argument): what a python-osc handler returns to have it sent back."""
+    def encoded(self) -> bytes:
+        """The OSC message sent back: `/reply` + the address, the JSON its one argument."""
         body = {"address": self.address, "status": self.status, "message": self.message, "data": self.data}
-        return "/reply" + self.address, json.dumps(body, ensure_ascii=False)
+        return encode_message("/reply" + self.address, [json.dumps(body, ensure_ascii=False)])
 
 
 def command_for(address: str) -> tuple[str, str | None] | None:
@@ -144,257 +153,66 @@ def where(sender: Sender) -> str:
     return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
 
 
-class Budget:
-    """A token bucket: `burst` at once, then `per_s` a second. `take` returns how many were
-    refused since the last one taken (None: over budget now)."""
-
-    def __init__(self, burst: int = REFUSALS_BURST, per_s: float = REFUSALS_PER_S,
-                 now: Callable[[], float] = time.monotonic) -> None:
-        self.burst = burst
-        self.per_s = per_s
-        self._now = now
-        self._tokens = float(burst)
-        self._at = now()
-        self._skipped = 0
-        self._lock = threading.Lock()
-
-    def take(self) -> int | None:
-        with self._lock:
-            now = self._now()
-            self._tokens = min(float(self.burst), self._tokens + (now - self._at) * self.per_s)
-            self._at = now
-            if self._tokens < 1.0:
-                self._skipped += 1
-                return None
-            self._tokens -= 1.0
-            skipped, self._skipped = self._skipped, 0
-            return skipped
-
-
-class SlipStream:
-    """OSC packets out of a TCP byte stream framed with SLIP (RFC 1055): double-END framing as
-    QLab and OSC 1.1 send it, and END-terminated frames too. A malformed frame is dropped, not
-    the connection; a stream without an END for `MAX_FRAME` bytes is not OSC (ValueError)."""
-
-    def __init__(self) -> None:
-        self._buffer = b""
-
-    def feed(self, data: bytes) -> list[bytes]:
-        *frames, self._buffer = (self._buffer + data).split(slip.END)
-        if len(self._buffer) > MAX_FRAME:
-            raise ValueError("SLIP frame too long")
-        packets = []
-        for frame in frames:
-            if frame:
-                try:
-                    packets.append(slip.decode(frame))
-                except slip.ProtocolError:
-                    continue
-        return packets
-
-
-class _UdpServer(osc_server.BlockingOSCUDPServer):
-    """One message at a time, in order of arrival (a GO and a stop keep their order)."""
-
-    def handle_error(self, request: Any, client_address: Any) -> None:
-        """socketserver would print a traceback; a bad packet is its sender's problem."""
-
-
-class _TcpServer(socketserver.ThreadingMixIn, osc_tcp_server.OSCTCPServer):
-    """A thread a connection (QLab keeps one open), its packets read by `_SlipConnection`
-    rather than python-osc's reader, which takes only double-END frames arriving whole."""
-
-    daemon_threads = True
-    allow_reuse_address = True  # a restart right after a run: connections in TIME_WAIT do not block it
-
-    def __init__(self, address: tuple[str, int], dispatcher: Dispatcher) -> None:
-        self.connections: set[socket.socket] = set()
-        self.connections_lock = threading.Lock()
-        super().__init__(address, dispatcher, mode=osc_tcp_server.MODE_1_1)
-
-    def finish_request(self, request: Any, client_address: Any) -> None:
-        _SlipConnection(request, client_address, self)
-
-    def handle_error(self, request: Any, client_address: Any) -> None:
-        """socketserver would print a traceback; a broken connection is its peer's problem."""
-
-    def close_connections(self) -> None:
-        """The peers see the end of the stream; their threads, blocked reading, end."""
-        with self.connections_lock:
-            connections = list(self.connections)
-        for connection in connections:
-            try:
-                connection.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-
-
-class _SlipConnection(socketserver.BaseRequestHandler):
-    """One TCP peer: its packets dispatched as they come, each reply SLIP-framed on the same
-    connection."""
-
-    server: _TcpServer
-
-    def handle(self) -> None:
-        server, connection = self.server, self.request
-        connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # a reply is one small write: now
-        with server.connections_lock:
-            server.connections.add(connection)
-        stream = SlipStream()
-        try:
-            while data := connection.recv(4096):
-                for packet in stream.feed(data):
-                    for reply in server.dispatcher.call_handlers_for_packet(packet, self.client_address):
-                        connection.sendall(slip.encode(build_msg(reply[0], list(reply[1:])).dgram))
-        except (OSError, ValueError):
-            pass
-        finally:
-            with server.connections_lock:
-                server.connections.discard(connection)
-
-
-class _Notifier:
-    """The show's progress as OSC messages to HOST:PORT (UDP), sent by a thread of its own from
-    a queue: the listeners only enqueue, so nothing on a runner's path waits for the network,
-    and a message that cannot be sent is dropped."""
-
-    def __init__(self, target: tuple[str, int], live: Live) -> None:
-        self.target = target
-        self.live = live
-        self._queue: queue.SimpleQueue[tuple | None] = queue.SimpleQueue()
-        self._socket: socket.socket | None = None
-        self._address: Any = None
-        self._thread: threading.Thread | None = None
-
-    def start(self) -> None:
-        host, port = self.target
-        try:
-            family, kind, proto, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
-            self._socket = socket.socket(family, kind, proto)
-        except OSError as exc:
-            raise UsageError(f"--osc-notify {host}:{port}: {exc.strerror or exc}") from None
-        self._socket.setblocking(False)
-        self._address = address
-        self._thread = threading.Thread(target=self._loop, name="choreo-osc-notify", daemon=True)
-        self._thread.start()
-
-    def put(self, address: str, *args: Any) -> None:
-        self._queue.put((address, args))
-
-    def close(self) -> None:
-        if self._thread is not None:
-            self._queue.put(None)
-            self._thread.join(1.0)
-            self._thread = None
-        if self._socket is not None:
-            self._socket.close()
-            self._socket = None
-
-    def _loop(self) -> None:
-        while True:
-            item = self._queue.get()
-            if item is None:
-                return
-            self._send(*item)
-
-    def _send(self, address: str, args: tuple) -> None:
-        try:
-            self._socket.sendto(build_msg(address, list(args)).dgram, self._address)  # type: ignore[union-attr]
-        except (OSError, ValueError, AttributeError):
-            pass  # nobody listening, a full buffer, closed: progress is not worth holding the show
-
-
 class OscServer:
     """Takes OSC commands for a `Live` on host:port (UDP and TCP), answers each, and (a run and
     command listener) notifies progress; see the module's docstring."""
 
     def __init__(self, live: Live, port: int, *, host: str = "127.0.0.1", allow: Sequence[str] = (),
-                 notify: tuple[str, int] | None = None) -> None:
+                 notify: Sequence[Target] | Target | None = None, limits: Limits = LIMITS,
+                 now: Callable[[], float] = time.monotonic, wire_limits: OscLimits = WIRE_LIMITS) -> None:
         self.live = live
         self.host = host
         self.requested_port = port
         self.allow_given = tuple(allow)
         self.allow = parse_allow(allow)
-        self.notify = notify
-        self._notifier = _Notifier(notify, live) if notify is not None else None
-        self._refusals = Budget()
-        self._unknowns = Budget()
-        self._servers: list[tuple[socketserver.BaseServer, threading.Thread]] = []
-        self._port: int | None = None
+        self.notify = _targets(notify)
+        self._notifier = Notifier(self.notify) if self.notify else None
+        self._limits = SenderLimits(limits, now)  # what a sender's messages may cost
+        self.wire_limits = wire_limits
+        self.counts: Counter[str] = Counter()  # packets refused as malformed, connections dropped
+        self._net: OscNet | None = None
 
     # -- serving -----------------------------------------------------------------------------
 
     @property
     def port(self) -> int:
         """The port it listens on (the one the OS chose, when asked for port 0)."""
-        return self._port if self._port is not None else self.requested_port
+        return self._net.port if self._net is not None else self.requested_port
+
+    def bind(self) -> None:
+        """Listen (UDP and TCP), serving nothing yet, and look the notify targets up: a port in
+        use or out of range, a target that does not resolve or is this very port, is a
+        UsageError before anything else starts. Twice is harmless."""
+        if self._net is None:
+            net = OscNet(self, self.host, self.requested_port, self.wire_limits)
+            try:
+                net.bind()
+            except ListenFailed as exc:
+                raise UsageError(self._cannot_listen(exc)) from None
+            if self._notifier is not None:
+                try:
+                    self._notifier.resolve(net.port)
+                except UsageError:
+                    net.close()
+                    raise
+            self._net = net
 
     def start(self) -> None:
-        udp, tcp = self._bind()
-        self._port = udp.server_address[1]
+        self.bind()
+        assert self._net is not None
         if self._notifier is not None:
-            try:
-                self._notifier.start()
-            except UsageError:
-                udp.server_close()
-                tcp.server_close()
-                raise
-        for name, server in (("udp", udp), ("tcp", tcp)):
-            thread = threading.Thread(target=server.serve_forever, args=(SERVE_POLL_S,),
-                                      name=f"choreo-osc-{name}", daemon=True)
-            thread.start()
-            self._servers.append((server, thread))
+            self._notifier.start()
+        self._net.serve()
 
-    def _bind(self) -> tuple[_UdpServer, _TcpServer]:
-        """UDP and TCP on one port number; with port 0, a number free for both."""
-        attempts = 20 if self.requested_port == 0 else 1
-        while True:
-            attempts -= 1
-            udp = self._listen("udp", self.requested_port)
-            try:
-                return udp, self._listen("tcp", udp.server_address[1])
-            except UsageError:
-                udp.server_close()
-                if attempts == 0:
-                    raise
-
-    def _listen(self, transport: str, port: int) -> Any:
-        kind = _UdpServer if transport == "udp" else _TcpServer
-        try:
-            return kind((self.host, port), self._dispatcher(transport))
-        except (OSError, OverflowError) as exc:
-            why = getattr(exc, "strerror", None) or str(exc)
-            if getattr(exc, "errno", None) == errno.EADDRINUSE:
-                why += " (another program listens there: choose another port)"
-            tcp = " (tcp)" if transport == "tcp" else ""
-            raise UsageError(f"--osc {self.requested_port}: cannot listen on {where((self.host, port))}{tcp}: "
-                             f"{why}") from None
-
-    def _dispatcher(self, transport: str) -> Dispatcher:
-        """Every address goes to `_receive` (no mapping: patterns are not expanded), and a
-        bundle's future time tag is not waited for (a sleeping handler would hold the next GO)."""
-        dispatcher = Dispatcher(strict_timing=False)
-
-        def receive(sender: Sender, address: str, *args: Any) -> tuple[str, str] | None:
-            reply = self._receive(transport, sender, address, args)
-            return reply.osc() if reply is not None else None
-
-        dispatcher.set_default_handler(receive, needs_reply_address=True)
-        return dispatcher
+    def _cannot_listen(self, exc: ListenFailed) -> str:
+        why = exc.why + (" (another program listens there: choose another port)" if exc.in_use else "")
+        tcp = " (tcp)" if exc.transport == "tcp" else ""
+        return f"--osc {self.requested_port}: cannot listen on {where(exc.address)}{tcp}: {why}"
 
     def close(self) -> None:
-        servers, self._servers = self._servers, []
-        # each server notices within SERVE_POLL_S: both told at once, not one after the other
-        stopping = [threading.Thread(target=server.shutdown, daemon=True) for server, _ in servers]
-        for stopper in stopping:
-            stopper.start()
-        for stopper in stopping:
-            stopper.join()
-        for server, thread in servers:
-            server.server_close()
-            if isinstance(server, _TcpServer):
-                server.close_connections()
-            thread.join(1.0)
+        """Stop listening; open connections are closed. Twice is harmless."""
+        if self._net is not None:
+            self._net.close()
         if self._notifier is not None:
             self._notifier.close()
 
@@ -405,45 +223,94 @@ class OscServer:
         who = f"commands from this machine and {others}" if others else "commands from this machine only"
         if others and _is_loopback_host(self.host):
             who += f" (but {self.host} is reachable from this machine only: give --osc-host 0.0.0.0)"
-        line = f"osc: listening on {where((self.host, self.port))} (udp and tcp/SLIP), {who}"
-        if self.notify is not None:
-            line += f"; progress to {where(self.notify)}"
+        line = f"osc: listening on {where((self.host, self.port))} (udp and tcp), {who}"
+        if self.notify:
+            line += f"; progress to {', '.join(show_target(target) for target in self.notify)}"
         return line
+
+    # -- packets (choreo.oscnet asks) --------------------------------------------------------
+
+    def admit(self, sender: Sender) -> bool:
+        """A TCP peer, at accept: a refused one is closed before a byte of it is read."""
+        host = plain_host(sender[0])
+        if sender_allowed(host, self.allow):
+            return True
+        self._refuse(host, f"osc tcp {where(sender)}", "")
+        return False
+
+    def packet(self, transport: str, sender: Sender, data: bytes) -> list[bytes]:
+        """One packet (a datagram, a TCP frame): its encoded replies. The sender is checked
+        before the packet is read; a malformed one is refused whole."""
+        host, source = plain_host(sender[0]), f"osc {transport} {where(sender)}"
+        if not sender_allowed(host, self.allow):
+            replies = [self._refuse(host, source, "")]  # its address is not read: the reply is `/reply`
+        else:
+            decoded = decode(data, self.wire_limits)
+            if decoded.error is not None:
+                replies = [self._malformed(host, source, decoded.error, decoded.address)]
+            else:
+                replies = self._messages(transport, sender, decoded.messages)
+        return [reply.encoded() for reply in replies if reply is not None]
+
+    def dropped(self, transport: str, sender: Sender, why: str) -> None:
+        """A frame dropped or a connection closed by the transport's limits: counted, told."""
+        self.counts["dropped"] += 1
+        self._report(Command("dropped", f"osc {transport} {where(sender)}"), Answer("error", why))
+
+    def _messages(self, transport: str, sender: Sender, messages: Sequence[Message]) -> list[Reply | None]:
+        """One packet's messages in order (a bundle's, all in one call): the place to bound
+        what one packet may do."""
+        return [self._receive(transport, sender, message.address, message.args) for message in messages]
+
+    def _malformed(self, host: str, source: str, error: str, address: str | None) -> Reply | None:
+        """A packet choreo cannot read whole: nothing of it is carried out. Its sender (allowed)
+        is answered when the refused message's address could be read."""
+        self.counts["malformed"] += 1
+        message = f"refused: OSC that choreo cannot read ({error}); nothing in the packet was carried out"
+        self._report(Command("malformed", source, address), Answer("error", message))
+        return self._answer(host, Reply(address, "error", message)) if address else None
 
     # -- one message -------------------------------------------------------------------------
 
     def _receive(self, transport: str, sender: Sender, address: str, args: tuple) -> Reply | None:
-        """A message from `sender`: its reply (None: none is sent)."""
+        """A message from `sender` (one of a bundle's, each counted alone): its reply (None:
+        none is sent). What it may cost is bounded (`choreo.limits`): a refused sender's reply
+        comes out of a budget all of them share; an allowed sender's commands are carried out
+        and answered within its own budgets, and past them ignored (and counted)."""
         source = f"osc {transport} {where(sender)}"
-        if not sender_allowed(sender[0], self.allow):
-            return self._refuse(sender, source, address)
+        host = plain_host(sender[0])
+        if not sender_allowed(host, self.allow):
+            return self._refuse(host, source, address)
+        if address.startswith(ECHOES):  # a reply or notification come back: answering it could loop
+            self._report(Command(ECHO, source, address), Answer("error", echo_message(address)))
+            return None
         wanted = command_for(address)
+        if not self._limits.admit(host):
+            name, label = wanted if wanted is not None else ("unknown", address)
+            message = self._limits.over_rate(host)
+            self._report(Command(name, source, label), Answer("error", message))
+            return self._answer(host, Reply(address, "error", message))
         if wanted is None:
-            return self._unknown(source, address)
+            return self._answer(host, self._unknown(source, address))
         if is_release(args):
-            return Reply(address, "ok", "ignored: a button's release (argument 0) is not a command",
-                         {"ignored": True})
+            return self._answer(host, Reply(address, "ok", "ignored: a button's release (argument 0) is not a "
+                                            "command", {"ignored": True}))
         name, label = wanted
         answer = self.live.command(Command(name, source, label))
-        return Reply(address, answer.status, answer.message, answer.data)
+        return self._answer(host, Reply(address, answer.status, answer.message, answer.data))
 
-    def _refuse(self, sender: Sender, source: str, address: str) -> Reply | None:
-        skipped = self._refusals.take()
-        if skipped is None:
-            return None
-        host = plain_host(sender[0])
-        message = (f"refused: {host} may not command this show (give --osc-allow {host} to let it)"
-                   + _more(skipped, "refused"))
-        self._report(Command("refused", source, address), Answer("denied", message))
-        return Reply(address, "denied", message)
+    def _answer(self, host: str, reply: Reply) -> Reply | None:
+        """The reply, if the sender's reply budget allows (one packet can ask for many)."""
+        return reply if self._limits.may_reply(host) else None
+
+    def _refuse(self, host: str, source: str, address: str) -> Reply | None:
+        message = f"refused: {host} may not command this show (give --osc-allow {host} to let it)"
+        self._report(Command("refused", source, address or None), Answer("denied", message))
+        return Reply(address, "denied", message) if self._limits.may_answer_refusal() else None
 
     def _unknown(self, source: str, address: str) -> Reply:
-        """Answered always (the sender is trusted); logged within a budget, as a desk that sends
-        every fader move would otherwise fill the log."""
         message = unknown_message(address)
-        skipped = self._unknowns.take()
-        if skipped is not None:
-            self._report(Command("unknown", source, address), Answer("error", message + _more(skipped, "unknown")))
+        self._report(Command("unknown", source, address), Answer("error", message))
         return Reply(address, "error", message)
 
     def _report(self, command: Command, answer: Answer) -> None:
@@ -468,7 +335,9 @@ class OscServer:
             self._notifier.put(f"{NOTIFY}/go", cue.name, cue.step.index, round(cue.reached_s, 6))
 
     def on_command(self, event: CommandEvent) -> None:
-        if self._notifier is not None:
+        """Every command but what came back from a notification or reply, and the summaries of
+        those held back: notified, either could loop between two programs."""
+        if self._notifier is not None and event.command.name not in (ECHO, UNLOGGED):
             command, answer = event.command, event.answer
             self._notifier.put(f"{NOTIFY}/command", command.name, command.source, answer.status,
                                answer.message, command.label or "")
@@ -480,8 +349,18 @@ class OscServer:
                                round(result.show_s, 6))
 
 
-def _more(skipped: int, what: str) -> str:
-    return f" ({skipped} more {what} not logged)" if skipped else ""
+def echo_message(address: str) -> str:
+    return (f"ignored: {address} is a reply or a notification, not a command (is a program's --osc-notify "
+            "or reply port set to choreo's own?)")
+
+
+def _targets(notify: Sequence[Target] | Target | None) -> tuple[Target, ...]:
+    """--osc-notify's targets: none, one (HOST, PORT), or several."""
+    if not notify:
+        return ()
+    if isinstance(notify[0], str):
+        return (notify,)  # type: ignore[return-value]
+    return tuple(notify)  # type: ignore[arg-type]
 
 
 def _is_loopback_host(host: str) -> bool:

@@ -117,7 +117,9 @@ class ConnectionTable:
             return
         if messages:
             slot.proven = True
-        if pending and (messages or not slot.pending):
+        if not slot.proven:
+            pass  # the first message is due within the timeout of connecting, however it trickles
+        elif pending and (messages or not slot.pending):
             slot.due = now + self.limits.message_timeout_s
         elif not pending and messages:
             slot.due = now + self.limits.idle_timeout_s
@@ -174,10 +176,12 @@ class OscNet:
         self._accept_paused_until: float | None = None
         self._closing = threading.Event()
         self._thread: threading.Thread | None = None
+        self._port: int | None = None
 
     @property
     def port(self) -> int:
-        return self._udp.getsockname()[1] if self._udp is not None else self.requested_port
+        """The port bound (the one the OS chose, when asked for 0)."""
+        return self._port if self._port is not None else self.requested_port
 
     @property
     def connections(self) -> int:
@@ -185,7 +189,20 @@ class OscNet:
         return len(self._connections)
 
     def start(self) -> None:
-        self._udp, self._tcp = bind(self.host, self.requested_port, self.limits)
+        self.bind()
+        self.serve()
+
+    def bind(self) -> None:
+        """Listen on both transports (ListenFailed), not serving yet: the port's problems are
+        known before a show starts."""
+        if self._udp is None:
+            self._udp, self._tcp = bind(self.host, self.requested_port, self.limits)
+            self._port = self._udp.getsockname()[1]
+
+    def serve(self) -> None:
+        """Serve from a thread of its own, until `close`."""
+        if self._udp is None or self._thread is not None or self._closing.is_set():
+            return
         self._wake = socket.socketpair()
         self._wake[0].setblocking(False)
         self._selector = selectors.DefaultSelector()
@@ -207,6 +224,7 @@ class OscNet:
             self._thread = None
         for connection in list(self._connections):
             self._close(connection)
+        self._closing.set()
         for sock in (self._udp, self._tcp, *(self._wake or ())):
             if sock is not None:
                 sock.close()
@@ -311,6 +329,7 @@ class OscNet:
             pass
         self._connections.add(connection)
         self._selector.register(sock, selectors.EVENT_READ, connection)  # type: ignore[union-attr]
+        self._read(connection)  # a message sent with the connection (QLab's GO) proves it at once
 
     def _read(self, connection: _Connection) -> None:
         try:

@@ -198,7 +198,8 @@ def _encode_arg(arg: Arg) -> tuple[str, bytes]:
 
 
 def _string(text: str) -> bytes:
-    data = text.encode("utf-8") + b"\x00"
+    """Zero-ended and padded; a zero inside would end it early, so it is sent as U+FFFD."""
+    data = text.replace("\x00", "\ufffd").encode("utf-8") + b"\x00"
     return data + b"\x00" * (-len(data) % 4)
 
 
