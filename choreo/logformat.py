@@ -4,6 +4,8 @@ as a typed record with its JSON form, and the motion tracker every review reads 
 The recorder writes records through `to_json`; every reader (summary, frames, timeline, export,
 replay) gets them back through `parse`, so a field is named once, here, and a log choreo did not
 write fails in one way (KeyError, TypeError or ValueError, which the reader turns into one line).
+A logged frame's bytes mean what the board layout its robot ran with says (the metadata records
+it, `LogLayouts`): `frame_meaning` and `reply_meaning` are the one way a review puts them in words.
 JSON forms leave absent fields out: Foxglove's JSON-schema support takes one `type` per field
 and refuses a topic whose schema allows null.
 """
@@ -11,9 +13,13 @@ and refuses a topic whose schema allows null.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from functools import lru_cache
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any, ClassVar
+
+from choreo import protocol as p
+from choreo.layouts import DEFAULT_LAYOUT, LAYOUTS, Layout, layout_of_call
 
 TX_TOPIC = "/rcb4/tx"
 RX_TOPIC = "/rcb4/rx"
@@ -64,6 +70,11 @@ def channels_for(robots: tuple[str, ...] = ()) -> dict[str, tuple[str, str]]:
     return {**split, **{topic: CHANNELS[topic] for topic in shared}}
 METADATA_NAME = "choreo"
 RESULT_METADATA_NAME = "choreo.result"
+
+
+def layout_key(robot: str | None) -> str:
+    """The metadata key of a robot's board layout (`layout` in a one-robot log)."""
+    return "layout" if robot is None else f"robot.{robot}.layout"
 
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5  # foxglove.Log levels
 ABORT_LABEL = "on_abort"  # the label of the abort motion's frames (they belong to no step)
@@ -395,3 +406,214 @@ class MotionTracker:
         if armed is not None:
             self.plays.append(MotionPlay(armed.motion, armed.step, armed.label, None, None, "not started"))
         self._armed = self._lost_start = None
+
+
+# -- frames in words, by the layout they were made for ------------------------------------------
+
+
+@dataclass(frozen=True)
+class LogLayouts:
+    """Which board layout each robot's frames were made for, as the log's metadata records it
+    (`layout`, and `robot.<name>.layout` in a show for several robots).
+
+    The bytes of a play sequence differ between layouts (slots 0x38 apart, other stop and start
+    frames, another status read), so a frame read with the wrong layout is a "not a motion slot"
+    that never was. A log from before choreo recorded layouts was written for the seed layout,
+    its only one then: it is read so, and `assumed` says so.
+    """
+
+    recorded: dict[str | None, str]  # robot (None: a one-robot log) -> the name its key holds, or ""
+
+    @classmethod
+    def of(cls, run_info: Mapping[str, str]) -> LogLayouts:
+        robots = [name for name in str(run_info.get("robots", "")).split(",") if name]
+        return cls({robot: str(run_info.get(layout_key(robot), "")) for robot in [None, *robots]})
+
+    def name(self, robot: str | None) -> str:
+        """The layout name the log gives the robot's frames (seed where it gives none)."""
+        return self.recorded.get(robot, "") or DEFAULT_LAYOUT
+
+    def layout(self, robot: str | None) -> Layout | None:
+        """The robot's layout; None for a name this choreo does not know (a newer choreo's log)."""
+        return LAYOUTS.get(self.name(robot))
+
+    def assumed(self, robot: str | None) -> bool:
+        """The log does not say: seed is assumed."""
+        return not self.recorded.get(robot, "")
+
+    def notes(self, robots: list[str]) -> list[str]:
+        """What a review says of the layouts it read the frames with, where the log did not
+        record one or recorded one this choreo does not know."""
+        notes = []
+        for robot in robots or [None]:
+            whose = f"robot {robot}: " if robot is not None else ""
+            if self.assumed(robot):
+                notes.append(f"{whose}the log does not record a board layout: frames read with the "
+                             f"{DEFAULT_LAYOUT} layout (what choreo used before it recorded layouts)")
+            elif self.layout(robot) is None:
+                notes.append(f"{whose}board layout {self.name(robot)!r} is unknown to this choreo: "
+                             "motion slots named by whichever known layout they fit")
+        return notes
+
+
+def frame_meaning(tx: TxRecord, layouts: LogLayouts) -> str:
+    """What a logged frame does, read with its robot's layout: `CALL 0x000b80: motion 0`."""
+    if not isinstance(tx.hex, str):
+        return f"not hex: {tx.hex!r}"
+    return _frame_words(tx.hex, layouts.layout(tx.robot))
+
+
+def reply_meaning(rx: RxRecord, tx: TxRecord | None, layouts: LogLayouts) -> str:
+    """What came back for `tx` (None: its frame is not in the log), in words: `ACK`, `status
+    0x23: executing`, `program counter 0x001380 (motion 1), ...: executing`, or why it was refused."""
+    if rx.kind in ("timeout", "invalid"):
+        error = rx.error or ("no reply" if rx.kind == "timeout" else "invalid reply")
+        return f"{rx.kind}: {error}"
+    if not isinstance(rx.hex, str):
+        return f"not hex: {rx.hex!r}"
+    return _reply_words(rx.hex, tx.hex if tx is not None and isinstance(tx.hex, str) else None,
+                        layouts.layout(rx.robot))
+
+
+# A run repeats a few frames and replies thousands of times: each is put in words once.
+@lru_cache(maxsize=4096)
+def _frame_words(hex_text: str, layout: Layout | None) -> str:
+    try:
+        return describe_frame(bytes.fromhex(hex_text), layout)
+    except (TypeError, ValueError):
+        return f"not hex: {hex_text!r}"
+
+
+@lru_cache(maxsize=4096)
+def _reply_words(hex_text: str, frame_hex: str | None, layout: Layout | None) -> str:
+    try:
+        data = bytes.fromhex(hex_text)
+        frame = bytes.fromhex(frame_hex) if frame_hex is not None else None
+    except (TypeError, ValueError):
+        return f"not hex: {hex_text!r}"
+    return describe_reply(data, frame, layout)
+
+
+def describe_frame(data: bytes, layout: Layout | None) -> str:
+    """A frame sent to the board, in words, as `layout` builds its frames (None: not known)."""
+    try:
+        command = p.parse_command(data)
+    except ValueError as exc:
+        return f"not a frame: {exc}"
+    if data == p.sync_frame().data:
+        return "ACK check"
+    if data == p.version_frame().data:
+        return "version query"
+    if command.command == p.CMD_CALL:
+        return f"CALL 0x{command.address:06x}: {_called(command.address or 0, layout)}"
+    if command.move_type == p.MOV_COM_TO_RAM:
+        return f"MOV COM->RAM 0x{command.address:04x} <- {p.hexbytes(command.payload)}: {_written(data, layout)}"
+    if command.move_type == p.MOV_RAM_TO_COM:
+        return f"MOV RAM->COM 0x{command.address:04x} x{command.count}: {_read_name(data, layout)}"
+    return f"command {command.command:02x}"
+
+
+def _called(address: int, layout: Layout | None) -> str:
+    """`motion N` when the address starts one of the layout's slots; else whose slot it is."""
+    slot = layout.slot_of(address) if layout is not None else None
+    if slot is not None:
+        return f"motion {slot}"
+    fits = layout_of_call(address)
+    if fits is None:
+        return "not a motion slot"
+    other, slot = fits
+    if layout is None:
+        return f"motion {slot} (a slot of the {other.name} layout)"
+    return f"not a motion slot of the {layout.name} layout (motion {slot}'s slot in {other.name})"
+
+
+def _written(data: bytes, layout: Layout | None) -> str:
+    """Which frame of the layout's play sequence a write is (at any baud, from any config word:
+    the layout builds them), or `write`."""
+    kind = _sequence_kind(data, layout) if layout is not None else None
+    if kind is None or layout is None:
+        return "write"
+    word = int.from_bytes(data[6:8], "little")
+    if kind is p.FrameKind.COUNTER:
+        return f"program counter to the main loop 0x{layout.main_loop:06x}"
+    if not layout.reads_config:
+        return "stop and save status" if kind is p.FrameKind.STOP else "restore status"
+    return f"{'suspend' if kind is p.FrameKind.STOP else 'resume'}: config 0x{word:04x}"
+
+
+def _sequence_kind(data: bytes, layout: Layout) -> p.FrameKind | None:
+    word = int.from_bytes(data[6:8], "little") if len(data) >= 8 else 0
+    for baud in p.BAUD_CODES:
+        for frame in layout.play_sequence(0, word, baud):
+            if frame.kind is not p.FrameKind.PLAY and frame.data == data:
+                return frame.kind
+    return None
+
+
+def _read_name(data: bytes, layout: Layout | None) -> str:
+    if layout is not None and data == layout.status.data:
+        return "status query"
+    if layout is not None and data == layout.start_read.data:
+        return "program state read (did the motion start?)"
+    if layout is not None and layout.reads_config and data == _CONFIG_READ:
+        return "config word read"
+    return "read"
+
+
+_CONFIG_READ = p.read_frame(p.CONFIG_ADDRESS, 2).data  # the hth4-2.2 link reads it at open
+# What the RAM a frame can read holds (address, bytes, name): the config word, then the program
+# counter, the return address a CALL pushed, and the call depth.
+_RAM_FIELDS = ((p.CONFIG_ADDRESS, 2, "config"), (p.PROGRAM_COUNTER_ADDRESS, 3, "program counter"),
+               (0x0005, 3, "return address"), (0x0008, 1, "depth"))
+
+
+def describe_reply(data: bytes, frame: bytes | None, layout: Layout | None) -> str:
+    """A reply in words: `ACK`, `NAK`, a RAM read's fields (`config 0x821b`), and for the
+    layout's status query whether a motion is executing. `frame`: what it answers (None: unknown)."""
+    if not data:
+        return "no reply"
+    if len(data) == p.TYPE1_REPLY_SIZE and data[0] == len(data) and p.checksum(data[:3]) == data[3]:
+        return {p.ACK_BYTE: "ACK", p.NAK_BYTE: "NAK"}.get(data[2], f"type 1 reply {data[2]:02x}")
+    if data[0] != len(data) or p.checksum(data[:-1]) != data[-1]:
+        return f"invalid: {p.hexbytes(data)}"
+    try:
+        command = p.parse_command(frame) if frame is not None else None
+    except ValueError:
+        command = None
+    if command is None or command.move_type != p.MOV_RAM_TO_COM or len(data) != (command.count or 0) + 3:
+        return f"{len(data)}-byte reply: {p.hexbytes(data)}"
+    if layout is not None and frame == layout.status.data:
+        return _status_words(data, frame, layout)
+    return _ram_words(command.address or 0, data[2:-1], layout) or f"{len(data) - 3} bytes: {p.hexbytes(data[2:-1])}"
+
+
+def _status_words(data: bytes, frame: bytes, layout: Layout) -> str:
+    """The layout's status query answered: what it reads, and the layout's running rule on it."""
+    executing = p.parse_reply(p.Frame(p.FrameKind.STATUS, frame), data).executing
+    state = "executing" if executing else "not executing"
+    if data[2:-1] and frame == p.status_frame().data:
+        return f"status 0x{data[2]:02x}: {state}"  # the document's words for its config read
+    command = p.parse_command(frame)
+    return f"{_ram_words(command.address or 0, data[2:-1], layout)}: {state}"
+
+
+def _ram_words(address: int, ram: bytes, layout: Layout | None) -> str:
+    """The known fields of RAM read from `address`: `config 0x821b, program counter 0x001380
+    (motion 1), ...`; empty if the read holds none whole."""
+    words = []
+    for start, size, name in _RAM_FIELDS:
+        if address <= start and start + size <= address + len(ram):
+            value = int.from_bytes(ram[start - address:start - address + size], "little")
+            words.append(f"{name} {value}" if name == "depth" else
+                         f"{name} 0x{value:0{size * 2}x}{_in_slot(value, layout) if size == 3 else ''}")
+    return ", ".join(words)
+
+
+def _in_slot(address: int, layout: Layout | None) -> str:
+    """` (motion 1)` where a program address lies inside one of the layout's slots."""
+    if layout is None:
+        return ""
+    offset = address - layout.first_slot
+    if 0 <= offset < p.MOTION_SLOTS * p.SLOT_SIZE:
+        return f" (motion {offset // p.SLOT_SIZE})"
+    return ""

@@ -12,19 +12,21 @@ import json
 from collections.abc import Iterator
 from typing import TextIO
 
-from choreo.review.frames import Exchange, exchanges, frame_meaning, reply_meaning
+from choreo.logformat import LogLayouts, frame_meaning, reply_meaning
+from choreo.review.frames import Exchange, exchanges
 from choreo.review.reader import LogReader
 
 COLUMNS = (
     "seq",
     "tx_time_ns", "tx_show_s", "step", "label", "frame", "motion", "attempt", "tx_hex", "frame_meaning",
     "rx_time_ns", "rx_show_s", "reply", "rx_hex", "latency_ms", "executing", "error", "stale", "reply_meaning",
-    "robot",
+    "robot", "layout",
 )
 
 
-def row(exchange: Exchange) -> dict:
-    """One frame and its reply as a flat dict (None where the log has no such field)."""
+def row(exchange: Exchange, layouts: LogLayouts) -> dict:
+    """One frame and its reply as a flat dict (None where the log has no such field); the
+    meanings read with the layout the log records for the robot (`layout`)."""
     tx, rx = exchange.tx, exchange.rx
     return {
         "seq": exchange.seq,
@@ -36,7 +38,7 @@ def row(exchange: Exchange) -> dict:
         "motion": tx.motion if tx else None,
         "attempt": tx.attempt if tx else None,
         "tx_hex": tx.hex if tx else None,
-        "frame_meaning": frame_meaning(tx) if tx else None,
+        "frame_meaning": frame_meaning(tx, layouts) if tx else None,
         "rx_time_ns": exchange.rx_ns,
         "rx_show_s": _round(exchange.rx_s),
         "reply": rx.kind if rx else None,
@@ -45,8 +47,9 @@ def row(exchange: Exchange) -> dict:
         "executing": rx.executing if rx else None,
         "error": rx.error if rx else None,
         "stale": rx.stale if rx else None,  # late replies to earlier frames set aside before this one, as hex
-        "reply_meaning": reply_meaning(rx) if rx else None,
+        "reply_meaning": reply_meaning(rx, tx, layouts) if rx else None,
         "robot": exchange.robot,  # whose frame, in a show for several robots (empty otherwise)
+        "layout": layouts.name(exchange.robot),  # the board layout the meanings are read with
     }
 
 
@@ -55,8 +58,9 @@ def _round(seconds: float | None) -> float | None:
 
 
 def rows(reader: LogReader) -> Iterator[dict]:
+    layouts = LogLayouts.of(reader.run_info)
     for exchange in exchanges(reader):
-        yield row(exchange)
+        yield row(exchange, layouts)
 
 
 class CsvSink:

@@ -11,8 +11,8 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from choreo.protocol import describe_frame, describe_reply
-from choreo.logformat import ABORT_LABEL, CLOCK_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, RxRecord, TxRecord, parse
+from choreo.logformat import (ABORT_LABEL, CLOCK_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, LogLayouts, RxRecord, TxRecord,
+                              frame_meaning, parse, reply_meaning)
 from choreo.review.reader import LogReader
 from choreo.review.showtime import ShowTimes
 from choreo.review.summary import stale_replies
@@ -56,7 +56,7 @@ def exchanges(reader: LogReader, clock: ShowTimes | None = None) -> Iterator[Exc
         for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC, CLOCK_TOPIC)):
             number += 1
             if topic == STEP_TOPIC:
-                if not clock.from_step:
+                if not clock.anchored:
                     clock.see_step(log_time, parse(topic, data))
                 continue
             if topic == CLOCK_TOPIC:
@@ -86,25 +86,6 @@ def _pair(clock: ShowTimes, tx: TxRecord | None, tx_ns: int | None, rx: RxRecord
     return Exchange(seq, tx, tx_ns, clock.seconds(tx_ns), rx, rx_ns, clock.seconds(rx_ns))
 
 
-def frame_meaning(tx: TxRecord) -> str:
-    """What a sent frame does, from its bytes: `CALL 0x000bb8: motion 0`."""
-    try:
-        return describe_frame(bytes.fromhex(tx.hex))
-    except (TypeError, ValueError):
-        return f"not hex: {tx.hex!r}"
-
-
-def reply_meaning(rx: RxRecord) -> str:
-    """What came back, in words: `ACK`, `status 0x23: executing`, or why it was refused."""
-    if rx.kind in ("timeout", "invalid"):
-        error = rx.error or ("no reply" if rx.kind == "timeout" else "invalid reply")
-        return f"{rx.kind}: {error}"
-    try:
-        return describe_reply(bytes.fromhex(rx.hex))
-    except (TypeError, ValueError):
-        return f"not hex: {rx.hex!r}"
-
-
 def stale_note(rx: RxRecord) -> str:
     """` (set aside a late reply: 04 00 06 0a)` after a reply that came with late ones, or ``."""
     replies = stale_replies(rx.stale)
@@ -130,19 +111,20 @@ def _time(seconds: float | None) -> str:
     return f"{seconds:10.6f}" if seconds is not None else " " * 10
 
 
-def lines(exchange: Exchange) -> Iterator[str]:
-    """`show_s  tx  seq  kind  hex  meaning` and the same for its reply."""
+def lines(exchange: Exchange, layouts: LogLayouts) -> Iterator[str]:
+    """`show_s  tx  seq  kind  hex  meaning` and the same for its reply, the bytes read with the
+    layout the log records for the robot."""
     tx, rx = exchange.tx, exchange.rx
     robot = f"{exchange.robot}: " if exchange.robot else ""
     if tx is not None:
         where = f"step {tx.step}" if tx.step is not None else "abort" if tx.label == ABORT_LABEL else "-"
         retry = f" (try {tx.attempt})" if tx.attempt > 1 else ""
         yield (f"{_time(exchange.tx_s)}  tx  #{exchange.seq:<6} {where:<9} {tx.kind:<8} "
-               f"{tx.hex:<56} {robot}{frame_meaning(tx)}{retry}")
+               f"{tx.hex:<56} {robot}{frame_meaning(tx, layouts)}{retry}")
     if rx is not None:
         latency = f"{rx.latency_ms:.3f} ms"
         yield (f"{_time(exchange.rx_s)}  rx  #{exchange.seq:<6} {latency:<9} {rx.kind:<8} "
-               f"{rx.hex:<56} {robot}{reply_meaning(rx)}{stale_note(rx)}")
+               f"{rx.hex:<56} {robot}{reply_meaning(rx, tx, layouts)}{stale_note(rx)}")
     elif tx is not None:
         yield f"{'':10}  rx  #{exchange.seq:<6} {'':9} {'-':<8} {'':56} no reply in the log (it ends here)"
 
@@ -155,16 +137,19 @@ def frame_lines(reader: LogReader, step: int | None = None, kind: str | None = N
     """Every line `choreo log frames` prints, header first; a cut log ends with where it stops."""
     yield HEADER
     shown = 0
+    layouts = LogLayouts.of(reader.run_info)
     for exchange in exchanges(reader):
         if matches(exchange, step, kind, robot):
             shown += 1
             try:
-                yield from lines(exchange)
+                yield from lines(exchange, layouts)
             except (KeyError, TypeError, ValueError, AttributeError) as exc:
                 raise reader.not_choreo(TX_TOPIC, exchange.seq, exc) from None
     if reader.cut is not None:
         yield f"log {reader.cut.state}: {reader.cut}"
-    if not shown:
+    if shown:
+        yield from layouts.notes([robot] if robot is not None else reader.robots)
+    else:
         wanted = " and ".join(x for x in (f"step {step}" if step is not None else "",
                                          f"kind {kind}" if kind else "",
                                          f"robot {robot}" if robot else "") if x)

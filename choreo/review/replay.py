@@ -25,10 +25,9 @@ from choreo.clock import TimeSource
 from choreo.errors import UsageError
 from choreo.protocol import Frame, FrameKind
 from choreo.review.attached import AttachedShow, attached_show
-from choreo.review.frames import reply_meaning
 from choreo.review.showtime import ShowTimes
-from choreo.logformat import (LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, RxRecord, StepRecord, TxRecord,
-                              parse)
+from choreo.logformat import (LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, LogLayouts, RxRecord, StepRecord,
+                              TxRecord, parse, reply_meaning)
 from choreo.review.reader import Cut, LogReader
 from choreo.sim.options import is_simulator
 
@@ -47,6 +46,8 @@ class Difference:
     replayed: RxRecord
     late_ms: float = 0.0  # how late the replay sent the frame, on the run's clock (ms)
     at_end: bool = False  # in the recording, the motion's end showed at this poll or the next
+    sent: TxRecord | None = None  # the recorded frame: what the replies answer
+    layouts: LogLayouts = LogLayouts({})  # the recorded run's layouts: the replies are read with them
 
     @property
     def timing(self) -> bool:
@@ -80,12 +81,11 @@ class Difference:
         else:
             note = " (a poll away from the motion's end: the board answered differently)" if self.timing else ""
         return (f"{self.show_s:9.3f} s  #{self.seq} {where}{self.frame}: recorded "
-                f"{_said(self.recorded)}, replay {_said(self.replayed)}{note}")
+                f"{self._said(self.recorded)}, replay {self._said(self.replayed)}{note}")
 
-
-def _said(reply: RxRecord) -> str:
-    shown = reply.hex and reply.kind not in ("timeout", "invalid")
-    return reply_meaning(reply) + (f" ({reply.hex})" if shown else "")
+    def _said(self, reply: RxRecord) -> str:
+        shown = reply.hex and reply.kind not in ("timeout", "invalid")
+        return reply_meaning(reply, self.sent, self.layouts) + (f" ({reply.hex})" if shown else "")
 
 
 @dataclass
@@ -233,7 +233,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         if baud is None:
             recorded = int(recorded_baud) if recorded_baud.isdigit() else None
             baud = recorded if port and recorded in BAUD_RATES else DEFAULT_BAUD
-        layout = layout or reader.run_info.get("layout") or "seed"  # logs before layouts: seed
+        layout = layout or _recorded_layout(reader, None)  # logs before layouts: seed
         check_options(speed, baud, timeout, layout)
         url = at_speed(_with_durations(port or "sim://", show, baud, layout), speed)
         name = reader.run_info.get("show") or reader.path.stem
@@ -252,7 +252,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         # config word at open, a frame the recording does not have)
         links = ([_robot_link(reader, show, name, speed, timeout) for name in robots] if robots else
                  [RobotLink(SOLO, url, "command line", baud, timeout or DEFAULT_TIMEOUT_S, tries=1)])
-        robot_info = tuple(RobotInfo(link.robot, link.port, link.baud, reader.run_info.get(f"robot.{link.robot}.layout", "seed"))
+        robot_info = tuple(RobotInfo(link.robot, link.port, link.baud, _recorded_layout(reader, link.robot))
                            for link in links) if robots else ()
         info = RunInfo(show_path, name, show_source, url, baud, clock.wall_anchor_ns, layout, robot_info,
                        reader.run_info.get("unison") == "yes")
@@ -269,7 +269,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
             if on_start is not None:
                 on_start(report)
             if robots:
-                _replay_robots(source, stage, clock, speed, report, on_difference)
+                _replay_robots(source, stage, clock, speed, report, on_difference, _first_frame_s(reader))
             else:
                 _replay_frames(reader, stage.link, stage.recorder, clock, speed, report, on_difference)
             report.cut = reader.cut if not robots else report.cut
@@ -287,7 +287,7 @@ def _robot_link(reader: LogReader, show: AttachedShow, robot: str, speed: float,
 
     baud_text = reader.run_info.get(f"robot.{robot}.baud", "")
     baud = int(baud_text) if baud_text.isdigit() and int(baud_text) in BAUD_RATES else DEFAULT_BAUD
-    layout = layout_named(reader.run_info.get(f"robot.{robot}.layout") or "seed")
+    layout = layout_named(_recorded_layout(reader, robot))
     plan = show.plan_of(robot)
     abort = show.show.abort_motion(robot) if show.show is not None and plan is not None else None
     url = with_show_durations("sim://", show.show if plan is not None else None, plan, baud, layout, abort)
@@ -295,13 +295,13 @@ def _robot_link(reader: LogReader, show: AttachedShow, robot: str, speed: float,
 
 
 def _replay_robots(source: str | Path, stage, clock, speed: float, report: ReplayReport,  # type: ignore[no-untyped-def]
-                   on_difference: Callable[[Difference], None] | None) -> None:
+                   on_difference: Callable[[Difference], None] | None, first_s: float = 0.0) -> None:
     """Each robot's frames on its own thread and link, all on one start: a robot waiting for its
     reply never holds up another's frames. Each thread reads the log on its own (a reader is
     not shared between threads); the reports are added up at the end."""
     import threading
 
-    start = clock.mono()
+    start = clock.mono() - min(first_s, 0.0) / speed  # recorded show time 0; frames sent at open come before it
     parts = {name: ReplayReport(report.source, link.name, speed, report.log_path) for name, link in stage.links.items()}
     errors: list[BaseException] = []
 
@@ -330,6 +330,27 @@ def _replay_robots(source: str | Path, stage, clock, speed: float, report: Repla
         _add_up(report, part)
 
 
+def _recorded_layout(reader: LogReader, robot: str | None) -> str:
+    """The layout the log records for the robot's frames (seed for a log from before layouts
+    were recorded); UsageError for one this choreo does not know."""
+    from choreo.layouts import LAYOUT_NAMES
+
+    layouts = LogLayouts.of(reader.run_info)
+    if layouts.layout(robot) is None:
+        whose = f"robot {robot}'s" if robot is not None else "its"
+        raise UsageError(f"log {reader.path}: {whose} board layout {layouts.name(robot)!r} is unknown to "
+                         f"this choreo{'' if robot else ': replay it with --layout ' + ' or '.join(LAYOUT_NAMES)}")
+    return layouts.name(robot)
+
+
+def _first_frame_s(reader: LogReader) -> float:
+    """The recorded show time of the log's first frame (negative: sent when the ports opened)."""
+    times = ShowTimes.of(reader)
+    for _, log_time, _ in reader.messages((TX_TOPIC,)):
+        return times.seconds(log_time) or 0.0
+    return 0.0
+
+
 def _add_up(report: ReplayReport, part: ReplayReport) -> None:
     for name in ("frames", "same", "different", "timing", "replay_late", "excused", "unmatched"):
         setattr(report, name, getattr(report, name) + getattr(part, name))
@@ -353,6 +374,7 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
 
     at_end = _polls_at_motion_ends(reader, robot)
     recorded_clock = ShowTimes.of(reader)
+    layouts = LogLayouts.of(reader.run_info)
     zero_mono: float | None = start  # replay's monotonic time of recorded show time 0
     first_s = 0.0
     last: tuple[float, float] | None = None  # the last event: (recorded show s, replay monotonic)
@@ -392,7 +414,10 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
                 continue
             if isinstance(record, StepRecord):
                 due(recorded_clock.seconds(log_time) or 0.0)
-                retimed = _retimed(record, first_s, speed, clock.mono() - zero_mono)
+                # the replay's show clock is the run's, from its first event if the run's started
+                # later than zero: frames the run sent before zero (at open) stay before it
+                origin = max(first_s, 0.0)
+                retimed = _retimed(record, origin, speed, clock.mono() - zero_mono + (first_s - origin) / speed)
                 recorder.on_step(_ReplayedStep(clock.wall_ns(), retimed))
             elif isinstance(record, TxRecord):
                 show_s = recorded_clock.seconds(log_time) or 0.0
@@ -404,7 +429,7 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
                 reply = link.send(frame, record.attempt, Tag(record.step, record.label))
                 report.frames += 1
                 replayed = RxRecord(record.seq, reply.kind.value, reply.hex, executing=reply.executing,
-                                    error=reply.error)
+                                    error=reply.error, robot=record.robot)
                 written = getattr(link, "last_tx_mono", target)  # after any wait in the link
                 if frame.kind is FrameKind.RESTORE:
                     restored = (show_s, written)
@@ -422,7 +447,7 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
                     report.same += 1
                     continue
                 difference = Difference(record.seq, tx.step, tx.kind, show_s, record, replayed,
-                                        round(late_ms, 3), record.seq in at_end)
+                                        round(late_ms, 3), record.seq in at_end, tx, layouts)
                 report.different += 1
                 report.timing += difference.timing
                 report.replay_late += difference.replay_late
@@ -493,7 +518,8 @@ def _same(recorded: RxRecord, replayed: RxRecord) -> bool:
 
 
 def _retimed(step: StepRecord, first_s: float, speed: float, elapsed_s: float) -> StepRecord:
-    """A recorded step event on the replay's clock (seconds since the replay's first frame)."""
+    """A recorded step event on the replay's clock (seconds since recorded show time `first_s`,
+    at `speed`; `elapsed_s`: the replay's show time now)."""
 
     def moved(seconds: float) -> float:
         return round(max(0.0, (seconds - first_s) / speed), 6)
