@@ -17,9 +17,11 @@ import pytest
 
 from choreo.clock import VirtualTime
 from choreo.layouts import HTH4_22, SEED
-from choreo.logformat import LogLayouts, TxRecord, RxRecord, describe_frame, frame_meaning, reply_meaning
+from choreo.logformat import (ClockRecord, LogLayouts, RxRecord, StepRecord, TxRecord, describe_frame, frame_meaning,
+                              reply_meaning)
 from choreo.review.reader import LogReader
 from choreo.review.replay import replay
+from choreo.review.showtime import ShowTimes
 from choreo.review.summary import summarize
 from choreo.review.timeline import build
 from runlog import vmain, write_show
@@ -237,3 +239,54 @@ def test_bytes_that_are_not_hex_are_said_so():
     assert frame_meaning(TxRecord(1, "play", "zz"), layouts) == "not hex: 'zz'"
     assert reply_meaning(RxRecord(1, "ack", {"a": 1}), None, layouts) == "not hex: {'a': 1}"  # type: ignore[arg-type]
     assert reply_meaning(RxRecord(1, "ack", "04 00 06 0a"), TxRecord(1, "stop", 7), layouts) == "ACK"  # type: ignore[arg-type]
+
+
+# -- a log whose show clock is damaged ----------------------------------------------------------
+
+
+class _StepEvent:
+    """What the recorder takes for a step event: its record, time and robot."""
+
+    def __init__(self, record: StepRecord, time_ns: int) -> None:
+        self.step, self.time_ns, self.robot = record, time_ns, None
+
+    def record(self) -> StepRecord:
+        return self.step
+
+
+def _hostile_log(path: Path, show_s: object) -> Path:
+    """A log whose first clock sample and first step start carry `show_s`, then a good step."""
+    from choreo.record import Recorder, RunInfo
+
+    recorder = Recorder(path, RunInfo("show.yaml", "x", b"version: 1\n", "sim://", 115200, 10**18, "hth4-2.2"))
+    recorder.on_tx(_TxEvent(1, 10**18 + 1_000_000))
+    recorder.on_clock(ClockRecord(show_s, 5), 10**18 + 2_000_000)  # type: ignore[arg-type]
+    recorder.on_step(_StepEvent(StepRecord(0, "play", "start", show_s), 10**18 + 3_000_000))  # type: ignore[arg-type]
+    recorder.on_step(_StepEvent(StepRecord(1, "play", "start", 1.0), 10**18 + 4_000_000))
+    recorder.close({"outcome": "done"})
+    return path
+
+
+class _TxEvent:
+    def __init__(self, seq: int, time_ns: int) -> None:
+        from choreo.protocol import sync_frame
+
+        self.seq, self.frame, self.attempt, self.time_ns, self.tag = seq, sync_frame(), 1, time_ns, None
+
+
+@pytest.mark.parametrize("show_s", [float("inf"), float("nan"), 1e300, "abc", [], None])
+def test_a_damaged_show_time_is_one_line_or_skipped_never_a_traceback(tmp_path, show_s, capsys):
+    log = _hostile_log(tmp_path / "hostile.mcap", show_s)
+    for command in (["summary"], ["frames"], ["timeline"], ["export", "--csv", "-"]):
+        code = vmain(["log", command[0], str(log), *command[1:]])
+        err = capsys.readouterr().err
+        assert code in (0, 2) and "Traceback" not in err, (command, err)
+        assert code == 0 or len(err.strip().splitlines()) == 1, (command, err)
+
+
+def test_the_first_show_time_that_is_a_number_fixes_zero(tmp_path):
+    log = _hostile_log(tmp_path / "hostile.mcap", float("nan"))
+    with LogReader(log) as reader:
+        times = ShowTimes.of(reader)
+    assert times.anchored and times.seconds(10**18 + 4_000_000) == pytest.approx(1.0)
+    assert times.seconds(10**18 + 1_000_000) == pytest.approx(0.997)  # the frame before: before zero

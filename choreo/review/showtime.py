@@ -17,6 +17,7 @@ the pieces are few (a hold's end, a loop's next pass) and memory stays bounded.
 
 from __future__ import annotations
 
+import math
 from bisect import bisect_right
 
 from choreo.logformat import CLOCK_TOPIC, STEP_TOPIC, ClockRecord, StepRecord, parse
@@ -54,7 +55,8 @@ class ShowTimes:
     def anchor(self, reader: LogReader) -> None:
         """Read ahead to the show clock's first sample or step start and fix the zero by it.
 
-        A message that does not parse is left for the review's own pass to report."""
+        A message that does not parse, or holds no number, is left for the review's own pass
+        to report."""
         messages = reader.messages()
         try:
             for count, (topic, log_time, data) in enumerate(messages):
@@ -64,12 +66,12 @@ class ShowTimes:
                     continue
                 try:
                     record = parse(topic, data)
-                except (KeyError, TypeError, ValueError):
+                    if isinstance(record, ClockRecord):
+                        self.see_clock(log_time, record)
+                    else:
+                        self.see_step(log_time, record)
+                except (KeyError, TypeError, ValueError, AttributeError):
                     continue
-                if isinstance(record, ClockRecord):
-                    self.see_clock(log_time, record)
-                else:
-                    self.see_step(log_time, record)
                 if self.anchored:
                     return
         finally:
@@ -84,9 +86,11 @@ class ShowTimes:
         self._anchor(log_time, actual_s)
 
     def _anchor(self, log_time: int, show_s: float) -> None:
-        if not self.anchored:
-            self.zero_ns = log_time - round(show_s * 1e9)
-            self.anchored = True
+        """The zero, from the first show time that is a number (a damaged record's is not)."""
+        if self.anchored or not isinstance(show_s, (int, float)) or not math.isfinite(show_s * 1e9):
+            return
+        self.zero_ns = log_time - round(show_s * 1e9)
+        self.anchored = True
 
     def see_clock(self, log_time: int, sample: ClockRecord) -> None:
         """A /choreo/clock sample: where show time really stood at `log_time`."""
