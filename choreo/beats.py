@@ -29,9 +29,12 @@ import numpy as np
 
 from choreo.errors import UsageError
 from choreo.show.model import MUSIC_FORMATS_TEXT, Tempo
+from choreo.textfit import visible
 
 SAMPLE_RATE = 22050  # Hz: enough for onsets, half the work of 44.1 kHz
 SONG_FORMATS = MUSIC_FORMATS_TEXT
+# The file is read whole before it is decoded: an hour of WAV at CD quality is 635 MB.
+MAX_SONG_BYTES = 1024 * 1024 * 1024
 BPM_RANGE = (40.0, 240.0)  # searched by default; `tempo.bpm` itself may be up to 400
 BPM_LIMITS = (1.0, 400.0)  # what a search range may span: the show schema's bpm range
 METER_LIMITS = (1, 16)  # beats a bar, as the show schema allows
@@ -121,33 +124,23 @@ class _Grid:
 def read_song(path: str, sample_rate: int = SAMPLE_RATE) -> Song:
     """The song as mono floats, read with miniaudio so that every format decodes without system
     libraries; unreadable files become one line that says what to do."""
+    from choreo.userfile import read_input
+
     name = os.fspath(path)
-    _check_file(name)
+    data = read_input(name, "sound file", MAX_SONG_BYTES)  # a pipe, a device, a read error: one line
+    if not data:
+        raise UsageError(f"{visible(name)}: the file is empty")
     try:
-        decoded = miniaudio.decode_file(name, output_format=miniaudio.SampleFormat.FLOAT32,
-                                        nchannels=1, sample_rate=sample_rate)
+        decoded = miniaudio.decode(data, output_format=miniaudio.SampleFormat.FLOAT32,
+                                   nchannels=1, sample_rate=sample_rate)
     except miniaudio.DecodeError as exc:
-        raise UsageError(f"{name}: cannot decode: not a {SONG_FORMATS} file, or a damaged one "
+        raise UsageError(f"{visible(name)}: cannot decode: not a {SONG_FORMATS} file, or a damaged one "
                          f"(miniaudio: {exc.args[0] if exc.args else exc})") from None
-    except OSError as exc:
-        raise UsageError(f"{name}: cannot read: {exc.strerror or exc}") from None
     samples = np.frombuffer(decoded.samples, dtype=np.float32)
     if samples.size == 0:
-        raise UsageError(f"{name}: no audio in it (0 samples)")
+        raise UsageError(f"{visible(name)}: no audio in it (0 samples)")
     peak = float(np.max(np.abs(samples)))
     return Song(name, samples / peak if peak > 0 else samples.copy(), sample_rate)
-
-
-def _check_file(name: str) -> None:
-    """The common mistakes, named before the decoder reports them as a bare failure code."""
-    if not os.path.exists(name):
-        raise UsageError(f"{name}: no such file")
-    if not os.path.isfile(name):
-        raise UsageError(f"{name}: not a file (give a {SONG_FORMATS} file)")
-    if os.path.getsize(name) == 0:
-        raise UsageError(f"{name}: the file is empty")
-    if not os.access(name, os.R_OK):
-        raise UsageError(f"{name}: cannot read: permission denied")
 
 
 def estimate(song: Song, meter: int = 4, bpm_range: tuple[float, float] = BPM_RANGE) -> BeatEstimate:

@@ -33,6 +33,23 @@ class UsageError(ChoreoError):
     exit_code = 2
 
 
+class InputError(UsageError):
+    """A file the user named that cannot be read as what it should be (`choreo.userfile`)."""
+
+    def __init__(self, path: str, reason: str) -> None:
+        from choreo.textfit import visible
+
+        self.path = path
+        self.reason = reason
+        super().__init__(f"{visible(path)}: {reason}")
+
+
+class OutputError(ChoreoError):
+    """The command's output (stdout) cannot be written: a full disk, a closed device."""
+
+    exit_code = 2
+
+
 class MotionRangeError(UsageError, ValueError):
     """A motion number outside the controller's slots 0..119."""
 

@@ -5,11 +5,13 @@ cannot: at which ROM address each motion slot starts, i.e. which layout the boar
 were written with. HTH4 2.2 and later put slot 0 at 0x0B80; the source document's frames (the
 `seed` layout) CALL 0x0BB8. Each slot is `SLOT_SIZE` bytes after the one before.
 
-The file is .NET `XmlSerializer` output (UTF-8): root `Rcb4`; `ProjectTitle`; and
+The file is .NET `XmlSerializer` output: root `Rcb4`; `ProjectTitle`; and
 `MotionDataCollection`, one `DictionaryEntry` a slot with `Key` (`M001`..`M120`) and a `Value`
 (`xsi:type="Motion"`) holding `Number` (0-based slot), `Name`, `MotionData` (hex strings, none
 for an unused slot) and `Address` (decimal). Tags are matched by local name, so a namespaced
-file reads the same as a plain one.
+file reads the same as a plain one. Its text is UTF-8 (with or without a byte order mark),
+UTF-16, or what its XML declaration says: Japanese projects are often `Shift_JIS`, which the
+XML parser cannot decode itself, so the bytes are decoded here (`decode_project`).
 
 The file comes from elsewhere, so it is read defensively: its size is capped, and a DOCTYPE is
 refused before anything in it is expanded (HTH4 never writes one; a DTD is how entity bombs
@@ -18,6 +20,8 @@ and external entities get in).
 
 from __future__ import annotations
 
+import codecs
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +29,7 @@ from pathlib import Path
 from choreo.errors import UsageError
 from choreo.layouts import LAYOUTS
 from choreo.protocol import MOTION_SLOTS, SLOT_SIZE
+from choreo.textfit import visible
 
 # Where each layout puts slot 0 (choreo.layouts is the one place the layouts are defined; the
 # show schema's `robot.layout` enum lists their names too, and a test holds them equal).
@@ -60,21 +65,16 @@ class Project:
 
 
 def read_project(path: str | Path) -> Project:
-    """The project at `path`; `ProjectError` with one line if it cannot be imported."""
-    name = str(path)
-    try:
-        with open(path, "rb") as stream:
-            data = stream.read(MAX_PROJECT_BYTES + 1)
-    except OSError as exc:
-        raise ProjectError(f"{name}: cannot read the project: {exc.strerror or exc}") from None
-    if len(data) > MAX_PROJECT_BYTES:
-        raise ProjectError(f"{name}: over {MAX_PROJECT_BYTES // (1024 * 1024)} MiB, too big for a Heart to Heart 4 project")
-    return parse_project(data, name)
+    """The project at `path`; `ProjectError` (or `InputError`) with one line if it cannot be imported."""
+    from choreo.userfile import read_input
+
+    data = read_input(path, "Heart to Heart 4 project", MAX_PROJECT_BYTES)
+    return parse_project(data, visible(str(path)))
 
 
 def parse_project(data: bytes, path: str = "<project>") -> Project:
     """A project from the file's bytes; `path` names it in messages."""
-    root = _parse_xml(data, path)
+    root = _parse_xml(decode_project(data, path), path)
     if _local(root.tag) != "Rcb4":
         raise ProjectError(f"{path}: not a Heart to Heart 4 project: the root element is <{_local(root.tag)}>, not <Rcb4>")
     collection = _child(root, "MotionDataCollection")
@@ -124,15 +124,68 @@ class _TreeBuilder(ET.TreeBuilder):
         raise _Refused
 
 
-def _parse_xml(data: bytes, path: str) -> ET.Element:
+def _parse_xml(text: str, path: str) -> ET.Element:
     parser = ET.XMLParser(target=_TreeBuilder())
     try:
-        parser.feed(data)
+        parser.feed(text)  # text, not bytes: the parser ignores the declared encoding
         return parser.close()
     except _Refused:
         raise ProjectError(f"{path}: the file declares a DOCTYPE, which Heart to Heart 4 never writes: refused (entities could expand without bound)") from None
     except ET.ParseError as exc:
         raise ProjectError(f"{path}: not a Heart to Heart 4 project (not XML: {exc})") from None
+
+
+# Byte order marks, longest first (UTF-32's begin with UTF-16's).
+# Each codec named here reads its mark and drops it.
+_BOMS = ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"), (codecs.BOM_UTF8, "utf-8-sig"),
+         (codecs.BOM_UTF16_LE, "utf-16"), (codecs.BOM_UTF16_BE, "utf-16"))
+_DECLARED = re.compile(rb"""\A<\?xml[^>]*?\sencoding\s*=\s*(["'])([^"'<>]*)\1""")
+_DECLARATION_MAX = 4096  # bytes the XML declaration is sought in (it is the first thing in the file)
+# What Windows means by these names: code page 932, Shift_JIS with Microsoft's extensions
+# (NEC and IBM characters, a different tilde), which .NET writes under the name Shift_JIS.
+_WINDOWS_NAMES = {"shift_jis": "cp932", "shift-jis": "cp932", "sjis": "cp932", "x-sjis": "cp932",
+                  "windows-31j": "cp932", "ms_kanji": "cp932", "csshiftjis": "cp932"}
+# Python codecs that are not a file's character set (they unescape or transform text).
+_NOT_CHARSETS = frozenset(("unicode-escape", "raw-unicode-escape", "idna", "punycode", "undefined", "charmap"))
+
+
+def decode_project(data: bytes, path: str = "<project>") -> str:
+    """The project's text: by its byte order mark, else by the encoding its XML declaration
+    names, else UTF-8 (XML's default); `ProjectError` for an encoding choreo does not know or
+    bytes that are not in it."""
+    encoding = _encoding_of(data, path)
+    try:
+        return data.decode(encoding)
+    except UnicodeError as exc:
+        start = getattr(exc, "start", None)
+        where = f"byte {start} (0x{data[start]:02x})" if isinstance(start, int) and start < len(data) else "a byte"
+        raise ProjectError(f"{path}: not a Heart to Heart 4 project: {where} is not {encoding} text "
+                           "(the encoding it declares or implies)") from None
+
+
+def _encoding_of(data: bytes, path: str) -> str:
+    for bom, encoding in _BOMS:
+        if data.startswith(bom):
+            return encoding
+    if data[:2] == b"<\0":  # UTF-16 without a mark: `<` is the first character of any XML
+        return "utf-16-le"
+    if data[:2] == b"\0<":
+        return "utf-16-be"
+    declared = _DECLARED.match(data[:_DECLARATION_MAX])
+    if declared is None:
+        return "utf-8"
+    name = declared.group(2).decode("latin-1")[:100]
+    try:
+        info = codecs.lookup(_WINDOWS_NAMES.get(name.lower(), name)) if name.isascii() and name.isprintable() else None
+    except LookupError:
+        info = None
+    if info is None or not info._is_text_encoding or info.name in _NOT_CHARSETS:  # type: ignore[attr-defined]
+        raise ProjectError(f"{path}: the file declares encoding {visible(repr(name))}, which choreo cannot read: save the project "
+                           "again in Heart to Heart 4, or as UTF-8")
+    if info.name.startswith(("utf-16", "utf-32")):
+        raise ProjectError(f"{path}: the file declares encoding {visible(repr(name))} but has no byte order mark and does not "
+                           "start with '<' in it: save the project again in Heart to Heart 4, or as UTF-8")
+    return info.name
 
 
 def _local(tag: str) -> str:

@@ -75,11 +75,14 @@ class Song:
         decode or `start` is past its end (before any port opens)."""
         import miniaudio
 
+        from choreo.userfile import problem
+
         where = f"{show_path}: music.file {music.file}"
+        unreadable = problem(music.path, "sound file")  # a pipe or a device would hang the decoder
+        if unreadable is not None:
+            raise AudioError(f"{where}: {unreadable} ({music.path})")
         try:
             info = miniaudio.get_file_info(str(music.path))
-        except FileNotFoundError:
-            raise AudioError(f"{where}: no such file ({music.path})") from None
         except (miniaudio.DecodeError, OSError) as exc:
             raise AudioError(f"{where}: cannot decode it ({_reason(exc)}): is it a {MUSIC_FORMATS_TEXT} file?") from None
         if info.sample_rate <= 0 or info.num_frames <= 0:

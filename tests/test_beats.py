@@ -172,11 +172,11 @@ def test_songs_that_cannot_be_read_or_have_no_beat_are_one_line_and_exit_2(tmp_p
     empty.write_bytes(b"")
     silent = write_wav(tmp_path / "silent.wav", np.zeros(5 * RATE))
     for path, says in [
-        (tmp_path / "missing.mp3", "no such file"),
+        (tmp_path / "missing.mp3", "cannot read the sound file: No such file or directory"),
         (text, "cannot decode: not a wav, mp3, flac or ogg file"),
         (empty, "the file is empty"),
         (silent, "no beat found: the song is silent"),
-        (tmp_path, "not a file"),
+        (tmp_path, "not a regular file (a folder): give a sound file"),
     ]:
         assert main(["beats", str(path)]) == 2, path
         out, err = capsys.readouterr()

@@ -159,7 +159,7 @@ def test_not_mcap_missing_and_empty_files(tmp_path):
     text.write_text("version: 1\n")
     with pytest.raises(LogError, match=r"^log .*show.yaml: not an MCAP file"):
         LogReader(text)
-    with pytest.raises(LogError, match=r"cannot open: No such file"):
+    with pytest.raises(LogError, match=r"nope.mcap: cannot read the run log: No such file"):
         LogReader(tmp_path / "nope.mcap")
     empty = tmp_path / "empty.mcap"
     empty.write_bytes(b"")

@@ -15,9 +15,10 @@ import sys
 from collections.abc import Iterable, Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
-from typing import IO, TextIO
+from typing import IO
 
 from choreo.errors import UsageError
+from choreo.textfit import visible
 
 FRAME_AND_REPLY_KINDS = ("stop", "counter", "play", "restore", "status", "read", "sync",
                          "ack", "nak", "timeout", "invalid")
@@ -58,6 +59,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="only frames of this kind or with replies of this kind: "
                         + ", ".join(FRAME_AND_REPLY_KINDS))
     frames.add_argument("--robot", metavar="NAME", help="only this robot's frames (a show for several robots)")
+    frames.add_argument("--json", action="store_true",
+                        help="one JSON object: {ok, log, frames: [one object a frame, the fields of "
+                        "`log export`], cut: null or {state, reason}}; a failure is {ok: false, exit, error}")
     frames.set_defaults(handler=run_frames)
 
     timeline = commands.add_parser(
@@ -101,24 +105,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="the replay's own log (default runs/<show>-replay-<UTC time>.mcap)")
     replay.add_argument("--strict", action="store_true", help="exit 1 if any reply differs")
     replay.add_argument("--quiet", "-q", action="store_true", help="print only the result line")
+    replay.add_argument("--json", action="store_true",
+                        help="at the end, one JSON object on stdout: the figures of the result line, the "
+                        "logs, and every difference; a failure is {ok: false, exit, error}")
     replay.set_defaults(handler=run_replay)
-
-
-@contextmanager
-def _stdout() -> Iterator[TextIO]:
-    """stdout for a command's output; a reader that went away (`| head`) ends it quietly.
-
-    After a broken pipe stdout is pointed at /dev/null, so the interpreter's last flush at exit
-    does not fail again (and turn the exit status into 120).
-    """
-    try:
-        yield sys.stdout
-        sys.stdout.flush()
-    except BrokenPipeError:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        os.close(devnull)
-        raise
 
 
 def _print_all(lines: Iterable[str]) -> None:
@@ -127,43 +117,45 @@ def _print_all(lines: Iterable[str]) -> None:
     from choreo.textfit import fit
 
     width = columns()
-    with _stdout() as out:
-        for line in lines:
-            out.write(fit(line, width) + "\n")
+    for line in lines:
+        sys.stdout.write(fit(line, width) + "\n")
 
 
 def run_summary(args: argparse.Namespace) -> int:
     """One summary a log, a blank line between; a log that cannot be read is one line on stderr
-    and the others are still summarised (exit 2 at the end)."""
+    (with --json, its error object in the stream too) and the others are still summarised
+    (exit 2 at the end)."""
+    from choreo.cli.jsonout import error_record
+    from choreo.cli.terminal import columns
     from choreo.errors import ChoreoError
     from choreo.review.summary import render, summarize, summary_record
-
-    from choreo.cli.terminal import columns
     from choreo.textfit import fit
 
     failed = 0
     width = columns()
-    with _stdout() as out:
-        for number, path in enumerate(_logs_in(args.log)):
-            try:
-                summary = summarize(path)
-            except ChoreoError as exc:
-                failed += 1
-                print(str(exc), file=sys.stderr)
-                continue
+    out = sys.stdout
+    for number, path in enumerate(_logs_in(args.log)):
+        try:
+            summary = summarize(path)
+        except ChoreoError as exc:
+            failed += 1
+            print(str(exc), file=sys.stderr)
             if args.json:
-                out.write(json.dumps(summary_record(summary), separators=(",", ":")) + "\n")
-            else:
-                out.write(("\n" if number else "") + "\n".join(fit(line, width) for line in render(summary)) + "\n")
-            out.flush()
+                out.write(json.dumps({**error_record(exc), "log": str(path)}, ensure_ascii=False) + "\n")
+            continue
+        if args.json:
+            out.write(json.dumps(summary_record(summary), separators=(",", ":")) + "\n")
+        else:
+            out.write(("\n" if number else "") + "\n".join(fit(line, width) for line in render(summary)) + "\n")
+        out.flush()
     return 2 if failed else 0
 
 
 def run_latest(args: argparse.Namespace) -> int:
-    if not Path(args.dir).is_dir():
-        raise UsageError(f"{args.dir}: no such folder (`choreo run` writes its logs to runs/)")
-    logs = _logs_in([args.dir])
-    print(max(logs, key=lambda p: (p.stat().st_mtime, p.name)))
+    logs = _folder_logs(Path(args.dir))
+    if not logs:
+        raise UsageError(f"{visible(args.dir)}: no .mcap logs in this folder")
+    print(logs[-1])
     return 0
 
 
@@ -172,14 +164,39 @@ def _logs_in(given: list[str]) -> list[Path]:
     logs: list[Path] = []
     for name in given:
         path = Path(name)
-        if path.is_dir():
-            found = sorted(path.glob("*.mcap"), key=lambda p: (p.stat().st_mtime, p.name))
-            if not found:
-                raise UsageError(f"{path}: no .mcap logs in this folder")
-            logs += found
-        else:
-            logs.append(path)
+        if not _is_folder(path):
+            logs.append(path)  # the log reader says what is wrong with anything that is not a log
+            continue
+        found = _folder_logs(path)
+        if not found:
+            raise UsageError(f"{visible(name)}: no .mcap logs in this folder")
+        logs += found
     return logs
+
+
+def _is_folder(path: Path) -> bool:
+    try:
+        return stat.S_ISDIR(os.stat(path).st_mode)
+    except (OSError, ValueError):
+        return False
+
+
+def _folder_logs(folder: Path) -> list[Path]:
+    """The regular `*.mcap` files in `folder`, oldest first (by modification time, then name).
+
+    A link to nothing, a loop of links, a pipe or a folder named `x.mcap` is not a log and is
+    passed over; a folder that cannot be listed is an `InputError` saying why, never "no logs".
+    """
+    from choreo.userfile import listing, regular_size_and_time
+
+    logs = []
+    for path in listing(folder, "log folder"):
+        if not path.name.endswith(".mcap") or path.name.startswith("."):
+            continue
+        facts = regular_size_and_time(path)
+        if facts is not None:
+            logs.append((facts[1], path.name, path))
+    return [path for _, _, path in sorted(logs)]
 
 
 def run_frames(args: argparse.Namespace) -> int:
@@ -194,8 +211,31 @@ def run_frames(args: argparse.Namespace) -> int:
             known = f"its robots: {', '.join(robots)}" if robots else "it is a one-robot log"
             raise UsageError(f"--robot {args.robot}: not a robot of this log"
                              f"{did_you_mean(args.robot, robots)}; {known}")
-        _print_all(frame_lines(reader, step=args.step, kind=args.kind, robot=args.robot))
+        if args.json:
+            _print_frames_json(reader, args)
+        else:
+            _print_all(frame_lines(reader, step=args.step, kind=args.kind, robot=args.robot))
     return 0
+
+
+def _print_frames_json(reader, args: argparse.Namespace) -> None:  # type: ignore[no-untyped-def]
+    """One object, printed once the whole log is read: a log that turns out not to be choreo's
+    half-way is the failure object alone, never half an object and then another."""
+    from choreo.logformat import TX_TOPIC, LogLayouts
+    from choreo.review.export import row
+    from choreo.review.frames import exchanges, matches
+
+    layouts = LogLayouts.of(reader.run_info)
+    records = []
+    for exchange in exchanges(reader):
+        if not matches(exchange, args.step, args.kind, args.robot):
+            continue
+        try:
+            records.append(row(exchange, layouts))
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise reader.not_choreo(TX_TOPIC, exchange.seq, exc) from None
+    cut = {"state": reader.cut.state, "reason": str(reader.cut)} if reader.cut is not None else None
+    print(json.dumps({"ok": True, "log": str(reader.path), "frames": records, "cut": cut}, ensure_ascii=False))
 
 
 def run_timeline(args: argparse.Namespace) -> int:
@@ -239,7 +279,7 @@ def run_export(args: argparse.Namespace) -> int:
     if sum(1 for _, value in targets if value == "-") > 1:
         raise UsageError("log export: only one of --csv, --json and --jsonl can go to stdout ('-')")
     sink_of = {"csv": CsvSink, "json": JsonSink, "jsonl": JsonLinesSink}
-    with LogReader(args.log) as reader, _stdout(), ExitStack() as files:
+    with LogReader(args.log) as reader, ExitStack() as files:
         sinks = []
         for name, value in targets:
             out = sys.stdout if value == "-" else files.enter_context(_output(value, f"log export --{name}"))
@@ -299,6 +339,8 @@ def _discard(file: IO, created: Path | None) -> None:
 def run_replay(args: argparse.Namespace) -> int:
     from choreo.review.replay import replay
 
+    say = not args.quiet and not args.json
+
     def started(report) -> None:
         if not args.quiet:
             note = f" (simulator without the show's durations: {report.show_note})" if report.show_note else ""
@@ -307,22 +349,35 @@ def run_replay(args: argparse.Namespace) -> int:
                 print(f"note: {report.speed_note}", file=sys.stderr)
             print(f"log: {report.log_path}", file=sys.stderr)
 
-    with _stdout() as out:
-        def differs(difference) -> None:
-            if not args.quiet:
-                out.write(f"differs: {difference}\n")
-                out.flush()
+    def differs(difference) -> None:
+        if say:
+            sys.stdout.write(f"differs: {difference}\n")
+            sys.stdout.flush()
 
-        report = replay(args.log, port=args.port, speed=args.speed, baud=args.baud, timeout=args.timeout,
-                        log_path=args.new_log, on_difference=differs, on_start=started, layout=args.layout,
-                        time_source=args.time_source)
-        unmatched = f", {report.unmatched} with no recorded reply" if report.unmatched else ""
-        cut = f"; the recorded log is {report.cut.state}: {report.cut.reason}" if report.cut else ""
-        late = f", {report.replay_late} sent late by the replay" if report.replay_late else ""
-        timing = (f" ({report.excused} of them status polls at a motion's end{late})"
-                  if report.excused else "")
-        out.write(f"replayed {report.frames} frames: {report.same} same, {report.different} differ{timing}"
-                  f"{unmatched}; frames left up to {report.max_lag_ms:.1f} ms after their recorded time"
-                  f"{cut}\n")
-        out.write(f"log: {report.log_path}\n")
-    return 1 if args.strict and report.board_differences else 0
+    report = replay(args.log, port=args.port, speed=args.speed, baud=args.baud, timeout=args.timeout,
+                    log_path=args.new_log, on_difference=differs, on_start=started, layout=args.layout,
+                    time_source=args.time_source)
+    code = 1 if args.strict and report.board_differences else 0
+    if args.json:
+        print(json.dumps(_replay_record(report, code), ensure_ascii=False))
+        return code
+    unmatched = f", {report.unmatched} with no recorded reply" if report.unmatched else ""
+    cut = f"; the recorded log is {report.cut.state}: {report.cut.reason}" if report.cut else ""
+    late = f", {report.replay_late} sent late by the replay" if report.replay_late else ""
+    timing = (f" ({report.excused} of them status polls at a motion's end{late})"
+              if report.excused else "")
+    print(f"replayed {report.frames} frames: {report.same} same, {report.different} differ{timing}"
+          f"{unmatched}; frames left up to {report.max_lag_ms:.1f} ms after their recorded time{cut}")
+    print(f"log: {report.log_path}")
+    return code
+
+
+def _replay_record(report, code: int) -> dict:  # type: ignore[no-untyped-def]  # ReplayReport: imported lazily
+    """`replay --json`: the result line's figures, both logs and every difference in words."""
+    cut = {"state": report.cut.state, "reason": report.cut.reason} if report.cut else None
+    return {"ok": code == 0, "exit": code, "log": str(report.source), "replay_log": str(report.log_path),
+            "port": report.port, "speed": report.speed, "frames": report.frames, "same": report.same,
+            "different": report.different, "excused": report.excused, "replay_late": report.replay_late,
+            "board_differences": report.board_differences, "unmatched": report.unmatched,
+            "max_lag_ms": round(report.max_lag_ms, 3), "cut": cut,
+            "differences": [str(d) for d in report.differences]}

@@ -25,7 +25,6 @@ Attachment, Metadata, Data End; everything else is skipped, as the spec allows).
 from __future__ import annotations
 
 import os
-import stat
 import struct
 import zlib
 from collections.abc import Collection, Iterator
@@ -33,10 +32,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-from choreo.errors import LogError
+from choreo.errors import InputError, LogError
 from choreo.logformat import CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME, base_topic
+from choreo.userfile import open_input
 
 MAGIC = b"\x89MCAP0\r\n"
+LOG_WHAT = "run log"  # what a file given as a log should be, in messages
 
 OP_HEADER = 0x01
 OP_FOOTER = 0x02
@@ -125,11 +126,9 @@ class LogReader:
         self._head_cut: Cut | None = None  # a damaged record before the first message
         self._file: IO[bytes] | None = None
         try:
-            if not stat.S_ISREG(os.stat(self.path).st_mode):  # a FIFO would block the open
-                raise LogError(f"log {self.path}: not a regular file: give the .mcap file a run wrote")
-            self._file = open(self.path, "rb", buffering=256 * 1024)
-        except OSError as exc:
-            raise LogError(f"log {self.path}: cannot open: {exc.strerror or exc}") from None
+            self._file = open_input(self.path, LOG_WHAT)  # a pipe, a device, a loop: one line
+        except InputError as exc:
+            raise self._fail(exc.reason) from None
         try:
             self._size = os.fstat(self._file.fileno()).st_size
             self._read_head()
@@ -165,12 +164,12 @@ class LogReader:
 
     def attachment_data(self, attachment: Attachment) -> bytes:
         """An attachment's bytes (read now: a log's attachments never sit in memory unasked)."""
-        try:
-            with open(self.path, "rb") as f:
+        with open_input(self.path, LOG_WHAT) as f:
+            try:
                 f.seek(attachment.offset)
-                return f.read(attachment.size)
-        except OSError as exc:
-            raise self._fail(f"cannot read attachment {attachment.name}: {exc.strerror or exc}") from None
+            except OSError as exc:
+                raise self._fail(f"cannot read attachment {attachment.name}: {exc.strerror or exc}") from None
+            return f.read(attachment.size)
 
     def show_source(self) -> bytes | None:
         attachment = self.show_attachment()

@@ -13,6 +13,7 @@ from enum import Enum
 from pathlib import Path
 
 from choreo.protocol import Frame
+from choreo.textfit import is_hidden
 
 DEFAULT_MOTION_S = 1.0  # a motion's expected length when the show does not say (the simulator's default)
 DEFAULT_DONE_TIMEOUT_S = 60.0  # `wait: done` gives up after this long unless the step says otherwise
@@ -29,9 +30,21 @@ def is_motion_name(name: str) -> bool:
     name stays one word that reads the same in a step, a message and a log. Length is the
     schema's to check (`MOTION_NAME_MAX`), so that a long name gets its own message.
     """
-    if not name or not (name[0] == "_" or _is_letter(name[0])):
+    if not name or not (name[0] == "_" or _is_letter(name[0])) or hidden_character(name) is not None:
         return False
     return all(ch in "_-" or _is_letter(ch) or unicodedata.category(ch) in _NAME_TAIL for ch in name[1:])
+
+
+def hidden_character(text: str) -> str | None:
+    """The first character of `text` no one reading it could see or trust, if any: a control,
+    a line break, a bidi override, a zero-width or otherwise invisible character
+    (`choreo.textfit.is_hidden`), a private-use or unassigned one. A show's name, a label or an
+    `hth4_name` is shown to people: one holding such a character is refused where it is written
+    (`choreo validate`) and cleaned where it is made (`choreo import`)."""
+    return next((ch for ch in text if is_hidden(ch) or unicodedata.category(ch) in _UNKNOWN), None)
+
+
+_UNKNOWN = frozenset(("Co", "Cn"))  # private use, unassigned
 
 
 _NAME_TAIL = frozenset(("Mn", "Mc", "Nd"))  # combining marks, decimal digits

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from choreo.hth4 import LAYOUT_FIRST_SLOT, Project, ProjectSlot
-from choreo.show.model import MOTION_NAME_MAX, is_motion_name
+from choreo.show.model import MOTION_NAME_MAX, hidden_character, is_motion_name
 
-NAME_MAX = 200  # characters of a show's `name` (the schema's maxLength)
+NAME_MAX = 200  # characters of a show's `name` and of an `hth4_name` (the schema's maxLength)
 
 # Words some YAML reader takes for true, false or nothing when written plain.
 _YAML_WORDS = frozenset(("y", "n", "yes", "no", "true", "false", "on", "off", "null"))
@@ -52,7 +52,7 @@ def starter_motions(slots: tuple[ProjectSlot, ...]) -> list[StarterMotion]:
         while key in keys:
             key += "_"
         keys.add(key)
-        motions.append(StarterMotion(key, slot.number, slot.name or None))
+        motions.append(StarterMotion(key, slot.number, _one_line(slot.name)[:NAME_MAX].strip() or None))
     return motions
 
 
@@ -140,6 +140,9 @@ def _show_name(title: str | None) -> str | None:
 
 
 def _one_line(text: str) -> str:
-    """Control characters and line breaks as spaces, runs of spaces as one."""
-    spaced = "".join(" " if unicodedata.category(ch) in ("Cc", "Zl", "Zp") else ch for ch in text)
-    return " ".join(spaced.split())
+    """`text` as `choreo validate` takes a name (`hidden_character`): control characters and
+    line breaks as spaces, runs of spaces as one, and what cannot be seen or would reorder the
+    letters around it (bidi overrides, zero-width characters) left out."""
+    kept = "".join(" " if unicodedata.category(ch) in ("Cc", "Zl", "Zp") else "" if hidden_character(ch) else ch
+                   for ch in text)
+    return " ".join(kept.split())

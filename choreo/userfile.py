@@ -1,0 +1,156 @@
+"""Opening a file a user named: a show, a project, a song, a log. The one way choreo does it.
+
+A name on the command line or in a show may be anything: a folder, a named pipe (an open
+would wait for a writer for ever), a device (`/dev/zero` never ends; opening a serial port
+toggles its lines), a link to nothing or a loop of links, a name the system refuses as too
+long, a file too big to hold in memory. Each gets one line that says what it is, as an
+`InputError` (exit 2), before anything reads it.
+
+The name is looked at first (`os.stat`, which never opens anything), then opened without
+blocking and looked at again through the open descriptor (`fstat`), so that a file swapped
+between the two looks is still never a pipe or a device. A read that fails later (a disk
+error, `/proc/self/mem`) is an `InputError` too, saying it could not be *read*: a failure to
+write the output is a different message (`choreo.cli.output`).
+"""
+
+from __future__ import annotations
+
+import errno
+import io
+import os
+import stat
+from pathlib import Path
+
+from choreo.errors import InputError
+
+_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a named pipe"), (stat.S_ISCHR, "a device"),
+          (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket"))
+_OPEN_FLAGS = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_BINARY", 0)
+
+
+def kind_of(mode: int) -> str:
+    """`a folder`, `a named pipe`, `a device`...: what a non-regular file is, in words."""
+    return next((name for test, name in _KINDS if test(mode)), "not a file")
+
+
+def size_text(count: int) -> str:
+    """`16 MiB`, `256 KiB`: a size limit as a user reads it."""
+    if count >= 1024 * 1024 and count % (1024 * 1024) == 0:
+        return f"{count // (1024 * 1024)} MiB"
+    return f"{count // 1024} KiB" if count >= 1024 and count % 1024 == 0 else f"{count} bytes"
+
+
+def problem(path: str | os.PathLike[str], what: str, limit: int | None = None) -> str | None:
+    """Why `path` cannot be read as a `what` (`show file`, `song`), in words; None if it can.
+
+    For a file another library opens by name (a song miniaudio decodes): the name is checked
+    here first, so that its failure is not a bare decoder code or a hang.
+    """
+    try:
+        open_input(path, what, limit).close()
+    except InputError as exc:
+        return exc.reason
+    return None
+
+
+def open_input(path: str | os.PathLike[str], what: str, limit: int | None = None) -> io.BufferedReader:
+    """`path` open for reading if it is a regular file of at most `limit` bytes; `InputError`
+    (exit 2, one line naming the file and `what` it should be) if not. A read of the returned
+    file that fails raises `InputError` too."""
+    name = os.fspath(path)
+    try:
+        _check_mode(name, os.stat(name).st_mode, what)
+        fd = os.open(name, _OPEN_FLAGS)
+    except OSError as exc:
+        raise InputError(name, _os_reason(name, exc, what)) from None
+    try:
+        info = os.fstat(fd)
+        _check_mode(name, info.st_mode, what)
+        if limit is not None and info.st_size > limit:
+            raise InputError(name, f"the file is over {size_text(limit)}, too big for a {what}")
+        os.set_blocking(fd, True)
+        raw = _RawInput(fd, name, what)
+    except BaseException:
+        os.close(fd)
+        raise
+    return io.BufferedReader(raw, buffer_size=256 * 1024)
+
+
+def read_input(path: str | os.PathLike[str], what: str, limit: int) -> bytes:
+    """The whole of `path` (see `open_input`), at most `limit` bytes: a file that grew past
+    `limit` since it was looked at is refused too, never read on without end."""
+    name = os.fspath(path)
+    with open_input(name, what, limit) as stream:
+        data = stream.read(limit + 1)
+    if len(data) > limit:
+        raise InputError(name, f"the file is over {size_text(limit)}, too big for a {what}")
+    return data
+
+
+def _check_mode(name: str, mode: int, what: str) -> None:
+    if not stat.S_ISREG(mode):
+        raise InputError(name, f"not a regular file ({kind_of(mode)}): give a {what}")
+
+
+# What the system's words for these errors mean to someone who named a file.
+_OS_REASONS = {errno.ELOOP: "a loop of symbolic links", errno.ENAMETOOLONG: "the name is too long for this system"}
+
+
+def _os_reason(name: str, exc: OSError, what: str) -> str:
+    """What an `os.stat` or `os.open` error means for the user who named the file."""
+    if exc.errno == errno.ENOENT and os.path.islink(name):
+        why = f"it is a link to {_link_target(name)}, which does not exist"
+    else:
+        why = _OS_REASONS.get(exc.errno or 0, exc.strerror or str(exc))
+    return f"cannot read the {what}: {why}"
+
+
+def _link_target(name: str) -> str:
+    from choreo.textfit import visible
+
+    try:
+        return repr(visible(os.readlink(name)))
+    except OSError:
+        return "nothing"
+
+
+class _RawInput(io.FileIO):
+    """A file whose failed reads say they failed reading it (not writing the output)."""
+
+    def __init__(self, fd: int, name: str, what: str) -> None:
+        super().__init__(fd, "rb", closefd=True)
+        self._label = name
+        self._what = what
+
+    def readinto(self, buffer) -> int | None:  # type: ignore[no-untyped-def, override]
+        try:
+            return super().readinto(buffer)
+        except OSError as exc:
+            raise InputError(self._label, f"cannot read the {self._what}: {exc.strerror or exc}") from None
+
+    def readall(self) -> bytes:
+        try:
+            return super().readall()
+        except OSError as exc:
+            raise InputError(self._label, f"cannot read the {self._what}: {exc.strerror or exc}") from None
+
+
+def listing(folder: str | os.PathLike[str], what: str = "folder") -> list[Path]:
+    """The entries of a folder the user named; `InputError` if it cannot be listed (not there,
+    not a folder, not readable), never "nothing in it"."""
+    name = os.fspath(folder)
+    try:
+        with os.scandir(name) as entries:
+            return [Path(entry.path) for entry in entries]
+    except OSError as exc:
+        raise InputError(name, _os_reason(name, exc, what)) from None
+
+
+def regular_size_and_time(path: Path) -> tuple[int, float] | None:
+    """(size, modification time) of a regular file reached from `path` (links followed); None
+    for anything else: a link to nothing, a loop, a folder, a pipe, a device, a name too long."""
+    try:
+        info = path.stat()
+    except (OSError, ValueError):
+        return None
+    return (info.st_size, info.st_mtime) if stat.S_ISREG(info.st_mode) else None
