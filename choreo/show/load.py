@@ -532,8 +532,6 @@ def _tag(tag: str) -> str:
 
 def _is_empty(event: yaml.Event) -> bool:
     return isinstance(event, yaml.ScalarEvent) and event.value == "" and event.implicit[0] and event.tag is None
-    if _too_deep(text, report):
-        return None
 
 
 def _parse(text: str, report: _Report) -> _Doc | None:
@@ -547,6 +545,8 @@ def _parse(text: str, report: _Report) -> _Doc | None:
         report.add((line, column), "", f"character U+{ord(stand_in):04X} (private use) is not allowed in a show file")
         return None
     text = text.translate(_HIDE_BREAKS)
+    if _too_deep(text, report):
+        return None
     try:
         try:
             for event in yaml.parse(text, Loader=_Parser):
