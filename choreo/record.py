@@ -48,7 +48,8 @@ from choreo import __version__
 from choreo.errors import LogError
 from choreo.limits import UNLOGGED
 from choreo.logformat import (CLOCK_TOPIC, COMMAND_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC, STEP_TOPIC,
-                              TX_TOPIC, ClockRecord, CommandRecord, LogRecord, RxRecord, TxRecord, channels_for, robot_topic)
+                              TX_TOPIC, ClockRecord, CommandRecord, LogRecord, RxRecord, TxRecord, channels_for, layout_key,
+                              robot_topic)
 
 if TYPE_CHECKING:
     from choreo.link import RxEvent, TxEvent
@@ -126,7 +127,7 @@ class RunInfo:
         named = {"robots": ",".join(robot.name for robot in self.robots), "unison": "yes" if self.unison else "no"}
         for robot in self.robots:
             named.update({f"robot.{robot.name}.port": robot.port, f"robot.{robot.name}.baud": str(robot.baud),
-                          f"robot.{robot.name}.layout": robot.layout})
+                          layout_key(robot.name): robot.layout})
         return named
 
     def _run(self) -> dict[str, str]:
@@ -137,7 +138,7 @@ class RunInfo:
             "show_sha256": hashlib.sha256(self.show_source).hexdigest(),
             "port": self.port,
             "baud": str(self.baud),
-            "layout": self.layout,
+            layout_key(None): self.layout,
             "start_time": _iso(self.start_ns),
             "start_ns": str(self.start_ns),
             "host": socket.gethostname(),
