@@ -277,7 +277,7 @@ class Link:
                 self.moved = True
                 if frame is frames[0]:
                     began = self.last_tx_mono
-                start_sent = self.last_write_end
+                start_at, start_sent = self.last_tx_mono, self.last_write_end  # the last frame's: the start
                 if not reply.ok:
                     break
             else:
@@ -291,7 +291,7 @@ class Link:
                 if state.started:
                     lost = f"the reply to '{what}' ({frame.kind.value} frame) was lost ({reply.describe()})"
                     return Played(attempt, began, recovered=_not_sent_again(lost, motion, state),
-                                  started=self.last_tx_mono)
+                                  started=start_at)
                 # The state's answer came after any late reply: the line is idle for the retry.
             elif attempt < self.tries and not self._settle(reply, tag, what):
                 raise self._failed(what, frame, reply, tag, attempt, silent=True)

@@ -43,6 +43,8 @@ def test_a_lost_start_reply_with_the_motion_running_is_a_play_done(lost, answer)
     played = link.play(3, Tag(0))
     assert played.recovered and "'play 3' (restore frame) was lost" in played.recovered
     assert "shows motion 3 running: it was not sent again" in played.recovered
+    # when the motion started: the restore's write, not the read 50 ms later (the last write)
+    assert played.began < played.started <= link.last_tx_mono - 0.05
     assert played.tries == 1
     assert kinds(events) == ["stop", "play", "restore", "read"]
     assert kinds(events).count("play") == 1  # one CALL: the motion started once
