@@ -41,8 +41,9 @@ What it models, following the spec and its errata:
   address outside the modelled RAM gets a NAK `04 CMD 15 SUM`. Bytes that cannot be a frame at
   all (a size byte below 3 or above 128) get a NAK with the command byte that followed, or 00.
 - The status refresh covers RAM 0x0000-0x000B (the config word and the program state, what
-  both layouts' status reads look at): the sources only say the status is refreshed every
-  50 ms, so the cautious model shows the program state as late as the config word.
+  both layouts' status reads and the link's read after a lost start reply look at): the sources
+  only say the status is refreshed every 50 ms, so the cautious model shows the program state
+  as late as the config word.
 - `baud_switch`: a config write whose COM baud bits (7-6) name another baud switches the
   board to it at once, its ACK included (lost to a client at the old baud). Kondo does not
   document what a board does; this is the worst case.
