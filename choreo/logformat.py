@@ -441,6 +441,12 @@ class LogLayouts:
         """The log does not say: seed is assumed."""
         return not self.recorded.get(robot, "")
 
+    def describe(self, robot: str | None) -> str:
+        """`hth4-2.2`, or the name with why it is not simply the recorded one."""
+        if self.assumed(robot):
+            return f"{DEFAULT_LAYOUT} (not recorded: assumed)"
+        return self.name(robot) if self.layout(robot) is not None else f"{self.name(robot)!r} (unknown)"
+
     def notes(self, robots: list[str]) -> list[str]:
         """What a review says of the layouts it read the frames with, where the log did not
         record one or recorded one this choreo does not know."""

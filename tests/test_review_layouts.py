@@ -290,3 +290,16 @@ def test_the_first_show_time_that_is_a_number_fixes_zero(tmp_path):
         times = ShowTimes.of(reader)
     assert times.anchored and times.seconds(10**18 + 4_000_000) == pytest.approx(1.0)
     assert times.seconds(10**18 + 1_000_000) == pytest.approx(0.997)  # the frame before: before zero
+
+
+def test_summary_names_each_robots_layout_and_an_assumed_one(logs, tmp_path, capsys):
+    assert vmain(["log", "summary", str(logs["mixed"])]) == 0
+    out = capsys.readouterr().out
+    assert "robot left: " in out and ", layout hth4-2.2; " in out and ", layout seed; " in out
+    old = _hostile_log(tmp_path / "old.mcap", 0.0)
+    with LogReader(old) as reader:
+        reader.metadata["choreo"].pop("layout")  # as a log from before layouts were recorded
+        from choreo.review.summary import render, summarize_reader
+
+        lines = list(render(summarize_reader(reader)))
+    assert any(", layout seed (not recorded: assumed) " in line for line in lines if line.startswith("run "))

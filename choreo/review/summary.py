@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from choreo.logformat import (CHOREO_TOPICS, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING,
-                              ClockRecord, CommandRecord, LogRecord, MotionPlay, MotionTracker, RxRecord, StepRecord, TxRecord, is_late,
-                              parse, slipped)
+                              ClockRecord, CommandRecord, LogLayouts, LogRecord, MotionPlay, MotionTracker, RxRecord, StepRecord, TxRecord,
+                              is_late, parse, slipped)
 from choreo.review.reader import Cut, LogReader
 from choreo.review.showtime import ShowTimes
 FRAME_KINDS = ("stop", "play", "restore", "status")
@@ -340,7 +340,7 @@ class _Part:
     def named(cls, reader: LogReader, robot: str, whole: _Tally) -> _Part:
         run = {"port": reader.run_info.get(f"robot.{robot}.port", "?"),
                "baud": reader.run_info.get(f"robot.{robot}.baud", "?"),
-               "layout": reader.run_info.get(f"robot.{robot}.layout", "?")}
+               "layout": LogLayouts.of(reader.run_info).name(robot)}
         return cls(Summary(reader.path, run, None, False, None), _Tally(whole.times), MotionTracker())
 
     def see(self, topic: str, record, log_time: int, whole: _Tally) -> None:  # type: ignore[no-untyped-def]
@@ -532,7 +532,8 @@ def render(summary: Summary) -> Iterable[str]:
                f"ports below) (choreo {run.get('version', '?')}, host {run.get('host', '?')})")
     elif run:
         yield (f"run       started {run.get('start_time', '?')} on {run.get('port', '?')} at "
-               f"{run.get('baud', '?')} baud (choreo {run.get('version', '?')}, host {run.get('host', '?')})")
+               f"{run.get('baud', '?')} baud, layout {LogLayouts.of(run).describe(None)} "
+               f"(choreo {run.get('version', '?')}, host {run.get('host', '?')})")
     else:
         yield "run       no `choreo` metadata: not a log written by choreo run"
     duration = f"{summary.duration_s:.3f} s" if summary.duration_s is not None else "-"
@@ -653,7 +654,8 @@ def _render_robots(summary: Summary) -> Iterable[str]:
         late = f", {robot.steps_late} late" if robot.steps_late else ""
         failed = f", {robot.steps_failed} failed" if robot.steps_failed else ""
         aborted = f", {robot.steps_aborted} aborted" if robot.steps_aborted else ""
-        yield (f"robot {name}: {run.get('port', '?')} at {run.get('baud', '?')} baud, layout {run.get('layout', '?')}; "
+        yield (f"robot {name}: {run.get('port', '?')} at {run.get('baud', '?')} baud, "
+               f"layout {LogLayouts.of(summary.run).describe(name)}; "
                f"{robot.steps_run} steps{late}{failed}{aborted}, {robot.frames_sent} frames, {robot.retries} retries, "
                f"{robot.plays_total} plays")
         lat, cues = robot.latency, robot.lateness
