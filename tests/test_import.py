@@ -22,9 +22,11 @@ from hypothesis import strategies as st
 
 import choreo.hth4
 from choreo.cli import main
-from choreo.hth4 import LAYOUT_FIRST_SLOT, read_project
+from choreo.errors import ShowError
+from choreo.hth4 import LAYOUT_FIRST_SLOT, parse_project, read_project
 from choreo.show.load import load_show, load_show_bytes
-from choreo.show.starter import yaml_key, yaml_text
+from choreo.show.model import hidden_character
+from choreo.show.starter import starter_show, yaml_key, yaml_text
 
 SLOT_SIZE = 2048
 PACKET = "0a 00 20 00 00 00 02 00 0a 36"  # one instruction packet, as HTH4 stores it (hex text)
@@ -150,7 +152,7 @@ def test_names_yaml_would_read_as_something_else_survive(tmp_path, capsys):
     assert {n: m.number for n, m in show.motions.items()} == {"yes": 1, "Null": 2, "on": 3, "motion_4": 4, "motion_5": 5, "motion_6": 6, "motion_7": 7, "motion_8": 8}
     assert show.steps[0].motion_name == "yes"
     kept = {m["number"]: m.get("hth4_name") for m in yaml.safe_load(text)["motions"].values()}
-    assert kept == {1: None, 2: None, 3: None, 4: "1e3", 5: "a: b", 6: ' "q" \\ #x ', 7: "tab\there", 8: "line\u2028break"}
+    assert kept == {1: None, 2: None, 3: None, 4: "1e3", 5: "a: b", 6: '"q" \\ #x', 7: "tab here", 8: "line break"}
 
 
 def test_keys_stay_unique_when_names_repeat_or_look_derived(tmp_path, capsys):
@@ -239,7 +241,7 @@ BILLION_LAUGHS = (
 
 BAD = {
     "not XML": (b"Number,Name,Address\n0,home,2944\n", "not a Heart to Heart 4 project (not XML: "),
-    "binary": (bytes(range(256)), "not a Heart to Heart 4 project (not XML: "),
+    "binary": (bytes(range(256)), "not a Heart to Heart 4 project: byte 128 (0x80) is not utf-8 text"),
     "empty": (b"", "not a Heart to Heart 4 project (not XML: "),
     "another root": (b"<?xml version='1.0'?><Project><MotionDataCollection/></Project>", "the root element is <Project>, not <Rcb4>"),
     "no collection": (b"<Rcb4><ProjectTitle>x</ProjectTitle></Rcb4>", "<Rcb4> has no <MotionDataCollection>"),
@@ -279,8 +281,10 @@ def test_a_bad_project_is_exit_2_in_one_line(tmp_path, capsys, case):
 
 
 def test_a_missing_file_and_a_directory_are_exit_2(tmp_path, capsys):
-    assert_one_line_exit_2(capsys, ["import", str(tmp_path / "nope.h4p")], "cannot read the project: No such file or directory")
-    assert_one_line_exit_2(capsys, ["import", str(tmp_path)], "cannot read the project: Is a directory")
+    assert_one_line_exit_2(capsys, ["import", str(tmp_path / "nope.h4p")],
+                           "cannot read the Heart to Heart 4 project: No such file or directory")
+    assert_one_line_exit_2(capsys, ["import", str(tmp_path)],
+                           "not a regular file (a folder): give a Heart to Heart 4 project")
 
 
 def test_a_file_over_the_cap_is_refused_before_parsing(tmp_path, capsys, monkeypatch):
@@ -302,3 +306,147 @@ def test_a_valid_project_still_reads_after_the_bad_ones(tmp_path):
 def test_any_text_reads_back_as_itself(text):
     assert yaml.safe_load(f"k: {yaml_text(text)}\n") == {"k": text}
     assert yaml.safe_load(f"{yaml_key(text)}: 1\n") == {text: 1}
+
+
+# ------------------------------------------------------------------ encodings (issue 21, item 6)
+
+NIHONGO = [Slot(0, "ホームポジション"), Slot(3, "歩く（前）→"), Slot(4, "歩く"), Slot(5, "①礼～")]
+
+
+def encoded(slots: list[Slot], codec: str, declared: str | None) -> bytes:
+    """The project as HTH4 on a Japanese Windows saves it: the text in `codec`, the XML
+    declaration naming `declared` (None: no encoding in the declaration)."""
+    text = project_xml(slots).decode("utf-8")
+    text = text.replace(' encoding="utf-8"', f' encoding="{declared}"' if declared else "")
+    return text.encode(codec)
+
+
+def names_of(capsys, path: Path) -> dict[int, str]:
+    text = imported(capsys, path)
+    show = load_show_bytes(text.encode("utf-8"), "imported.yaml")
+    assert show.name == "KXR デモ"
+    return {m["number"]: m.get("hth4_name", key) for key, m in yaml.safe_load(text)["motions"].items()}
+
+
+@pytest.mark.parametrize("codec, declared", [
+    ("cp932", "Shift_JIS"),  # what .NET writes: code page 932 under the name Shift_JIS
+    ("cp932", "shift_jis"),
+    ("cp932", "CP932"),
+    ("cp932", "Windows-31J"),
+    ("euc_jp", "EUC-JP"),
+    ("utf-8", None),
+    ("utf-8-sig", "utf-8"),
+    ("utf-8-sig", None),
+    ("utf-16", "utf-16"),  # with its byte order mark
+    ("utf-16-be", None),  # without one: read from where the `<` falls
+    ("utf-16-le", None),
+])
+def test_japanese_names_survive_every_encoding_a_project_comes_in(tmp_path, capsys, codec, declared):
+    slots = NIHONGO if codec != "euc_jp" else NIHONGO[:3]  # EUC-JP has no ① (a Windows character)
+    path = write_project(tmp_path, encoded(slots, codec, declared))
+    assert names_of(capsys, path) == {s.number: s.name for s in slots}
+
+
+def test_plain_shift_jis_reads_too(tmp_path, capsys):
+    slots = [Slot(0, "ホームポジション"), Slot(4, "歩く")]
+    path = write_project(tmp_path, encoded(slots, "shift_jis", "Shift_JIS"))
+    assert names_of(capsys, path) == {0: "ホームポジション", 4: "歩く"}
+
+
+@pytest.mark.parametrize("declared, says", [
+    ("bogus", "declares encoding 'bogus', which choreo cannot read"),
+    ("rot13", "declares encoding 'rot13', which choreo cannot read"),  # a Python codec, not a charset
+    ("base64", "declares encoding 'base64', which choreo cannot read"),
+    ("unicode_escape", "declares encoding 'unicode_escape', which choreo cannot read"),
+    ("x" * 300, "which choreo cannot read"),
+    ("Shift_JIS\x1b[2J", "declares encoding 'Shift_JIS\\x1b[2J', which choreo cannot read"),
+    ("utf-16", "declares encoding 'utf-16' but has no byte order mark"),
+])
+def test_an_encoding_choreo_cannot_read_is_one_line(tmp_path, capsys, declared, says):
+    path = write_project(tmp_path, encoded(NIHONGO, "utf-8", "ENC").replace(b"ENC", declared.encode("latin-1")))
+    err = assert_one_line_exit_2(capsys, ["import", str(path)], says)
+    assert "\x1b" not in err
+
+
+def test_bytes_that_are_not_in_the_declared_encoding_are_one_line(tmp_path, capsys):
+    data = encoded(NIHONGO, "utf-8", "EUC-JP")  # UTF-8 bytes under an EUC-JP label
+    assert_one_line_exit_2(capsys, ["import", str(write_project(tmp_path, data))], "is not euc_jp text")
+
+
+# ------------------------------------------------------------------ files that are not files (item 6)
+
+
+def run_import(*argv: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "choreo", "import", *argv], capture_output=True, text=True,
+                          timeout=30, cwd=Path(__file__).resolve().parent.parent)
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes here")
+def test_a_named_pipe_is_refused_at_once(tmp_path):
+    fifo = tmp_path / "robot.h4p"
+    os.mkfifo(fifo)
+    done = run_import(str(fifo))  # it blocked for ever: the timeout would fail the test
+    assert (done.returncode, done.stdout) == (2, "")
+    assert done.stderr == f"{fifo}: not a regular file (a named pipe): give a Heart to Heart 4 project\n"
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/zero"), reason="no /dev/zero here")
+def test_links_to_devices_to_nothing_and_in_loops_are_one_line(tmp_path, capsys):
+    (tmp_path / "zero.h4p").symlink_to("/dev/zero")
+    (tmp_path / "gone.h4p").symlink_to(tmp_path / "nothing.h4p")
+    (tmp_path / "a.h4p").symlink_to(tmp_path / "b.h4p")
+    (tmp_path / "b.h4p").symlink_to(tmp_path / "a.h4p")
+    for name, says in [("zero.h4p", "not a regular file (a device)"),
+                       ("gone.h4p", "it is a link to '" + str(tmp_path / "nothing.h4p") + "', which does not exist"),
+                       ("a.h4p", "a loop of symbolic links"),
+                       ("x" * 300 + ".h4p", "the name is too long for this system")]:
+        assert_one_line_exit_2(capsys, ["import", str(tmp_path / name)], says)
+
+
+def test_a_read_error_is_a_read_error(capsys):
+    if not os.path.exists("/proc/self/mem"):
+        pytest.skip("no /proc here")
+    assert_one_line_exit_2(capsys, ["import", "/proc/self/mem"], "/proc/self/mem: cannot read the Heart to Heart 4 project: ")
+
+
+# ------------------------------------------------------------------ hostile names (items 4 and 7)
+
+HIDDEN = "\x00\x07\x1b\x7f\x85\x9b\u200b\u200d\u200e\u202a\u202e\u2066\u2069\u2028\u2029\ufeff\ue000\U000e0001"
+
+
+def test_a_bidi_override_in_a_name_is_cleaned_and_validate_refuses_it_raw(tmp_path, capsys):
+    path = write_project(tmp_path, project_xml([Slot(2, "右\u202e手 振る"), Slot(3, "a\u200bb")],
+                                               title="KXR\u202e デモ"))
+    text = imported(capsys, path)
+    assert "\u202e" not in text and "\u200b" not in text
+    show = load_show_bytes(text.encode("utf-8"))
+    assert show.name == "KXR デモ"
+    kept = {m["number"]: m.get("hth4_name") for m in yaml.safe_load(text)["motions"].values()}
+    assert kept == {2: "右手 振る", 3: "ab"}
+    raw = text.replace("右手 振る", "右\u202e手 振る")
+    with pytest.raises(ShowError, match=r"hth4_name: the Heart to Heart 4 name holds U\+202E \(RIGHT-TO-LEFT OVERRIDE\)"):
+        load_show_bytes(raw.encode("utf-8"))
+
+
+def xml_text(text: str) -> str:
+    """`text` as XML 1.0 can hold it: characters it cannot (most C0 controls) as `?`."""
+    return "".join(ch if ch in "\t\n\r" or 0x20 <= ord(ch) <= 0xD7FF or 0xE000 <= ord(ch) <= 0xFFFD
+                   or ord(ch) >= 0x10000 else "?" for ch in text)
+
+
+hostile_text = st.text(st.one_of(st.sampled_from(HIDDEN + "\"'\\:#&*!|>%@`{}[],?- \t\n"), st.characters(blacklist_categories=("Cs",))),
+                       max_size=300)
+
+
+@settings(max_examples=150, deadline=None, derandomize=True)
+@given(names=st.lists(hostile_text, min_size=1, max_size=8), title=hostile_text)
+def test_any_names_import_as_a_show_that_validates(names, title):
+    slots = [Slot(n, xml_text(name)) for n, name in enumerate(names)]
+    project = parse_project(project_xml(slots, title=xml_text(title)), "hostile.h4p")
+    text = starter_show(project)
+    show = load_show_bytes(text.encode("utf-8"), "hostile.yaml")  # raises ShowError if validate would
+    assert sorted(m.number for m in show.motions.values()) == list(range(len(names)))
+    assert len(set(show.motions)) == len(names)
+    for name, motion in yaml.safe_load(text)["motions"].items():
+        for shown in (name, motion.get("hth4_name", "")):
+            assert hidden_character(shown) is None and len(shown) <= 200

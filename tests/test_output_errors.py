@@ -1,9 +1,15 @@
 """An output that cannot be written (issue 11, item 3): one line and exit 2, never a traceback;
-a reader that went away (a closed pipe) ends the command quietly."""
+a reader that went away (a closed pipe) ends the command quietly. A file that cannot be read is
+said to be unreadable, never "cannot write the output"; log folders hold things named `*.mcap`
+that are not logs; `--json` fails as JSON (issue 21, item 6)."""
 
 from __future__ import annotations
 
+import errno
+import io
+import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -55,3 +61,184 @@ def test_a_closed_pipe_ends_quietly(run_log):
     reader.stdout.close()
     _, err = reader.communicate(timeout=60)
     assert reader.returncode == 0 and b"Traceback" not in err
+
+
+# ------------------------------------------------------------------ issue 21, item 6
+
+
+def choreo(*argv: str, stdout=subprocess.PIPE) -> subprocess.CompletedProcess:
+    """choreo in a process of its own; env given, so that the COLUMNS readline exports behind
+    os.environ's back does not cut the lines."""
+    return subprocess.run([sys.executable, "-m", "choreo", *argv], stdout=stdout, stderr=subprocess.PIPE,
+                          text=True, cwd=ROOT, timeout=60, env=dict(os.environ))
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full here")
+@pytest.mark.parametrize("argv", [["--help"], ["--version"], ["log", "--help"], ["import", "--help"]])
+def test_help_into_a_full_output_is_exit_2(argv):
+    with open("/dev/full", "w") as full:
+        done = choreo(*argv, stdout=full)
+    assert (done.returncode, done.stderr) == (2, "choreo: cannot write the output: No space left on device\n")
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/mem"), reason="no /proc here")
+@pytest.mark.parametrize("argv, says", [
+    (["log", "summary", "/proc/self/mem"], "/proc/self/mem: cannot read the run log: Input/output error"),
+    (["log", "frames", "/proc/self/mem"], "/proc/self/mem: cannot read the run log: Input/output error"),
+    (["replay", "/proc/self/mem"], "/proc/self/mem: cannot read the run log: Input/output error"),
+    (["beats", "/proc/self/mem"], "/proc/self/mem: cannot read the sound file: Input/output error"),
+    (["validate", "/proc/self/mem"], "/proc/self/mem: cannot read the show file: Input/output error"),
+])
+def test_a_read_error_is_reported_as_a_read_error(argv, says):
+    done = choreo(*argv)
+    assert (done.returncode, done.stdout) == (2, "")
+    assert says in done.stderr and "write" not in done.stderr and done.stderr.count("\n") == 1, done.stderr
+
+
+class FullStream(io.StringIO):
+    """stdout on a full disk: every write fails, as /dev/full's do."""
+
+    def write(self, text: str) -> int:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+
+def test_a_write_failure_a_command_swallowed_is_still_reported(monkeypatch, capsys):
+    import choreo.cli.schema
+
+    def swallowing(args) -> int:
+        try:
+            print("the schema")
+        except Exception:  # noqa: BLE001 - what a careless command might do
+            pass
+        return 0
+
+    monkeypatch.setattr(choreo.cli.schema, "run", swallowing, raising=False)
+    parser_default = choreo.cli.schema.register
+
+    def register(subparsers):
+        parser_default(subparsers)
+        subparsers.choices["schema"].set_defaults(handler=swallowing)
+
+    monkeypatch.setattr(choreo.cli.schema, "register", register)
+    monkeypatch.setattr(sys, "stdout", FullStream())
+    assert main(["schema"]) == 2
+    assert capsys.readouterr().err == "choreo: cannot write the output: No space left on device\n"
+
+
+# ------------------------------------------------------------------ log folders
+
+
+@pytest.fixture
+def hostile_folder(tmp_path, run_log) -> tuple[Path, Path]:
+    """A folder with one real log among things named *.mcap that are not logs, all newer."""
+    folder = tmp_path / "runs"
+    folder.mkdir()
+    real = folder / "real.mcap"
+    shutil.copyfile(run_log, real)
+    os.utime(real, (1_000_000, 1_000_000))
+    (folder / "dangling.mcap").symlink_to(folder / "gone.mcap")
+    (folder / "loop-a.mcap").symlink_to(folder / "loop-b.mcap")
+    (folder / "loop-b.mcap").symlink_to(folder / "loop-a.mcap")
+    (folder / "x.mcap").mkdir()
+    if hasattr(os, "mkfifo"):
+        os.mkfifo(folder / "fifo.mcap")
+    if os.path.exists("/dev/zero"):
+        (folder / "zero.mcap").symlink_to("/dev/zero")
+    return folder, real
+
+
+def test_log_latest_is_the_newest_regular_log_whatever_else_is_named_mcap(hostile_folder):
+    folder, real = hostile_folder
+    done = choreo("log", "latest", str(folder))
+    assert (done.returncode, done.stdout, done.stderr) == (0, f"{real}\n", "")
+
+
+def test_log_summary_of_a_folder_reads_only_its_logs(hostile_folder):
+    folder, real = hostile_folder
+    done = choreo("log", "summary", str(folder))
+    assert done.returncode == 0, done.stderr
+    assert done.stderr == "" and str(real) in done.stdout and done.stdout.count("\nmessages ") == 1
+
+
+@pytest.mark.parametrize("name, says", [
+    ("gone.mcap", "cannot read the run log: it is a link to"),
+    ("loop-a.mcap", "cannot read the run log: a loop of symbolic links"),
+    ("x" * 300 + ".mcap", "cannot read the run log: the name is too long for this system"),
+    ("fifo.mcap", "not a regular file (a named pipe): give a run log"),
+    ("x.mcap", "not a regular file (a folder): give a run log"),
+])
+def test_a_log_that_is_not_a_file_is_one_line(tmp_path, name, says):
+    (tmp_path / "gone.mcap").symlink_to(tmp_path / "nothing.mcap")
+    (tmp_path / "loop-a.mcap").symlink_to(tmp_path / "loop-b.mcap")
+    (tmp_path / "loop-b.mcap").symlink_to(tmp_path / "loop-a.mcap")
+    (tmp_path / "x.mcap").mkdir()
+    os.mkfifo(tmp_path / "fifo.mcap")
+    for argv in (["log", "summary"], ["log", "frames"], ["log", "timeline"], ["replay"]):
+        done = choreo(*argv, str(tmp_path / name))
+        assert (done.returncode, done.stdout) == (2, ""), done.stderr
+        expected = "no .mcap logs in this folder" if argv[-1] == "summary" and name == "x.mcap" else says
+        assert expected in done.stderr and done.stderr.count("\n") == 1, done.stderr
+
+
+@pytest.mark.parametrize("argv", [["log", "latest"], ["log", "summary"]])
+def test_a_folder_that_cannot_be_listed_says_so(argv, tmp_path, monkeypatch, capsys):
+    folder = tmp_path / "runs"
+    folder.mkdir()
+    real_scandir = os.scandir
+
+    def refused(path):  # what a folder without read permission does (the tests may run as root)
+        if os.fspath(path) == str(folder):
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real_scandir(path)
+
+    monkeypatch.setattr(os, "scandir", refused)
+    assert main([*argv, str(folder)]) == 2
+    assert capsys.readouterr().err == f"{folder}: cannot read the log folder: Permission denied\n"
+
+
+def test_log_latest_of_a_folder_that_is_not_there_or_not_a_folder(tmp_path, capsys):
+    assert main(["log", "latest", str(tmp_path / "nowhere")]) == 2
+    assert capsys.readouterr().err == f"{tmp_path / 'nowhere'}: cannot read the log folder: No such file or directory\n"
+    (tmp_path / "file").write_text("x")
+    assert main(["log", "latest", str(tmp_path / "file")]) == 2
+    assert capsys.readouterr().err == f"{tmp_path / 'file'}: cannot read the log folder: Not a directory\n"
+
+
+# ------------------------------------------------------------------ --json on failure
+
+
+def test_log_summary_json_gives_every_log_a_line_the_bad_one_an_error_object(run_log, tmp_path, capsys):
+    bad = tmp_path / "bad.mcap"
+    bad.write_text("not a log")
+    assert main(["log", "summary", str(run_log), str(bad), "--json"]) == 2
+    out, err = capsys.readouterr()
+    good, failed = (json.loads(line) for line in out.splitlines())
+    assert good["log"] == str(run_log) and "steps" in good
+    assert failed == {"ok": False, "exit": 2, "error": err.strip(), "log": str(bad)}
+
+
+@pytest.mark.parametrize("argv", [["log", "summary", "NOPE", "--json"], ["log", "frames", "NOPE", "--json"],
+                                  ["replay", "NOPE", "--json"]])
+def test_json_failures_are_one_json_object(argv, tmp_path, capsys):
+    argv = [str(tmp_path / "nope.mcap") if a == "NOPE" else a for a in argv]
+    assert main(argv) == 2
+    out, err = capsys.readouterr()
+    record = json.loads(out)
+    assert record["ok"] is False and record["exit"] == 2 and "nope.mcap" in record["error"]
+
+
+def test_log_frames_json_is_one_object_with_the_export_fields(run_log, capsys):
+    assert main(["log", "frames", str(run_log), "--json", "--kind", "play"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert record["ok"] is True and record["log"] == str(run_log) and record["cut"] is None
+    assert record["frames"] and {f["frame"] for f in record["frames"]} == {"play"}
+    assert {"seq", "tx_hex", "frame_meaning", "reply", "layout"} <= set(record["frames"][0])
+
+
+def test_replay_json_is_one_object_with_the_result(run_log, tmp_path, capsys):
+    new_log = tmp_path / "again.mcap"
+    assert vmain(["replay", str(run_log), "--json", "--log", str(new_log), "-q"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert record["ok"] is True and record["exit"] == 0 and record["replay_log"] == str(new_log)
+    assert record["frames"] > 0 and record["frames"] == record["same"] + record["different"]
+    assert isinstance(record["differences"], list)

@@ -8,16 +8,15 @@ and `choreo validate` do not pay for serial, mcap or matplotlib.
 from __future__ import annotations
 
 import argparse
-import errno
 import importlib
-import os
 import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from choreo import __version__
 from choreo.cli.parser import ChoreoParser
-from choreo.errors import ChoreoError
+from choreo.cli.output import OUTPUT_ERROR_EXIT, Output, drop_output
+from choreo.errors import ChoreoError, OutputError
 
 if TYPE_CHECKING:
     from choreo.__main__ import SignalGuard
@@ -60,8 +59,33 @@ def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = Non
     `time_source`: the time a run or replay keeps (the machine's unless given; an embedding
     program or a test may pass `VirtualTime` to run shows on the in-process simulator at once).
     """
+    output = Output(sys.stdout)  # every command's output: a failed write is known and reported
+    sys.stdout = output  # type: ignore[assignment]
     try:
-        return _command(argv, signals, time_source)
+        code = _outcome(argv, signals, time_source, output)
+    finally:
+        sys.stdout = output.wrapped
+    if output.failure is not None:  # reported here, even if a command swallowed the exception
+        print(output.message(), file=sys.stderr)
+        return OUTPUT_ERROR_EXIT
+    return code
+
+
+def _outcome(argv: Sequence[str] | None, signals: SignalGuard | None, time_source: TimeSource | None,
+             output: Output) -> int:
+    """The command's exit status, every error and interruption printed as one message."""
+    try:
+        code = _command(argv, signals, time_source)
+        output.flush()  # a full output fails here, inside the one place errors are mapped
+        return code
+    except OutputError:
+        return OUTPUT_ERROR_EXIT  # `main` says it, once
+    except SystemExit:  # argparse's --help, --version and usage errors: their text must get out too
+        try:
+            output.flush()
+        except OutputError:
+            return OUTPUT_ERROR_EXIT
+        raise
     except ChoreoError as exc:
         for line in exc.lines():
             print(line, file=sys.stderr)
@@ -71,15 +95,14 @@ def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = Non
         return 130
     except BrokenPipeError:
         # The reader of our output went away (`choreo log frames LOG | head`): not an error.
-        _drop_stdout()
+        drop_output(output.wrapped)
         sys.stderr.close()
         return 0
     except OSError as exc:
-        if not _is_output_error(exc):
-            raise
-        _drop_stdout()
-        print(f"choreo: cannot write the output: {exc.strerror or exc}", file=sys.stderr)
-        return OUTPUT_ERROR_EXIT
+        # Every read of a user's file and every write of the output says which it was (an
+        # InputError, an OutputError); anything else the system refused is still one line.
+        print(f"choreo: {exc.strerror or exc}" + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
+        return 2
 
 
 def _remember_leaf_parsers(parser: argparse.ArgumentParser) -> None:
@@ -90,25 +113,6 @@ def _remember_leaf_parsers(parser: argparse.ArgumentParser) -> None:
             for sub in action.choices.values():
                 sub.set_defaults(parser=sub)
                 _remember_leaf_parsers(sub)
-
-
-OUTPUT_ERROR_EXIT = 2  # like a log that cannot be written: the user's output, not the robot
-_OUTPUT_ERRNOS = frozenset((errno.ENOSPC, errno.EIO, errno.EFBIG, getattr(errno, "EDQUOT", errno.ENOSPC)))
-
-
-def _is_output_error(exc: OSError) -> bool:
-    """A write or flush of stdout that failed (it names no file, unlike an open or a read)."""
-    return exc.filename is None and exc.errno in _OUTPUT_ERRNOS
-
-
-def _drop_stdout() -> None:
-    """Point stdout at /dev/null: the interpreter's last flush must not fail a second time."""
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        os.close(devnull)
-    except (OSError, ValueError):
-        pass
 
 
 def _command(argv: Sequence[str] | None, signals: SignalGuard | None,
@@ -128,7 +132,6 @@ def _command(argv: Sequence[str] | None, signals: SignalGuard | None,
 
             report_failure(args, exc)  # --json: the failure as JSON on stdout too
             raise
-        sys.stdout.flush()  # a full output fails here, inside the one place errors are mapped
         return code
     finally:
         if signals is not None:

@@ -26,7 +26,6 @@ import os
 import json
 import math
 import re
-import stat
 import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,6 +36,7 @@ import yaml
 from choreo.show.nesting import too_deep_at
 from choreo.errors import Problem, ShowError
 from choreo.show.model import (
+    hidden_character,
     SOLO,
     Tempo,
     DEFAULT_DONE_TIMEOUT_S,
@@ -164,26 +164,14 @@ def format_path(path: JsonPath) -> str:
 
 
 def _read(path: Path, report: _Report) -> bytes | None:
+    from choreo.errors import InputError
+    from choreo.userfile import read_input
+
     try:
-        mode = path.stat().st_mode
-        if not stat.S_ISREG(mode):  # a FIFO would block the open until a writer came
-            report.add((0, 0), "", f"not a regular file ({_file_kind(mode)}): give a show file")
-            return None
-        with path.open("rb") as stream:
-            data = stream.read(MAX_BYTES + 1)
-    except OSError as exc:
-        report.add((0, 0), "", f"cannot read the show file: {exc.strerror or exc}")
+        return read_input(path, "show file", MAX_BYTES)
+    except InputError as exc:
+        report.add((0, 0), "", exc.reason)
         return None
-    if len(data) > MAX_BYTES:
-        report.add((0, 0), "", f"the file is over {MAX_BYTES // 1024} KiB, too big for a show file")
-        return None
-    return data
-
-
-def _file_kind(mode: int) -> str:
-    kinds = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a named pipe"), (stat.S_ISCHR, "a device"),
-             (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket"))
-    return next((name for test, name in kinds if test(mode)), "not a file")
 
 
 def _decode(data: bytes, report: _Report) -> str | None:
@@ -893,10 +881,13 @@ def _check_music(walk: _Walk, folder: Path | None) -> None:
     if Path(file).suffix.lower() not in MUSIC_FORMATS:
         walk.report.add(walk.doc.mark(path), path, f"{file}: choreo plays {', '.join(f[1:] for f in MUSIC_FORMATS)} "
                         "files: convert it, or give one of those")
-    elif folder is not None and not (folder / file).is_file():
+    elif folder is not None:
+        from choreo.userfile import problem
+
         where = folder / file
-        what = "is a folder" if where.is_dir() else "no such file"
-        walk.report.add(walk.doc.mark(path), path, f"{file}: {what} ({where}; the path is relative to the show file)")
+        what = problem(where, "sound file")
+        if what is not None:
+            walk.report.add(walk.doc.mark(path), path, f"{file}: {what} ({where}; the path is relative to the show file)")
 
 
 def _check_total(walk: _Walk, path: JsonPath, total: int) -> None:
@@ -1001,6 +992,9 @@ def _check_motion_table(walk: _Walk) -> None:
     """Two names for one slot are fine; two different durations for it are a contradiction."""
     durations: dict[int, tuple[float, str]] = {}
     for name, entry in walk.motions.items():
+        hth4 = ("motions", name, "hth4_name")
+        if isinstance(entry.get("hth4_name"), str) and walk.ok(hth4):
+            _check_visible(walk, hth4, entry["hth4_name"], "the Heart to Heart 4 name")
         path = ("motions", name, "duration")
         number, duration = entry.get("number"), entry.get("duration")
         if not (walk.ok(path) and walk.ok(("motions", name, "number"))) or duration is None or not isinstance(number, (int, float)):
@@ -1107,16 +1101,13 @@ def _beat_seconds(walk: _Walk, at: dict[str, Any], path: JsonPath) -> float | No
 def _check_visible(walk: _Walk, path: JsonPath, text: str, what: str) -> bool:
     """Text that choreo prints (names, labels) holds no control or invisible characters: they
     would reach terminals and logs raw (an escape sequence, a right-to-left override)."""
-    hidden = next((ch for ch in text if unicodedata.category(ch) in _HIDDEN), None)
+    hidden = hidden_character(text)
     if hidden is None:
         return True
     name = unicodedata.name(hidden, "a control character")
     walk.report.add(walk.doc.mark(path), path, f"{what} holds U+{ord(hidden):04X} ({name}), which is "
                                                "invisible or controls the terminal: remove it")
     return False
-
-
-_HIDDEN = frozenset(("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp"))  # controls, formats, separators
 
 
 def _check_label(walk: _Walk, step: dict[str, Any], here: JsonPath) -> None:
