@@ -19,6 +19,8 @@ import errno
 import io
 import os
 import stat
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from choreo.errors import InputError
@@ -55,8 +57,9 @@ def problem(path: str | os.PathLike[str], what: str, limit: int | None = None) -
 
 def open_input(path: str | os.PathLike[str], what: str, limit: int | None = None) -> io.BufferedReader:
     """`path` open for reading if it is a regular file of at most `limit` bytes; `InputError`
-    (exit 2, one line naming the file and `what` it should be) if not. A read of the returned
-    file that fails raises `InputError` too."""
+    (exit 2, one line naming the file and `what` it should be) if not. Its reads are the
+    standard library's own, fast ones: read it inside `reading(path, what)`, so that a read that
+    fails is an `InputError` too."""
     name = os.fspath(path)
     try:
         _check_mode(name, os.stat(name).st_mode, what)
@@ -69,18 +72,30 @@ def open_input(path: str | os.PathLike[str], what: str, limit: int | None = None
         if limit is not None and info.st_size > limit:
             raise InputError(name, f"the file is over {size_text(limit)}, too big for a {what}")
         os.set_blocking(fd, True)
-        raw = _RawInput(fd, name, what)
+        return open(fd, "rb", buffering=256 * 1024)
     except BaseException:
         os.close(fd)
         raise
-    return io.BufferedReader(raw, buffer_size=256 * 1024)
+
+
+@contextmanager
+def reading(path: str | os.PathLike[str], what: str) -> Iterator[None]:
+    """A read that fails inside the block (a disk error, `/proc/self/mem`) as an `InputError`
+    that says it could not *read* the file (an OSError would not say which file, nor whether
+    it was a read or a write)."""
+    try:
+        yield
+    except InputError:
+        raise
+    except OSError as exc:
+        raise InputError(os.fspath(path), f"cannot read the {what}: {exc.strerror or exc}") from None
 
 
 def read_input(path: str | os.PathLike[str], what: str, limit: int) -> bytes:
     """The whole of `path` (see `open_input`), at most `limit` bytes: a file that grew past
     `limit` since it was looked at is refused too, never read on without end."""
     name = os.fspath(path)
-    with open_input(name, what, limit) as stream:
+    with open_input(name, what, limit) as stream, reading(name, what):
         data = stream.read(limit + 1)
     if len(data) > limit:
         raise InputError(name, f"the file is over {size_text(limit)}, too big for a {what}")
@@ -112,27 +127,6 @@ def _link_target(name: str) -> str:
         return repr(visible(os.readlink(name)))
     except OSError:
         return "nothing"
-
-
-class _RawInput(io.FileIO):
-    """A file whose failed reads say they failed reading it (not writing the output)."""
-
-    def __init__(self, fd: int, name: str, what: str) -> None:
-        super().__init__(fd, "rb", closefd=True)
-        self._label = name
-        self._what = what
-
-    def readinto(self, buffer) -> int | None:  # type: ignore[no-untyped-def, override]
-        try:
-            return super().readinto(buffer)
-        except OSError as exc:
-            raise InputError(self._label, f"cannot read the {self._what}: {exc.strerror or exc}") from None
-
-    def readall(self) -> bytes:
-        try:
-            return super().readall()
-        except OSError as exc:
-            raise InputError(self._label, f"cannot read the {self._what}: {exc.strerror or exc}") from None
 
 
 def listing(folder: str | os.PathLike[str], what: str = "folder") -> list[Path]:

@@ -16,7 +16,7 @@ from choreo.errors import InputError, ShowError
 from choreo.music import AudioError, Song
 from choreo.show.load import load_show
 from choreo.show.model import Music
-from choreo.userfile import listing, open_input, problem, read_input
+from choreo.userfile import listing, open_input, problem, read_input, reading
 
 ROOT = Path(__file__).resolve().parent.parent
 needs_fifo = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes here")
@@ -109,7 +109,8 @@ def test_a_failed_read_is_an_input_error_that_says_read():
     """/proc/self/mem is a regular file whose first bytes cannot be read (EIO)."""
     with open_input("/proc/self/mem", "show file") as stream:
         with pytest.raises(InputError, match=r"^/proc/self/mem: cannot read the show file: Input/output error$"):
-            stream.read(10)
+            with reading("/proc/self/mem", "show file"):
+                stream.read(10)
     with pytest.raises(InputError, match=r"^/proc/self/mem: cannot read the show file: Input/output error$"):
         read_input("/proc/self/mem", "show file", 1024)
 

@@ -34,7 +34,7 @@ from typing import IO
 
 from choreo.errors import InputError, LogError
 from choreo.logformat import CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME, base_topic
-from choreo.userfile import open_input
+from choreo.userfile import open_input, reading
 
 MAGIC = b"\x89MCAP0\r\n"
 LOG_WHAT = "run log"  # what a file given as a log should be, in messages
@@ -131,7 +131,8 @@ class LogReader:
             raise self._fail(exc.reason) from None
         try:
             self._size = os.fstat(self._file.fileno()).st_size
-            self._read_head()
+            with reading(self.path, LOG_WHAT):
+                self._read_head()
         except BaseException:
             self.close()
             raise
@@ -164,11 +165,8 @@ class LogReader:
 
     def attachment_data(self, attachment: Attachment) -> bytes:
         """An attachment's bytes (read now: a log's attachments never sit in memory unasked)."""
-        with open_input(self.path, LOG_WHAT) as f:
-            try:
-                f.seek(attachment.offset)
-            except OSError as exc:
-                raise self._fail(f"cannot read attachment {attachment.name}: {exc.strerror or exc}") from None
+        with open_input(self.path, LOG_WHAT) as f, reading(self.path, f"attachment {attachment.name} of the run log"):
+            f.seek(attachment.offset)
             return f.read(attachment.size)
 
     def show_source(self) -> bytes | None:
@@ -317,7 +315,8 @@ class LogReader:
         Calling it again starts over. A file that turns out not to be a choreo log at all is a
         LogError at the end.
         """
-        yield from self._messages(topics)
+        with reading(self.path, LOG_WHAT):  # a disk error mid-log: "cannot read the run log"
+            yield from self._messages(topics)
         self._check_choreo()
 
     def _messages(self, topics: Collection[str] | None) -> Iterator[Message]:
