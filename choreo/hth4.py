@@ -218,7 +218,7 @@ def _slots(collection: ET.Element, path: str) -> list[ProjectSlot]:
 
 
 def _slot(entry: ET.Element, index: int, path: str) -> ProjectSlot:
-    key = _text(_child(entry, "Key")).strip() or f"entry {index + 1}"
+    key = visible(_text(_child(entry, "Key")).strip()[:40]) or f"entry {index + 1}"  # only messages show it
     value = _child(entry, "Value")
     if value is None:
         raise ProjectError(f"{path}: slot {key} has no <Value>")

@@ -450,3 +450,9 @@ def test_any_names_import_as_a_show_that_validates(names, title):
     for name, motion in yaml.safe_load(text)["motions"].items():
         for shown in (name, motion.get("hth4_name", "")):
             assert hidden_character(shown) is None and len(shown) <= 200
+
+
+def test_a_slot_key_in_a_message_is_shown_escaped(tmp_path, capsys):
+    data = "<Rcb4><MotionDataCollection><DictionaryEntry><Key>M\u202e100</Key></DictionaryEntry></MotionDataCollection></Rcb4>"
+    err = assert_one_line_exit_2(capsys, ["import", str(write_project(tmp_path, data.encode()))], "slot M\\u202e100 has no <Value>")
+    assert "\u202e" not in err
