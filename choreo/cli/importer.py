@@ -19,6 +19,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "0x0B80: hth4-2.2; 0x0BB8: seed), one `motions:` entry for every slot that holds a motion "
         "(keyed by its HTH4 name where that is a valid show name, else `motion_N` with the HTH4 "
         "name as `hth4_name`), and steps that play the first motion and wait until it is done. "
+        "Projects in Shift_JIS (CP932), EUC-JP, UTF-8 or UTF-16 are read; control, bidi-override and "
+        "invisible characters are left out of the names, so the show always validates. "
         "A file that is not such a project, holds no motions or has slot addresses that fit no "
         "layout is exit status 2 with one line saying why.",
     )
