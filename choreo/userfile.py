@@ -136,8 +136,18 @@ def listing(folder: str | os.PathLike[str], what: str = "folder") -> list[Path]:
     try:
         with os.scandir(name) as entries:
             return [Path(entry.path) for entry in entries]
+    except NotADirectoryError:
+        raise InputError(name, f"not a folder ({_kind_at(name)}): give a {what}") from None
     except OSError as exc:
         raise InputError(name, _os_reason(name, exc, what)) from None
+
+
+def _kind_at(name: str) -> str:
+    try:
+        mode = os.stat(name).st_mode
+    except OSError:
+        return "not a folder"
+    return "a file" if stat.S_ISREG(mode) else kind_of(mode)
 
 
 def regular_size_and_time(path: Path) -> tuple[int, float] | None:

@@ -201,7 +201,7 @@ def test_log_latest_of_a_folder_that_is_not_there_or_not_a_folder(tmp_path, caps
     assert capsys.readouterr().err == f"{tmp_path / 'nowhere'}: cannot read the log folder: No such file or directory\n"
     (tmp_path / "file").write_text("x")
     assert main(["log", "latest", str(tmp_path / "file")]) == 2
-    assert capsys.readouterr().err == f"{tmp_path / 'file'}: cannot read the log folder: Not a directory\n"
+    assert capsys.readouterr().err == f"{tmp_path / 'file'}: not a folder (a file): give a log folder\n"
 
 
 # ------------------------------------------------------------------ --json on failure
@@ -242,3 +242,12 @@ def test_replay_json_is_one_object_with_the_result(run_log, tmp_path, capsys):
     assert record["ok"] is True and record["exit"] == 0 and record["replay_log"] == str(new_log)
     assert record["frames"] > 0 and record["frames"] == record["same"] + record["different"]
     assert isinstance(record["differences"], list)
+
+
+def test_a_folder_of_things_named_mcap_that_are_not_logs_says_so(hostile_folder, capsys):
+    folder, real = hostile_folder
+    real.unlink()
+    others = len([p for p in folder.iterdir() if p.name.endswith(".mcap")])
+    for argv in (["log", "latest"], ["log", "summary"]):
+        assert main([*argv, str(folder)]) == 2
+        assert capsys.readouterr().err == f"{folder}: no .mcap logs in this folder ({others} named *.mcap are not regular files)\n"

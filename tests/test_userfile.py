@@ -129,5 +129,5 @@ def test_a_folder_that_cannot_be_listed_is_an_error_not_an_empty_folder(tmp_path
     with pytest.raises(InputError, match="nope: cannot read the folder: No such file or directory"):
         listing(tmp_path / "nope")
     (tmp_path / "file").write_text("x")
-    with pytest.raises(InputError, match="file: cannot read the log folder: Not a directory"):
+    with pytest.raises(InputError, match=r"file: not a folder \(a file\): give a log folder"):
         listing(tmp_path / "file", "log folder")

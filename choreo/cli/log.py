@@ -152,10 +152,7 @@ def run_summary(args: argparse.Namespace) -> int:
 
 
 def run_latest(args: argparse.Namespace) -> int:
-    logs = _folder_logs(Path(args.dir))
-    if not logs:
-        raise UsageError(f"{visible(args.dir)}: no .mcap logs in this folder")
-    print(logs[-1])
+    print(_folder_logs(Path(args.dir))[-1])
     return 0
 
 
@@ -167,10 +164,7 @@ def _logs_in(given: list[str]) -> list[Path]:
         if not _is_folder(path):
             logs.append(path)  # the log reader says what is wrong with anything that is not a log
             continue
-        found = _folder_logs(path)
-        if not found:
-            raise UsageError(f"{visible(name)}: no .mcap logs in this folder")
-        logs += found
+        logs += _folder_logs(path)
     return logs
 
 
@@ -182,20 +176,26 @@ def _is_folder(path: Path) -> bool:
 
 
 def _folder_logs(folder: Path) -> list[Path]:
-    """The regular `*.mcap` files in `folder`, oldest first (by modification time, then name).
+    """The regular `*.mcap` files in `folder`, oldest first (by modification time, then name);
+    a folder without one is a `UsageError`.
 
     A link to nothing, a loop of links, a pipe or a folder named `x.mcap` is not a log and is
     passed over; a folder that cannot be listed is an `InputError` saying why, never "no logs".
     """
     from choreo.userfile import listing, regular_size_and_time
 
-    logs = []
+    logs, others = [], 0
     for path in listing(folder, "log folder"):
         if not path.name.endswith(".mcap") or path.name.startswith("."):
             continue
         facts = regular_size_and_time(path)
-        if facts is not None:
+        if facts is None:
+            others += 1
+        else:
             logs.append((facts[1], path.name, path))
+    if not logs:
+        passed = f" ({others} named *.mcap are not regular files)" if others else ""
+        raise UsageError(f"{visible(str(folder))}: no .mcap logs in this folder{passed}")
     return [path for _, _, path in sorted(logs)]
 
 
