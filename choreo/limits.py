@@ -175,7 +175,7 @@ class Held:
         named = ", ".join(self.sources[:3])
         others = len(self.sources) - 3
         more = f" and {others}{'+' if self.more_sources else ''} more" if others > 0 or self.more_sources else ""
-        return (f"{self.count} refused or ignored commands not logged one by one (over the log's limit): {what}; "
+        return (f"refused or ignored: {self.count} commands not logged one by one (over the log's limit): {what}; "
                 f"from {named}{more}")
 
     @property

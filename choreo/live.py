@@ -146,6 +146,7 @@ class Live:
         self._released: set[object] = set()  # GO cues already given their GO
         self._last_go: float | None = None
         self._reports = ReportGate(limits, now)  # what of the commands the listeners hear
+        self._summing = threading.RLock()  # a summary is told whole before `close` returns
         self._over = False  # the run is over (`close`): no command is taken any more
 
     @property
@@ -251,9 +252,10 @@ class Live:
     def flush_reports(self, force: bool = False) -> None:
         """Tell the listeners the commands held back since the last summary, if it is time
         (called on every command, and by a ticker while the show runs; `force`: at the end)."""
-        held = self._reports.due(force)
-        if held is not None:
-            self._tell(*summary_of(held))
+        with self._summing:
+            held = self._reports.due(force)
+            if held is not None:
+                self._tell(*summary_of(held))
 
     def _tell(self, command: Command, answer: Answer) -> None:
         show = self.show

@@ -101,7 +101,7 @@ def test_a_flood_of_refused_commands_is_summed_up_not_logged_one_by_one():
     first = summaries[0]
     assert first.answer.status == "error" and first.command.source == "osc udp 127.0.0.1:9000"
     assert first.answer.data["counts"] == {"go": first.answer.data["count"]}
-    assert first.answer.message.startswith(f"{first.answer.data['count']} refused or ignored commands not logged")
+    assert first.answer.message.startswith(f"refused or ignored: {first.answer.data['count']} commands not logged")
 
 
 def test_commands_taken_are_always_told_and_a_summary_comes_before_the_next_one():

@@ -64,8 +64,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     live.add_argument("--osc-allow", action="append", metavar="ADDRESS", default=[],
                       help="a sender (IP address, or a network such as 192.168.1.0/24) OSC takes commands from "
                       "besides this machine (repeatable)")
-    live.add_argument("--osc-notify", metavar="HOST:PORT", help="send the show's progress there as OSC "
-                      "(step started, GO cue waiting, fault, done)")
+    live.add_argument("--osc-notify", action="append", metavar="HOST:PORT", default=[],
+                      help="send the show's progress there as OSC (step started, GO cue waiting, fault, done); "
+                      "repeatable: every target gets it")
     live.add_argument("--wait-start", action="store_true", help="load, open the ports, then wait for "
                       "the OSC start command (or the console's GO) before the show starts")
     live.add_argument("--no-console", action="store_true", help="on a terminal, the plain progress "
@@ -97,9 +98,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, report: "_RunReport") -> int:
+    from choreo.runner import StopRequest
     from choreo.session import RunRequest, Session
 
     port, robot_ports = port_arguments(args.port)
+    _check_osc_options(args)
     request = RunRequest(args.show, port=port, baud=args.baud, log_path=args.log,
                          no_log=args.no_log, from_step=args.from_step, timeout=args.timeout,
                          retries=args.retries, layout=args.layout, robot_ports=robot_ports,
@@ -109,6 +112,9 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     report.session = session
     console = _wants_console(args)
     _check_go_sources(session, console, args)
+    stop = StopRequest()
+    live = _live(args, stop, console)
+    osc = _bound_osc(args, live)  # listening (not serving yet) before a line is said or anything opens
     say = _Say(sys.stderr, quiet=args.quiet)
     if session.show.ensemble:
         for line in _robot_lines(session):
@@ -120,17 +126,19 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     if session.show.music is not None:
         say(_music_line(session))
     progress = Progress(session, sys.stderr, live=sys.stderr.isatty() and not console, quiet=args.quiet or console)
-    signals = _StopOnSignals()
+    signals = _StopOnSignals(stop)
     try:
-        with _log_named_on_failure(session, say), signals as stop, session:
+        with signals, _controls(live, osc, say, progress) as listeners, _log_named_on_failure(session, say), session:
             say(f"log: {session.log_path}" if session.log_path else "log: off (--no-log)")
             for note in session.stage.notes:
                 say(f"warning: {note}")
-            with _controls(args, session, stop, console, say, progress) as (live, listeners):
+            with _console(session, live, console, listeners):
                 result = session.run([progress, *listeners], stop, live)
                 for listener in listeners:
                     if hasattr(listener, "on_result"):  # OSC notify: the run is over
                         listener.on_result(result)
+            if live is not None:
+                live.close()  # later commands refused; those held back summed up, still into the log
         report.result = result
         progress.finish()
         say.quiet = args.quiet and result.outcome == "done"
@@ -179,52 +187,91 @@ def _check_go_sources(session, console: bool, args: argparse.Namespace) -> None:
             raise UsageError(f"{step_ref(step)} waits for GO, but nothing can give it: {where}")
 
 
-@contextmanager
-def _controls(args, session, stop, console: bool, say, progress):  # type: ignore[no-untyped-def]
-    """The operator's controls for the run: (None, []) for a show run as before; else the Live
-    that GO cues wait on, with the console and the OSC server that command it (and listen to
-    the show: their progress lines and notifications)."""
+def _check_osc_options(args: argparse.Namespace) -> None:
+    """The OSC options' values, checked before anything is loaded or opened (the port's binding
+    and the notify targets' look-up come next, still before the session opens)."""
+    from choreo.errors import UsageError
+    from choreo.osc import parse_allow
+    from choreo.oscnotify import parse_targets
+
+    if args.osc is not None and not 0 <= args.osc <= 65535:
+        raise UsageError(f"--osc {args.osc}: give a port number, 1..65535 (0: any free port)")
+    if not args.osc_host.strip():
+        raise UsageError("--osc-host '': give the address to listen on (127.0.0.1, 0.0.0.0, ::)")
+    parse_allow(args.osc_allow)
+    parse_targets(args.osc_notify)
+
+
+def _live(args: argparse.Namespace, stop, console: bool):  # type: ignore[no-untyped-def]
+    """The Live that GO cues wait on, when someone can command the show (the console, OSC);
+    None for a show run as before."""
     if not console and args.osc is None:
-        yield None, []
-        return
+        return None
     from choreo.live import Live
 
-    live = Live(stop, wait_start=args.wait_start)
+    return Live(stop, wait_start=args.wait_start)
+
+
+def _bound_osc(args: argparse.Namespace, live):  # type: ignore[no-untyped-def]
+    """With --osc, the OSC server listening and its notify targets looked up, serving nothing
+    yet (`_controls` starts it): a port in use, a host it cannot listen on, a notify target that
+    is this very port, end the run with one line before anything is said or opened."""
+    if args.osc is None:
+        return None
+    from choreo.osc import OscServer
+    from choreo.oscnotify import parse_targets
+
+    server = OscServer(live, args.osc, host=args.osc_host, allow=args.osc_allow, notify=parse_targets(args.osc_notify))
+    server.bind()
+    return server
+
+
+@contextmanager
+def _controls(live, osc, say, progress):  # type: ignore[no-untyped-def]
+    """The operator's controls for the run (none without a Live): the OSC server, bound
+    already, serving before the session opens, which commands the Live and listens to the show
+    (its notifications); the listeners the run should tell. The commands held back by the
+    limits are summed up every `Limits.summary_every_s`, and once more at the end."""
+    if live is None:
+        yield []
+        return
+    from choreo.limits import LIMITS, Ticker
+
     live.listeners.append(progress)  # off the console, the plain lines say what waits and what was pressed
     listeners: list = []
-    opened: list = []
+    opened: list = [osc] if osc is not None else []
     try:
-        if args.osc is not None:
-            from choreo.osc import OscServer
-
-            server = OscServer(live, args.osc, host=args.osc_host, allow=args.osc_allow,
-                               notify=_host_port(args.osc_notify, "--osc-notify") if args.osc_notify else None)
-            server.start()
-            opened.append(server)
-            live.listeners.append(server)
-            listeners.append(server)
-            say(server.listening)
-        if console:
-            from choreo.cli.console import Console
-
-            screen = Console(session, live)
-            screen.start()
-            opened.append(screen)
-            live.listeners.append(screen)
-            listeners.append(screen)
-        yield live, listeners
+        if osc is not None:
+            osc.start()
+            live.listeners.append(osc)
+            listeners.append(osc)
+            say(osc.listening)
+        opened.append(Ticker(live.flush_reports, LIMITS.summary_every_s).start())
+        yield listeners
     finally:
+        live.close()
         for control in reversed(opened):
             control.close()
+        live.flush_reports(force=True)
 
 
-def _host_port(text: str, option: str) -> tuple[str, int]:
-    from choreo.errors import UsageError
+@contextmanager
+def _console(session, live, console: bool, listeners: list):  # type: ignore[no-untyped-def]
+    """The console, on a terminal, for the time of the show (it draws on the terminal and reads
+    its keys: only once the session is open)."""
+    if not console:
+        yield
+        return
+    from choreo.cli.console import Console
 
-    host, _, port = text.rpartition(":")
-    if not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise UsageError(f"{option} {text}: give HOST:PORT, e.g. 127.0.0.1:53001")
-    return host.strip("[]"), int(port)
+    screen = Console(session, live)
+    screen.start()
+    live.listeners.append(screen)
+    listeners.append(screen)
+    try:
+        yield
+    finally:
+        screen.close()
 
 
 def port_arguments(values: list[str] | None) -> tuple[str | None, dict[str, str]]:
@@ -399,14 +446,12 @@ class _StopOnSignals:
     """First Ctrl-C or SIGTERM: finish the frame in flight, play the abort motion, close the log.
     Second: leave at once (the log is still closed on the way out)."""
 
-    def __init__(self) -> None:
+    def __init__(self, stop) -> None:  # type: ignore[no-untyped-def]
+        self.stop = stop
         self._previous: dict = {}
         self._signalled = False  # a stop the log asked for is not a first Ctrl-C
 
     def __enter__(self):
-        from choreo.runner import StopRequest
-
-        self.stop = StopRequest()
         for signum in STOP_SIGNALS:
             self._previous[signum] = signal.signal(signum, self._handle)
         return self.stop

@@ -1,0 +1,493 @@
+"""OSC on a hostile network, what a packet may cost (`choreo.limits` through `choreo.osc`): one
+bundle of many GOs carries out and answers only what one sender's budget allows; replies and
+notifications sent back to choreo are never answered nor notified; `--osc-notify` pointed at
+choreo's own port is refused at start-up, and every target given is notified; `choreo run`
+checks every option, and listens, before a log is created or a byte goes to a board.
+
+Loopback only. The servers' budgets run on a virtual clock that does not move, so what a flood
+gets is exact; replies are waited for with a deadline, never a sleep that decides.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from pythonosc.dispatcher import Dispatcher
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message_builder import OscMessageBuilder
+from pythonosc.osc_server import ThreadingOSCUDPServer
+
+from choreo.clock import VirtualTime
+from choreo.errors import UsageError
+from choreo.limits import LIMITS, UNLOGGED, Limits, Rate
+from choreo.live import Command, Live
+from choreo.osc import OscServer
+from choreo.runner import StopRequest
+from runlog import choreo, read_log, start_choreo, wait_for, write_show
+
+TIMEOUT_S = 5.0
+EVERY_EVENT = Limits(reported=Rate(1_000_000, 1.0))  # the test hears every command one by one
+
+
+class Heard:
+    def __init__(self) -> None:
+        self.events: list = []
+        self._lock = threading.Lock()
+
+    def on_command(self, event) -> None:  # type: ignore[no-untyped-def]
+        with self._lock:
+            self.events.append(event)
+
+    def names(self) -> list[str]:
+        with self._lock:
+            return [e.command.name for e in self.events]
+
+    def messages(self, name: str) -> list[str]:
+        with self._lock:
+            return [e.answer.message for e in self.events if e.command.name == name]
+
+
+@pytest.fixture
+def clock() -> VirtualTime:
+    return VirtualTime()
+
+
+@pytest.fixture
+def heard() -> Heard:
+    return Heard()
+
+
+@pytest.fixture
+def live(clock, heard):  # type: ignore[no-untyped-def]
+    live = Live(StopRequest(), wait_start=True, lockout_s=0.0, now=clock.now, limits=EVERY_EVENT)
+    live.listeners.append(heard)
+    return live
+
+
+@pytest.fixture
+def server(live, clock):  # type: ignore[no-untyped-def]
+    server = OscServer(live, 0, now=clock.now)
+    server.start()
+    live.listeners.append(server)
+    yield server
+    server.close()
+
+
+def message(address: str) -> bytes:
+    return OscMessageBuilder(address).build().dgram
+
+
+def bundle(address: str, count: int) -> bytes:
+    builder = OscBundleBuilder(IMMEDIATELY)
+    for _ in range(count):
+        builder.add_content(OscMessageBuilder(address).build())
+    return builder.build().dgram
+
+
+def slip(packet: bytes) -> bytes:
+    return b"\xc0" + packet.replace(b"\xdb", b"\xdb\xdd").replace(b"\xc0", b"\xdb\xdc") + b"\xc0"
+
+
+class Peer:
+    """One sender on loopback, over UDP or TCP (SLIP), counting the replies it gets."""
+
+    def __init__(self, transport: str, port: int, host: str = "127.0.0.1") -> None:
+        self.transport = transport
+        if transport == "udp":
+            self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self.sock.bind((host, 0))
+            self.sock.connect(("127.0.0.1", port))
+        else:
+            self.sock = socket.create_connection(("127.0.0.1", port), timeout=TIMEOUT_S, source_address=(host, 0))
+        self._buffer = b""
+
+    def send(self, packet: bytes) -> None:
+        self.sock.sendall(packet if self.transport == "udp" else slip(packet))
+
+    def replies(self, quiet_s: float = 0.3) -> list[bytes]:
+        """Every reply until none came for `quiet_s`."""
+        got: list[bytes] = []
+        self.sock.settimeout(quiet_s)
+        try:
+            while True:
+                data = self.sock.recv(65536)
+                if not data:
+                    break
+                if self.transport == "udp":
+                    got.append(data)
+                else:
+                    self._buffer += data
+                    *frames, self._buffer = self._buffer.split(b"\xc0")
+                    got.extend(frame for frame in frames if frame)
+        except (TimeoutError, socket.timeout):
+            pass
+        return got
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+# -- what one packet may do ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("transport", ["udp", "tcp"])
+def test_one_bundle_of_many_gos_is_bounded_by_the_senders_budget(transport, server, heard):
+    """Once, one 8 KB UDP bundle of 408 GOs carried out 408 commands and sent 408 replies (8.8
+    times the bytes received: a reflector for forged senders)."""
+    count = 200
+    packet = bundle("/choreo/go", count)
+    peer = Peer(transport, server.port)
+    try:
+        peer.send(packet)
+        assert wait_for(lambda: len(heard.names()) >= count, TIMEOUT_S, every=0.005)
+        replies = peer.replies()
+    finally:
+        peer.close()
+    carried_out = [m for m in heard.messages("go") if not m.startswith("ignored: over the limit")]
+    assert len(carried_out) == LIMITS.commands_per_sender.burst  # the rest not carried out, but counted
+    assert heard.names() == ["go"] * count
+    assert len(replies) == LIMITS.replies_per_sender.burst
+    assert sum(map(len, replies)) < len(packet)  # no longer an amplifier
+
+
+def test_the_budget_is_the_senders_not_the_packets(server, heard, clock):
+    """Messages sent one packet each count as a bundle's do, from any port of the sender's
+    address; another sender (address) keeps its own budget."""
+    flooder, other = Peer("udp", server.port), Peer("udp", server.port, host="127.0.0.2")
+    try:
+        for _ in range(15):
+            flooder.send(message("/choreo/go"))
+        again = Peer("udp", server.port)  # the same sender from another port
+        for _ in range(15):
+            again.send(message("/choreo/go"))
+        assert wait_for(lambda: len(heard.names()) >= 30, TIMEOUT_S, every=0.005)
+        assert again.replies() == []  # its budget was spent from the other port
+        again.close()
+        other.send(message("/choreo/start"))
+        assert wait_for(lambda: "start" in heard.names(), TIMEOUT_S, every=0.005)
+        flooded, answered = flooder.replies(), other.replies()
+    finally:
+        flooder.close()
+        other.close()
+    assert len(flooded) == LIMITS.replies_per_sender.burst
+    assert heard.messages("start") == ["starting"] and len(answered) == 1
+
+
+def test_a_flood_reaches_the_log_and_terminal_as_counts(clock):
+    """The listeners (the log, the terminal's lines, notifications) hear a flood within the
+    reported budget; the rest come as one `unlogged` count."""
+    live = Live(StopRequest(), wait_start=True, now=clock.now)
+    heard = Heard()
+    live.listeners.append(heard)
+    server = OscServer(live, 0, now=clock.now)
+    server.start()
+    peer = Peer("udp", server.port)
+    try:
+        for _ in range(4):
+            peer.send(bundle("/choreo/go", 100))
+            assert wait_for(lambda: server_idle(server, peer), TIMEOUT_S, every=0.01)
+        clock.advance(LIMITS.summary_every_s)
+        live.flush_reports()
+    finally:
+        peer.close()
+        server.close()
+    names = heard.names()
+    assert len(names) <= LIMITS.reported.burst + 1
+    summary = [e for e in heard.events if e.command.name == UNLOGGED]
+    assert len(summary) == 1
+    told = names.count("go") + summary[0].answer.data["counts"]["go"]
+    assert told == 400  # every GO of the bundles accounted for
+
+
+def server_idle(server: OscServer, peer: Peer) -> bool:
+    """The server has read what the peer sent: a probe from another address (with budgets of
+    its own) sent after it is answered."""
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.3", 0))
+    try:
+        probe.sendto(message("/choreo/nothing"), ("127.0.0.1", server.port))
+        probe.settimeout(TIMEOUT_S)
+        return bool(probe.recv(65536))
+    except OSError:
+        return False
+    finally:
+        probe.close()
+
+
+# -- replies and notifications that come back -----------------------------------------------------
+
+
+class Receiver:
+    """What QLab (or a logger) would receive on --osc-notify's port."""
+
+    def __init__(self) -> None:
+        self.messages: list[tuple] = []
+        dispatcher = Dispatcher()
+        dispatcher.set_default_handler(lambda address, *args: self.messages.append((address, *args)))
+        self.server = ThreadingOSCUDPServer(("127.0.0.1", 0), dispatcher)
+        self.address = ("127.0.0.1", self.server.server_address[1])
+        threading.Thread(target=self.server.serve_forever, args=(0.05,), daemon=True).start()
+
+    def commands(self) -> list[tuple]:
+        return [m[1:] for m in self.messages if m[0] == "/choreo/notify/command"]
+
+    def close(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+
+
+@pytest.fixture
+def receivers():  # type: ignore[no-untyped-def]
+    made = [Receiver(), Receiver()]
+    yield made
+    for receiver in made:
+        receiver.close()
+
+
+def test_replies_and_notifications_sent_back_are_never_answered_nor_notified(live, clock, heard, receivers):
+    receiver = receivers[0]
+    server = OscServer(live, 0, now=clock.now, notify=receiver.address)
+    server.start()
+    live.listeners.append(server)
+    peer = Peer("udp", server.port)
+    try:
+        for address in ("/reply/choreo/go", "/choreo/notify/command", "/choreo/notify/step"):
+            peer.send(message(address))
+        peer.send(message("/choreo/start"))  # a real one after them: its notification comes last
+        assert wait_for(lambda: any(c[0] == "start" for c in receiver.commands()), TIMEOUT_S, every=0.005)
+        replies = peer.replies()
+    finally:
+        peer.close()
+        server.close()
+    assert heard.names() == ["echo", "echo", "echo", "start"]
+    assert heard.messages("echo")[0].startswith("ignored: /reply/choreo/go is a reply or a notification")
+    assert [json.loads(OscReply(r).argument)["address"] for r in replies] == ["/choreo/start"]
+    assert [c[0] for c in receiver.commands()] == ["start"]  # the echoes were not notified
+
+
+class OscReply:
+    """A reply's one string argument."""
+
+    def __init__(self, data: bytes) -> None:
+        from pythonosc.osc_message import OscMessage
+
+        self.argument = OscMessage(data).params[0]
+
+
+def test_every_notify_target_gets_the_notifications(live, clock, receivers):
+    server = OscServer(live, 0, now=clock.now, notify=[r.address for r in receivers])
+    server.start()
+    live.listeners.append(server)
+    try:
+        assert live.command(Command("start", "key")).ok
+        assert wait_for(lambda: all(r.commands() for r in receivers), TIMEOUT_S, every=0.005)
+    finally:
+        server.close()
+    for receiver in receivers:
+        assert receiver.commands() == [("start", "key", "ok", "starting", "")]
+    ports = ", ".join(f"127.0.0.1:{r.address[1]}" for r in receivers)
+    assert server.listening.endswith(f"; progress to {ports}")
+
+
+def outside_address() -> str | None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect(("10.255.255.255", 9))  # no packet is sent: only a route is chosen
+            host = probe.getsockname()[0]
+        except OSError:
+            return None
+    return None if host.startswith("127.") or host == "0.0.0.0" else host
+
+
+def free_port() -> int:
+    """A port number free for both UDP and TCP right now."""
+    while True:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp, \
+                socket.socket(socket.AF_INET, socket.SOCK_STREAM) as tcp:
+            udp.bind(("127.0.0.1", 0))
+            port = udp.getsockname()[1]
+            try:
+                tcp.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+
+
+SELF = ["127.0.0.1", "localhost", "127.9.8.7", "0.0.0.0", "::1", "::ffff:127.0.0.1", "::", "outside"]
+
+
+@pytest.mark.parametrize("host", SELF)
+def test_notifying_choreos_own_port_is_refused_at_start_up(live, host):
+    """Each notification would come back as an unknown command, notified in turn: a loop."""
+    if host == "outside":
+        host = outside_address()
+        if host is None:
+            pytest.skip("this machine has no address but loopback")
+    port = free_port()
+    server = OscServer(live, port, host="0.0.0.0", notify=(host, port))
+    with pytest.raises(UsageError) as refused:
+        server.start()
+    server.close()
+    assert str(refused.value).startswith(f"--osc-notify {host if ':' not in host else f'[{host}]'}:{port}: "
+                                         "that is choreo's own --osc port on this machine")
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as again:
+        again.bind(("0.0.0.0", port))  # the port was let go
+    OscServer(live, port, notify=(host, port + 1 if port < 65535 else port - 1)).close()  # another port is fine
+
+
+def test_a_notify_target_on_another_machine_and_port_is_taken(live):
+    server = OscServer(live, 0, notify=[("192.0.2.1", 53001), ("127.0.0.1", 9)])  # TEST-NET-1: nobody
+    server.start()
+    server.close()
+
+
+# -- choreo run: every option checked, every port bound, before anything opens --------------------
+
+
+ONE_STEP = """\
+    version: 1
+    steps:
+      - play: 1
+    """
+
+
+class Board:
+    """A TCP listener standing for a board on `socket://`: did anyone connect (a byte sent)?"""
+
+    def __init__(self) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.listen()
+        self.sock.setblocking(False)
+        self.url = f"socket://127.0.0.1:{self.sock.getsockname()[1]}"
+
+    def touched(self) -> bool:
+        try:
+            connection, _ = self.sock.accept()
+        except BlockingIOError:
+            return False
+        connection.close()
+        return True
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+@pytest.fixture
+def taken_port():  # type: ignore[no-untyped-def]
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        yield taken.getsockname()[1]
+
+
+BAD_OPTIONS = {
+    "port out of range": (["--osc", "70000"], "--osc 70000: give a port number"),
+    "negative port": (["--osc", "-1"], "--osc -1: give a port number"),
+    "port in use": (["--osc", "{taken}"], "--osc {taken}: cannot listen on 127.0.0.1:{taken}"),
+    "empty host": (["--osc", "0", "--osc-host", ""], "--osc-host '': give the address"),
+    "host of another machine": (["--osc", "0", "--osc-host", "192.0.2.1"], "--osc 0: cannot listen on 192.0.2.1:0"),
+    "bad allow": (["--osc", "0", "--osc-allow", "qlab.local"], "--osc-allow qlab.local: give an IP address"),
+    "bad notify": (["--osc", "0", "--osc-notify", "127.0.0.1"], "--osc-notify 127.0.0.1: give HOST:PORT"),
+    "notify port 0": (["--osc", "0", "--osc-notify", "127.0.0.1:0"], "--osc-notify 127.0.0.1:0: give HOST:PORT"),
+    "notify twice": (["--osc", "0", "--osc-notify", "127.0.0.1:9", "--osc-notify", "127.0.0.1:9"],
+                     "--osc-notify 127.0.0.1:9: given twice"),
+    "notify nowhere": (["--osc", "0", "--osc-notify", "no-such-host.invalid:9"], "--osc-notify no-such-host.invalid:9: "),
+    "notify itself": (["--osc", "{free}", "--osc-notify", "localhost:{free}"], "--osc-notify localhost:{free}: that is "
+                      "choreo's own --osc port"),
+    "bad timeout": (["--timeout", "nan"], "--timeout nan: "),
+    "bad retries": (["--retries", "99"], "--retries 99: "),
+    "bad baud": (["--baud", "12"], "baud 12: "),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_OPTIONS))
+def test_a_bad_option_ends_the_run_before_a_log_or_a_board_is_touched(tmp_path, taken_port, case):
+    """Once `--osc 70000` or a port in use were noticed only after the log was created and the
+    board had had its ACK check and config read."""
+    options, expected = BAD_OPTIONS[case]
+    free = free_port()
+    options = [o.format(taken=taken_port, free=free) for o in options]
+    show = write_show(tmp_path, ONE_STEP)
+    board = Board()
+    try:
+        result = choreo("run", str(show), "--port", board.url, *options, cwd=tmp_path)
+        touched = board.touched()
+    finally:
+        board.close()
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith(expected.format(taken=taken_port, free=free)), result.stderr
+    assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
+    assert not touched  # no byte went to the board
+    assert not (tmp_path / "runs").exists()  # no log was created
+
+
+# -- a flood through choreo run --------------------------------------------------------------------
+
+
+GO_SHOW = """\
+    version: 1
+    motions:
+      bow: {number: 2, duration: 0.05}
+    steps:
+      - play: 1
+      - play: bow
+        at: go
+        label: applause
+    """
+
+
+def test_a_flood_over_osc_neither_fills_the_log_nor_the_terminal_and_the_review_counts_it(tmp_path):
+    """80,000 GOs in 5 s once wrote a 14 MB log and 4.5 MB of stderr, and `log summary` said
+    "38201 commands, 19 refused" where 38,188 were."""
+    show = write_show(tmp_path, GO_SHOW.rstrip(" ") + "      - wait: 60\n")  # after the GO, the show goes on till stopped
+    log_path = tmp_path / "run.mcap"
+    port = free_port()
+    process = start_choreo("run", str(show), "--osc", str(port), "--no-console", "--log", str(log_path))
+    sent = 0
+    try:
+        peer = None
+        deadline = time.monotonic() + 30
+        while peer is None:  # until choreo listens
+            assert time.monotonic() < deadline and process.poll() is None, "choreo does not listen"
+            try:
+                peer = Peer("tcp", port)
+            except OSError:
+                time.sleep(0.05)
+        while not any(b'"status": "ok"' in reply for reply in peer.replies(quiet_s=0.25)):  # until a GO is taken
+            assert time.monotonic() < deadline and process.poll() is None, "no GO taken"
+            peer.send(message("/choreo/go"))
+            sent += 1
+        packet = bundle("/choreo/go", 200)
+        for _ in range(50):  # 10,000 GOs over TCP: none lost on the way
+            peer.send(packet)
+            sent += 200
+        peer.replies(quiet_s=0.5)
+        stopped = False
+        deadline = time.monotonic() + 30
+        while not stopped:  # a stop, once the sender's budget has come back
+            assert time.monotonic() < deadline, "the stop was never taken"
+            peer.send(message("/choreo/stop"))
+            sent += 1
+            stopped = any(b"stopping" in reply for reply in peer.replies(quiet_s=0.3))
+        peer.close()
+        _, err = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert process.returncode == 130, err
+    assert len(err) < 8000, err[-2000:]  # the terminal: a few lines, not one a command
+    assert log_path.stat().st_size < 200_000
+    commands = read_log(log_path).topic("/choreo/command")
+    unlogged = [c for c in commands if c["command"] == UNLOGGED]
+    assert unlogged and len(commands) < 200
+    assert sum(c.get("count", 1) for c in commands) == sent
+    review = choreo("log", "summary", str(log_path), cwd=tmp_path)
+    assert review.returncode == 0, review.stderr
+    assert f"commands  {sent} from the operator ({sent - 2} refused; " in review.stdout  # a GO and the stop taken
+    assert "log export" not in review.stdout
