@@ -116,7 +116,11 @@ class Session:
         loop = _loop_range(request.loop) if request.loop is not None else None
         starts, origin = _starts(show, plans, loop[0] if loop else request.from_step, "--loop" if loop else "--from")
         ends = _ends(show, plans, loop[1], starts, "--loop") if loop else {}
+        if loop:
+            _check_loop_length(plans, starts, ends, origin, request.loop)
         song, output = _music(show, request, time_source)
+        if song is not None and (loop or request.from_step is not None):
+            _check_in_song(song, origin, f"--loop {request.loop}" if loop else f"--from {request.from_step}")
         log_path = None
         if request.log_path and not request.no_log:
             check_output_folder(Path(request.log_path), "--log")
@@ -335,9 +339,7 @@ class Session:
     def _end_of_section(self, show: ShowClock, stop: StopRequest) -> None:
         """A --loop pass lasts until the step after its last one is planned (or the last
         motion's expected end): the section's last motion plays out before the next pass."""
-        end = max(plan.steps[self.ends[name]].planned_s if self.ends[name] < len(plan.steps) else plan.estimated_s
-                  for name, plan in self.plans.items())
-        sleep_until_show(self.clock, show, end, stop)
+        sleep_until_show(self.clock, show, _section_end(self.plans, self.ends), stop)
 
     def _stop_music(self, listeners: list[RunListener]) -> None:
         if self.player is None:
@@ -614,6 +616,7 @@ def with_show_durations(url: str, show: Show | None, plan: Plan | None,
 
 
 MAX_TIMEOUT_S = 10.0
+MIN_LOOP_S = 0.1  # a --loop pass's least show time: its motions restart at most 10 times a second
 MAX_RETRIES = 10
 
 
@@ -678,6 +681,41 @@ def _ends(show: Show, plans: dict[str, Plan], ref: str, starts: dict[str, int], 
     if all(ends[name] <= starts[name] for name in plans):
         raise UsageError(f"{option} ..{ref}: it comes before the loop's first step")
     return ends
+
+
+def _section_end(plans: dict[str, Plan], ends: dict[str, int]) -> float:
+    """The show time a --loop pass ends at: where the step after the section is planned (the
+    show's expected end after the last step), the latest of every robot's."""
+    return max(plan.steps[ends[name]].planned_s if ends[name] < len(plan.steps) else plan.estimated_s
+               for name, plan in plans.items())
+
+
+def _check_loop_length(plans: dict[str, Plan], starts: dict[str, int], ends: dict[str, int], origin: float,
+                       given: str) -> None:
+    """A pass over (nearly) no show time would restart its motions as fast as the port allows
+    (a section of plays and zero-length waits: 1,899 restarts in 2.3 s); a GO cue in it paces it
+    by hand, anything else must last MIN_LOOP_S."""
+    if any(step.go for name, plan in plans.items() for step in plan.steps[starts[name]:ends[name]]):
+        return
+    length = _section_end(plans, ends) - origin
+    if length < MIN_LOOP_S - 1e-9:
+        raise UsageError(f"--loop {given}: one pass lasts {max(length, 0.0):.3f} s of show time; a loop needs "
+                         f"{MIN_LOOP_S:g} s at least (its motions would restart {_rate(length)}): end it at a "
+                         "later step (a `wait: done` after its last play), or add a GO cue to pace it")
+
+
+def _rate(length: float) -> str:
+    return "without pause" if length <= 0 else f"{1 / length:.0f} times a second"
+
+
+def _check_in_song(song: Song, origin: float, given: str) -> None:
+    """In a music show, show time is the song's position: a start at or past its end would run
+    the show in silence, on a clock that no longer moves with anything."""
+    end = song.duration_s - song.music.start  # the show time the song ends at
+    if origin >= end - 1e-9:
+        raise UsageError(f"{given}: it starts at {origin:.3f} s of show time, past the end of the music "
+                         f"({song.path} ends at {max(end, 0.0):.3f} s): nothing would play; give an earlier "
+                         "step, or --no-music to run on the machine's clock")
 
 
 def _start_index(plan: Plan, ref: str | None, option: str = "--from") -> int:
