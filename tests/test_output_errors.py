@@ -251,3 +251,12 @@ def test_a_folder_of_things_named_mcap_that_are_not_logs_says_so(hostile_folder,
     for argv in (["log", "latest"], ["log", "summary"]):
         assert main([*argv, str(folder)]) == 2
         assert capsys.readouterr().err == f"{folder}: no .mcap logs in this folder ({others} named *.mcap are not regular files)\n"
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full here")
+def test_a_json_failure_into_a_full_output_still_tells_the_failure():
+    with open("/dev/full", "w") as full:
+        done = choreo("log", "summary", "/nonexistent.mcap", "--json", stdout=full)
+    assert done.returncode == 2
+    assert done.stderr == ("log /nonexistent.mcap: cannot read the run log: No such file or directory\n"
+                           "choreo: cannot write the output: No space left on device\n")

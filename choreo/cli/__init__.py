@@ -67,7 +67,7 @@ def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = Non
         sys.stdout = output.wrapped
     if output.failure is not None:  # reported here, even if a command swallowed the exception
         print(output.message(), file=sys.stderr)
-        return OUTPUT_ERROR_EXIT
+        return code or OUTPUT_ERROR_EXIT  # a command that failed anyway keeps its own status
     return code
 
 
@@ -130,7 +130,10 @@ def _command(argv: Sequence[str] | None, signals: SignalGuard | None,
         except (ChoreoError, KeyboardInterrupt) as exc:
             from choreo.cli.jsonout import report_failure
 
-            report_failure(args, exc)  # --json: the failure as JSON on stdout too
+            try:
+                report_failure(args, exc)  # --json: the failure as JSON on stdout too
+            except OutputError:
+                pass  # main says so; the failure itself is still told on stderr, with its exit status
             raise
         return code
     finally:
