@@ -456,3 +456,16 @@ def test_a_slot_key_in_a_message_is_shown_escaped(tmp_path, capsys):
     data = "<Rcb4><MotionDataCollection><DictionaryEntry><Key>M\u202e100</Key></DictionaryEntry></MotionDataCollection></Rcb4>"
     err = assert_one_line_exit_2(capsys, ["import", str(write_project(tmp_path, data.encode()))], "slot M\\u202e100 has no <Value>")
     assert "\u202e" not in err
+
+
+def test_names_that_clean_to_the_same_text_keep_distinct_keys(tmp_path, capsys):
+    slots = [Slot(1, "wave"), Slot(2, "wa\u200bve"), Slot(3, "wave\u202e"), Slot(4, "\u3164"), Slot(5, "motion_2")]
+    text = imported(capsys, write_project(tmp_path, project_xml(slots)))
+    load_show_bytes(text.encode("utf-8"))
+    assert yaml.safe_load(text)["motions"] == {
+        "wave": {"number": 1},
+        "motion_2": {"number": 5},
+        "motion_2_": {"number": 2, "hth4_name": "wave"},
+        "motion_3": {"number": 3, "hth4_name": "wave"},
+        "motion_4": {"number": 4},  # a Hangul filler alone: nothing visible is left to keep
+    }
