@@ -141,3 +141,64 @@ def test_only_one_export_can_go_to_stdout(a_log):
     with pytest.raises(ChoreoError, match="only one of --csv, --json and --jsonl"):
         from choreo.cli import _command  # the error itself, before main prints it
         _command(["log", "export", str(a_log), "--jsonl", "-", "--csv", "-"], None)
+
+
+def test_run_json_names_every_robots_port_and_no_first_one_for_the_show(capsys, tmp_path):
+    show = tmp_path / "two.yaml"
+    show.write_text("version: 1\nrobots:\n  a: {}\n  b: {}\nsteps:\n  - play: 1\n")
+    code = vmain(["run", str(show), "--json", "-q", "--no-log", "--port", "a=sim://?motion_s=0.05",
+                  "--port", "b=sim://?motion_s=0.07"])
+    record = json.loads(capsys.readouterr().out)
+    assert code == 0 and set(record["robots"]) == {"a", "b"}
+    assert record["robots"]["a"]["port"].startswith("sim://?motion_s=0.05")
+    assert record["robots"]["b"]["port"].startswith("sim://?motion_s=0.07")
+    assert "port" not in record and "baud" not in record  # the first robot's would pass for the show's
+
+
+def test_run_json_of_one_robot_has_its_port_both_ways(capsys):
+    record = json_of(capsys, "run", "shows/minimal.yaml", "--port", FAST, "--no-log", "--json", "-q")
+    assert record["port"] == FAST and list(record["robots"].values()) == [
+        {"port": FAST, "baud": 115200, "layout": "seed"}]
+
+
+def test_probe_json_is_the_readings(capsys):
+    assert vmain(["probe", "--port", "sim://?baud=625000", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert record["ok"] is True and record["port"] == "sim://?baud=625000" and record["baud"] == 625000
+    assert record["version"] == "RCB-4 simulator (choreo)"
+    assert record["config"]["word"] == 2 and record["config"]["rom_run"] is True and record["config"]["com_baud"] == 115200
+    assert len(record["counter"]["hex"].split()) == 10 and record["hints"]
+
+
+@pytest.mark.parametrize("argv, code", [
+    (["probe", "--port", "sim://?drop=1", "--timeout", "0.02", "--json"], 3),
+    (["probe", "--port", " ", "--json"], 2),
+    (["doctor", "--port", "sim://?drop=1", "--json", "--audio-device", "nosuch"], 1),
+])
+def test_probe_and_doctor_json_on_failure(capsys, argv, code):
+    assert vmain(argv) == code
+    record = json.loads(capsys.readouterr().out)
+    assert record["ok"] is False and record["exit"] == code
+
+
+def test_doctor_json_lists_each_finding(capsys):
+    assert vmain(["doctor", "--port", "sim://", "--json"]) in (0, 1)
+    record = json.loads(capsys.readouterr().out)
+    board = next(f for f in record["findings"] if f["check"] == "board")
+    assert board == {"level": "ok", "check": "board", "fix": None,
+                     "text": "a board answers on sim:// at 115200 baud, version 'RCB-4 simulator (choreo)'"}
+    assert record["ok"] is (record["exit"] == 0) and all(f["level"] in ("ok", "problem", "note") for f in record["findings"])
+
+
+def test_ports_json_marks_kondo_adapters(capsys, monkeypatch):
+    from types import SimpleNamespace
+
+    from serial.tools import list_ports
+
+    found = [SimpleNamespace(device="/dev/ttyUSB0", description="Kondo", vid=0x165C, pid=0x0008),
+             SimpleNamespace(device="/dev/ttyS0", description=None, vid=None, pid=None)]
+    monkeypatch.setattr(list_ports, "comports", lambda: found)
+    record = json_of(capsys, "ports", "--json")
+    assert record["ports"] == [
+        {"device": "/dev/ttyS0", "description": "", "vid": None, "pid": None, "kondo": False},
+        {"device": "/dev/ttyUSB0", "description": "Kondo", "vid": 0x165C, "pid": 0x0008, "kondo": True}]

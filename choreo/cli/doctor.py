@@ -17,6 +17,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--port", help="the port to check and probe (default: the one Kondo adapter "
                         "plugged in); sim:// probes the built-in simulator")
     parser.add_argument("--no-probe", action="store_true", help="do not talk to the board")
+    parser.add_argument("--json", action="store_true", help="one JSON object on stdout: ok, exit, and the "
+                        "findings, each with level (ok, problem, note), check, text and fix")
     parser.add_argument("--audio-device", metavar="OUTPUT", help="the audio output to check (as `choreo run` "
                         "takes it; default: the system's output)")
     parser.set_defaults(handler=run)
@@ -40,6 +42,14 @@ def run(args: argparse.Namespace) -> int:
         return audio_output(lambda: try_output(pick_output(args.audio_device)), args.audio_device)
 
     findings = examine(ports, args.port, probe=None if args.no_probe else probe_port, audio=audio)
+    code = 1 if any(f.level == PROBLEM for f in findings) else 0
+    if args.json:
+        from dataclasses import asdict
+
+        from choreo.cli.jsonout import print_json
+
+        print_json({"ok": code == 0, "exit": code, "findings": [asdict(f) for f in findings]})
+        return code
     for finding in findings:
         print(finding.line())
-    return 1 if any(f.level == PROBLEM for f in findings) else 0
+    return code

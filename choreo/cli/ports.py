@@ -11,6 +11,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("ports", help="list serial ports, marking Kondo adapters",
                                    description="List the serial ports found; Kondo's USB adapter "
                                    "(USB 165C:0008) is marked.")
+    parser.add_argument("--json", action="store_true", help="one JSON object on stdout: ports, each with "
+                        "device, description, vid, pid (null when not USB) and kondo")
     parser.set_defaults(handler=run)
 
 
@@ -18,6 +20,13 @@ def run(args: argparse.Namespace) -> int:
     from serial.tools import list_ports
 
     ports = sorted(list_ports.comports(), key=lambda p: p.device)
+    if args.json:
+        from choreo.cli.jsonout import print_json
+
+        print_json({"ok": True, "exit": 0, "ports": [
+            {"device": p.device, "description": p.description or "", "vid": p.vid, "pid": p.pid,
+             "kondo": (p.vid, p.pid) == KONDO_USB} for p in ports]})
+        return 0
     if not ports:
         print("no serial ports found (is the adapter plugged in? on Linux, Kondo's adapter may "
               "need: modprobe ftdi_sio && echo 165C 0008 > /sys/bus/usb-serial/drivers/ftdi_sio/new_id)")

@@ -20,6 +20,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "exactly one is plugged in); sim:// probes the built-in simulator")
     parser.add_argument("--timeout", type=float, metavar="S", default=0.2,
                         help="seconds to wait for each reply, 0 < S <= 10 (default 0.2)")
+    parser.add_argument("--json", action="store_true", help="one JSON object on stdout: the baud, what the "
+                        "board said, notes and hints (on failure: ok false, exit, error)")
     parser.set_defaults(handler=run)
 
 
@@ -31,9 +33,31 @@ def run(args: argparse.Namespace) -> int:
     port = args.port if args.port is not None else _kondo_adapter()
     if not port.strip():
         raise UsageError("--port: empty; give a device (/dev/ttyUSB0, COM3) or a URL (sim://)")
-    for line in probe(port, timeout=args.timeout, time_source=args.time_source).lines():
+    info = probe(port, timeout=args.timeout, time_source=args.time_source)
+    if args.json:
+        from choreo.cli.jsonout import print_json
+
+        print_json(board_record(info))
+        return 0
+    for line in info.lines():
         print(line)
     return 0
+
+
+def board_record(info) -> dict:  # type: ignore[no-untyped-def]  # BoardInfo: imported lazily
+    """What `probe --json` prints: the readings as numbers, None where the board did not answer."""
+    config = info.config
+    counter = info.counter
+    return {
+        "ok": True, "exit": 0, "port": info.port, "baud": info.baud, "version": info.version,
+        "config": None if config is None else {
+            "word": config.word, "rom_run": config.bit(1), "ics": config.bit(0), "end_message": config.bit(2),
+            "vector_jump": config.bit(3), "frame_ms": config.frame_ms, "com_baud": config.com_baud,
+            "ics_baud": config.ics_baud, "green_led": config.bit(15)},
+        "counter": None if counter is None else {
+            "program_counter": counter.program_counter, "in_call": counter.in_call, "hex": counter.data.hex(" ")},
+        "notes": list(info.notes), "hints": info.hints(),
+    }
 
 
 def _kondo_adapter() -> str:

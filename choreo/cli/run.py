@@ -318,11 +318,13 @@ class _RunReport:
         session, result = self.session, self.result
         record: dict = {"show": self.show, "ok": self.exit_code == 0, "exit": self.exit_code}
         if session is not None:
-            record.update(name=session.show.name, port=session.port, baud=session.baud, layout=session.layout.name,
+            record.update(name=session.show.name,
                           log=str(session.log_path) if session.log_path and session.recorder else None)
+            if not session.show.ensemble:  # with several robots, the first one's would pass for the show's
+                record.update(port=session.port, baud=session.baud, layout=session.layout.name)
+            record["robots"] = {link.robot: {"port": link.port, "baud": link.baud, "layout": link.layout.name}
+                                for link in session.links.values()}
             if session.show.ensemble:
-                record["robots"] = {link.robot: {"port": link.port, "baud": link.baud, "layout": link.layout.name}
-                                    for link in session.links.values()}
                 record["dropouts"] = [{"robot": d.robot, "show_s": round(d.show_s, 6), "error": str(d.error)}
                                       for d in session.dropouts]
             if session.song is not None:
