@@ -17,10 +17,8 @@ import time
 from pathlib import Path
 
 import pytest
-from pythonosc.dispatcher import Dispatcher
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
-from pythonosc.osc_server import ThreadingOSCUDPServer
 
 from choreo.clock import VirtualTime
 from choreo.errors import UsageError
@@ -29,6 +27,7 @@ from choreo.live import Command, Live
 from choreo.osc import OscServer
 from choreo.runner import StopRequest
 from runlog import choreo, read_log, start_choreo, wait_for, write_show
+from test_osc import Receiver, free_port, outside_address
 
 TIMEOUT_S = 5.0
 EVERY_EVENT = Limits(reported=Rate(1_000_000, 1.0))  # the test hears every command one by one
@@ -222,25 +221,6 @@ def server_idle(server: OscServer, peer: Peer) -> bool:
 # -- replies and notifications that come back -----------------------------------------------------
 
 
-class Receiver:
-    """What QLab (or a logger) would receive on --osc-notify's port."""
-
-    def __init__(self) -> None:
-        self.messages: list[tuple] = []
-        dispatcher = Dispatcher()
-        dispatcher.set_default_handler(lambda address, *args: self.messages.append((address, *args)))
-        self.server = ThreadingOSCUDPServer(("127.0.0.1", 0), dispatcher)
-        self.address = ("127.0.0.1", self.server.server_address[1])
-        threading.Thread(target=self.server.serve_forever, args=(0.05,), daemon=True).start()
-
-    def commands(self) -> list[tuple]:
-        return [m[1:] for m in self.messages if m[0] == "/choreo/notify/command"]
-
-    def close(self) -> None:
-        self.server.shutdown()
-        self.server.server_close()
-
-
 @pytest.fixture
 def receivers():  # type: ignore[no-untyped-def]
     made = [Receiver(), Receiver()]
@@ -259,7 +239,7 @@ def test_replies_and_notifications_sent_back_are_never_answered_nor_notified(liv
         for address in ("/reply/choreo/go", "/choreo/notify/command", "/choreo/notify/step"):
             peer.send(message(address))
         peer.send(message("/choreo/start"))  # a real one after them: its notification comes last
-        assert wait_for(lambda: any(c[0] == "start" for c in receiver.commands()), TIMEOUT_S, every=0.005)
+        assert wait_for(lambda: any(c[0] == "start" for c in receiver.of("command")), TIMEOUT_S, every=0.005)
         replies = peer.replies()
     finally:
         peer.close()
@@ -267,7 +247,7 @@ def test_replies_and_notifications_sent_back_are_never_answered_nor_notified(liv
     assert heard.names() == ["echo", "echo", "echo", "start"]
     assert heard.messages("echo")[0].startswith("ignored: /reply/choreo/go is a reply or a notification")
     assert [json.loads(OscReply(r).argument)["address"] for r in replies] == ["/choreo/start"]
-    assert [c[0] for c in receiver.commands()] == ["start"]  # the echoes were not notified
+    assert [c[0] for c in receiver.of("command")] == ["start"]  # the echoes were not notified
 
 
 class OscReply:
@@ -285,37 +265,13 @@ def test_every_notify_target_gets_the_notifications(live, clock, receivers):
     live.listeners.append(server)
     try:
         assert live.command(Command("start", "key")).ok
-        assert wait_for(lambda: all(r.commands() for r in receivers), TIMEOUT_S, every=0.005)
+        assert wait_for(lambda: all(r.of("command") for r in receivers), TIMEOUT_S, every=0.005)
     finally:
         server.close()
     for receiver in receivers:
-        assert receiver.commands() == [("start", "key", "ok", "starting", "")]
+        assert receiver.of("command") == [("start", "key", "ok", "starting", "")]
     ports = ", ".join(f"127.0.0.1:{r.address[1]}" for r in receivers)
     assert server.listening.endswith(f"; progress to {ports}")
-
-
-def outside_address() -> str | None:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        try:
-            probe.connect(("10.255.255.255", 9))  # no packet is sent: only a route is chosen
-            host = probe.getsockname()[0]
-        except OSError:
-            return None
-    return None if host.startswith("127.") or host == "0.0.0.0" else host
-
-
-def free_port() -> int:
-    """A port number free for both UDP and TCP right now."""
-    while True:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp, \
-                socket.socket(socket.AF_INET, socket.SOCK_STREAM) as tcp:
-            udp.bind(("127.0.0.1", 0))
-            port = udp.getsockname()[1]
-            try:
-                tcp.bind(("127.0.0.1", port))
-            except OSError:
-                continue
-            return port
 
 
 SELF = ["127.0.0.1", "localhost", "127.9.8.7", "0.0.0.0", "::1", "::ffff:127.0.0.1", "::", "outside"]
