@@ -189,10 +189,14 @@ def _step_table(steps, shared: bool = False) -> list[str]:  # type: ignore[no-un
         )
         for step in steps
     ]
+    from choreo.textfit import display_width, pad, visible
+
     header = ("#", "path", "label", "start", "step", "frames")
-    widths = [max(len(row[i]) for row in [header, *rows]) for i in range(5)]
-    return ["  ".join([row[0].rjust(widths[0])] + [row[i].ljust(widths[i]) for i in range(1, 5)] + [row[5]])
-            for row in [header, *rows]]
+    # by the columns a terminal gives each cell (a Japanese name takes two a character), as shown
+    cells = [tuple(visible(cell) for cell in row) for row in [header, *rows]]
+    widths = [max(display_width(row[i]) for row in cells) for i in range(5)]
+    return ["  ".join([row[0].rjust(widths[0])] + [pad(row[i], widths[i]) for i in range(1, 5)] + [row[5]])
+            for row in cells]
 
 
 def _layout_note(plan) -> str:  # type: ignore[no-untyped-def]
