@@ -447,3 +447,15 @@ def test_a_flood_over_osc_neither_fills_the_log_nor_the_terminal_and_the_review_
     assert review.returncode == 0, review.stderr
     assert f"commands  {sent} from the operator ({sent - 2} refused; " in review.stdout  # a GO and the stop taken
     assert "log export" not in review.stdout
+
+
+@pytest.mark.parametrize("url", ["socket://", "socket://127.0.0.1", "socket://127.0.0.1:0", "socket://127.0.0.1:70000",
+                                 "rfc2217://:4000", "solo=socket://host:x"])
+def test_a_network_port_without_host_and_port_is_a_bad_argument_not_a_failed_link(tmp_path, url):
+    """Once `--port socket://` created a log and failed as a link (exit 3) with pyserial's
+    "'<=' not supported between instances of 'int' and 'NoneType'"."""
+    show = write_show(tmp_path, ONE_STEP)
+    result = choreo("run", str(show), "--port", url, cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith(f"--port {url}: give ") and result.stderr.count("\n") == 1
+    assert not (tmp_path / "runs").exists()

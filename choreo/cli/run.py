@@ -285,6 +285,7 @@ def port_arguments(values: list[str] | None) -> tuple[str | None, dict[str, str]
         split = split_robot_port(value)
         if value.startswith("="):
             raise UsageError(f"--port {value}: give the robot's name before '=' (--port NAME=URL)")
+        _check_network_port(value if split is None else split[1], value)
         if split is None:
             plain.append(value)
         elif split[0] in named:
@@ -295,6 +296,29 @@ def port_arguments(values: list[str] | None) -> tuple[str | None, dict[str, str]
         raise UsageError(f"--port {plain[1]}: one --port URL for a one-robot show; for several robots "
                          "give --port NAME=URL")
     return (plain[0] if plain else None), named
+
+
+NETWORK_PORTS = ("socket://", "rfc2217://")  # pyserial's URLs of a port over the network: HOST:PORT
+
+
+def _check_network_port(url: str, given: str) -> None:
+    """A network port's URL names a host and a port number (1..65535): a bad one is a bad
+    argument (exit 2) found before anything opens, not a port that would not open (exit 3)."""
+    from urllib.parse import urlsplit
+
+    from choreo.errors import UsageError
+
+    if not url.lower().startswith(NETWORK_PORTS):
+        return
+    try:
+        parts = urlsplit(url)
+        port = parts.port
+    except ValueError:
+        port, parts = None, None
+    if parts is None or not parts.hostname or port is None or port == 0:
+        scheme = url.split("://", 1)[0]
+        raise UsageError(f"--port {given}: give {scheme}://HOST:PORT, a port number 1..65535 "
+                         f"(e.g. {scheme}://192.168.1.50:4000)")
 
 
 class _RunReport:
