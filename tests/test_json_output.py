@@ -202,3 +202,27 @@ def test_ports_json_marks_kondo_adapters(capsys, monkeypatch):
     assert record["ports"] == [
         {"device": "/dev/ttyS0", "description": "", "vid": None, "pid": None, "kondo": False},
         {"device": "/dev/ttyUSB0", "description": "Kondo", "vid": 0x165C, "pid": 0x0008, "kondo": True}]
+
+
+@pytest.mark.parametrize("argv", [
+    ["plan", "--json"],
+    ["doctor", "--json", "--bogus"],
+    ["probe", "--json", "--timeout", "abc"],
+    ["run", "shows/minimal.yaml", "--json", "--baud", "x"],
+    ["validate", "--json"],
+    ["ports", "--json", "extra"],
+])
+def test_bad_arguments_of_a_json_command_are_a_json_failure_too(capsys, argv):
+    with pytest.raises(SystemExit) as ended:
+        main(argv)
+    assert ended.value.code == 2
+    captured = capsys.readouterr()
+    record = json.loads(captured.out)
+    assert record == {"ok": False, "exit": 2, "error": record["error"]} and record["error"].startswith(f"choreo {argv[0]}: ")
+    assert "usage:" in captured.err
+
+
+def test_bad_arguments_without_json_print_nothing_on_stdout(capsys):
+    with pytest.raises(SystemExit):
+        main(["log", "export", "x.mcap", "--json"])  # --json FILE: not a request for JSON output
+    assert capsys.readouterr().out == ""

@@ -17,12 +17,29 @@ class ChoreoParser(argparse.ArgumentParser):
     """argparse, with a suggestion after an unknown command, choice or option, and the usage of
     the subcommand whose arguments were wrong (not the top-level one)."""
 
+    _given: Sequence[str] = ()
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[no-untyped-def, override]
+        """Remembered, so that a bad argument of a command asked for JSON is answered in JSON."""
+        self._given = list(args) if args is not None else []
+        return super().parse_known_args(args, namespace)
+
     def error(self, message: str) -> NoReturn:
         match = _INVALID_CHOICE.search(message)
         if match:
             choices = re.findall(r"'([^']*)'", match.group("choices"))
             message += did_you_mean(match.group("given"), choices)
+        if self._wants_json():
+            from choreo.cli.jsonout import error_record, print_json
+            from choreo.errors import UsageError
+
+            print_json(error_record(UsageError(f"{self.prog}: {message}")))
         super().error(message)
+
+    def _wants_json(self) -> bool:
+        """`--json` given to a command whose --json is a flag (not `log export --json FILE`)."""
+        flag = any(isinstance(a, argparse._StoreTrueAction) and "--json" in a.option_strings for a in self._actions)
+        return flag and "--json" in self._given
 
     def unknown_arguments(self, extra: Sequence[str]) -> NoReturn:
         """Arguments no parser took: this parser's usage, with the closest option it has."""
