@@ -66,6 +66,8 @@ def open_input(path: str | os.PathLike[str], what: str, limit: int | None = None
         fd = os.open(name, _OPEN_FLAGS)
     except OSError as exc:
         raise InputError(name, _os_reason(name, exc, what)) from None
+    except ValueError:  # a NUL, or a character the file system's encoding has no bytes for
+        raise InputError(name, f"cannot read the {what}: {_UNNAMEABLE}") from None
     try:
         info = os.fstat(fd)
         _check_mode(name, info.st_mode, what)
@@ -107,6 +109,7 @@ def _check_mode(name: str, mode: int, what: str) -> None:
         raise InputError(name, f"not a regular file ({kind_of(mode)}): give a {what}")
 
 
+_UNNAMEABLE = "no file can have this name (it holds a NUL or a character the system cannot encode)"
 # What the system's words for these errors mean to someone who named a file.
 _OS_REASONS = {errno.ELOOP: "a loop of symbolic links", errno.ENAMETOOLONG: "the name is too long for this system"}
 
@@ -140,12 +143,14 @@ def listing(folder: str | os.PathLike[str], what: str = "folder") -> list[Path]:
         raise InputError(name, f"not a folder ({_kind_at(name)}): give a {what}") from None
     except OSError as exc:
         raise InputError(name, _os_reason(name, exc, what)) from None
+    except ValueError:
+        raise InputError(name, f"cannot read the {what}: {_UNNAMEABLE}") from None
 
 
 def _kind_at(name: str) -> str:
     try:
         mode = os.stat(name).st_mode
-    except OSError:
+    except (OSError, ValueError):
         return "not a folder"
     return "a file" if stat.S_ISREG(mode) else kind_of(mode)
 

@@ -131,3 +131,15 @@ def test_a_folder_that_cannot_be_listed_is_an_error_not_an_empty_folder(tmp_path
     (tmp_path / "file").write_text("x")
     with pytest.raises(InputError, match=r"file: not a folder \(a file\): give a log folder"):
         listing(tmp_path / "file", "log folder")
+
+
+def test_a_name_no_file_can_have_is_one_line(tmp_path):
+    """A show can spell a NUL (`"a\\0b.wav"`): os.stat raises ValueError, not OSError."""
+    says = "cannot read the sound file: no file can have this name (it holds a NUL or a character the system cannot encode)"
+    assert problem(tmp_path / "a\0b.wav", "sound file") == says
+    show = tmp_path / "show.yaml"
+    show.write_text('version: 1\nmusic: {file: "a\\0b.wav"}\nsteps:\n  - play: 1\n', encoding="utf-8")
+    with pytest.raises(ShowError, match=r"music.file: a\\x00b.wav: cannot read the sound file: no file can have"):
+        load_show(show)
+    with pytest.raises(InputError, match=r"cannot read the log folder: no file can have this name"):
+        listing(tmp_path / "a\0b", "log folder")
