@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -22,7 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     validate.add_argument("shows", nargs="+", metavar="SHOW", help="a show file (YAML)")
     validate.add_argument("--json", action="store_true", help="one JSON object on stdout: every file, "
                           "ok with its figures or its problems (exit status as without)")
-    validate.set_defaults(handler=run_validate, own_json_failure=True)  # its files' record says the problems
+    validate.set_defaults(handler=run_validate)
 
     plan = subparsers.add_parser(
         "plan",
@@ -57,8 +58,11 @@ def run_validate(args: argparse.Namespace) -> int:
             files.append({"path": path, "ok": True, **record})
         else:
             print(summary_line(show, plans), flush=True)
-    if args.json:
+    if args.json:  # its files' record says the problems; stderr as without --json
         print(json.dumps({"ok": not problems, "exit": 2 if problems else 0, "files": files}, ensure_ascii=False))
+        for line in ShowError(problems).lines():
+            print(line, file=sys.stderr)
+        return 2 if problems else 0
     if problems:
         raise ShowError(problems)
     return 0
