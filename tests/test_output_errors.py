@@ -198,7 +198,7 @@ def test_a_folder_that_cannot_be_listed_says_so(argv, tmp_path, monkeypatch, cap
 
 def test_log_latest_of_a_folder_that_is_not_there_or_not_a_folder(tmp_path, capsys):
     assert main(["log", "latest", str(tmp_path / "nowhere")]) == 2
-    assert capsys.readouterr().err == f"{tmp_path / 'nowhere'}: cannot read the log folder: No such file or directory\n"
+    assert capsys.readouterr().err == f"{tmp_path / 'nowhere'}: no such folder (`choreo run` writes its logs to runs/)\n"
     (tmp_path / "file").write_text("x")
     assert main(["log", "latest", str(tmp_path / "file")]) == 2
     assert capsys.readouterr().err == f"{tmp_path / 'file'}: not a folder (a file): give a log folder\n"

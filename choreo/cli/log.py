@@ -152,6 +152,8 @@ def run_summary(args: argparse.Namespace) -> int:
 
 
 def run_latest(args: argparse.Namespace) -> int:
+    if not os.path.lexists(args.dir):  # the usual case on a new machine: say where logs go
+        raise UsageError(f"{visible(args.dir)}: no such folder (`choreo run` writes its logs to runs/)")
     print(_folder_logs(Path(args.dir))[-1])
     return 0
 
