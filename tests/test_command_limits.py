@@ -222,3 +222,21 @@ def test_the_log_carries_the_counts_and_the_review_adds_them_up(tmp_path):
 def test_a_summary_record_whose_count_is_no_count_is_refused(count):
     with pytest.raises(ValueError):
         CommandRecord(UNLOGGED, "osc", "error", "", count=count, counts={"go": 1}).commands
+
+
+@pytest.mark.parametrize("data", [{"count": "12", "counts": {"go": 12}}, {"count": 5, "counts": {"go": 4}},
+                                  {"count": 3, "counts": ["go"]}, {"count": 2, "counts": {"go": -1, "stop": 3}}])
+def test_a_log_whose_summary_record_does_not_add_up_is_refused_in_one_line(tmp_path, data):
+    """A log written by another program (or edited) must not make the review count wrong or
+    raise a traceback."""
+    from choreo.errors import ChoreoError
+    from choreo.live import Answer, CommandEvent
+
+    time = VirtualTime()
+    path = tmp_path / "forged.mcap"
+    recorder = Recorder(path, RunInfo("show.yaml", "forged", b"version: 1\n", "sim://", 115200, time.wall_ns()))
+    recorder.on_command(CommandEvent(Command(UNLOGGED, "osc"), Answer("error", "forged", data), time.wall_ns(), None))
+    recorder.close()
+    with pytest.raises(ChoreoError) as refused:
+        summarize(path)
+    assert "\n" not in str(refused.value)
