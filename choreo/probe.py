@@ -158,13 +158,11 @@ def probe(url: str, *, bauds: Iterable[int] = BAUD_RATES, timeout: float = DEFAU
             continue
         try:
             if _answers(link):
-                info = _read(link, url, baud)
-                info.notes[:0] = [f"note: {exc}: not tried at that baud" for exc in refused]
-                return info
+                return _read(link, url, baud, [f"note: {exc}: not tried at that baud" for exc in refused])
         finally:
             link.close()
         tried.append(str(baud))
-    if not tried:
+    if refused and not tried:
         raise refused[0]  # no baud opens: the port itself is the problem
     also = "".join(f"; {exc}" for exc in refused)
     raise LinkError(f"port {url}: no answer to the ACK check (04 fe 06 08) at {', '.join(tried)} "
@@ -181,8 +179,8 @@ def _answers(link: Link) -> bool:
     return False
 
 
-def _read(link: Link, url: str, baud: int) -> BoardInfo:
-    info = BoardInfo(url, baud)
+def _read(link: Link, url: str, baud: int, notes: list[str]) -> BoardInfo:
+    info = BoardInfo(url, baud, notes=notes)
     version = _ask(link, protocol.version_frame(), info, "version")
     if version is not None:
         info.version = version[2:-1].decode("ascii", "replace").strip()
