@@ -260,3 +260,11 @@ def test_a_json_failure_into_a_full_output_still_tells_the_failure():
     assert done.returncode == 2
     assert done.stderr == ("log /nonexistent.mcap: cannot read the run log: No such file or directory\n"
                            "choreo: cannot write the output: No space left on device\n")
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes here")
+def test_an_output_file_that_is_a_pipe_nobody_reads_is_one_line_not_a_hang(run_log, tmp_path):
+    fifo = tmp_path / "out.csv"
+    os.mkfifo(fifo)
+    done = choreo("log", "export", str(run_log), "--csv", str(fifo))  # it blocked until the timeout
+    assert (done.returncode, done.stderr) == (2, f"log export --csv {fifo}: cannot write: a named pipe nobody reads\n")

@@ -8,6 +8,7 @@ goes and says where it stops (exit 0): that is the run a reviewer most needs to 
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import os
 import stat
@@ -310,9 +311,12 @@ def _output(path: str, command: str, binary: bool = False) -> Iterator[IO]:
     check_output_folder(target, command)
     created = not os.path.lexists(target)
     try:
-        file = open(target, "wb") if binary else open(target, "w", encoding="utf-8", newline="")
+        fd = os.open(target, _WRITE_FLAGS, 0o666)  # a named pipe nobody reads: ENXIO, not a hang
+        os.set_blocking(fd, True)
+        file = os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8", newline="")
     except OSError as exc:
-        raise UsageError(f"{command} {path}: cannot write: {exc.strerror or exc}") from None
+        why = "a named pipe nobody reads" if exc.errno == errno.ENXIO else exc.strerror or exc
+        raise UsageError(f"{command} {visible(path)}: cannot write: {why}") from None
     finished = False
     try:
         yield file
@@ -323,6 +327,10 @@ def _output(path: str, command: str, binary: bool = False) -> Iterator[IO]:
     finally:
         if not finished:
             _discard(file, target if created else None)
+
+
+_WRITE_FLAGS = (os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
+                | getattr(os, "O_BINARY", 0))
 
 
 def _discard(file: IO, created: Path | None) -> None:
