@@ -327,7 +327,8 @@ class Link:
         """
         self._check_stop(what)
         self.clock.sleep_until(start_sent + self.status_spacing_s)
-        return self.layout.start_state(motion, self.exchange(self.layout.start_read, tag).data)
+        read = replace(self.layout.start_read, motion=motion)  # the log tells which motion it asks about
+        return self.layout.start_state(motion, self.exchange(read, tag).data)
 
     def halt(self, tag: Tag | None = None) -> Reply:
         """The play sequence's stop frame alone: the board's program halts, and the motion with

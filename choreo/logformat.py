@@ -18,8 +18,8 @@ from functools import lru_cache
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any, ClassVar
 
-from choreo import protocol as p
-from choreo.layouts import DEFAULT_LAYOUT, LAYOUTS, Layout, layout_of_call
+from choreo.framewords import describe_frame, describe_reply
+from choreo.layouts import DEFAULT_LAYOUT, LAYOUTS, Layout, StartState
 
 TX_TOPIC = "/rcb4/tx"
 RX_TOPIC = "/rcb4/rx"
@@ -314,7 +314,7 @@ class MotionPlay:
     label: str | None
     start_ns: int | None  # the restore frame that started it; None: it never started
     end_ns: int | None
-    ended_by: str  # status | stop | end of log | not started
+    ended_by: str  # status | stop | state read (over when the board was asked) | end of log | not started
 
     @property
     def measured(self) -> bool:
@@ -338,15 +338,22 @@ class MotionTracker:
     restore's time. A retry of the same step's sequence re-arms it; an armed play that never got
     its restore answered did not start. A status query answered "not executing" ends the motion
     at the query's time (measured); the next play's stop frame, or the log's end, ends it
-    unmeasured. A restore whose answer was lost but after which the board reports the motion
-    executing did start (the runner counted that play done without sending it again).
+    unmeasured. A restore whose answer was lost is judged as the link judged it: by the answer
+    to the read of the board's program state that followed, through the robot's layout
+    (`Layout.start_state`): running, or already over (ended at the read, unmeasured), is a play
+    started at the restore; never started is not, and the link sends the sequence again. With a
+    layout this choreo does not know (`layout` None) the link's next frame tells instead: the
+    same sequence again from its stop frame, or not. An older log (no state read) is judged by a
+    status reply saying executing.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, layout: Layout | None = None) -> None:
+        self.layout = layout
         self.plays: list[MotionPlay] = []
         self._armed: _Armed | None = None
         self._running: _Armed | None = None
         self._lost_start: _Armed | None = None  # a restore with no answer: started, or not
+        self._asked = False  # the state was read after it, and the layout could not judge it
         self._sent: dict[int, tuple[TxRecord, int]] = {}
 
     def tx(self, record: TxRecord, time_ns: int) -> None:
@@ -363,7 +370,10 @@ class MotionTracker:
         elif record.kind == "restore" and self._armed is not None:
             self._armed.start_ns, self._armed.restore_seq = time_ns, record.seq
         elif record.kind == "stop":
-            self._lost_start = None  # the board was asked and the motion had not started
+            lost = self._lost_start
+            if lost is not None and self._asked and record.step != lost.step:
+                self._start(lost)  # asked, and the link went on: it counted the play started
+            self._lost_start = None  # else: the board was asked and the motion had not started
             if self._running is not None:
                 self._end(time_ns, "stop")
 
@@ -375,12 +385,27 @@ class MotionTracker:
             if record.kind == "ack":
                 self._start(armed)
             elif record.kind != "nak":
-                self._lost_start = armed  # carried out, or not: the board is asked next
+                self._lost_start, self._asked = armed, False  # carried out, or not: the board is asked next
+        elif kind == "read" and record.kind == "status" and self._lost_start is not None:
+            self._judge(self._lost_start, record, sent_ns)
         elif kind == "status" and record.kind == "status":
             if self._lost_start is not None and record.executing:
                 self._start(self._lost_start)
             elif self._running is not None and record.executing is False:
                 self._end(sent_ns, "status")
+
+    def _judge(self, lost: _Armed, reply: RxRecord, read_ns: int) -> None:
+        """The program state read after a lost restore reply, judged by the robot's layout."""
+        if self.layout is None or lost.motion is None:
+            self._asked = True
+            return
+        state = self.layout.start_state(lost.motion, _hex_bytes(reply.hex))
+        if not state.started:
+            self._lost_start = None  # the link sends the sequence again from its stop frame
+            return
+        self._start(lost)
+        if state is StartState.DONE:
+            self._end(read_ns, "state read")  # over before the read went out
 
     def finish(self, end_ns: int | None) -> list[MotionPlay]:
         """The plays, in the order they began, once the log is read to `end_ns`."""
@@ -403,9 +428,19 @@ class MotionTracker:
 
     def _not_started(self) -> None:
         armed = self._armed
-        if armed is not None:
+        if armed is not None and armed is self._lost_start and self._asked:
+            self._start(armed)  # asked, and not sent again: the link counted it started
+        elif armed is not None:
             self.plays.append(MotionPlay(armed.motion, armed.step, armed.label, None, None, "not started"))
         self._armed = self._lost_start = None
+
+
+def _hex_bytes(text: object) -> bytes:
+    """A logged reply's bytes; b"" for hex no choreo wrote (a state no layout can judge)."""
+    try:
+        return bytes.fromhex(text) if isinstance(text, str) else b""
+    except ValueError:
+        return b""
 
 
 # -- frames in words, by the layout they were made for ------------------------------------------
@@ -477,8 +512,9 @@ def reply_meaning(rx: RxRecord, tx: TxRecord | None, layouts: LogLayouts) -> str
         return f"{rx.kind}: {error}"
     if not isinstance(rx.hex, str):
         return f"not hex: {rx.hex!r}"
-    return _reply_words(rx.hex, tx.hex if tx is not None and isinstance(tx.hex, str) else None,
-                        layouts.layout(rx.robot))
+    frame_hex = tx.hex if tx is not None and isinstance(tx.hex, str) else None
+    asked = tx.motion if tx is not None and type(tx.motion) is int else None  # a state read's motion
+    return _reply_words(rx.hex, frame_hex, layouts.layout(rx.robot), asked)
 
 
 # A run repeats a few frames and replies thousands of times: each is put in words once.
@@ -491,135 +527,10 @@ def _frame_words(hex_text: str, layout: Layout | None) -> str:
 
 
 @lru_cache(maxsize=4096)
-def _reply_words(hex_text: str, frame_hex: str | None, layout: Layout | None) -> str:
+def _reply_words(hex_text: str, frame_hex: str | None, layout: Layout | None, motion: int | None) -> str:
     try:
         data = bytes.fromhex(hex_text)
         frame = bytes.fromhex(frame_hex) if frame_hex is not None else None
     except (TypeError, ValueError):
         return f"not hex: {hex_text!r}"
-    return describe_reply(data, frame, layout)
-
-
-def describe_frame(data: bytes, layout: Layout | None) -> str:
-    """A frame sent to the board, in words, as `layout` builds its frames (None: not known)."""
-    try:
-        command = p.parse_command(data)
-    except ValueError as exc:
-        return f"not a frame: {exc}"
-    if data == p.sync_frame().data:
-        return "ACK check"
-    if data == p.version_frame().data:
-        return "version query"
-    if command.command == p.CMD_CALL:
-        return f"CALL 0x{command.address:06x}: {_called(command.address or 0, layout)}"
-    if command.move_type == p.MOV_COM_TO_RAM:
-        return f"MOV COM->RAM 0x{command.address:04x} <- {p.hexbytes(command.payload)}: {_written(data, layout)}"
-    if command.move_type == p.MOV_RAM_TO_COM:
-        return f"MOV RAM->COM 0x{command.address:04x} x{command.count}: {_read_name(data, layout)}"
-    return f"command {command.command:02x}"
-
-
-def _called(address: int, layout: Layout | None) -> str:
-    """`motion N` when the address starts one of the layout's slots; else whose slot it is."""
-    slot = layout.slot_of(address) if layout is not None else None
-    if slot is not None:
-        return f"motion {slot}"
-    fits = layout_of_call(address)
-    if fits is None:
-        return "not a motion slot"
-    other, slot = fits
-    if layout is None:
-        return f"motion {slot} (a slot of the {other.name} layout)"
-    return f"not a motion slot of the {layout.name} layout (motion {slot}'s slot in {other.name})"
-
-
-def _written(data: bytes, layout: Layout | None) -> str:
-    """Which frame of the layout's play sequence a write is (at any baud, from any config word:
-    the layout builds them), or `write`."""
-    kind = _sequence_kind(data, layout) if layout is not None else None
-    if kind is None or layout is None:
-        return "write"
-    word = int.from_bytes(data[6:8], "little")
-    if kind is p.FrameKind.COUNTER:
-        return f"program counter to the main loop 0x{layout.main_loop:06x}"
-    if not layout.reads_config:
-        return "stop and save status" if kind is p.FrameKind.STOP else "restore status"
-    return f"{'suspend' if kind is p.FrameKind.STOP else 'resume'}: config 0x{word:04x}"
-
-
-def _sequence_kind(data: bytes, layout: Layout) -> p.FrameKind | None:
-    word = int.from_bytes(data[6:8], "little") if len(data) >= 8 else 0
-    for baud in p.BAUD_CODES:
-        for frame in layout.play_sequence(0, word, baud):
-            if frame.kind is not p.FrameKind.PLAY and frame.data == data:
-                return frame.kind
-    return None
-
-
-def _read_name(data: bytes, layout: Layout | None) -> str:
-    if layout is not None and data == layout.status.data:
-        return "status query"
-    if layout is not None and data == layout.start_read.data:
-        return "program state read (did the motion start?)"
-    if layout is not None and layout.reads_config and data == _CONFIG_READ:
-        return "config word read"
-    return "read"
-
-
-_CONFIG_READ = p.read_frame(p.CONFIG_ADDRESS, 2).data  # the hth4-2.2 link reads it at open
-# What the RAM a frame can read holds (address, bytes, name): the config word, then the program
-# counter, the return address a CALL pushed, and the call depth.
-_RAM_FIELDS = ((p.CONFIG_ADDRESS, 2, "config"), (p.PROGRAM_COUNTER_ADDRESS, 3, "program counter"),
-               (0x0005, 3, "return address"), (0x0008, 1, "depth"))
-
-
-def describe_reply(data: bytes, frame: bytes | None, layout: Layout | None) -> str:
-    """A reply in words: `ACK`, `NAK`, a RAM read's fields (`config 0x821b`), and for the
-    layout's status query whether a motion is executing. `frame`: what it answers (None: unknown)."""
-    if not data:
-        return "no reply"
-    if len(data) == p.TYPE1_REPLY_SIZE and data[0] == len(data) and p.checksum(data[:3]) == data[3]:
-        return {p.ACK_BYTE: "ACK", p.NAK_BYTE: "NAK"}.get(data[2], f"type 1 reply {data[2]:02x}")
-    if data[0] != len(data) or p.checksum(data[:-1]) != data[-1]:
-        return f"invalid: {p.hexbytes(data)}"
-    try:
-        command = p.parse_command(frame) if frame is not None else None
-    except ValueError:
-        command = None
-    if command is None or command.move_type != p.MOV_RAM_TO_COM or len(data) != (command.count or 0) + 3:
-        return f"{len(data)}-byte reply: {p.hexbytes(data)}"
-    if layout is not None and frame == layout.status.data:
-        return _status_words(data, frame, layout)
-    return _ram_words(command.address or 0, data[2:-1], layout) or f"{len(data) - 3} bytes: {p.hexbytes(data[2:-1])}"
-
-
-def _status_words(data: bytes, frame: bytes, layout: Layout) -> str:
-    """The layout's status query answered: what it reads, and the layout's running rule on it."""
-    executing = p.parse_reply(p.Frame(p.FrameKind.STATUS, frame), data).executing
-    state = "executing" if executing else "not executing"
-    if data[2:-1] and frame == p.status_frame().data:
-        return f"status 0x{data[2]:02x}: {state}"  # the document's words for its config read
-    command = p.parse_command(frame)
-    return f"{_ram_words(command.address or 0, data[2:-1], layout)}: {state}"
-
-
-def _ram_words(address: int, ram: bytes, layout: Layout | None) -> str:
-    """The known fields of RAM read from `address`: `config 0x821b, program counter 0x001380
-    (motion 1), ...`; empty if the read holds none whole."""
-    words = []
-    for start, size, name in _RAM_FIELDS:
-        if address <= start and start + size <= address + len(ram):
-            value = int.from_bytes(ram[start - address:start - address + size], "little")
-            words.append(f"{name} {value}" if name == "depth" else
-                         f"{name} 0x{value:0{size * 2}x}{_in_slot(value, layout) if size == 3 else ''}")
-    return ", ".join(words)
-
-
-def _in_slot(address: int, layout: Layout | None) -> str:
-    """` (motion 1)` where a program address lies inside one of the layout's slots."""
-    if layout is None:
-        return ""
-    offset = address - layout.first_slot
-    if 0 <= offset < p.MOTION_SLOTS * p.SLOT_SIZE:
-        return f" (motion {offset // p.SLOT_SIZE})"
-    return ""
+    return describe_reply(data, frame, layout, motion)

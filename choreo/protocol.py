@@ -145,15 +145,6 @@ def motion_address(motion: int) -> int:
     return FIRST_SLOT_ADDRESS + check_motion(motion) * SLOT_SIZE
 
 
-def slot_of_address(address: int) -> int | None:
-    """The motion slot a CALL address starts, or None if it is not the start of a slot."""
-    offset = address - FIRST_SLOT_ADDRESS
-    if offset < 0 or offset % SLOT_SIZE:
-        return None
-    slot = offset // SLOT_SIZE
-    return slot if slot < MOTION_SLOTS else None
-
-
 # Step 1: config word 0x8721, program counter 0x0003FD, and zeros: 12 bytes at RAM 0x0000.
 _STOP = mov_write(CONFIG_ADDRESS, _le(SUSPENDED_CONFIG, 2) + _le(SUSPEND_PROGRAM_COUNTER, 3) + bytes(7))
 _RESTORE = mov_write(CONFIG_ADDRESS, _le(RESUMED_CONFIG, 2))
@@ -200,16 +191,6 @@ def play_sequence(motion: int) -> tuple[Frame, ...]:
     from choreo.layouts import SEED
 
     return SEED.play_sequence(motion)
-
-
-def frame_for(kind: FrameKind | str, motion: int | None = None) -> Frame:
-    """The frame of a kind by name (what `choreo frames` and the log review need)."""
-    kind = FrameKind(kind)
-    if kind is FrameKind.PLAY:
-        if motion is None:
-            raise MotionRangeError("play needs a motion number 0..119")
-        return play_frame(motion)
-    return {FrameKind.STOP: stop_frame, FrameKind.RESTORE: restore_frame, FrameKind.STATUS: status_frame}[kind]()
 
 
 class ReplyKind(str, Enum):
@@ -384,37 +365,3 @@ def parse_command(data: bytes) -> Command:
     if cmd == CMD_MOV and args[:1] == bytes((MOV_RAM_TO_COM,)) and len(args) == 7:
         return Command(cmd, MOV_RAM_TO_COM, int.from_bytes(args[4:6], "little"), count=args[6])
     return Command(cmd, payload=bytes(args))
-
-
-def describe_frame(data: bytes) -> str:
-    """A frame sent to the board, in words: `CALL 0x000bb8: motion 0`."""
-    try:
-        cmd = parse_command(data)
-    except ValueError as exc:
-        return f"not a frame: {exc}"
-    if bytes(data) == _SYNC:
-        return "ACK check"
-    if bytes(data) == _VERSION:
-        return "version query"
-    if cmd.command == CMD_CALL:
-        slot = slot_of_address(cmd.address or 0)
-        what = f"motion {slot}" if slot is not None else "not a motion slot"
-        return f"CALL 0x{cmd.address:06x}: {what}"
-    if cmd.move_type == MOV_COM_TO_RAM:
-        name = {_STOP: "stop and save status", _RESTORE: "restore status"}.get(bytes(data), "write")
-        return f"MOV COM->RAM 0x{cmd.address:04x} <- {hexbytes(cmd.payload)}: {name}"
-    if cmd.move_type == MOV_RAM_TO_COM:
-        name = "status query" if bytes(data) == _STATUS else "read"
-        return f"MOV RAM->COM 0x{cmd.address:04x} x{cmd.count}: {name}"
-    return f"command {cmd.command:02x}"
-
-
-def describe_reply(data: bytes) -> str:
-    """A reply in words: `ACK`, `NAK`, `status 0x23: executing`."""
-    data = bytes(data)
-    if len(data) == TYPE1_REPLY_SIZE and data[0] == 4 and checksum(data[:3]) == data[3]:
-        return {ACK_BYTE: "ACK", NAK_BYTE: "NAK"}.get(data[2], f"type 1 reply {data[2]:02x}")
-    if len(data) == STATUS_REPLY_SIZE and data[0] == 5 and checksum(data[:4]) == data[4]:
-        state = "executing" if data[2] == EXECUTING_BYTE else "not executing"
-        return f"status 0x{data[2]:02x}: {state}"
-    return "no reply" if not data else f"invalid: {hexbytes(data)}"

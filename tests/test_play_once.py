@@ -91,7 +91,8 @@ def test_the_state_is_read_one_status_refresh_after_the_start_frame():
     link.play(3)
     restore = next(e for e in events.tx if e.frame.kind is p.FrameKind.RESTORE)
     read = next(e for e in events.tx if e.frame.kind is p.FrameKind.READ)
-    assert read.frame == SEED.start_read and read.frame.hex == "0a 00 20 00 00 00 00 00 0c 36"
+    assert read.frame.data == SEED.start_read.data and read.frame.hex == "0a 00 20 00 00 00 00 00 0c 36"
+    assert read.frame.motion == 3  # the log says which motion the read asks about
     assert read.time_ns - restore.time_ns >= 50_000_000
 
 

@@ -8,6 +8,8 @@ import pytest
 
 from choreo import protocol as p
 from choreo.errors import MotionRangeError
+from choreo.framewords import describe_frame, describe_reply
+from choreo.layouts import SEED
 
 DATA = Path(__file__).parent / "data"
 
@@ -35,7 +37,7 @@ def test_slots_101_to_119_follow_the_formula(motion):
     address = 0x0BB8 + motion * 0x800
     body = bytes([0x07, 0x0C, address & 0xFF, address >> 8 & 0xFF, address >> 16 & 0xFF, 0x00])
     assert p.play_frame(motion).data == body + bytes([sum(body) & 0xFF])
-    assert p.slot_of_address(address) == motion
+    assert SEED.slot_of(address) == motion
 
 
 def test_document_checksums_hold_for_every_row():
@@ -127,13 +129,13 @@ def test_parse_command_reads_what_the_board_reads():
         p.parse_command(bytes.fromhex("07 0c b8 0b 00 00 d7"))
 
 
-def test_describe_frames_and_replies():
-    assert p.describe_frame(p.play_frame(0).data) == "CALL 0x000bb8: motion 0"
-    assert p.describe_frame(p.stop_frame().data).endswith("stop and save status")
-    assert p.describe_frame(p.status_frame().data).endswith("status query")
-    assert p.describe_reply(bytes.fromhex("04 0c 06 16")) == "ACK"
-    assert p.describe_reply(bytes.fromhex("04 00 15 19")) == "NAK"
-    assert p.describe_reply(bytes.fromhex("05 00 23 87 af")) == "status 0x23: executing"
+def test_describe_frames_and_replies_of_the_seed_layout():
+    assert describe_frame(p.play_frame(0).data, SEED) == "CALL 0x000bb8: motion 0"
+    assert describe_frame(p.stop_frame().data, SEED).endswith("stop and save status")
+    assert describe_frame(p.status_frame().data, SEED).endswith("status query")
+    assert describe_reply(bytes.fromhex("04 0c 06 16"), p.play_frame(0).data, SEED) == "ACK"
+    assert describe_reply(bytes.fromhex("04 00 15 19"), p.stop_frame().data, SEED) == "NAK"
+    assert describe_reply(bytes.fromhex("05 00 23 87 af"), p.status_frame().data, SEED) == "status 0x23: executing"
 
 
 @pytest.mark.parametrize(

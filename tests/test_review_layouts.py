@@ -16,8 +16,9 @@ from pathlib import Path
 import pytest
 
 from choreo.clock import VirtualTime
+from choreo.framewords import describe_frame
 from choreo.layouts import HTH4_22, SEED
-from choreo.logformat import (ClockRecord, LogLayouts, RxRecord, StepRecord, TxRecord, describe_frame, frame_meaning,
+from choreo.logformat import (ClockRecord, LogLayouts, RxRecord, StepRecord, TxRecord, frame_meaning,
                               reply_meaning)
 from choreo.review.reader import LogReader
 from choreo.review.replay import replay

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from choreo import protocol as p
+from choreo.layouts import HTH4_22, SEED
 from choreo.sim.board import RAM_SIZE, SimBoard, Transmission
 from choreo.sim.faults import FAULT_KINDS, JUNK, FaultPlan, Trigger
 from choreo.sim.options import parse_durations, parse_options, parse_query
@@ -692,3 +693,32 @@ def test_a_call_the_board_never_executed_pushes_nothing(kind):
     reply(b, p.play_frame(3).data, 0.0)  # frame 2: hit, not executed
     reply(b, p.play_frame(3).data, 0.0)
     assert b.stack_depth == 1 and b.stack_faults == 0
+
+
+# -- the journal reads frames with the board's own layout (issue 21, item 7's follow-up) ----------
+
+
+def _journal_note(layout, frame: bytes, how: str) -> str:
+    """The note of a frame the board did not carry out: never arrived (a drop) or came while
+    the board was still replying (ignored)."""
+    faults = FaultPlan({"drop": Trigger(every=1)}) if how == "drop" else FaultPlan()
+    board = SimBoard(layout=layout, faults=faults, power_on_config=0x821B)
+    if how == "ignored":
+        board.receive(p.sync_frame().data, 1.0)  # its ACK is on the wire until ~1.0006
+        board.receive(frame, 1.0003, first=1.0002)
+    else:
+        board.receive(frame, 1.0)
+    entry = next(e for e in board.journal if e.data == frame)
+    return entry.note
+
+
+@pytest.mark.parametrize("how", ["drop", "ignored"])
+@pytest.mark.parametrize("layout", [SEED, HTH4_22], ids=lambda layout: layout.name)
+def test_the_journal_names_frames_by_the_boards_own_layout(layout, how):
+    sequence = layout.play_sequence(5, 0x821B)
+    call, restore = sequence[-2].data, sequence[-1].data
+    assert _journal_note(layout, call, how).startswith(f"CALL 0x{layout.slot_address(5):06x}: motion 5")
+    resumed = "restore status" if layout is SEED else "resume: config"
+    assert resumed in _journal_note(layout, restore, how)
+    other = (HTH4_22 if layout is SEED else SEED).play_frame(5).data  # another layout's slot: said so
+    assert f"not a motion slot of the {layout.name} layout" in _journal_note(layout, other, how)

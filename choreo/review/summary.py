@@ -86,7 +86,7 @@ class Play:
     label: str | None
     start_s: float  # show clock: the restore frame that started it
     duration_s: float | None  # to the first status query that found it not executing
-    ended_by: str  # "status" (measured), "stop" (the next play stopped it), "end of log"
+    ended_by: str  # "status" (measured), "stop" (the next play stopped it), "state read" (over by then), "end of log"
 
 
 @dataclass
@@ -277,7 +277,7 @@ def summarize_reader(reader: LogReader) -> Summary:
     summary = Summary(reader.path, dict(reader.run_info), None, False, None)
     tally = _Tally(ShowTimes.of(reader))
     parts: dict[str, _Part] = {}  # a show for several robots: each robot's own tally and tracker
-    solo = _Part(summary, tally, MotionTracker())
+    solo = _Part(summary, tally, MotionTracker(LogLayouts.of(reader.run_info).layout(None)))
     topic, count, last_time = None, 0, None
     try:
         for topic, log_time, data in reader.messages():
@@ -341,7 +341,8 @@ class _Part:
         run = {"port": reader.run_info.get(f"robot.{robot}.port", "?"),
                "baud": reader.run_info.get(f"robot.{robot}.baud", "?"),
                "layout": LogLayouts.of(reader.run_info).name(robot)}
-        return cls(Summary(reader.path, run, None, False, None), _Tally(whole.times), MotionTracker())
+        tracker = MotionTracker(LogLayouts.of(reader.run_info).layout(robot))
+        return cls(Summary(reader.path, run, None, False, None), _Tally(whole.times), tracker)
 
     def see(self, topic: str, record, log_time: int, whole: _Tally) -> None:  # type: ignore[no-untyped-def]
         tallies = (whole,) if self.tally is whole else (whole, self.tally)

@@ -18,7 +18,7 @@ from typing import BinaryIO
 from choreo.errors import ChoreoError
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.showtime import ShowTimes
-from choreo.logformat import (ABORT_LABEL, CLOCK_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, MotionPlay, MotionTracker,
+from choreo.logformat import (ABORT_LABEL, CLOCK_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, LogLayouts, MotionPlay, MotionTracker,
                               RxRecord, StepRecord, is_late, parse, slipped)
 from choreo.review.reader import Cut, LogReader
 from choreo.textfit import fit
@@ -43,7 +43,7 @@ class MotionRun:
     due_s: float | None  # when the step was due at run time
     start_s: float | None  # the restore frame that started it (None: the play never started)
     end_s: float | None
-    ended_by: str  # status | stop | end of log | not started
+    ended_by: str  # status | stop | state read | end of log | not started
     late_ms: float = 0.0
     robot: str | None = None  # whose play, in a show for several robots
 
@@ -129,6 +129,14 @@ class Timeline:
         return max(self.end_s, max(planned, default=0.0), max((c.show_s for c in self.cues), default=0.0), 0.001)
 
 
+def _tracker(trackers: dict[str | None, MotionTracker], layouts: LogLayouts, robot: str | None) -> MotionTracker:
+    """The robot's motion tracker, made with the layout the log records for it."""
+    tracker = trackers.get(robot)
+    if tracker is None:
+        tracker = trackers[robot] = MotionTracker(layouts.layout(robot))
+    return tracker
+
+
 @dataclass
 class _Step:
     """A play step as its events tell it: when it was due, and how late its motion began."""
@@ -144,6 +152,7 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
     timeline = Timeline(reader.run_info.get("show") or reader.path.stem, show_problem=show.problem)
     clock = ShowTimes.of(reader)
     trackers: dict[str | None, MotionTracker] = {}  # by robot: each robot's motions are its own
+    layouts = LogLayouts.of(reader.run_info)  # a lost start reply is judged by the robot's layout
     steps: dict[tuple[str | None, int], _Step] = {}
     last_ns: int | None = None
     topic, number = None, 0
@@ -160,12 +169,12 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
                     clock.see_start(log_time, record.actual_s)
                 _see_step(timeline, steps, record, clock.seconds(log_time))
             elif topic == TX_TOPIC:
-                trackers.setdefault(record.robot, MotionTracker()).tx(record, log_time)
+                _tracker(trackers, layouts, record.robot).tx(record, log_time)
                 if record.label == ABORT_LABEL and not any(m.kind == "abort" for m in timeline.marks):
                     timeline.marks.append(Mark(clock.seconds(log_time) or 0.0, "abort",
                                                f"show stopped: abort motion {record.motion} played"))
             elif topic == RX_TOPIC:
-                trackers.setdefault(record.robot, MotionTracker()).rx(record, log_time)
+                _tracker(trackers, layouts, record.robot).rx(record, log_time)
                 if not record.answered:
                     timeline.marks.append(_fault(record, clock.seconds(log_time)))
             elif record.level >= ERROR:

@@ -70,6 +70,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
 from choreo import protocol as p
+from choreo.framewords import describe_frame
 from choreo.layouts import SEED, Layout
 from choreo.sim.faults import NOT_EXECUTED, FaultInjector, FaultPlan
 
@@ -316,7 +317,7 @@ class SimBoard:
             self.ignored += 1
             self._record(JournalEntry(
                 "ignored", now, data,
-                note=f"{_described(data)} arrived while the board was still replying "
+                note=f"{_described(data, self.layout)} arrived while the board was still replying "
                      f"(its reply ends at {self._tx_free:.6f}): not answered",
             ))
             return None
@@ -333,12 +334,12 @@ class SimBoard:
                     kinds += ("lose_start",)
                     reply, note = b"", f"{note}; its reply is lost (lose_start)"
         else:  # the frame never reached the board, or the board refused it
-            reply, command, note = b"", _command_byte(data), _described(data) + ": not executed"
+            reply, command, note = b"", _command_byte(data), _described(data, self.layout) + ": not executed"
         damage = self._injector.damage(kinds, command, reply)
         if damage.lost:
             self.lost = True
             self.lost_at_frame = number
-            note = _described(data) + ": port lost"
+            note = _described(data, self.layout) + ": port lost"
         sent = None
         if damage.reply:  # b"": the reply was lost on the way (lose_start, a baud switch)
             sent = self._schedule(damage.reply, now + self.reply_delay_s + damage.extra_delay_s)
@@ -512,5 +513,6 @@ def _command_byte(data: bytes) -> int:
     return data[1] if len(data) > 1 else 0x00
 
 
-def _described(data: bytes) -> str:
-    return p.describe_frame(data) if data and 3 <= data[0] <= p.MAX_FRAME_SIZE else "noise"
+def _described(data: bytes, layout: Layout) -> str:
+    """A frame in the journal's words, read as the board's own layout makes its frames."""
+    return describe_frame(data, layout) if data and 3 <= data[0] <= p.MAX_FRAME_SIZE else "noise"
