@@ -304,9 +304,10 @@ class Recorder:
         """The link listener of one robot of several: its frames on its own topics."""
         return RobotTap(self, robot)
 
-    def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
-        """Queued only: a late-cue warning comes just before the cue's first frame."""
-        time_ns = time.time_ns() if time_ns is None else time_ns
+    def on_log(self, level: int, message: str, time_ns: int) -> None:
+        """Queued only: a late-cue warning comes just before the cue's first frame. `time_ns`:
+        the run clock's wall time (`RunClock.wall_ns`), never the machine's: on virtual time or
+        the music's clock that would place the line elsewhere on the show clock."""
         self._queue((LOG_TOPIC, time_ns, _log_message, (level, message, time_ns)))
 
     def on_clock(self, record: ClockRecord, time_ns: int) -> None:

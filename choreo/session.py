@@ -420,7 +420,7 @@ class Stage:
             if self.named:
                 exc = LinkError(f"robot {robot.robot}: {exc}")
             if self.recorder is not None:
-                self.recorder.on_log(ERROR, str(exc))
+                self.recorder.on_log(ERROR, str(exc), self.clock.wall_ns())
             raise exc from None
 
     def __exit__(self, exc_type, exc, tb) -> None:
