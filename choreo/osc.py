@@ -285,17 +285,16 @@ class OscServer:
             self._report(Command(ECHO, source, address), Answer("error", echo_message(address)))
             return None
         wanted = command_for(address)
+        if wanted is None:  # costs a reply and a log line, both bounded; a desk's fader moves spend no GO
+            return self._answer(host, self._unknown(source, address))
+        name, label = wanted
         if not self._limits.admit(host):
-            name, label = wanted if wanted is not None else ("unknown", address)
             message = self._limits.over_rate(host)
             self._report(Command(name, source, label), Answer("error", message))
             return self._answer(host, Reply(address, "error", message))
-        if wanted is None:
-            return self._answer(host, self._unknown(source, address))
         if is_release(args):
             return self._answer(host, Reply(address, "ok", "ignored: a button's release (argument 0) is not a "
                                             "command", {"ignored": True}))
-        name, label = wanted
         answer = self.live.command(Command(name, source, label))
         return self._answer(host, Reply(address, answer.status, answer.message, answer.data))
 

@@ -177,6 +177,22 @@ def test_the_budget_is_the_senders_not_the_packets(server, heard, clock):
     assert heard.messages("start") == ["starting"] and len(answered) == 1
 
 
+def test_a_desks_other_messages_spend_no_command(server, heard):
+    """A desk that sends every fader move to choreo gets them refused (answered within its
+    reply budget), but its GO is still carried out."""
+    desk = Peer("udp", server.port)
+    try:
+        desk.send(bundle("/1/fader1", 100))
+        desk.send(message("/choreo/start"))
+        assert wait_for(lambda: "start" in heard.names(), TIMEOUT_S, every=0.005)
+        replies = desk.replies()
+    finally:
+        desk.close()
+    assert heard.names() == ["unknown"] * 100 + ["start"]
+    assert heard.messages("start") == ["starting"]
+    assert len(replies) == LIMITS.replies_per_sender.burst
+
+
 def test_a_flood_reaches_the_log_and_terminal_as_counts(clock):
     """The listeners (the log, the terminal's lines, notifications) hear a flood within the
     reported budget; the rest come as one `unlogged` count."""
