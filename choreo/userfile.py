@@ -155,11 +155,11 @@ def _kind_at(name: str) -> str:
     return "a file" if stat.S_ISREG(mode) else kind_of(mode)
 
 
-def regular_size_and_time(path: Path) -> tuple[int, float] | None:
-    """(size, modification time) of a regular file reached from `path` (links followed); None
-    for anything else: a link to nothing, a loop, a folder, a pipe, a device, a name too long."""
+def modified_if_regular(path: Path) -> float | None:
+    """When the regular file reached from `path` (links followed) was last modified; None for
+    anything else: a link to nothing, a loop, a folder, a pipe, a device, a name too long."""
     try:
         info = path.stat()
     except (OSError, ValueError):
         return None
-    return (info.st_size, info.st_mtime) if stat.S_ISREG(info.st_mode) else None
+    return info.st_mtime if stat.S_ISREG(info.st_mode) else None

@@ -185,17 +185,17 @@ def _folder_logs(folder: Path) -> list[Path]:
     A link to nothing, a loop of links, a pipe or a folder named `x.mcap` is not a log and is
     passed over; a folder that cannot be listed is an `InputError` saying why, never "no logs".
     """
-    from choreo.userfile import listing, regular_size_and_time
+    from choreo.userfile import listing, modified_if_regular
 
     logs, others = [], 0
     for path in listing(folder, "log folder"):
         if not path.name.endswith(".mcap") or path.name.startswith("."):
             continue
-        facts = regular_size_and_time(path)
-        if facts is None:
+        modified = modified_if_regular(path)
+        if modified is None:
             others += 1
         else:
-            logs.append((facts[1], path.name, path))
+            logs.append((modified, path.name, path))
     if not logs:
         passed = f" ({others} named *.mcap are not regular files)" if others else ""
         raise UsageError(f"{visible(str(folder))}: no .mcap logs in this folder{passed}")
