@@ -9,7 +9,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import closing, contextmanager, nullcontext
 from typing import TextIO
 
 from choreo.__main__ import STOP_SIGNALS
@@ -132,13 +132,13 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
             say(f"log: {session.log_path}" if session.log_path else "log: off (--no-log)")
             for note in session.stage.notes:
                 say(f"warning: {note}")
-            with _console(session, live, console, listeners):
+            # the Live closed however the run ends, while the log is open: later commands are
+            # refused, and those held back by the limits summed up into it
+            with closing(live) if live is not None else nullcontext(), _console(session, live, console, listeners):
                 result = session.run([progress, *listeners], stop, live)
                 for listener in listeners:
                     if hasattr(listener, "on_result"):  # OSC notify: the run is over
                         listener.on_result(result)
-            if live is not None:
-                live.close()  # later commands refused; those held back summed up, still into the log
         report.result = result
         progress.finish()
         say.quiet = args.quiet and result.outcome == "done"
