@@ -97,7 +97,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="timing factor, 0.01..1000: 2 plays twice as fast, and a sim:// board runs its "
                         "motions twice as fast too (default 1, the recorded timing)")
     replay.add_argument("--layout", choices=("seed", "hth4-2.2"),
-                        help="the board layout the simulator models (default: the recorded run's)")
+                        help="the board layout the simulator models, for every robot of a show for several "
+                        "(default: the one the log records for each robot)")
     replay.add_argument("--baud", type=int, help="115200, 625000 or 1250000 (default: the recorded run's "
                         "for --port, 115200 for the simulator)")
     replay.add_argument("--timeout", type=float, metavar="S",

@@ -11,7 +11,11 @@ robot only when `--port` says so. At `--speed X` a `sim://` board runs its motio
 faster too, so a status poll falls on the same side of a motion's end as it did in the run and a
 clean log replays clean at any speed. Only the motions' lengths are scaled: a frame's wire time,
 the board's reply delay and the link's reply timeout are the line's, and a replay cannot make a
-frame shorter. A robot (or `choreo sim` on a pty) runs its motions at their own speed.
+frame shorter. A robot (or `choreo sim` on a pty) runs its motions at its own speed.
+
+Each board modelled gets the layout the log records for its robot; `--layout` gives every one
+that layout (the recorded bytes are sent as they are: a board of another layout answers them as
+it would, and the differences show it).
 """
 
 from __future__ import annotations
@@ -105,6 +109,7 @@ class ReplayReport:
     max_lag_ms: float = 0.0  # how far behind its recorded show time (scaled) a frame left at worst
     cut: Cut | None = None
     show_note: str | None = None  # why the simulator runs without the show's durations
+    boards: tuple[str, ...] = ()  # where the frames went: one URL a robot (empty: `port`)
 
     @property
     def board_differences(self) -> int:
@@ -113,11 +118,13 @@ class ReplayReport:
 
     @property
     def speed_note(self) -> str | None:
-        """Why replies may differ at a motion's end: only a `sim://` board runs faster."""
-        if self.speed == 1 or is_simulator(self.port):
+        """Why replies may differ at a motion's end: only a `sim://` board runs faster, so the
+        note names the boards that are not one (none: no note)."""
+        others = [board for board in self.boards or (self.port,) if not is_simulator(board)]
+        if self.speed == 1 or not others:
             return None
-        return (f"{self.port} runs its motions at their own speed, not {self.speed:g}x: "
-                "status polls near a motion's end may differ")
+        return (f"{', '.join(others)} {'runs' if len(others) == 1 else 'run'} motions at the robot's own "
+                f"speed, not {self.speed:g}x: status polls near a motion's end may differ")
 
 
 def default_port(show: AttachedShow, baud: int | None = None, layout: str = "seed") -> str:
@@ -233,6 +240,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         if baud is None:
             recorded = int(recorded_baud) if recorded_baud.isdigit() else None
             baud = recorded if port and recorded in BAUD_RATES else DEFAULT_BAUD
+        given_layout = layout
         layout = layout or _recorded_layout(reader, None)  # logs before layouts: seed
         check_options(speed, baud, timeout, layout)
         url = at_speed(_with_durations(port or "sim://", show, baud, layout), speed)
@@ -248,18 +256,22 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         if robots and port:
             raise UsageError(f"--port {port}: a replay of several robots ({', '.join(robots)}) runs each on "
                              "its own simulator; leave out --port")
-        # the links send the recorded bytes only: no layout of their own (an HTH4 link would read the
-        # config word at open, a frame the recording does not have)
-        links = ([_robot_link(reader, show, name, speed, timeout) for name in robots] if robots else
+        # Each robot's simulator models its recorded layout, or --layout's for every robot. The
+        # links send the recorded bytes only: no layout of their own (an HTH4 link would read the
+        # config word at open, a frame the recording does not have).
+        boards = {name: given_layout or _recorded_layout(reader, name) for name in robots}
+        links = ([_robot_link(reader, show, name, boards[name], speed, timeout) for name in robots] if robots else
                  [RobotLink(SOLO, url, "command line", baud, timeout or DEFAULT_TIMEOUT_S, tries=1)])
-        robot_info = tuple(RobotInfo(link.robot, link.port, link.baud, _recorded_layout(reader, link.robot))
+        robot_info = tuple(RobotInfo(link.robot, link.port, link.baud, boards[link.robot])
                            for link in links) if robots else ()
         info = RunInfo(show_path, name, show_source, url, baud, clock.wall_anchor_ns, layout, robot_info,
                        reader.run_info.get("unison") == "yes")
         stage = Stage(info, new_log, clock, links, unique_log=log_path is None, named=bool(robots),
                       opening_note=f"replay of {reader.path} at speed {speed:g} on {url if not robots else 'simulators'}")
+        report.boards = tuple(link.port for link in links)
         if robots:
-            report.port = f"{len(robots)} simulators, one per robot ({', '.join(robots)})"
+            each = ", ".join(f"{name}: {boards[name]}" for name in robots)
+            report.port = f"{len(robots)} simulators, one per robot and its layout ({each})"
         with stage:
             report.log_path = stage.log_path
             if speed > 1:
@@ -279,15 +291,17 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
     return report
 
 
-def _robot_link(reader: LogReader, show: AttachedShow, robot: str, speed: float, timeout: float | None):  # type: ignore[no-untyped-def]
-    """A recorded robot's replay link: its own simulator, set up from its plan, at its baud."""
+def _robot_link(reader: LogReader, show: AttachedShow, robot: str, layout_name: str, speed: float,  # type: ignore[no-untyped-def]
+                timeout: float | None):
+    """A recorded robot's replay link: its own simulator of `layout_name`, set up from its plan,
+    at its baud."""
     from choreo.layouts import layout_named
     from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S
     from choreo.session import RobotLink, with_show_durations
 
     baud_text = reader.run_info.get(f"robot.{robot}.baud", "")
     baud = int(baud_text) if baud_text.isdigit() and int(baud_text) in BAUD_RATES else DEFAULT_BAUD
-    layout = layout_named(_recorded_layout(reader, robot))
+    layout = layout_named(layout_name)
     plan = show.plan_of(robot)
     abort = show.show.abort_motion(robot) if show.show is not None and plan is not None else None
     url = with_show_durations("sim://", show.show if plan is not None else None, plan, baud, layout, abort)
@@ -339,7 +353,7 @@ def _recorded_layout(reader: LogReader, robot: str | None) -> str:
     if layouts.layout(robot) is None:
         whose = f"robot {robot}'s" if robot is not None else "its"
         raise UsageError(f"log {reader.path}: {whose} board layout {layouts.name(robot)!r} is unknown to "
-                         f"this choreo{'' if robot else ': replay it with --layout ' + ' or '.join(LAYOUT_NAMES)}")
+                         f"this choreo: replay it with --layout {' or '.join(LAYOUT_NAMES)}")
     return layouts.name(robot)
 
 
