@@ -107,9 +107,14 @@ def describe_reply(data: bytes, frame: bytes | None, layout: Layout | None, moti
     if layout is not None and frame == layout.status.data:
         return _status_words(data, frame, layout)
     words = _ram_words(command.address or 0, data[2:-1], layout) or f"{len(data) - 3} bytes: {p.hexbytes(data[2:-1])}"
-    if layout is not None and frame == layout.start_read.data and motion in range(p.MOTION_SLOTS):
+    if layout is not None and frame == layout.start_read.data and is_slot(motion):
         return f"{words}: motion {motion} {layout.start_state(motion, data).value}"
     return words
+
+
+def is_slot(motion: object) -> bool:
+    """A motion number a layout can judge (a log another program wrote may hold anything)."""
+    return type(motion) is int and 0 <= motion < p.MOTION_SLOTS
 
 
 def _status_words(data: bytes, frame: bytes, layout: Layout) -> str:

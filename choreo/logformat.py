@@ -18,7 +18,7 @@ from functools import lru_cache
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any, ClassVar
 
-from choreo.framewords import describe_frame, describe_reply
+from choreo.framewords import describe_frame, describe_reply, is_slot
 from choreo.layouts import DEFAULT_LAYOUT, LAYOUTS, Layout, StartState
 
 TX_TOPIC = "/rcb4/tx"
@@ -396,7 +396,7 @@ class MotionTracker:
 
     def _judge(self, lost: _Armed, reply: RxRecord, read_ns: int) -> None:
         """The program state read after a lost restore reply, judged by the robot's layout."""
-        if self.layout is None or lost.motion is None:
+        if self.layout is None or not is_slot(lost.motion):
             self._asked = True
             return
         state = self.layout.start_state(lost.motion, _hex_bytes(reply.hex))
@@ -513,7 +513,7 @@ def reply_meaning(rx: RxRecord, tx: TxRecord | None, layouts: LogLayouts) -> str
     if not isinstance(rx.hex, str):
         return f"not hex: {rx.hex!r}"
     frame_hex = tx.hex if tx is not None and isinstance(tx.hex, str) else None
-    asked = tx.motion if tx is not None and type(tx.motion) is int else None  # a state read's motion
+    asked = tx.motion if tx is not None and is_slot(tx.motion) else None  # a state read's motion
     return _reply_words(rx.hex, frame_hex, layouts.layout(rx.robot), asked)
 
 

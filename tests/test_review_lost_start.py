@@ -163,3 +163,24 @@ def test_a_state_read_answered_with_no_hex_counts_as_unclear():
     tracker.rx(RxRecord(4, "status", "zz"), 81)
     (play,) = tracker.finish(500)
     assert play.start_ns == 20
+
+
+@pytest.mark.parametrize("motion", [1.0, True, -1, 120, "3", None])
+def test_a_motion_no_layout_can_judge_is_left_to_the_links_next_frame(motion):
+    tracker = MotionTracker(SEED)  # a log another program wrote: never an exception
+    for seq, kind in enumerate(("stop", "play", "restore"), 1):
+        tracker.tx(TxRecord(seq, kind, "", step=0, motion=motion), seq * 10)
+        tracker.rx(RxRecord(seq, "ack" if kind != "restore" else "timeout"), seq * 10 + 1)
+    _read(tracker, 4, NEVER, 80)
+    tracker.tx(TxRecord(5, "stop", "", step=1), 300)
+    (play,) = tracker.finish(500)
+    assert play.start_ns == 30
+
+
+@pytest.mark.parametrize("motion", [1.0, True, 999, "x"])
+def test_export_words_of_a_state_read_with_a_motion_no_layout_can_judge(motion):
+    from choreo.logformat import LogLayouts, reply_meaning
+
+    tx = TxRecord(4, "read", SEED.start_read.hex, step=0, motion=motion)
+    words = reply_meaning(RxRecord(4, "status", NEVER.hex(" ")), tx, LogLayouts({None: "seed"}))
+    assert words.startswith("config 0x8721") and "never started" not in words
