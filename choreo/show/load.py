@@ -33,8 +33,8 @@ from typing import Any, Union
 
 import yaml
 
-from choreo.show.nesting import too_deep_at
 from choreo.errors import Problem, ShowError
+from choreo.show.nesting import too_deep_at
 from choreo.show.model import (
     hidden_character,
     SOLO,
@@ -482,6 +482,19 @@ _HIDE_BREAKS = str.maketrans(_BREAKS_1_1)
 _SHOW_BREAKS = str.maketrans({v: k for k, v in _BREAKS_1_1.items()})
 
 
+def _restore_breaks(text: str) -> str:
+    return text.translate(_SHOW_BREAKS)
+
+
+def _tag(tag: str) -> str:
+    """A tag as it is written in YAML: `!!python/object`, not `tag:yaml.org,2002:python/object`."""
+    return "!!" + tag[len("tag:yaml.org,2002:"):] if tag.startswith("tag:yaml.org,2002:") else tag
+
+
+def _is_empty(event: yaml.Event) -> bool:
+    return isinstance(event, yaml.ScalarEvent) and event.value == "" and event.implicit[0] and event.tag is None
+
+
 def _too_deep(text: str, report: _Report) -> bool:
     """True (and the depth reported in choreo's words) if the text nests past `MAX_DEPTH`.
 
@@ -507,19 +520,6 @@ def _too_deep(text: str, report: _Report) -> bool:
     except yaml.YAMLError:
         pass  # the prefix ends mid-document; only a depth stop counts here
     return False
-
-
-def _restore_breaks(text: str) -> str:
-    return text.translate(_SHOW_BREAKS)
-
-
-def _tag(tag: str) -> str:
-    """A tag as it is written in YAML: `!!python/object`, not `tag:yaml.org,2002:python/object`."""
-    return "!!" + tag[len("tag:yaml.org,2002:"):] if tag.startswith("tag:yaml.org,2002:") else tag
-
-
-def _is_empty(event: yaml.Event) -> bool:
-    return isinstance(event, yaml.ScalarEvent) and event.value == "" and event.implicit[0] and event.tag is None
 
 
 def _parse(text: str, report: _Report) -> _Doc | None:
