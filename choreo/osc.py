@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import ipaddress
 import json
-import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence

@@ -33,7 +33,7 @@ from choreo.osclimits import LIMITS, OscLimits
 
 Sender = tuple  # (host, port) or, over IPv6, (host, port, flowinfo, scope)
 ACCEPT_PAUSE_S = 0.1  # out of descriptors: try accepting again this much later
-ACCEPT_BATCH = 64  # connections accepted a wake-up (the backlog drained quickly, others served)
+ACCEPT_BATCH = 4  # connections accepted a turn: a peer accepted is read before many more can push it out
 UDP_BATCH = 64  # datagrams read a wake-up, then TCP peers get their turn
 LISTEN_BACKLOG = 128  # connections the OS holds until accepted (accepting is quick)
 RECV_BYTES = 16384  # read at once from a TCP peer
@@ -177,6 +177,7 @@ class OscNet:
         self._closing = threading.Event()
         self._thread: threading.Thread | None = None
         self._port: int | None = None
+        self.faults = 0  # events whose handling failed (a bug): counted, and serving goes on
 
     @property
     def port(self) -> int:
@@ -239,17 +240,23 @@ class OscNet:
         assert self._selector is not None
         while not self._closing.is_set():
             for key, mask in self._selector.select(self._timeout()):
-                if key.data == "udp":
-                    self._read_datagrams()
-                elif key.data == "accept":
-                    self._accept()
-                elif key.data == "wake":
-                    self._drain_wake()
-                elif mask & selectors.EVENT_WRITE:
-                    self._flush(key.data)
-                else:
-                    self._read(key.data)
+                try:
+                    self._ready(key.data, mask)
+                except Exception:  # noqa: BLE001 - one event's fault must not end OSC for the show
+                    self.faults += 1
             self._expire()
+
+    def _ready(self, what: object, mask: int) -> None:
+        if what == "udp":
+            self._read_datagrams()
+        elif what == "accept":
+            self._accept()
+        elif what == "wake":
+            self._drain_wake()
+        elif mask & selectors.EVENT_WRITE:
+            self._flush(what)  # type: ignore[arg-type]
+        else:
+            self._read(what)  # type: ignore[arg-type]
 
     def _timeout(self) -> float | None:
         dues = [due for due in (self._table.next_due(), self._accept_paused_until) if due is not None]
