@@ -14,6 +14,7 @@ import logging
 import os
 import resource
 import select
+import signal
 import socket
 import struct
 import subprocess
@@ -338,3 +339,25 @@ def test_300_idle_connections_and_256_descriptors_still_go(tmp_path):
 def _answers(osc) -> bool:  # type: ignore[no-untyped-def]
     osc.send_message("/choreo/cue/nothing/go", [])
     return next(osc.get_messages(0.1), None) is not None
+
+
+def test_choreo_run_answers_after_malformed_packets_and_stops_on_sigterm(tmp_path):
+    """The command itself: bundles that looped python-osc's parser (over UDP and TCP), then a
+    command still answered, one SIGTERM ending the run (exit 130), and stderr without a flood."""
+    show, port = write_show(tmp_path, TWO_CUES), free_port()
+    process = start_choreo_with_descriptors(256, "run", str(show), "--osc", str(port), "--no-log")
+    try:
+        with client("udp", port) as udp:
+            assert wait_for(lambda: process.poll() is None and _answers(udp), 30), "choreo did not listen"
+            for transport in ("udp", "tcp"):
+                for size in (-4, 0, 1000):
+                    send(transport, port, bad_bundle(size)).close()
+            assert wait_for(lambda: _answers(udp), 10), "OSC died"
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert process.returncode == 130, err
+    assert "WARNING" not in err and len(err) < 10_000
