@@ -23,7 +23,10 @@ import threading
 import time
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from runlog import REPO, read_log, write_show, wait_for
+from test_osc_wire import PACKET
 from test_osc import GO_SHOW, TIMEOUT_S, Commands, ask, client, free_port, live, read_to_end, serve, server  # noqa: F401
 
 from choreo import osc as osc_module
@@ -361,3 +364,13 @@ def test_choreo_run_answers_after_malformed_packets_and_stops_on_sigterm(tmp_pat
             process.communicate()
     assert process.returncode == 130, err
     assert "WARNING" not in err and len(err) < 10_000
+
+
+@settings(max_examples=150, deadline=1000, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(packet=st.one_of(st.binary(max_size=128), PACKET, PACKET.map(lambda p: p[:-4] + b"\xff\xff\xff\xfc")))
+def test_fuzz_packets_through_the_server(live, packet):
+    """The whole path a packet takes (sender check, decoding, the limits, the command, the
+    reply's encoding) never raises, whatever arrives from an allowed sender."""
+    server = OscServer(live, 0)
+    for reply in server.packet("udp", ("127.0.0.1", 9), packet):
+        assert decode(reply).messages[0].address.startswith("/reply")
