@@ -495,17 +495,22 @@ def test_live_progress_line_redraws_in_place(tmp_path):
     import io
 
     from choreo.cli.run import Progress
+    from choreo.runner import StepEvent
 
     session = prepare(RunRequest(str(write_show(tmp_path, WIRE_SHOW)), no_log=True))
     out = io.StringIO()
     progress = Progress(session, out, live=True, quiet=False)
-    with session:
-        session.run([progress])
+    steps = session.plan.steps
+    for step in steps:  # the writer draws the latest step (on virtual time they come at once)
+        progress.on_step(StepEvent(step, "start", step.planned_s, step.planned_s, 0))
+    assert wait_for(lambda: "step 4 'last' (5/5): play 7 (bow)" in out.getvalue())
+    progress.on_log(3, "a warning")  # a line above: the live line cleared, then drawn again below
+    assert wait_for(lambda: out.getvalue().count("step 4 'last' (5/5)") >= 2)
     progress.finish()
     text = out.getvalue()
-    assert text.count("\r") >= 5 and "step 4 'last' (5/5): play 7 (bow)" in text
+    assert "\r\x1b[Kwarning: a warning\n" in text and text.count("step 4 'last' (5/5)") >= 2
     assert "[" in text and "/0.3 s" in text
-    assert text.endswith("\r")  # the line is cleared at the end
+    assert text.endswith("\r\x1b[K")  # the line is cleared at the end
 
 
 @pytest.mark.parametrize("given,expected", [

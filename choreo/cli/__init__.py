@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from choreo import __version__
 from choreo.cli.parser import ChoreoParser
+from choreo.cli.terminal import shows_outside_text_safely
 from choreo.cli.output import OUTPUT_ERROR_EXIT, Output, drop_output
 from choreo.errors import ChoreoError, OutputError
 
@@ -50,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@shows_outside_text_safely  # every line printed, a show's names and error messages too
 def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = None,
          time_source: TimeSource | None = None) -> int:
     """Run one command; every error and interruption becomes one message and an exit code here.

@@ -37,11 +37,13 @@ from rich.rule import Rule
 from rich.table import Table
 from rich.text import Text
 
+from choreo.cli.terminal import raw_stream
 from choreo.link import Link, RxEvent, TxEvent
 from choreo.live import Command, CommandEvent, HoldingShowClock, Live
 from choreo.logformat import ERROR, INFO, WARNING
 from choreo.runner import StepEvent
 from choreo.show.model import SOLO, PlannedStep, StepKind
+from choreo.textfit import visible
 
 REFRESH_S = 0.2  # five looks a second: the show time moves smoothly enough (and is drawn to 0.1 s)
 QUIET_BEFORE_S = 0.06  # no redraw starts this close before a step falls due (a cue's lead included)
@@ -117,7 +119,12 @@ def render(screen: Screen, width: int = NARROW) -> RenderableType:
 
 
 def _line(text: str, style: str = "") -> Text:
-    return Text(text, style=style, no_wrap=True, overflow="ellipsis", end="\n")
+    return Text(visible(text), style=style, no_wrap=True, overflow="ellipsis", end="\n")
+
+
+def _cell(text: str, style: str = "") -> Text:
+    """Every text drawn holds outside text (a show's names, an OSC address): made visible."""
+    return Text(visible(text), style=style)
 
 
 def _note_text(note: Note) -> str:
@@ -130,7 +137,7 @@ def _title(screen: Screen) -> Table:
     grid.add_column(ratio=1, no_wrap=True, overflow="ellipsis")
     grid.add_column(no_wrap=True, overflow="ellipsis", justify="right")
     time = f"{screen.show_s:.1f} s" if screen.show_s is not None else "not started"
-    grid.add_row(Text(screen.title, style="bold"), Text(f" show {time} · {screen.clock}"))
+    grid.add_row(_cell(screen.title, "bold"), _cell(f" show {time} · {screen.clock}"))
     return grid
 
 
@@ -144,8 +151,8 @@ def _robots(rows: tuple[Row, ...], narrow: bool) -> Table:
     table.add_column("link" if narrow else "link (median, retries)", no_wrap=True, overflow="ellipsis",
                      max_width=24)
     for row in rows:
-        table.add_row(row.robot, Text(row.now, style=row.now_style), row.next,
-                      Text(_link_text(row, narrow), style="yellow" if row.trouble else ""))
+        table.add_row(_cell(row.robot), _cell(row.now, row.now_style), _cell(row.next),
+                      _cell(_link_text(row, narrow), "yellow" if row.trouble else ""))
     return table
 
 
@@ -407,7 +414,7 @@ class Console:
                  keys: TextIO | None = None, width: int | None = None) -> None:
         """`out`: where it draws (default stderr); `keys`: the terminal it reads (default
         stdin; one that is not a terminal gives no keys); `width`: fixed, for tests."""
-        out = out if out is not None else sys.stderr
+        out = out if out is not None else raw_stream(sys.stderr)  # it draws: its escapes are its own
         self.session = session
         self.live = live
         self.out = out

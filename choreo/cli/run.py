@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import sys
 import threading
@@ -13,6 +12,8 @@ from contextlib import closing, contextmanager, nullcontext
 from typing import TextIO
 
 from choreo.__main__ import STOP_SIGNALS
+from choreo.cli.terminal import StatusWriter
+from choreo.cli.terminal import columns as terminal_columns
 from choreo.errors import ChoreoError, Interrupted
 from choreo.layouts import LAYOUT_NAMES
 from choreo.textfit import fit
@@ -397,7 +398,9 @@ def live_line(step: str, show_s: float, estimated_s: float, columns: int) -> str
 
 
 class _Say:
-    """Lines for the user on stderr; a closed pipe or terminal never stops the show."""
+    """Lines for the user on stderr, before and after the show (never from its threads: those
+    go through `Progress`); on a terminal each is cut to its width, measured at each line; a
+    closed pipe or terminal never stops the show."""
 
     def __init__(self, out: TextIO, quiet: bool) -> None:
         self.out = out
@@ -407,7 +410,8 @@ class _Say:
         if self.quiet:
             return
         try:
-            print(line, file=self.out, flush=True)
+            width = terminal_columns(self.out) if self.out.isatty() else None
+            print(fit(line, width), file=self.out, flush=True)
         except (OSError, ValueError):
             self.quiet = True
 
@@ -508,27 +512,24 @@ def _own_steps(plan, start: int, robot: str) -> list[int]:  # type: ignore[no-un
 class Progress:
     """The run on screen: a live line on a terminal, a plain line a step otherwise.
 
-    The live line is redrawn by its own thread every quarter second, so the show time moves
-    during long waits; it only formats and writes, off the runner's path.
+    Never on the show's path: the runners and the OSC server only note what happened; a
+    `StatusWriter` thread writes (and redraws the live line every quarter second, so the show
+    time moves during long waits). A terminal stopped with Ctrl-S or a full pipe holds up only
+    that thread: lines past its queue are dropped, counted, and the count said later.
     """
-
-    REDRAW_S = 0.25
 
     def __init__(self, session, out: TextIO, *, live: bool, quiet: bool) -> None:
         # each robot's steps from where it starts (a robot's own, in shared steps), by robot
         self.counts = {name if session.show.ensemble else None: _own_steps(plan, session.starts[name], name)
                        for name, plan in session.plans.items()}
         self.estimated = max(plan.estimated_s for plan in session.plans.values())
-        self.out = out
         self.live = live and not quiet
         self.quiet = quiet
-        self._width = 0
         self._lock = threading.Lock()
         self._current = ""  # the step part of the live line
         self._zero: float | None = None  # monotonic time of the show clock's zero
-        self._done = threading.Event()
-        if self.live:
-            threading.Thread(target=self._redraw_loop, name="choreo-progress", daemon=True).start()
+        self.writer = None if quiet else StatusWriter(out, fit_lines=self.live,
+                                                      status=self._live_line if self.live else None)
 
     def on_step(self, event) -> None:
         if self.quiet or event.event != "start":
@@ -540,46 +541,21 @@ class Progress:
         place = f" ({own.index(step.index) + 1}/{len(own)})" if step.index in own else ""
         where = f"{robot}step {step.index}{label}{place}"
         if not self.live:
-            self._write(f"[{event.actual_s:8.3f} s] {where}: {step.describe()}\n")
+            self._say_line(f"[{event.actual_s:8.3f} s] {where}: {step.describe()}")
             return
         with self._lock:
             self._zero = time.monotonic() - event.actual_s
             self._current = f"{where}: {step.describe()}"
-            self._draw()
+        self.writer.redraw()  # type: ignore[union-attr]
 
-    def _redraw_loop(self) -> None:
-        while not self._done.wait(self.REDRAW_S):
-            with self._lock:
-                if self._current:
-                    self._draw()
-
-    def _draw(self) -> None:
-        show_s = time.monotonic() - self._zero if self._zero is not None else 0.0
-        columns = self._columns()
-        line = live_line(self._current, show_s, self.estimated, columns)
-        self._write("\r" + line.ljust(min(self._width, columns - 1)))
-        self._width = len(line)
-
-    def _columns(self) -> int:
-        """The terminal's width now (it may be resized mid-show); 80 if it cannot be told."""
-        try:
-            size = os.get_terminal_size(self.out.fileno()).columns if self.out is not None else 80
-        except (OSError, ValueError, AttributeError):
-            size = 0
-        if size > 0:
-            return size
-        given = os.environ.get("COLUMNS", "")  # a terminal that reports no width (script, some CI ttys)
-        return int(given) if given.isdigit() and int(given) > 0 else 80
-
-    def _write(self, text: str) -> None:
-        """The screen is not the show: a closed pipe or terminal silences progress, nothing more."""
-        if self.out is None:
-            return
-        try:
-            self.out.write(text)
-            self.out.flush()
-        except (OSError, ValueError):
-            self.out = None
+    def _live_line(self, columns: int) -> str:
+        """The live line now (the writer's thread asks, at each draw)."""
+        with self._lock:
+            current, zero = self._current, self._zero
+        if not current:
+            return ""
+        show_s = time.monotonic() - zero if zero is not None else 0.0
+        return live_line(current, show_s, self.estimated, columns)
 
     def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
         if level < 3 or level >= 4:
@@ -598,15 +574,12 @@ class Progress:
 
     def _say_line(self, text: str, last_step_done: bool = False) -> None:
         """A line above the live one (which is drawn again below it, unless the steps are done)."""
-        if self.quiet:
+        if self.writer is None:
             return
-        with self._lock:
-            self._clear()
-            if last_step_done:
+        if last_step_done:
+            with self._lock:
                 self._current = ""
-            self._write(text + "\n")
-            if self._current:
-                self._draw()
+        self.writer.line(text)
 
     def on_play_out(self, end_s: float) -> None:
         """The steps are done; the music plays on to its end."""
@@ -614,12 +587,9 @@ class Progress:
                        last_step_done=True)
 
     def finish(self) -> None:
-        self._done.set()
+        """The live line cleared and every line written (an output that takes nothing for a
+        second is left behind: the run's last lines will wait for it)."""
         with self._lock:
             self._current = ""
-            self._clear()
-
-    def _clear(self) -> None:
-        if self.live and self._width:
-            self._write("\r" + " " * self._width + "\r")
-            self._width = 0
+        if self.writer is not None:
+            self.writer.close()

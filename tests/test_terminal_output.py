@@ -1,0 +1,264 @@
+"""What choreo writes on a terminal (issue 21, items 4 and 5): outside text never drives the
+terminal (every command's output, the console, the progress lines), and the terminal never
+drives the show (a terminal stopped with Ctrl-S or a pipe nobody reads holds up no robot;
+every line drawn fits the terminal's width, after a resize too)."""
+
+from __future__ import annotations
+
+import fcntl
+import io
+import json
+import os
+import pty
+import re
+import select
+import signal
+import struct
+import subprocess
+import sys
+import termios
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from rich.console import Console as RichConsole
+
+from choreo.cli.console import Note, Row, Screen, render
+from choreo.cli.run import Progress
+from choreo.cli.terminal import StatusWriter, VisibleStream, visible_output
+from choreo.live import Answer, Command, CommandEvent
+from choreo.runner import StepEvent
+from choreo.session import RunRequest
+from choreo.textfit import display_width, is_hidden
+from runlog import REPO, prepare, read_log, vmain, wait_for, write_show
+
+HOSTILE = "\x1b]0;pwned\x07\x1b[2J\u202eevil\u200b\x9b31m"
+
+
+def assert_safe(text: str) -> None:
+    """Nothing in `text` a terminal would obey or hide (newlines aside)."""
+    assert not [c for c in text if c != "\n" and is_hidden(c)], repr(text)
+
+
+# -- outside text: every output made visible ------------------------------------------------------
+
+
+def test_an_error_naming_a_hostile_file_shows_its_escapes(capsys) -> None:
+    assert vmain(["validate", f"/nonexistent/{HOSTILE}.yaml"]) == 2
+    err = capsys.readouterr().err
+    assert_safe(err)
+    assert "\\x1b]0;pwned\\x07\\x1b[2J\\u202eevil\\u200b\\u009b31m" in err
+
+
+def test_json_output_stays_json_and_keeps_the_text(capsys) -> None:
+    path = f"/nonexistent/{HOSTILE}\udcff.yaml"  # an undecodable byte too (a surrogate)
+    assert vmain(["run", "--json", path]) == 2
+    out = capsys.readouterr().out
+    assert_safe(out)
+    assert json.loads(out)["show"] == path
+
+
+def test_a_show_and_a_command_source_of_hostile_text_are_shown_escaped(tmp_path, capsys) -> None:
+    """The run's lines (the show's name in a header, an OSC source in a command's line) and
+    `log summary` of its log: every one made visible, whatever printed it."""
+    show = write_show(tmp_path, "version: 1\nname: plain\nsteps:\n  - play: 1\n")
+    session = prepare(RunRequest(str(show), log_path=str(tmp_path / "run.mcap")))
+    out = io.StringIO()
+    progress = Progress(session, out, live=False, quiet=False)
+    command = Command("go", f"osc udp 10.0.0.9:9 {HOSTILE}")
+    progress.on_command(CommandEvent(command, Answer("error", f"unknown address /choreo/{HOSTILE}"), 0, 1.0))
+    progress.on_log(3, f"warning from {HOSTILE}")
+    progress.finish()
+    assert_safe(out.getvalue())
+    assert out.getvalue().count("\\x1b]0;pwned") == 3
+    with visible_output():
+        print(f"show: {HOSTILE}", file=sys.stderr)
+        sys.stdout.writelines([HOSTILE, "\n"])
+    captured = capsys.readouterr()
+    assert_safe(captured.err + captured.out)
+    assert captured.err == "show: \\x1b]0;pwned\\x07\\x1b[2J\\u202eevil\\u200b\\u009b31m\n"
+
+
+def test_log_summary_of_a_log_with_hostile_commands_shows_them_escaped(tmp_path, capsys) -> None:
+    from choreo.live import Live
+    from choreo.runner import StopRequest
+
+    show = write_show(tmp_path, "version: 1\nname: plain\nsteps:\n  - play: 1\n  - wait: 0.5\n  - play: 2\n")
+    log_path = tmp_path / "run.mcap"
+    session = prepare(RunRequest(str(show), log_path=str(log_path)))
+    stop = StopRequest()
+    live = Live(stop)
+
+    class Attacker:
+        def on_log(self, *args: object) -> None:
+            pass
+
+        def on_step(self, event: StepEvent) -> None:
+            if event.event == "start" and event.step.index == 1:
+                live.command(Command("stop", f"osc udp 10.0.0.9:9 {HOSTILE}"))  # accepted: logged
+
+    with session:
+        session.run([Attacker()], stop, live)
+    assert any(HOSTILE in m["source"] for m in read_log(log_path).topic("/choreo/command"))  # the log keeps it raw
+    capsys.readouterr()
+    vmain(["log", "summary", str(log_path)])
+    out = capsys.readouterr().out
+    assert_safe(out)
+    assert "\\x1b]0;pwned" in out
+
+
+def test_the_console_draws_outside_text_escaped() -> None:
+    screen = Screen(HOSTILE, 1.0, "machine clock", f"next cue: {HOSTILE}", f"GO waits: '{HOSTILE}'", True,
+                    (Row(HOSTILE, HOSTILE, HOSTILE, 1.0),), (Note(f"GO refused ({HOSTILE})", "", 1.0),))
+    for width in (40, 80, 200):
+        text = io.StringIO()
+        RichConsole(file=text, width=width, color_system=None).print(render(screen, width))
+        assert_safe(text.getvalue())
+        assert "\\x1b]0;" in text.getvalue() or width < 80
+
+
+def test_a_visible_stream_is_the_stream_for_everything_but_writing() -> None:
+    raw = io.StringIO()
+    stream = VisibleStream(raw)  # type: ignore[arg-type]
+    assert stream.write("a\x1bb\n") == 4 and raw.getvalue() == "a\\x1bb\n"
+    assert stream.getvalue() == raw.getvalue()  # the rest is the stream's own
+
+
+# -- the terminal never holds the show ----------------------------------------------------------
+
+
+def _full_pipe() -> tuple[int, int]:
+    """A pipe whose buffer is full: the next write to it blocks."""
+    read, write = os.pipe()
+    os.set_blocking(write, False)
+    try:
+        while True:
+            os.write(write, b"x" * 4096)
+    except BlockingIOError:
+        pass
+    os.set_blocking(write, True)
+    return read, write
+
+
+def _drain(fd: int) -> bytes:
+    got = b""
+    while select.select([fd], [], [], 0.5)[0]:
+        chunk = os.read(fd, 65536)
+        if not chunk:
+            break
+        got += chunk
+    return got
+
+
+@pytest.mark.parametrize("live", [False, True])
+def test_progress_never_waits_for_an_output_that_takes_nothing(tmp_path, live: bool) -> None:
+    """A runner's step, a warning, a command's answer: noted at once however full the output
+    is; what did not fit is counted and said once the output takes lines again."""
+    session = prepare(RunRequest(str(write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n")), no_log=True))
+    read, write = _full_pipe()
+    with os.fdopen(write, "w", closefd=True) as out:
+        progress = Progress(session, out, live=live, quiet=False)
+        step = session.plan.steps[0]
+        count = StatusWriter.CAPACITY * 3
+
+        def show_thread() -> None:
+            for n in range(count):
+                progress.on_step(StepEvent(step, "start", 0.0, n / 1000, 0))
+                progress.on_log(3, f"warning {n}")
+
+        thread = threading.Thread(target=show_thread, daemon=True)
+        thread.start()
+        thread.join(10)
+        assert not thread.is_alive(), "a runner waited for the terminal"
+        drained: list[bytes] = []
+        reader = threading.Thread(target=lambda: drained.append(_drain(read)), daemon=True)
+        reader.start()
+        progress.finish()
+        reader.join(10)
+    os.close(read)
+    text = drained[0].decode().lstrip("x")
+    assert "warning 0\n" in text
+    dropped = progress.writer.dropped_total  # type: ignore[union-attr]
+    said = [int(n) for n in re.findall(r"\((\d+) progress lines? not shown: the output was blocked\)\n", text)]
+    assert dropped > 0 and said and sum(said) == dropped
+
+
+def _pty(columns: int) -> tuple[int, int]:
+    primary, secondary = pty.openpty()
+    fcntl.ioctl(secondary, termios.TIOCSWINSZ, struct.pack("HHHH", 24, columns, 0, 0))
+    return primary, secondary
+
+
+TIMED_SHOW = """\
+version: 1
+name: a show whose plays are all cued, on the simulator's time
+motions:
+  short: {number: 2, duration: 0.05}
+steps:
+""" + "".join(f"  - play: short\n    at: {0.3 + 0.15 * n:.2f}\n" for n in range(12))
+
+
+def _run_on_pty(tmp_path: Path, columns: int, port: str, hold: bool) -> tuple[str, Path, int]:
+    """`choreo run --no-console` on a pseudo-terminal `columns` wide; with `hold`, the terminal
+    stopped (Ctrl-S) from the header's last line until the log is closed."""
+    show = write_show(tmp_path, TIMED_SHOW)
+    log = tmp_path / "run.mcap"
+    primary, secondary = _pty(columns)
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+    process = subprocess.Popen([str(REPO / ".venv" / "bin" / "choreo"), "run", str(show), "--no-console",
+                                "--port", port, "--log", str(log)], stdin=secondary, stdout=secondary,
+                               stderr=secondary, cwd=REPO, env=env, start_new_session=True)
+    os.close(secondary)
+    seen = b""
+    try:
+        deadline = time.monotonic() + 20
+        while b"run.mcap\r\n" not in seen and time.monotonic() < deadline:  # the header's last line, whole
+            if select.select([primary], [], [], 0.1)[0]:
+                seen += os.read(primary, 65536)
+        if hold:
+            os.write(primary, b"\x13")  # Ctrl-S: the terminal takes no more output
+            assert wait_for(lambda: _closed(log), timeout=30), "the show did not finish while the terminal was stopped"
+            os.write(primary, b"\x11")  # Ctrl-Q
+        while True:
+            try:
+                ready = select.select([primary], [], [], 0.2)[0]
+                if ready:
+                    seen += os.read(primary, 65536)
+                elif process.poll() is not None:
+                    break
+            except OSError:
+                break
+        code = process.wait(20)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+        os.close(primary)
+    return seen.decode("utf-8", "replace"), log, code
+
+
+def _closed(log: Path) -> bool:
+    try:
+        read_log(log)
+        return True
+    except Exception:  # noqa: BLE001 - not written to its end yet
+        return False
+
+
+def test_a_terminal_stopped_with_ctrl_s_holds_up_no_play(tmp_path) -> None:
+    output, log, code = _run_on_pty(tmp_path, 80, "sim://", hold=True)
+    assert code == 0, output
+    starts = [m for m in read_log(log).topic("/choreo/step") if m.get("event") == "start"]
+    assert len(starts) == 12
+    worst_ms = max(m["actual_s"] - m["planned_s"] for m in starts) * 1e3
+    assert worst_ms < 200, f"a play {worst_ms:.0f} ms late while the terminal was stopped"
+
+
+@pytest.mark.parametrize("columns", [50, 33])
+def test_every_line_of_a_run_fits_the_terminal(tmp_path, columns: int) -> None:
+    durations = ",".join(f"{n}:{0.05 + n / 1000:g}" for n in range(40))
+    output, log, code = _run_on_pty(tmp_path, columns, f"sim://?durations={durations}", hold=False)
+    assert code == 0, output
+    assert "port: sim://?durations=" in output and "…" in output
+    for line in output.replace("\x1b[K", "").replace("\r\n", "\n").replace("\r", "\n").split("\n"):
+        assert display_width(line) <= columns, (line, columns)
