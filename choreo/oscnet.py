@@ -10,8 +10,9 @@ memory, descriptors and time, and the operator's GO still gets through:
 - A connection must complete a message within `message_timeout_s` of opening or of beginning
   it (a trickle of bytes does not keep it open); one that has sent messages is closed after
   `idle_timeout_s` of silence. Buffered bytes are bounded by the frame limit.
-- Out of descriptors (EMFILE), accepting pauses for `ACCEPT_PAUSE_S` instead of spinning on a
-  listener that stays readable.
+- Out of descriptors (EMFILE: the process's limit is lower than the caps need), the oldest
+  connection that has not sent a message is closed to make room; with none, accepting pauses
+  for `ACCEPT_PAUSE_S` instead of spinning on a listener that stays readable.
 - A reply never blocks the thread: what a peer does not read is queued up to `max_unsent`
   bytes, then the connection is closed; a UDP reply that cannot go at once is dropped.
 - Any datagram up to 64 KB is read whole (a smaller buffer would cut it without a word).
@@ -103,6 +104,14 @@ class ConnectionTable:
             del self._slots[old]
         self._slots[key] = _Slot(host, now + self.limits.message_timeout_s, now)
         return True, evict
+
+    def make_room(self) -> object | None:
+        """The oldest connection that has not sent a whole message, removed (to be closed: the
+        process is out of descriptors), or None."""
+        key = self._silent(list(self._slots))
+        if key is not None:
+            del self._slots[key]
+        return key
 
     def _silent(self, keys: list[object]) -> object | None:
         """The oldest of `keys` that has not sent a whole message, if any."""
@@ -305,10 +314,15 @@ class OscNet:
             except BlockingIOError:
                 return
             except OSError as exc:
-                if exc.errno in OUT_OF_DESCRIPTORS:
+                if exc.errno not in OUT_OF_DESCRIPTORS:
+                    continue  # a peer gone before it was accepted
+                silent = self._table.make_room()
+                if silent is None:
                     self._pause_accepting(exc)
                     return
-                continue  # a peer gone before it was accepted
+                self._drop(silent, "closed to make room: out of file descriptors, and it had sent no "  # type: ignore[arg-type]
+                                   "message")
+                continue
             self._admit(sock, sender)
 
     def _pause_accepting(self, exc: OSError) -> None:

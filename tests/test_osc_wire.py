@@ -199,6 +199,16 @@ def test_a_new_connection_takes_the_place_of_the_oldest_silent_one():
     assert table.admit("e1", "10.0.0.5", 6.0) == (False, [])
 
 
+def test_out_of_descriptors_the_oldest_silent_connection_makes_room():
+    table = ConnectionTable(LIMITED)
+    for key, at in (("old", 0.0), ("speaks", 1.0), ("new", 2.0)):
+        table.admit(key, key, at)
+    table.heard("speaks", 1.5, messages=1, pending=False)
+    assert table.make_room() == "old"
+    assert table.make_room() == "new"
+    assert table.make_room() is None and len(table) == 1
+
+
 def test_a_connection_must_speak_in_time_and_a_trickle_does_not_keep_it():
     table = ConnectionTable(LIMITED)
     table.admit("silent", "h", 0.0)
