@@ -1,13 +1,17 @@
 """What the outside may cost a running show: the limits on commands, replies, log lines and
-printed lines, in one place (README, "Limits on commands"), and the token buckets that keep them.
+printed lines, in one place (the README's OSC section, "Limits", lists them), and the token
+buckets that keep them. (The network's own limits, connections, sizes and timeouts, are
+`choreo.osclimits`.)
 
 Why they exist: a command from the network costs the show a log line, a line on the terminal and
 a reply. A flood of them (80,000 GOs in 5 s) would fill the disk, which stops the show, and the
 terminal; one UDP packet (a bundle of 408 GOs) would have choreo send 408 replies to a sender
 whose address may be forged. So:
 
-- each allowed sender may have `commands_per_sender` carried out, and all of them together
-  `commands_total` (a bundle's messages count one by one); the rest are not carried out;
+- each allowed sender (an address: every port of a machine is one sender) may have
+  `commands_per_sender` carried out, and all of them together `commands_total` (a bundle's
+  messages count one by one; an address choreo does not know is no command and spends none);
+  the rest are not carried out;
 - each sender gets at most `replies_per_sender` replies, and the senders refused (not allowed)
   `refusals` replies between them (their addresses are the easiest to forge);
 - a command that is taken (`ok`) is always logged and shown; refused and ignored ones are, one
