@@ -199,9 +199,11 @@ steps:
 """ + "".join(f"  - play: short\n    at: {0.3 + 0.15 * n:.2f}\n" for n in range(12))
 
 
-def _run_on_pty(tmp_path: Path, columns: int, port: str, hold: bool) -> tuple[str, Path, int]:
+def _run_on_pty(tmp_path: Path, columns: int, port: str, hold: bool,
+                resize_to: int | None = None) -> tuple[str, Path, int]:
     """`choreo run --no-console` on a pseudo-terminal `columns` wide; with `hold`, the terminal
-    stopped (Ctrl-S) from the header's last line until the log is closed."""
+    stopped (Ctrl-S) from the header's last line until the log is closed; with `resize_to`,
+    made that wide once the header is out."""
     show = write_show(tmp_path, TIMED_SHOW)
     log = tmp_path / "run.mcap"
     primary, secondary = _pty(columns)
@@ -213,9 +215,11 @@ def _run_on_pty(tmp_path: Path, columns: int, port: str, hold: bool) -> tuple[st
     seen = b""
     try:
         deadline = time.monotonic() + 20
-        while b"run.mcap\r\n" not in seen and time.monotonic() < deadline:  # the header's last line, whole
-            if select.select([primary], [], [], 0.1)[0]:
+        while (hold or resize_to) and b"\n" not in seen.partition(b"log: ")[2] and time.monotonic() < deadline:
+            if select.select([primary], [], [], 0.1)[0]:  # the header's last line, whole
                 seen += os.read(primary, 65536)
+        if resize_to:
+            fcntl.ioctl(primary, termios.TIOCSWINSZ, struct.pack("HHHH", 24, resize_to, 0, 0))
         if hold:
             os.write(primary, b"\x13")  # Ctrl-S: the terminal takes no more output
             assert wait_for(lambda: _closed(log), timeout=30), "the show did not finish while the terminal was stopped"
@@ -246,7 +250,7 @@ def _closed(log: Path) -> bool:
 
 
 def test_a_terminal_stopped_with_ctrl_s_holds_up_no_play(tmp_path) -> None:
-    output, log, code = _run_on_pty(tmp_path, 80, "sim://", hold=True)
+    output, log, code = _run_on_pty(tmp_path, 300, "sim://", hold=True)
     assert code == 0, output
     starts = [m for m in read_log(log).topic("/choreo/step") if m.get("event") == "start"]
     assert len(starts) == 12
@@ -262,3 +266,43 @@ def test_every_line_of_a_run_fits_the_terminal(tmp_path, columns: int) -> None:
     assert "port: sim://?durations=" in output and "…" in output
     for line in output.replace("\x1b[K", "").replace("\r\n", "\n").replace("\r", "\n").split("\n"):
         assert display_width(line) <= columns, (line, columns)
+
+
+def test_what_reaches_stderr_under_the_console_is_shown_escaped(tmp_path, monkeypatch) -> None:
+    """On a terminal the console has rich print stderr's lines above the screen (a library's
+    warning): made visible on the way, and stderr is put back as it was after."""
+    from choreo.cli.console import Console
+    from choreo.live import Live
+    from choreo.runner import StopRequest
+
+    session = prepare(RunRequest(str(write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n")), no_log=True))
+    primary, secondary = _pty(80)
+    drained: list[bytes] = []
+    with os.fdopen(secondary, "w", encoding="utf-8") as tty:
+        monkeypatch.setattr(sys, "__stderr__", tty)  # the console on the process's own terminal
+        before = sys.stderr
+        console = Console(session, Live(StopRequest()), out=tty, keys=io.StringIO())
+        console.start()
+        try:
+            assert sys.stderr is not before
+            print(f"WARNING:root: {HOSTILE}", file=sys.stderr)
+        finally:
+            console.close()
+        assert sys.stderr is before
+        reader = threading.Thread(target=lambda: drained.append(_drain(primary)), daemon=True)
+        reader.start()
+        reader.join(10)
+    os.close(primary)
+    err = drained[0].decode("utf-8", "replace")
+    assert "WARNING:root: \\x1b]0;pwned" in err
+    assert "\x1b]0;pwned" not in err and "\u202e" not in err
+
+
+def test_the_live_line_fits_the_terminal_after_a_resize(tmp_path) -> None:
+    output, log, code = _run_on_pty(tmp_path, 120, "sim://", hold=False, resize_to=30)
+    assert code == 0, output
+    segments = [s for s in output.replace("\x1b[K", "").replace("\r\n", "\n").replace("\r", "\n").split("\n") if s]
+    last = segments[-3:]  # the live line's last draw (at the show's end), then the outcome and the log
+    assert last[0].startswith("step ") and "/1.9 s [" in last[0] and last[1].startswith("done: "), segments
+    assert all(display_width(line) <= 30 for line in last), last
+    assert any(display_width(line) > 30 for line in segments[:3])  # the header, drawn at 120

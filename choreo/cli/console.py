@@ -32,12 +32,13 @@ from typing import TextIO
 
 from rich.console import Console as RichConsole
 from rich.console import Group, RenderableType
+from rich.file_proxy import FileProxy
 from rich.live import Live as RichLive
 from rich.rule import Rule
 from rich.table import Table
 from rich.text import Text
 
-from choreo.cli.terminal import raw_stream
+from choreo.cli.terminal import raw_stream, visible_stream
 from choreo.link import Link, RxEvent, TxEvent
 from choreo.live import Command, CommandEvent, HoldingShowClock, Live
 from choreo.logformat import ERROR, INFO, WARNING
@@ -445,6 +446,10 @@ class Console:
             self._take_keys()
             self._watch_links()
             self._rich.start()
+            # rich now prints what is written to stderr above the screen (its own print, which
+            # leaves escape sequences raw): made visible first, until rich puts stderr back
+            if isinstance(sys.stderr, FileProxy):
+                sys.stderr = visible_stream(sys.stderr)
             self._draw()
             self._redraw = threading.Thread(target=self._redraw_loop, name="choreo-console", daemon=True)
             self._redraw.start()

@@ -58,6 +58,11 @@ class VisibleStream:
         return getattr(self.stream, name)
 
 
+def visible_stream(stream: TextIO) -> TextIO:
+    """`stream`, writing visible text (as it is if it does already)."""
+    return stream if isinstance(stream, VisibleStream) else VisibleStream(stream)  # type: ignore[return-value]
+
+
 def raw_stream(stream: TextIO) -> TextIO:
     """The stream under a VisibleStream: for what draws the terminal itself (the console's
     own escape sequences), having made its text visible first."""
@@ -68,8 +73,7 @@ def raw_stream(stream: TextIO) -> TextIO:
 def visible_output() -> Iterator[None]:
     """stdout and stderr as VisibleStreams inside the block, as they were after it."""
     saved = sys.stdout, sys.stderr
-    sys.stdout, sys.stderr = (VisibleStream(s) if s is not None and not isinstance(s, VisibleStream) else s
-                              for s in saved)
+    sys.stdout, sys.stderr = (visible_stream(s) if s is not None else s for s in saved)
     try:
         yield
     finally:
