@@ -193,6 +193,44 @@ def test_a_desks_other_messages_spend_no_command(server, heard):
     assert len(replies) == LIMITS.replies_per_sender.burst
 
 
+def test_a_flood_from_a_sender_not_allowed_gets_few_replies_and_few_log_lines(clock):
+    """A forged sender's packets: answered within the refusals' shared budget, logged within
+    the log's, and every one counted."""
+    host = outside_address()
+    if host is None:
+        pytest.skip("this machine has no address but loopback")
+    live = Live(StopRequest(), wait_start=True, now=clock.now)
+    heard = Heard()
+    live.listeners.append(heard)
+    server = OscServer(live, 0, host="0.0.0.0", now=clock.now)
+    server.start()
+    forged = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    forged.bind((host, 0))
+    try:
+        for _ in range(6):  # in sixes of 50, read before the next: none lost in the socket's buffer
+            for _ in range(50):
+                forged.sendto(message("/choreo/panic"), (host, server.port))
+            assert wait_for(lambda: server_idle(server), TIMEOUT_S, every=0.01)
+        replies = Peer.replies(_Wrapped(forged))
+        live.close()
+    finally:
+        forged.close()
+        server.close()
+    assert not live.stop()  # no panic from a sender not allowed
+    assert len(replies) <= LIMITS.refusals.burst
+    names = heard.names()
+    assert names.count("refused") <= LIMITS.reported.burst
+    summary = [e for e in heard.events if e.command.name == UNLOGGED]
+    assert names.count("refused") + sum(e.answer.data["counts"].get("refused", 0) for e in summary) == 300
+
+
+class _Wrapped:
+    """A bare UDP socket, read as a `Peer` reads its replies."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock, self.transport, self._buffer = sock, "udp", b""
+
+
 def test_a_flood_reaches_the_log_and_terminal_as_counts(clock):
     """The listeners (the log, the terminal's lines, notifications) hear a flood within the
     reported budget; the rest come as one `unlogged` count."""
@@ -205,7 +243,7 @@ def test_a_flood_reaches_the_log_and_terminal_as_counts(clock):
     try:
         for _ in range(4):
             peer.send(bundle("/choreo/go", 100))
-            assert wait_for(lambda: server_idle(server, peer), TIMEOUT_S, every=0.01)
+            assert wait_for(lambda: server_idle(server), TIMEOUT_S, every=0.01)
         clock.advance(LIMITS.summary_every_s)
         live.flush_reports()
     finally:
@@ -219,14 +257,15 @@ def test_a_flood_reaches_the_log_and_terminal_as_counts(clock):
     assert told == 400  # every GO of the bundles accounted for
 
 
-def server_idle(server: OscServer, peer: Peer) -> bool:
-    """The server has read what the peer sent: a probe from another address (with budgets of
-    its own) sent after it is answered."""
+def server_idle(server: OscServer) -> bool:
+    """The server has read what was sent before: a probe from another address (with budgets of
+    its own), sent after it, is answered (a probe that found the socket's buffer full is lost:
+    the next one tries again)."""
     probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     probe.bind(("127.0.0.3", 0))
     try:
         probe.sendto(message("/choreo/nothing"), ("127.0.0.1", server.port))
-        probe.settimeout(TIMEOUT_S)
+        probe.settimeout(0.5)
         return bool(probe.recv(65536))
     except OSError:
         return False
