@@ -180,7 +180,7 @@ def test_progress_never_waits_for_an_output_that_takes_nothing(tmp_path, live: b
     text = drained[0].decode().lstrip("x")
     assert "warning 0\n" in text
     dropped = progress.writer.dropped_total  # type: ignore[union-attr]
-    said = [int(n) for n in re.findall(r"\((\d+) progress lines? not shown: the output was blocked\)\n", text)]
+    said = [int(n) for n in re.findall(r"\((\d+) progress lines? not shown: the output did not keep up\)\n", text)]
     assert dropped > 0 and said and sum(said) == dropped
 
 

@@ -161,7 +161,7 @@ class StatusWriter:
             self._dropped = 0
         if dropped:
             lines.append(f"({dropped} progress line{'s' if dropped != 1 else ''} not shown: "
-                         "the output was blocked)")
+                         "the output did not keep up)")
         width = (columns(self.out) or UNKNOWN_COLUMNS) if self.fit_lines else None
         text = "\r\x1b[K" if self._shown and (lines or self.status is not None) else ""
         self._shown = False
