@@ -52,6 +52,7 @@ class Limits:
     refusals: Rate = Rate(10, 1.0)  # replies to senders not allowed, all of them together
     reported: Rate = Rate(10, 2.0)  # refused/ignored commands logged and printed one by one
     summary_every_s: float = 1.0  # how often the commands not logged one by one are summed up
+    address_shown: int = 256  # characters of an OSC address logged, printed or replied; past them, cut
     senders_tracked: int = 256  # senders with a budget of their own; beyond, new ones share one
     notify_targets: int = 8  # --osc-notify given at most this many times
 

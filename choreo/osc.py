@@ -265,6 +265,7 @@ class OscServer:
         """A packet choreo cannot read whole: nothing of it is carried out. Its sender (allowed)
         is answered when the refused message's address could be read."""
         self.counts["malformed"] += 1
+        address = self._shown(address) if address else address
         message = f"refused: OSC that choreo cannot read ({error}); nothing in the packet was carried out"
         self._report(Command("malformed", source, address), Answer("error", message))
         return self._answer(host, Reply(address, "error", message)) if address else None
@@ -278,6 +279,7 @@ class OscServer:
         and answered within its own budgets, and past them ignored (and counted)."""
         source = f"osc {transport} {where(sender)}"
         host = plain_host(sender[0])
+        address = self._shown(address)
         if not sender_allowed(host, self.allow):
             return self._refuse(host, source, address)
         if address.startswith(ECHOES):  # a reply or notification come back: answering it could loop
@@ -310,6 +312,13 @@ class OscServer:
         message = unknown_message(address)
         self._report(Command("unknown", source, address), Answer("error", message))
         return Reply(address, "error", message)
+
+    def _shown(self, address: str) -> str:
+        """The address as the log, the terminal and a reply show it: cut past
+        `Limits.address_shown` characters (no command's address is that long; a 64 KB one
+        would cost a 64 KB log line, and a reply three times the bytes received)."""
+        most = self._limits.limits.address_shown
+        return address if len(address) <= most else address[:most] + "…"
 
     def _report(self, command: Command, answer: Answer) -> None:
         """A message `Live.command` has no name for, told to its listeners (the log) as it

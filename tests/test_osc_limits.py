@@ -193,6 +193,25 @@ def test_a_desks_other_messages_spend_no_command(server, heard):
     assert len(replies) == LIMITS.replies_per_sender.burst
 
 
+@pytest.mark.parametrize("address", ["/" + "x" * 60_000, "/reply/" + "y" * 60_000, "/choreo/cue/" + "z" * 60_000 + "/go"])
+def test_a_long_address_costs_neither_a_long_log_line_nor_a_long_reply(server, heard, address):
+    """A 60 KB address once cost a 60 KB log line (10 at once, 2 a second: a disk filled
+    fast) and a reply three times the bytes received (the address, in the reply's address,
+    its JSON and its message)."""
+    peer = Peer("udp", server.port)
+    try:
+        peer.send(OscMessageBuilder(address).build().dgram)
+        assert wait_for(lambda: heard.events, TIMEOUT_S, every=0.005)
+        replies = peer.replies()
+    finally:
+        peer.close()
+    (event,) = heard.events
+    most = LIMITS.address_shown + 1
+    assert len(event.command.label) <= most and len(event.answer.message) < 2 * most
+    assert event.command.label == address[:LIMITS.address_shown] + "…"
+    assert sum(map(len, replies)) < 4 * most
+
+
 def test_a_flood_from_a_sender_not_allowed_gets_few_replies_and_few_log_lines(clock):
     """A forged sender's packets: answered within the refusals' shared budget, logged within
     the log's, and every one counted."""
