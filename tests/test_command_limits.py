@@ -218,6 +218,18 @@ def test_the_log_carries_the_counts_and_the_review_adds_them_up(tmp_path):
     assert summary.commands_unlogged == sum(r["count"] for r in unlogged) == sent - (len(records) - len(unlogged))
 
 
+def test_a_summary_record_without_counts_is_counted_by_its_count(tmp_path):
+    from choreo.live import Answer, CommandEvent
+
+    time = VirtualTime()
+    path = tmp_path / "short.mcap"
+    recorder = Recorder(path, RunInfo("show.yaml", "short", b"version: 1\n", "sim://", 115200, time.wall_ns()))
+    recorder.on_command(CommandEvent(Command(UNLOGGED, "osc"), Answer("error", "x", {"count": 7}), time.wall_ns(), None))
+    recorder.close()
+    summary = summarize(path)
+    assert (summary.commands_total, summary.commands_refused, summary.commands_by) == (7, 7, {UNLOGGED: 7})
+
+
 @pytest.mark.parametrize("count", ["12", -3, 0, 1.5, True])
 def test_a_summary_record_whose_count_is_no_count_is_refused(count):
     with pytest.raises(ValueError):

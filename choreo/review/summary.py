@@ -608,8 +608,9 @@ def _command(summary: Summary, record: CommandRecord) -> None:
         by = {record.command: 1}
     else:
         summary.commands_unlogged += count
-        by = record.counts if isinstance(record.counts, dict) else {}
-        if sum(by.values()) != count or not all(type(n) is int and n > 0 for n in by.values()):
+        by = record.counts if record.counts is not None else {record.command: count}  # counts are optional
+        if not isinstance(by, dict) or not all(type(n) is int and n > 0 for n in by.values()) \
+                or sum(by.values()) != count:
             raise ValueError(f"unlogged: counts {record.counts!r} do not add up to count {count}")
     for name, n in by.items():
         summary.commands_by[name] = summary.commands_by.get(name, 0) + n
