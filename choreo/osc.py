@@ -51,7 +51,7 @@ from choreo.oscnet import ListenFailed, OscNet
 from choreo.osclimits import LIMITS as WIRE_LIMITS
 from choreo.osclimits import OscLimits
 from choreo.oscnotify import Notifier, Target, show_target
-from choreo.oscwire import Message, decode, encode_message
+from choreo.oscwire import Message, decode_packet, encode_message
 
 if TYPE_CHECKING:
     from choreo.runner import RunResult, StepEvent
@@ -244,7 +244,7 @@ class OscServer:
         if not sender_allowed(host, self.allow):
             replies = [self._refuse(host, source, "")]  # its address is not read: the reply is `/reply`
         else:
-            decoded = decode(data, self.wire_limits)
+            decoded = decode_packet(data, self.wire_limits)
             if decoded.error is not None:
                 replies = [self._malformed(host, source, decoded.error, decoded.address)]
             else:

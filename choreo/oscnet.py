@@ -320,8 +320,8 @@ class OscNet:
                 if silent is None:
                     self._pause_accepting(exc)
                     return
-                self._drop(silent, "closed to make room: out of file descriptors, and it had sent no "  # type: ignore[arg-type]
-                                   "message")
+                why = "closed to make room: out of file descriptors, and it had sent no message"
+                self._drop(silent, why)  # type: ignore[arg-type]
                 continue
             self._admit(sock, sender)
 
@@ -340,8 +340,9 @@ class OscNet:
             self._drop(old, "closed to make room: it had sent no message")  # type: ignore[arg-type]
         if not taken:
             sock.close()
-            self.handler.dropped("tcp", sender, f"refused: too many connections (at most {self.limits.max_connections}, "
-                                                f"{self.limits.max_per_sender} from one address, each sending)")
+            limits = self.limits
+            self.handler.dropped("tcp", sender, f"refused: too many connections (at most {limits.max_connections}, "
+                                                f"{limits.max_per_sender} from one address, each sending)")
             return
         sock.setblocking(False)
         try:

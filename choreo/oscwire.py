@@ -52,7 +52,7 @@ class _Malformed(Exception):
         self.address = address
 
 
-def decode(packet: bytes, limits: OscLimits = LIMITS) -> Decoded:
+def decode_packet(packet: bytes, limits: OscLimits = LIMITS) -> Decoded:
     """The messages of one OSC packet (a message or a bundle); never raises."""
     if not packet:
         return Decoded(error="an empty packet")

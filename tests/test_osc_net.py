@@ -32,7 +32,7 @@ from test_osc import GO_SHOW, TIMEOUT_S, Commands, ask, client, free_port, live,
 from choreo import osc as osc_module
 from choreo.osc import OscServer
 from choreo.osclimits import OscLimits
-from choreo.oscwire import BUNDLE, decode, encode_message, slip_encode
+from choreo.oscwire import BUNDLE, decode_packet, encode_message, slip_encode
 
 START = encode_message("/choreo/start")
 GO = encode_message("/choreo/go")
@@ -51,7 +51,7 @@ def raw_udp(port: int, packet: bytes) -> socket.socket:
 
 
 def reply_of(data: bytes) -> tuple[str, dict]:
-    (message,) = decode(data).messages
+    (message,) = decode_packet(data).messages
     return message.address, json.loads(message.args[0])
 
 
@@ -122,7 +122,7 @@ def test_a_refused_senders_packet_is_not_read(live, monkeypatch):
     def never(*args):  # type: ignore[no-untyped-def]
         raise AssertionError("a refused sender's packet was decoded")
 
-    monkeypatch.setattr(osc_module, "decode", never)
+    monkeypatch.setattr(osc_module, "decode_packet", never)
     commands = Commands()
     live.listeners.append(commands)
     (reply,) = server.packet("udp", ("10.9.8.7", 5000), bad_bundle(0))
@@ -216,10 +216,10 @@ def test_silent_and_trickling_connections_are_closed_in_time(live):
     live.listeners.append(commands)
     server = serve(live, wire_limits=SMALL)
     try:
-        with client("tcp", server.port) as talker, \
-                socket.create_connection(("127.0.0.1", server.port)) as silent, \
-                socket.create_connection(("127.0.0.1", server.port)) as trickle:
-            assert ask(talker, "/choreo/start")[1]["status"] == "ok"
+        with client("tcp", server.port) as talker:
+            assert ask(talker, "/choreo/start")[1]["status"] == "ok"  # it spoke: it may stay
+            silent = socket.create_connection(("127.0.0.1", server.port))
+            trickle = socket.create_connection(("127.0.0.1", server.port))
             packet = slip_encode(GO)
             closed = False
             for byte in packet[:-1]:  # a byte every 50 ms: the message never ends in time
@@ -235,6 +235,8 @@ def test_silent_and_trickling_connections_are_closed_in_time(live):
             trickle.settimeout(TIMEOUT_S)
             assert closed or read_to_end(trickle) == b""
             assert read_to_end(silent) == b""
+            silent.close()
+            trickle.close()
             assert ask(talker, "/choreo/stop")[1]["status"] == "ok"  # it spoke: still open
     finally:
         server.close()
@@ -373,4 +375,4 @@ def test_fuzz_packets_through_the_server(live, packet):
     reply's encoding) never raises, whatever arrives from an allowed sender."""
     server = OscServer(live, 0)
     for reply in server.packet("udp", ("127.0.0.1", 9), packet):
-        assert decode(reply).messages[0].address.startswith("/reply")
+        assert decode_packet(reply).messages[0].address.startswith("/reply")

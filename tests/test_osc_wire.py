@@ -16,8 +16,8 @@ from pythonosc.osc_message_builder import OscMessageBuilder, build_msg
 
 from choreo.oscnet import ConnectionTable
 from choreo.osclimits import LIMITS, OscLimits
-from choreo.oscwire import (BUNDLE, Decoded, FrameReader, Message, decode, encode_bundle, encode_message, slip_decode,
-                            slip_encode)
+from choreo.oscwire import (BUNDLE, Decoded, FrameReader, Message, decode_packet, encode_bundle, encode_message,
+                            slip_decode, slip_encode)
 
 GO = build_msg("/choreo/go", []).dgram
 TAG = BUNDLE + struct.pack(">Q", 1)
@@ -41,10 +41,11 @@ def test_every_argument_type_python_osc_sends_is_read():
               ("h", 2**40), ("d", 2.25), ("m", (1, 2, 3, 4)), ("r", 0x11223344)]
     for tag, value in values:
         builder.add_arg(value, tag)
-    decoded = decode(builder.build().dgram)
+    decoded = decode_packet(builder.build().dgram)
     assert decoded == Decoded((Message("/choreo/cue/ä/go", (-5, 1.5, "héllo", b"abcde", True, False, None, 2**40,
                                                             2.25, b"\x01\x02\x03\x04", 0x11223344)),))
-    assert decode(b"/c\x00\x00,ctI\x00\x00\x00\x00\x00\x00\x00x" + b"\x00" * 7 + b"\x01").messages == (Message("/c", (ord("x"), 1, None)),)
+    char_time_impulse = b"/c\x00\x00,ctI\x00\x00\x00\x00" + b"\x00\x00\x00x" + b"\x00" * 7 + b"\x01"
+    assert decode_packet(char_time_impulse).messages == (Message("/c", (ord("x"), 1, None)),)
 
 
 def test_nested_bundles_give_their_messages_in_order():
@@ -53,20 +54,20 @@ def test_nested_bundles_give_their_messages_in_order():
     outer.add_content(build_msg("/a", [1]))
     outer.add_content(inner.build())
     outer.add_content(build_msg("/c", []))
-    assert decode(outer.build().dgram).messages == (Message("/a", (1,)), Message("/b", ("x",)), Message("/c"))
-    assert decode(bundle()) == Decoded()  # an empty bundle: nothing to do, nothing wrong
+    assert decode_packet(outer.build().dgram).messages == (Message("/a", (1,)), Message("/b", ("x",)), Message("/c"))
+    assert decode_packet(bundle()) == Decoded()  # an empty bundle: nothing to do, nothing wrong
 
 
 def test_an_old_senders_message_without_type_tags_has_no_arguments():
-    assert decode(b"/choreo/go\x00\x00").messages == (Message("/choreo/go"),)
+    assert decode_packet(b"/choreo/go\x00\x00").messages == (Message("/choreo/go"),)
 
 
 def test_what_choreo_sends_reads_back():
     args = ("a reply", 3, -2**31, 2**40, 0.5, True, False, None, b"\x00\xff")
-    assert decode(encode_message("/reply/choreo/go", args)).messages == (Message("/reply/choreo/go", args),)
-    assert decode(encode_bundle([encode_message("/a"), encode_bundle([encode_message("/b", [1])])])).messages == (
+    assert decode_packet(encode_message("/reply/choreo/go", args)).messages == (Message("/reply/choreo/go", args),)
+    assert decode_packet(encode_bundle([encode_message("/a"), encode_bundle([encode_message("/b", [1])])])).messages == (
         Message("/a"), Message("/b", (1,)))
-    assert decode(encode_message("/a\x00b", ["c\x00"])).messages == (Message("/a\ufffdb", ("c\ufffd",)),)
+    assert decode_packet(encode_message("/a\x00b", ["c\x00"])).messages == (Message("/a\ufffdb", ("c\ufffd",)),)
     with pytest.raises(TypeError):
         encode_message("/a", [object()])  # type: ignore[list-item]
 
@@ -79,7 +80,7 @@ def test_a_bundle_elements_size_out_of_bounds_is_refused(size):
     """Size 0 or negative sent python-osc's parser round for ever; past the end, it read what was
     not there (4 and 12: within the packet, but not the element's true size of 16)."""
     for packet in (bundle(element(GO, size)), bundle(element(GO), element(GO, size))):
-        decoded = decode(packet)
+        decoded = decode_packet(packet)
         assert decoded.messages == ()
         if size not in (4, 12):
             assert "a bundle element's size" in decoded.error
@@ -91,10 +92,10 @@ def test_a_bundle_elements_size_out_of_bounds_is_refused(size):
 def test_an_unknown_type_tag_refuses_the_message(tag):
     """`/choreo/panic ,Q` was carried out (python-osc skipped the tag it did not know)."""
     packet = b"/choreo/panic\x00\x00\x00" + (f",{tag}".encode() + b"\x00\x00\x00\x00")[:4 if len(tag.encode()) < 3 else 8]
-    decoded = decode(packet)
+    decoded = decode_packet(packet)
     assert decoded.messages == () and decoded.address == "/choreo/panic"
     assert "which choreo does not take" in decoded.error
-    assert decode(bundle(element(GO), element(packet))).messages == ()  # one bad message refuses its packet
+    assert decode_packet(bundle(element(GO), element(packet))).messages == ()  # one bad message refuses its packet
 
 
 def test_bundles_nest_only_so_deep_and_hold_only_so_many():
@@ -102,14 +103,14 @@ def test_bundles_nest_only_so_deep_and_hold_only_so_many():
     nested = GO
     for _ in range(3):
         nested = bundle(element(nested))
-    assert decode(nested, limits).messages == (Message("/choreo/go"),)
-    assert "nested more than 3 deep" in decode(bundle(element(nested)), limits).error
-    assert len(decode(bundle(*[element(GO)] * 9), limits).messages) == 9  # the bundle itself counts
-    assert "more than 10 elements" in decode(bundle(*[element(GO)] * 10), limits).error
+    assert decode_packet(nested, limits).messages == (Message("/choreo/go"),)
+    assert "nested more than 3 deep" in decode_packet(bundle(element(nested)), limits).error
+    assert len(decode_packet(bundle(*[element(GO)] * 9), limits).messages) == 9  # the bundle itself counts
+    assert "more than 10 elements" in decode_packet(bundle(*[element(GO)] * 10), limits).error
     deep = GO
     for _ in range(10_000):  # deeper than Python's recursion: refused at the limit, not by a crash
         deep = bundle(element(deep))
-    assert "nested more than" in decode(deep, OscLimits(max_message=10**7)).error
+    assert "nested more than" in decode_packet(deep, OscLimits(max_message=10**7)).error
 
 
 @pytest.mark.parametrize("packet, why", [
@@ -130,14 +131,14 @@ def test_bundles_nest_only_so_deep_and_hold_only_so_many():
     (TAG + element(b"/a\x00"), "4-byte units"),
 ])
 def test_malformed_packets_are_refused_with_the_reason(packet, why):
-    decoded = decode(packet)
+    decoded = decode_packet(packet)
     assert decoded.messages == () and why in decoded.error
 
 
 def test_a_packet_over_the_size_limit_is_refused_unread():
     packet = encode_message("/choreo/go", ["x" * 100])
-    assert decode(packet, OscLimits(max_message=len(packet))).messages
-    assert "the limit is 100" in decode(packet, OscLimits(max_message=100)).error
+    assert decode_packet(packet, OscLimits(max_message=len(packet))).messages
+    assert "the limit is 100" in decode_packet(packet, OscLimits(max_message=100)).error
 
 
 # -- TCP framing --------------------------------------------------------------------------------
@@ -240,8 +241,8 @@ FUZZ = settings(max_examples=150, deadline=1000, suppress_health_check=[HealthCh
 
 
 def check(packet: bytes, limits: OscLimits = LIMITS) -> Decoded:
-    """decode's promises, whatever the packet: no exception, a result or a reason, never both."""
-    decoded = decode(packet, limits)
+    """decode_packet's promises, whatever the packet: no exception, a result or a reason, never both."""
+    decoded = decode_packet(packet, limits)
     assert isinstance(decoded, Decoded)
     assert (decoded.error is None) or decoded.messages == ()
     assert len(decoded.messages) <= limits.max_bundle_elements
