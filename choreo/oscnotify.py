@@ -16,10 +16,10 @@ import threading
 from collections.abc import Sequence
 from typing import Any
 
-from pythonosc.osc_message_builder import build_msg
 
 from choreo.errors import UsageError
 from choreo.limits import LIMITS
+from choreo.oscwire import encode_message
 
 QUEUED = 1000  # notifications waiting to be sent; past this they are dropped
 
@@ -139,7 +139,7 @@ class Notifier:
 
     def _send(self, address: str, args: tuple) -> None:
         try:
-            data = build_msg(address, list(args)).dgram
+            data = encode_message(address, args)
         except (ValueError, TypeError):
             return
         for family, target in self._addresses:
