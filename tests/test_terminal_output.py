@@ -306,3 +306,62 @@ def test_the_live_line_fits_the_terminal_after_a_resize(tmp_path) -> None:
     assert last[0].startswith("step ") and "/1.9 s [" in last[0] and last[1].startswith("done: "), segments
     assert all(display_width(line) <= 30 for line in last), last
     assert any(display_width(line) > 30 for line in segments[:3])  # the header, drawn at 120
+
+
+def test_a_pipe_nobody_reads_holds_up_no_play(tmp_path) -> None:
+    """stderr a pipe that fills up once the header is out (a `choreo run ... 2>&1 | less`
+    left unread): the plays keep their cues; the lines that did not fit are counted."""
+    show = write_show(tmp_path, TIMED_SHOW)
+    log = tmp_path / "run.mcap"
+    read, write = os.pipe()
+    process = subprocess.Popen([str(REPO / ".venv" / "bin" / "choreo"), "run", str(show), "--log", str(log)],
+                               stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=write, cwd=REPO)
+    seen = b""
+    try:
+        deadline = time.monotonic() + 20
+        while b"\n" not in seen.partition(b"log: ")[2] and time.monotonic() < deadline:
+            if select.select([read], [], [], 0.1)[0]:
+                seen += os.read(read, 65536)
+        filler = os.open(f"/proc/self/fd/{write}", os.O_WRONLY | os.O_NONBLOCK)  # its own flags, not choreo's
+        try:
+            while True:
+                os.write(filler, b"\n" * 4096)  # the pipe full: the next line waits for a reader
+        except BlockingIOError:
+            pass
+        finally:
+            os.close(filler)
+        assert wait_for(lambda: _closed(log), timeout=30), "the show did not finish while the pipe was full"
+        drained: list[bytes] = []
+        reader = threading.Thread(target=lambda: drained.append(_drain(read)), daemon=True)
+        reader.start()
+        assert process.wait(20) == 0
+        reader.join(10)
+        drained.append(_drain(read))  # what came after a pause
+    finally:
+        if process.poll() is None:
+            process.kill()
+        os.close(write)
+        os.close(read)
+    starts = [m for m in read_log(log).topic("/choreo/step") if m.get("event") == "start"]
+    assert len(starts) == 12
+    worst_ms = max(m["actual_s"] - m["planned_s"] for m in starts) * 1e3
+    assert worst_ms < 200, f"a play {worst_ms:.0f} ms late while the pipe was full"
+    assert b"done: 12 steps" in b"".join(drained)
+
+
+def test_a_non_blocking_output_is_waited_for_not_given_up(tmp_path) -> None:
+    """A stderr another process made non-blocking (a full one answers EAGAIN): the writer's
+    thread waits for room, and the lines arrive once someone reads."""
+    read, write = _full_pipe()
+    os.set_blocking(write, False)
+    with os.fdopen(write, "w", closefd=True) as out:
+        writer = StatusWriter(out, fit_lines=False)
+        writer.line("after the wait")
+        time.sleep(0.3)  # the writer meets the full pipe (EAGAIN) meanwhile
+        drained: list[bytes] = []
+        reader = threading.Thread(target=lambda: drained.append(_drain(read)), daemon=True)
+        reader.start()
+        writer.close(5)
+        reader.join(10)
+    os.close(read)
+    assert drained[0].endswith(b"after the wait\n")

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import functools
 import os
+import select
 import sys
 import threading
 from collections import deque
@@ -186,4 +187,7 @@ class StatusWriter:
             return
         data = text.encode(getattr(out, "encoding", None) or "utf-8", errors="backslashreplace")
         while data:
-            data = data[os.write(fd, data):]
+            try:
+                data = data[os.write(fd, data):]
+            except BlockingIOError:  # a descriptor another process made non-blocking: wait for room
+                select.select([], [fd], [], self.REDRAW_S)
