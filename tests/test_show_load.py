@@ -379,6 +379,10 @@ _DEEP = {
     "block lists": "- " * 3000 + "x",
     "block maps": "".join(" " * i + "a:\n" for i in range(300)),
     "explicit keys": "? " * 3000,
+    # brackets the pre-scan takes for flow (a plain scalar's next line, a compact `- key: |`
+    # whose text starts at the key's column) must not hide a deep flow later in the file
+    "after a plain scalar's brackets": "steps:\n  - play: abc\n      " + "[" * 45 + "\n  - play: " + "[" * 5000,
+    "after a compact block scalar": "steps:\n- play: |\n  x: " + "[" * 5000,
 }
 
 
@@ -390,6 +394,22 @@ def test_nesting_is_reported_in_choreos_words_whatever_the_parsers_limits(tmp_pa
     found = problems(tmp_path, _DEEP[shape])
     assert f"nested more than {MAX_DEPTH} levels deep" in [p.message for p in found]
     assert not any("YAML syntax error" in p.message for p in found)
+
+
+def test_libyamls_limit_on_a_key_it_cannot_resolve_is_said_in_choreos_words(tmp_path):
+    """A flow key at its mapping's column is withheld from the events until its `:`: the walk
+    never sees it, libyaml's scanner stops at its limit (the Python parser: at 1,024 characters)."""
+    found = problems(tmp_path, "version: 1\nsteps:\n- play: |\n  " + "[" * 5000 + "]" * 5000 + ": 1\n")
+    assert [p.message for p in found] == [f"nested more than {MAX_DEPTH} levels deep"]
+
+
+@pytest.mark.parametrize("parser", sorted(_PARSERS))
+def test_a_parsers_limit_past_a_syntax_error_leaves_the_syntax_error(tmp_path, monkeypatch, parser):
+    """libyaml's scanner reads ahead to its nesting limit before its parser reaches `[a[b`."""
+    monkeypatch.setattr("choreo.show.load._Parser", _PARSERS[parser])
+    found = problems(tmp_path, "version: 1\nsteps:\n  - play: [a[b, " + "[" * 5000)
+    assert [(p.line, p.column) for p in found] == [(3, 13)]
+    assert "nesting" not in found[0].message and "YAML syntax error" in found[0].message
 
 
 @pytest.mark.parametrize("parser", sorted(_PARSERS))

@@ -508,18 +508,64 @@ def _too_deep(text: str, report: _Report) -> bool:
     cut = too_deep_at(text, MAX_DEPTH)
     if cut is None:
         return False
+    return _walk_prefix(text[:cut + 1], report) is _TOO_DEEP
+
+
+_TOO_DEEP = "too deep"
+
+
+def _walk_prefix(prefix: str, report: _Report) -> yaml.YAMLError | str | None:
+    """Walk the events of the text's first part: `_TOO_DEEP` (reported) if it nests past the
+    limit, else the parser's error on it (None if it parses); other problems are not reported."""
     scratch = _Report(report.file)
     builder = _Builder(scratch)
     try:
-        for event in yaml.parse(text[:cut + 1], Loader=_Parser):
+        for event in yaml.parse(prefix, Loader=_Parser):
             builder.feed(event)
     except _Stop:
         for problem in scratch.problems():
             report.add((problem.line, problem.column), problem.path, problem.message)
-        return True
-    except yaml.YAMLError:
-        pass  # the prefix ends mid-document; only a depth stop counts here
+        return _TOO_DEEP
+    except yaml.YAMLError as exc:
+        return exc
+    return None
+
+
+def _earlier_problem(text: str, exc: yaml.MarkedYAMLError, report: _Report) -> bool:
+    """True (and it reported) if the text before the parser's error holds a problem of its own.
+
+    The scanner reads ahead of the events: its own limits (libyaml's nesting depth) can stop it
+    past a depth choreo's walk would have stopped at, or past a syntax error its parser had not
+    yet reached. The pre-scan of `_too_deep` is a reading of YAML, not YAML, so this is the
+    guard that holds whatever it missed: the text before the error, walked again, tells.
+    """
+    mark = exc.problem_mark
+    if mark is None or mark.index <= 0:
+        return False
+    prefix = text[:mark.index]
+    for _ in range(2):  # the token the parser stopped on may end at its mark: then without it
+        found = _walk_prefix(prefix, report)
+        if found is _TOO_DEEP:
+            return True
+        earlier = found.problem_mark if isinstance(found, yaml.MarkedYAMLError) else None
+        if earlier is not None and prefix[earlier.index:].strip():
+            _report_syntax(found, report)
+            return True
+        prefix = prefix.rstrip()[:-1]  # an error at the prefix's end is its cut, not the file's
     return False
+
+
+def _report_syntax(exc: yaml.MarkedYAMLError, report: _Report) -> None:
+    """The parser's error located; its own nesting limit (reached where the walk could not judge
+    the text before it: a key the scanner had not resolved) is said in choreo's words."""
+    mark = exc.problem_mark or exc.context_mark
+    where = (mark.line + 1, mark.column + 1) if mark else (0, 0)
+    what = exc.problem or "syntax error"
+    if "nesting" in what:
+        report.add(where, "", f"nested more than {MAX_DEPTH} levels deep")
+        return
+    context = f" ({exc.context})" if exc.context else ""
+    report.add(where, "", f"YAML syntax error: {what}{context}")
 
 
 def _parse(text: str, report: _Report) -> _Doc | None:
@@ -544,11 +590,8 @@ def _parse(text: str, report: _Report) -> _Doc | None:
     except _Stop:
         return None
     except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        where = (mark.line + 1, mark.column + 1) if mark else (0, 0)
-        what = exc.problem or "syntax error"
-        context = f" ({exc.context})" if exc.context else ""
-        report.add(where, "", f"YAML syntax error: {what}{context}")
+        if not _earlier_problem(text, exc, report):
+            _report_syntax(exc, report)
         return None
     except yaml.YAMLError as exc:  # the reader: a character YAML does not allow
         position = getattr(exc, "position", 0) or 0
