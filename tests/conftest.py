@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 
 @pytest.fixture(autouse=True)
 def output_to_a_pipe(monkeypatch):
-    """pytest-xdist's workers export COLUMNS=80, which choreo (like pip) takes as the terminal's
-    width and fits its lines to: tests see whole lines, as through a pipe, unless they set one."""
-    monkeypatch.delenv("COLUMNS", raising=False)
+    """pytest-xdist's workers export COLUMNS=80, and readline (which pytest loads) exports COLUMNS
+    and LINES into the C environment behind os.environ's back, where a subprocess inherits them;
+    choreo (like pip) takes COLUMNS as the terminal's width and fits its lines to it. Tests see
+    whole lines, as through a pipe, unless they set a width themselves."""
+    for name in ("COLUMNS", "LINES"):
+        monkeypatch.delenv(name, raising=False)
+        os.unsetenv(name)  # the C environment's copy too, which os.environ may not know of
