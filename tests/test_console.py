@@ -14,6 +14,7 @@ import pty
 import shlex
 import shutil
 import subprocess
+import sys
 import termios
 import threading
 import time
@@ -406,7 +407,8 @@ class Pane:
         self.socket = f"choreo-console-{uuid.uuid4().hex[:12]}"
         self.exit_file = tmp_path / "exit"
         self.stty_file = tmp_path / "stty"
-        choreo = shlex.join([str(REPO / ".venv" / "bin" / "choreo"), "run", *args])
+        # this interpreter's choreo: CI's pass on the lowest dependency versions runs in a venv of its own
+        choreo = shlex.join([sys.executable, "-m", "choreo", "run", *args])
         script = (f"cd {shlex.quote(str(REPO))} && {choreo}; echo $? > {self.exit_file}.tmp; "
                   f"stty -a > {self.stty_file}; mv {self.exit_file}.tmp {self.exit_file}; sleep 60")
         self._tmux("new-session", "-d", "-x", str(width), "-y", str(height), "-s", "run", f"sh -c {shlex.quote(script)}")
