@@ -167,10 +167,9 @@ def _encoding_of(data: bytes, path: str) -> str:
     for bom, encoding in _BOMS:
         if data.startswith(bom):
             return encoding
-    if data[:2] == b"<\0":  # UTF-16 without a mark: `<` is the first character of any XML
-        return "utf-16-le"
-    if data[:2] == b"\0<":
-        return "utf-16-be"
+    unmarked = _utf16_without_mark(data)
+    if unmarked:
+        return unmarked
     declared = _DECLARED.match(data[:_DECLARATION_MAX])
     if declared is None:
         return "utf-8"
@@ -186,6 +185,20 @@ def _encoding_of(data: bytes, path: str) -> str:
         raise ProjectError(f"{path}: the file declares encoding {visible(repr(name))} but has no byte order mark and does not "
                            "start with '<' in it: save the project again in Heart to Heart 4, or as UTF-8")
     return info.name
+
+
+_XML_SPACE = b" \t\r\n"
+
+
+def _utf16_without_mark(data: bytes) -> str | None:
+    """`utf-16-le`/`-be` for UTF-16 text without a byte order mark: its first character that is
+    not XML white space (which may come before the root when there is no declaration) is `<`."""
+    for index in range(0, min(len(data), _DECLARATION_MAX) - 1, 2):
+        pair = data[index:index + 2]
+        if pair[0] in _XML_SPACE and pair[1] == 0 or pair[1] in _XML_SPACE and pair[0] == 0:
+            continue
+        return {b"<\0": "utf-16-le", b"\0<": "utf-16-be"}.get(pair)
+    return None
 
 
 def _local(tag: str) -> str:

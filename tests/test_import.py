@@ -347,6 +347,14 @@ def test_japanese_names_survive_every_encoding_a_project_comes_in(tmp_path, caps
     assert names_of(capsys, path) == {s.number: s.name for s in slots}
 
 
+@pytest.mark.parametrize("codec", ["utf-16-le", "utf-16-be"])
+@pytest.mark.parametrize("space", ["\n", "\r\n  ", "\t"])
+def test_utf16_without_a_mark_or_a_declaration_may_start_with_white_space(tmp_path, capsys, codec, space):
+    text = space + project_xml(NIHONGO).decode("utf-8").split("?>\n", 1)[1]  # no declaration
+    path = write_project(tmp_path, text.encode(codec))
+    assert names_of(capsys, path) == {s.number: s.name for s in NIHONGO}
+
+
 def test_plain_shift_jis_reads_too(tmp_path, capsys):
     slots = [Slot(0, "ホームポジション"), Slot(4, "歩く")]
     path = write_project(tmp_path, encoded(slots, "shift_jis", "Shift_JIS"))
