@@ -181,6 +181,7 @@ def _answers(link: Link) -> bool:
 
 def _read(link: Link, url: str, baud: int, notes: list[str]) -> BoardInfo:
     info = BoardInfo(url, baud, notes=notes)
+    asked = len(notes)
     version = _ask(link, protocol.version_frame(), info, "version")
     if version is not None:
         info.version = version[2:-1].decode("ascii", "replace").strip()
@@ -190,7 +191,19 @@ def _read(link: Link, url: str, baud: int, notes: list[str]) -> BoardInfo:
     counter = _ask(link, protocol.read_frame(COUNTER_ADDRESS, COUNTER_BYTES), info, "program counter")
     if counter is not None:
         info.counter = Counter(counter[2:-1])
+    if info.version is None and info.config is None and info.counter is None:
+        raise _no_board(url, baud, info.notes[asked:])
     return info
+
+
+def _no_board(url: str, baud: int, notes: list[str]) -> LinkError:
+    """An ACK check answered and nothing after it: the ACK's reply is its own bytes, so a line
+    that echoes what is sent (TX joined to RX, a half-duplex adapter) or a device that repeats
+    one answer passes it. That is no board to report as found (nor for `doctor` to call ok)."""
+    first = notes[0].removeprefix("note: ") if notes else "no answer"
+    return LinkError(f"port {url}: something answers the ACK check at {baud} baud but no question after it "
+                     "(version, config word, program counter), so it is not a board: a line that echoes what "
+                     f"is sent (TX joined to RX) answers the ACK check with its own bytes; first: {first}")
 
 
 def _ask(link: Link, frame: protocol.Frame, info: BoardInfo, what: str) -> bytes | None:

@@ -110,3 +110,19 @@ def test_layout_hints_from_the_program_counter(counter, words):
     text = " ".join(_counter_hints(Counter(counter)))
     for word in words:
         assert word in text
+
+
+def test_a_line_that_echoes_is_not_a_board():
+    """The ACK check's reply is its own bytes: an echo passes it and answers nothing after it."""
+    with pytest.raises(LinkError) as failure:
+        probe("loop://", timeout=0.02)
+    message = str(failure.value)
+    assert message.startswith("port loop://: something answers the ACK check at 115200 baud but no question")
+    assert "echoes" in message and "version" in message
+
+
+def test_probe_and_doctor_of_a_line_that_echoes_fail(capsys):
+    assert main(["probe", "--port", "loop://", "--timeout", "0.02"]) == 3
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert main(["doctor", "--port", "loop://"]) == 1
+    assert "PROBLEM board: port loop://: something answers the ACK check" in capsys.readouterr().out
