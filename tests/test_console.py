@@ -544,3 +544,37 @@ def test_alt_arrows_and_alt_f_keys_do_not_panic(tmp_path, pane):
     assert run.exit_code() == 0
     assert commands_in(tmp_path) == [("go", "key", "ok"), ("go", "key", "ok")]
     assert run.terminal_restored()
+
+
+@needs_tmux
+def test_ctrl_keys_the_terminal_would_act_on_reach_the_console_and_do_nothing(tmp_path, pane):
+    """Ctrl-Z would suspend the show mid-motion, Ctrl-\\ kill it (no abort motion, no closed log),
+    Ctrl-S freeze the screen: in the console each is a byte it ignores."""
+    run = pane(GO_SHOW)
+    run.wait_for("GO waits: 'applause'")
+    for key in ("C-z", "C-\\", "C-s", "C-y", "C-v", "C-o", "C-q", "C-d", "C-w", "C-u", "C-r", "C-t"):
+        run.keys(key)
+    run.keys("Space")
+    run.wait_for("GO waits: 'encore'")
+    run.keys("Enter")
+    assert run.exit_code() == 0
+    assert commands_in(tmp_path) == [("go", "key", "ok"), ("go", "key", "ok")]
+    assert run.terminal_restored()
+
+
+def test_the_key_mode_takes_suspend_quit_and_flow_control_from_the_terminal():
+    primary, secondary = pty.openpty()
+    try:
+        before = termios.tcgetattr(secondary)
+        mode = TerminalMode(secondary)
+        mode.enter()
+        iflag, lflag, chars = (termios.tcgetattr(secondary)[i] for i in (0, 3, 6))
+        assert not iflag & termios.IXON and not lflag & termios.IEXTEN and lflag & termios.ISIG
+        off = bytes([os.fpathconf(secondary, "PC_VDISABLE") % 256])
+        assert chars[termios.VSUSP] == off and chars[termios.VQUIT] == off
+        assert chars[termios.VINTR] == before[6][termios.VINTR]  # Ctrl-C still stops the show
+        mode.restore()
+        assert termios.tcgetattr(secondary) == before
+    finally:
+        os.close(primary)
+        os.close(secondary)

@@ -233,10 +233,18 @@ class _LinkWatch:
 # -- the terminal and its keys -----------------------------------------------------------------
 
 
+# Keys the terminal itself would act on, each taken from it while the console reads: Ctrl-Z
+# (and BSD's delayed Ctrl-Y) would suspend the show mid-motion, Ctrl-\ kill it without its abort
+# motion or a closed log. Only Ctrl-C (VINTR) keeps its signal: it is the documented stop.
+_TAKEN_KEYS = tuple(getattr(termios, name) for name in ("VQUIT", "VSUSP", "VDSUSP") if hasattr(termios, name))
+
+
 class TerminalMode:
     """The terminal in cbreak without echo (a key arrives when pressed, and is not printed over
-    the console), signals left on (Ctrl-C still stops the show); `restore` puts back the
-    settings exactly as they were."""
+    the console), Ctrl-C's signal left on (it stops the show) and no other key the terminal
+    acts on: no suspend or quit key (`_TAKEN_KEYS`), no flow control (Ctrl-S would freeze the
+    screen), no extended input processing (Ctrl-V, Ctrl-O). Those bytes reach the key parser,
+    which ignores them. `restore` puts back the settings exactly as they were."""
 
     def __init__(self, fd: int) -> None:
         self.fd = fd
@@ -245,9 +253,13 @@ class TerminalMode:
     def enter(self) -> None:
         saved = termios.tcgetattr(self.fd)
         mode = [*saved[:6], list(saved[6])]
-        mode[3] &= ~(termios.ICANON | termios.ECHO)
+        mode[0] &= ~(termios.IXON | termios.IXOFF)
+        mode[3] &= ~(termios.ICANON | termios.ECHO | termios.IEXTEN)
         mode[6][termios.VMIN] = 1
         mode[6][termios.VTIME] = 0
+        disabled = bytes([_vdisable(self.fd)])
+        for key in _TAKEN_KEYS:
+            mode[6][key] = disabled
         termios.tcsetattr(self.fd, termios.TCSANOW, mode)
         self._saved = saved
 
@@ -257,6 +269,15 @@ class TerminalMode:
         saved, self._saved = self._saved, None
         if saved is not None:
             termios.tcsetattr(self.fd, termios.TCSAFLUSH, saved)
+
+
+def _vdisable(fd: int) -> int:
+    """The byte that turns a terminal key off (0 on Linux, 0xff on BSD and macOS)."""
+    try:
+        value = os.fpathconf(fd, "PC_VDISABLE")
+    except (OSError, ValueError):
+        value = -1
+    return value if 0 <= value <= 0xFF else 0
 
 
 def _in_foreground(fd: int) -> bool:
