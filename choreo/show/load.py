@@ -505,10 +505,25 @@ def _too_deep(text: str, report: _Report) -> bool:
     """
     if text.count("[") + text.count("{") <= MAX_DEPTH:
         return False
-    cut = too_deep_at(text, MAX_DEPTH)
-    if cut is None:
+    deep = too_deep_at(text, MAX_DEPTH)
+    if deep is None:
         return False
-    return _walk_prefix(text[:cut + 1], report) is _TOO_DEEP
+    prefix = text[:deep.index + 1]
+    found = _walk_prefix(prefix, report)
+    if found is _TOO_DEEP:
+        return True
+    if isinstance(found, yaml.MarkedYAMLError) and found.problem_mark is not None \
+            and found.problem_mark.index in (deep.outermost, len(prefix)):
+        # The walk saw no events of the deep collection (a key at its mapping's column is
+        # withheld until its `:`), and the parser's only complaint is the collection itself
+        # (at its start, or where it was cut), not something inside it: the brackets are
+        # nesting, whatever the parser would say of the whole (libyaml 0.2.5: its depth limit;
+        # PyYAML 6.0: a key over 1,024 characters).
+        line = text.count("\n", 0, deep.index) + 1
+        column = deep.index - (text.rfind("\n", 0, deep.index) + 1) + 1
+        report.add((line, column), "", f"nested more than {MAX_DEPTH} levels deep")
+        return True
+    return False
 
 
 _TOO_DEEP = "too deep"

@@ -19,6 +19,7 @@ parser's own limit as the last guard.
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 
 _OPEN = "[{"
 _CLOSE = "]}"
@@ -28,9 +29,19 @@ _NODE_PROPERTIES = "&!"  # an anchor or a tag before a node
 _LINE_BREAK = re.compile("[\r\n]")
 
 
-def too_deep_at(text: str, limit: int) -> int | None:
-    """Index of the first opening bracket that makes flow nesting deeper than `limit`, or None."""
-    return _Scan(text, limit).run()
+@dataclass(frozen=True)
+class TooDeep:
+    """Where flow nesting first goes past the limit."""
+
+    index: int  # the opening bracket past the limit
+    outermost: int  # the opening bracket of the flow collection it is inside, at depth 1
+
+
+def too_deep_at(text: str, limit: int) -> TooDeep | None:
+    """The first opening bracket that makes flow nesting deeper than `limit`, or None."""
+    scan = _Scan(text, limit)
+    found = scan.run()
+    return None if found is None else TooDeep(found, scan.outermost)
 
 
 class _Scan:
@@ -41,6 +52,7 @@ class _Scan:
         self.limit = limit
         self.i = 0
         self.depth = 0
+        self.outermost = 0  # where the flow collection being read opened
 
     def run(self) -> int | None:
         text = self.text
@@ -54,23 +66,32 @@ class _Scan:
 
     def _block_line(self) -> int | None:
         """One line in block context, from its indentation to its end (or a flow's end)."""
-        indent = self._skip(_BLANKS)
+        self._skip(_BLANKS)
         if self.text.startswith(("---", "..."), self.i) and self._blank_or_end(self.i + 3):
             self.i += 3
-        return self._node_start(indent)
+        return self._node_start()
 
-    def _node_start(self, indent: int) -> int | None:
+    def _node_start(self) -> int | None:
         """From a place where a node may start to the end of the line (or a flow's end).
 
         A loop, not recursion: `a: b: c: …` on one line must not cost a stack frame a key.
+        `parent` is the column of the block node a block scalar here belongs to (the key's in
+        `- play: |`, the entry's in `- |`): its text is the lines indented deeper than that.
         """
         text = self.text
+        line_start = text.rfind("\n", 0, self.i) + 1
+        parent = None
         while True:
             self._skip(_BLANKS)
             if self.i >= len(text):
                 return None
             char = text[self.i]
+            column = self.i - line_start
+            if parent is None:
+                parent = column
             if char in "-?:" and self._blank_or_end(self.i + 1):
+                if char != ":":
+                    parent = column
                 self.i += 1
             elif char in _NODE_PROPERTIES:
                 self._skip_word()
@@ -78,18 +99,22 @@ class _Scan:
                 found = self._flow()
                 if found is not None or not self._value_follows():
                     return found
+                parent = column
             elif char in "'\"":
                 self._quoted(char)
                 if not self._value_follows():
                     return None
+                parent = column
             elif char in "|>":
-                self._block_scalar(indent)
+                self._block_scalar(parent)
                 return None
             elif char == "#" or char in _BREAKS:
                 self._to_next_line()
                 return None
             elif not self._plain_in_block():
                 return None
+            else:
+                parent = column
 
     def _plain_in_block(self) -> bool:
         """Past a key or plain scalar (brackets inside it are text): True if `: ` starts a value."""
@@ -115,7 +140,7 @@ class _Scan:
         return False
 
     def _block_scalar(self, indent: int) -> None:
-        """`|` or `>`: every following line indented deeper than the line it began on, or blank."""
+        """`|` or `>`: every following line indented deeper than its parent node, or blank."""
         self._to_next_line()
         text = self.text
         while self.i < len(text):
@@ -132,6 +157,7 @@ class _Scan:
         """From an opening bracket to just past the bracket that closes the outermost collection."""
         text = self.text
         token_start = True
+        self.outermost = self.i
         while self.i < len(text):
             char = text[self.i]
             if char in _OPEN:
