@@ -12,6 +12,10 @@ whose address may be forged. So:
   `commands_per_sender` carried out, and all of them together `commands_total` (a bundle's
   messages count one by one; an address choreo does not know is no command and spends none);
   the rest are not carried out;
+- each allowed sender's packets are read within `packets_per_sender` (a datagram, a TCP frame; a
+  bundle is one), and all refused senders' within one such budget: past it a packet is counted, not read, at the least cost there is, so that a flood
+  costs choreo less than it costs the sender and the operator's GO, from another address, is
+  still read in time (a flood the socket cannot keep up with would drop it);
 - each sender gets at most `replies_per_sender` replies, and the senders refused (not allowed)
   `refusals` replies between them (their addresses are the easiest to forge);
 - a command that is taken (`ok`) is always logged and shown; refused and ignored ones are, one
@@ -46,6 +50,7 @@ class Rate:
 class Limits:
     """Every limit on what commands from outside may cost (the README lists them)."""
 
+    packets_per_sender: Rate = Rate(64, 32.0)  # packets read for one sender (its host); the rest counted
     commands_per_sender: Rate = Rate(10, 5.0)  # commands carried out for one sender (its host)
     commands_total: Rate = Rate(20, 10.0)  # commands carried out for all allowed senders together
     replies_per_sender: Rate = Rate(10, 5.0)  # replies sent to one sender
@@ -114,6 +119,7 @@ class Budgets:
         self._now = now
         self._budgets: dict[object, Budget] = {}
         self._lock = threading.Lock()
+        self._swept_at: float | None = None  # when idle buckets were last looked for
 
     def take(self, key: Hashable) -> bool:
         return self._budget(key).take() is not None
@@ -124,11 +130,24 @@ class Budgets:
             if budget is not None:
                 return budget
             if len(self._budgets) >= self.keys:
-                for idle in [k for k, b in self._budgets.items() if k is not self._OVERFLOW and b.full]:
-                    del self._budgets[idle]
+                self._sweep()
             if len(self._budgets) >= self.keys:
                 key = self._OVERFLOW
-            return self._budgets.setdefault(key, Budget.of(self.rate, self._now))
+            budget = self._budgets.get(key)
+            if budget is None:
+                budget = self._budgets[key] = Budget.of(self.rate, self._now)
+            return budget
+
+    def _sweep(self) -> None:
+        """The lock is held. Idle buckets go, looked for at most once in the time a bucket
+        takes to refill (a bucket cannot become idle sooner): a flood of new addresses would
+        otherwise cost a pass over the whole table for each of its packets."""
+        now = self._now()
+        if self._swept_at is not None and now - self._swept_at < self.rate.burst / self.rate.per_s:
+            return
+        self._swept_at = now
+        for idle in [k for k, b in self._budgets.items() if k is not self._OVERFLOW and b.full]:
+            del self._budgets[idle]
 
 
 class SenderLimits:
@@ -137,10 +156,18 @@ class SenderLimits:
 
     def __init__(self, limits: Limits = LIMITS, now: Callable[[], float] = time.monotonic) -> None:
         self.limits = limits
+        self._packets = Budgets(limits.packets_per_sender, limits.senders_tracked, now)
+        self._refused_packets = Budget.of(limits.packets_per_sender, now)
         self._commands = Budgets(limits.commands_per_sender, limits.senders_tracked, now)
         self._total = Budget.of(limits.commands_total, now)
         self._replies = Budgets(limits.replies_per_sender, limits.senders_tracked, now)
         self._refusals = Budget.of(limits.refusals, now)
+
+    def may_read(self, host: str, allowed: bool) -> bool:
+        """May a packet from `host` be read now? Senders not allowed share one budget (their
+        packets are refused, never read; their addresses are the easiest to forge, and many of
+        them must not take the table's places from the allowed ones)."""
+        return self._packets.take(host) if allowed else self._refused_packets.take() is not None
 
     def admit(self, host: str) -> bool:
         """May a command from `host` be carried out now? Its own budget first, so a flooding
@@ -209,6 +236,11 @@ class ReportGate:
         """Report this one now? If not, it is counted for the next summary."""
         if ok or self._budget.take() is not None:
             return True
+        self.hold(name, source)
+        return False
+
+    def hold(self, name: str, source: str) -> None:
+        """One more `name` not reported one by one (a packet not even read: no budget spent)."""
         with self._lock:
             self._counts[name] += 1
             if source not in self._sources:
@@ -216,7 +248,6 @@ class ReportGate:
                     self._sources[source] = None
                 else:
                     self._more_sources = True
-        return False
 
     def due(self, force: bool = False) -> Held | None:
         """The commands held since the last summary, if it is time to sum them up (`force`:

@@ -249,6 +249,11 @@ class Live:
         self.flush_reports()  # the summary of what came before, first
         self._tell(command, answer)
 
+    def count(self, name: str, source: str) -> None:
+        """One more `name` from `source` refused without a word (a packet over its sender's
+        rate, not read): only counted, for the next summary (the ticker's)."""
+        self._reports.hold(name, source)
+
     def flush_reports(self, force: bool = False) -> None:
         """Tell the listeners the commands held back since the last summary, if it is time
         (called on every command, and by a ticker while the show runs; `force`: at the end)."""

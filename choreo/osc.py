@@ -64,6 +64,8 @@ NOTIFY = f"{ROOT}/notify"
 PATTERN_CHARS = frozenset("*?[]{}")
 ECHOES = ("/reply", NOTIFY)  # replies and notifications: never commands, never answered (two would loop)
 ECHO = "echo"  # the command name a reply or notification sent to us is logged under
+UNREAD = "unread"  # the command name a packet over its sender's rate is counted under (not read)
+SENDERS_KNOWN = 4096  # senders whose verdict is remembered (an address's parse costs more than a refusal)
 
 Network = ipaddress.IPv4Network | ipaddress.IPv6Network
 Sender = tuple  # (host, port) or, over IPv6, (host, port, flowinfo, scope)
@@ -168,8 +170,9 @@ class OscServer:
         self._notifier = Notifier(self.notify) if self.notify else None
         self._limits = SenderLimits(limits, now)  # what a sender's messages may cost
         self.wire_limits = wire_limits
-        self.counts: Counter[str] = Counter()  # packets refused as malformed, connections dropped
+        self.counts: Counter[str] = Counter()  # packets refused as malformed or unread, connections dropped
         self._net: OscNet | None = None
+        self._verdicts: dict[str, tuple[str, bool]] = {}  # a sender's host: its plain host, allowed?
 
     # -- serving -----------------------------------------------------------------------------
 
@@ -231,17 +234,24 @@ class OscServer:
 
     def admit(self, sender: Sender) -> bool:
         """A TCP peer, at accept: a refused one is closed before a byte of it is read."""
-        host = plain_host(sender[0])
-        if sender_allowed(host, self.allow):
+        host, allowed = self._verdict(sender[0])
+        if allowed:
             return True
         self._refuse(host, f"osc tcp {where(sender)}", "")
         return False
 
     def packet(self, transport: str, sender: Sender, data: bytes) -> list[bytes]:
         """One packet (a datagram, a TCP frame): its encoded replies. The sender is checked
-        before the packet is read; a malformed one is refused whole."""
-        host, source = plain_host(sender[0]), f"osc {transport} {where(sender)}"
-        if not sender_allowed(host, self.allow):
+        before the packet is read, and its rate of packets: past it the packet is counted and
+        not read, at the least cost (a flood that costs choreo more than its sender outruns the
+        socket, which then drops the operator's GO too). A malformed packet is refused whole."""
+        host, allowed = self._verdict(sender[0])
+        if not self._limits.may_read(host, allowed):
+            self.counts[UNREAD] += 1
+            self.live.count(UNREAD if allowed else "refused", f"osc {transport} {host}")
+            return []
+        source = f"osc {transport} {where(sender)}"
+        if not allowed:
             replies = [self._refuse(host, source, "")]  # its address is not read: the reply is `/reply`
         else:
             decoded = decode_packet(data, self.wire_limits)
@@ -250,6 +260,17 @@ class OscServer:
             else:
                 replies = self._messages(transport, sender, decoded.messages)
         return [reply.encoded() for reply in replies if reply is not None]
+
+    def _verdict(self, host: str) -> tuple[str, bool]:
+        """A sender's plain host and whether it may command the show, remembered (at most
+        `SENDERS_KNOWN` of them: the table starts again when full)."""
+        verdict = self._verdicts.get(host)
+        if verdict is None:
+            if len(self._verdicts) >= SENDERS_KNOWN:
+                self._verdicts.clear()
+            plain = plain_host(host)
+            verdict = self._verdicts[host] = (plain, sender_allowed(plain, self.allow))
+        return verdict
 
     def dropped(self, transport: str, sender: Sender, why: str) -> None:
         """A frame dropped or a connection closed by the transport's limits: counted, told."""
@@ -278,9 +299,9 @@ class OscServer:
         comes out of a budget all of them share; an allowed sender's commands are carried out
         and answered within its own budgets, and past them ignored (and counted)."""
         source = f"osc {transport} {where(sender)}"
-        host = plain_host(sender[0])
+        host, allowed = self._verdict(sender[0])
         address = self._shown(address)
-        if not sender_allowed(host, self.allow):
+        if not allowed:
             return self._refuse(host, source, address)
         if address.startswith(ECHOES):  # a reply or notification come back: answering it could loop
             self._report(Command(ECHO, source, address), Answer("error", echo_message(address)))

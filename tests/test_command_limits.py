@@ -252,3 +252,23 @@ def test_a_log_whose_summary_record_does_not_add_up_is_refused_in_one_line(tmp_p
     with pytest.raises(ChoreoError) as refused:
         summarize(path)
     assert "\n" not in str(refused.value)
+
+
+def test_a_flood_of_new_senders_on_a_full_table_does_not_sweep_it_for_each_packet():
+    """With the table full, each new address made a pass over every bucket to find idle ones:
+    a flood of new addresses cost a pass a packet. The table is swept at most once in the time
+    a bucket takes to refill."""
+    time = VirtualTime()
+    reads = [0]
+
+    def now() -> float:
+        reads[0] += 1
+        return time.now()
+
+    budgets = Budgets(Rate(2, 1.0), keys=256, now=now)
+    for n in range(256):
+        budgets.take(f"10.0.{n // 256}.{n % 256}")
+    reads[0] = 0
+    for n in range(1000):
+        budgets.take(f"10.1.{n // 256}.{n % 256}")
+    assert reads[0] < 1000 * 3  # a take reads the clock once or twice; a sweep 256 times

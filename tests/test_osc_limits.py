@@ -533,3 +533,67 @@ def test_a_network_port_without_host_and_port_is_a_bad_argument_not_a_failed_lin
     assert result.returncode == 2, result.stderr
     assert result.stderr.startswith(f"--port {url}: give ") and result.stderr.count("\n") == 1
     assert not (tmp_path / "runs").exists()
+
+
+# -- what a flood may cost: packets past a sender's rate are counted, not read -----------------------
+
+
+def _decodes(monkeypatch) -> list[int]:  # type: ignore[no-untyped-def]
+    """Counts the packets choreo.osc decodes."""
+    import choreo.osc as osc
+
+    calls = [0]
+    decode = osc.decode_packet
+
+    def counting(data, limits=osc.WIRE_LIMITS):  # type: ignore[no-untyped-def]
+        calls[0] += 1
+        return decode(data, limits)
+
+    monkeypatch.setattr(osc, "decode_packet", counting)
+    return calls
+
+
+def _told(heard: Heard, name: str) -> int:
+    """How many `name` the listeners were told of, one by one and in summaries."""
+    summed = sum(e.answer.data["counts"].get(name, 0) for e in heard.events if e.command.name == UNLOGGED)
+    return heard.names().count(name) + summed
+
+
+def test_a_flood_past_a_senders_rate_of_packets_is_counted_not_read(clock, monkeypatch):
+    """A UDP flood that costs choreo more a packet than it costs its sender outruns the socket,
+    which then drops the operator's GO from another address too (a flood of 800,000 GOs in 5 s
+    from 127.0.0.2 lost 7 of 10 GOs from 127.0.0.9): past its sender's rate a packet is
+    counted and not decoded, and the other sender's GO is read and carried out."""
+    decodes = _decodes(monkeypatch)
+    live = Live(StopRequest(), wait_start=True, now=clock.now)
+    heard = Heard()
+    live.listeners.append(heard)
+    server = OscServer(live, 0, now=clock.now)  # not listening: its packets are handed to it
+    flood = 1000
+    for n in range(flood):
+        server.packet("udp", ("127.0.0.2", 40000 + n % 7), message("/choreo/go"))
+    assert decodes[0] == LIMITS.packets_per_sender.burst
+    assert server.packet("udp", ("127.0.0.9", 53000), message("/choreo/start"))  # answered
+    live.close()
+    assert heard.messages("start") == ["starting"]
+    unread = flood - LIMITS.packets_per_sender.burst
+    assert server.counts["unread"] == unread
+    assert _told(heard, "unread") == unread and _told(heard, "go") == LIMITS.packets_per_sender.burst
+
+
+def test_refused_senders_of_many_addresses_cannot_take_an_allowed_senders_packets(clock, monkeypatch):
+    """Forged senders of 300 addresses (more than the senders tracked one by one) share one
+    budget of packets read: an allowed sender that speaks after them is still read."""
+    decodes = _decodes(monkeypatch)
+    live = Live(StopRequest(), wait_start=True, now=clock.now)
+    heard = Heard()
+    live.listeners.append(heard)
+    server = OscServer(live, 0, host="0.0.0.0", now=clock.now)
+    for n in range(300 * 20):
+        server.packet("udp", (f"10.9.{n % 300 // 250}.{n % 300 % 250 + 1}", 5000), message("/choreo/panic"))
+    assert server.packet("udp", ("127.0.0.9", 53000), message("/choreo/start"))
+    live.close()
+    assert not live.stop()
+    assert heard.messages("start") == ["starting"]
+    assert decodes[0] == 1  # a refused sender's packet is never decoded, read or not
+    assert _told(heard, "refused") == 300 * 20  # every one counted
