@@ -26,15 +26,27 @@ QUEUED = 1000  # notifications waiting to be sent; past this they are dropped
 Target = tuple[str, int]
 
 
+def port_number(text: str, lowest: int = 1) -> int | None:
+    """A port number as typed: ASCII digits only, `lowest`..65535, else None. (`int` also takes
+    ' 5', '+5', '1_000' and '٥', the Arabic-Indic 5; `str.isdigit` passes '²', which `int`
+    refuses with an exception; and a number of thousands of digits is an exception too.)"""
+    digits = text.lstrip("0") or ("0" if text else "")
+    if not digits or len(digits) > 5 or not digits.isascii() or not digits.isdigit():
+        return None
+    port = int(digits)
+    return port if lowest <= port <= 65535 else None
+
+
 def parse_target(text: str, option: str = "--osc-notify") -> Target:
     """HOST:PORT (`[::1]:53001` for IPv6); UsageError on anything else."""
-    host, _, port = text.rpartition(":")
+    host, _, port_text = text.rpartition(":")
     host = host.strip()
     if host.startswith("[") and host.endswith("]"):
         host = host[1:-1]
-    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+    port = port_number(port_text)
+    if not host or port is None:
         raise UsageError(f"{option} {text}: give HOST:PORT, e.g. 127.0.0.1:53001")
-    return host, int(port)
+    return host, port
 
 
 def parse_targets(texts: Sequence[str]) -> tuple[Target, ...]:

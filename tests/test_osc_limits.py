@@ -418,6 +418,19 @@ def taken_port():  # type: ignore[no-untyped-def]
 BAD_OPTIONS = {
     "port out of range": (["--osc", "70000"], "--osc 70000: give a port number"),
     "negative port": (["--osc", "-1"], "--osc -1: give a port number"),
+    # a port not written in ASCII digits: argparse's int() took ' 5', '+5', '1_000' and the
+    # Arabic-Indic '٥' (port 5) and answered 'abc' with nine lines of usage; '²' passed
+    # isdigit() and ended --osc-notify in a traceback
+    "port not a number": (["--osc", "abc"], "--osc abc: give a port number"),
+    "port in hex": (["--osc", "0x10"], "--osc 0x10: give a port number"),
+    "port with a space": (["--osc", " 5"], "--osc  5: give a port number"),
+    "port with a sign": (["--osc", "+5"], "--osc +5: give a port number"),
+    "port with an underscore": (["--osc", "1_000"], "--osc 1_000: give a port number"),
+    "port in another script": (["--osc", "\u0665"], "--osc \u0665: give a port number"),
+    "port of a thousand digits": (["--osc", "9" * 5000], "--osc 999"),
+    "notify port superscript": (["--osc", "0", "--osc-notify", "127.0.0.1:\u00b2"], "--osc-notify 127.0.0.1:\u00b2: give HOST:PORT"),
+    "notify port in another script": (["--osc", "0", "--osc-notify", "127.0.0.1:\u0665"],
+                                      "--osc-notify 127.0.0.1:\u0665: give HOST:PORT"),
     "port in use": (["--osc", "{taken}"], "--osc {taken}: cannot listen on 127.0.0.1:{taken}"),
     "empty host": (["--osc", "0", "--osc-host", ""], "--osc-host '': give the address"),
     "host of another machine": (["--osc", "0", "--osc-host", "192.0.2.1"], "--osc 0: cannot listen on 192.0.2.1:0"),

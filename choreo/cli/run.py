@@ -57,7 +57,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        "the system's output")
     live = parser.add_argument_group("live control", "GO cues (`at: go`), the console and OSC; see "
                                      "README, Running a show live")
-    live.add_argument("--osc", type=int, metavar="PORT", help="take OSC commands (go, panic, start, stop, "
+    live.add_argument("--osc", metavar="PORT", help="take OSC commands (go, panic, start, stop, "
                       "cue/LABEL/go under /choreo) on this UDP and TCP (SLIP) port, and answer each with /reply/... "
                       "(QLab itself listens on 53000: choose another, e.g. 53200)")
     live.add_argument("--osc-host", metavar="HOST", default="127.0.0.1",
@@ -103,7 +103,7 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     from choreo.session import RunRequest, Session
 
     port, robot_ports = port_arguments(args.port)
-    _check_osc_options(args)
+    osc_port = _check_osc_options(args)
     request = RunRequest(args.show, port=port, baud=args.baud, log_path=args.log,
                          no_log=args.no_log, from_step=args.from_step, timeout=args.timeout,
                          retries=args.retries, layout=args.layout, robot_ports=robot_ports,
@@ -115,7 +115,7 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     _check_go_sources(session, console, args)
     stop = StopRequest()
     live = _live(args, stop, console)
-    osc = _bound_osc(args, live)  # listening (not serving yet) before a line is said or anything opens
+    osc = _bound_osc(args, osc_port, live)  # listening (not serving yet) before a line is said or anything opens
     say = _Say(sys.stderr, quiet=args.quiet)
     if session.show.ensemble:
         for line in _robot_lines(session):
@@ -188,19 +188,22 @@ def _check_go_sources(session, console: bool, args: argparse.Namespace) -> None:
             raise UsageError(f"{step_ref(step)} waits for GO, but nothing can give it: {where}")
 
 
-def _check_osc_options(args: argparse.Namespace) -> None:
+def _check_osc_options(args: argparse.Namespace) -> int | None:
     """The OSC options' values, checked before anything is loaded or opened (the port's binding
-    and the notify targets' look-up come next, still before the session opens)."""
+    and the notify targets' look-up come next, still before the session opens): --osc's port
+    number (None: no OSC)."""
     from choreo.errors import UsageError
     from choreo.osc import parse_allow
-    from choreo.oscnotify import parse_targets
+    from choreo.oscnotify import parse_targets, port_number
 
-    if args.osc is not None and not 0 <= args.osc <= 65535:
+    port = None if args.osc is None else port_number(args.osc, lowest=0)
+    if args.osc is not None and port is None:
         raise UsageError(f"--osc {args.osc}: give a port number, 1..65535 (0: any free port)")
     if not args.osc_host.strip():
         raise UsageError("--osc-host '': give the address to listen on (127.0.0.1, 0.0.0.0, ::)")
     parse_allow(args.osc_allow)
     parse_targets(args.osc_notify)
+    return port
 
 
 def _live(args: argparse.Namespace, stop, console: bool):  # type: ignore[no-untyped-def]
@@ -213,7 +216,7 @@ def _live(args: argparse.Namespace, stop, console: bool):  # type: ignore[no-unt
     return Live(stop, wait_start=args.wait_start)
 
 
-def _bound_osc(args: argparse.Namespace, live):  # type: ignore[no-untyped-def]
+def _bound_osc(args: argparse.Namespace, port: int | None, live):  # type: ignore[no-untyped-def]
     """With --osc, the OSC server listening and its notify targets looked up, serving nothing
     yet (`_controls` starts it): a port in use, a host it cannot listen on, a notify target that
     is this very port, end the run with one line before anything is said or opened."""
@@ -222,7 +225,7 @@ def _bound_osc(args: argparse.Namespace, live):  # type: ignore[no-untyped-def]
     from choreo.osc import OscServer
     from choreo.oscnotify import parse_targets
 
-    server = OscServer(live, args.osc, host=args.osc_host, allow=args.osc_allow, notify=parse_targets(args.osc_notify))
+    server = OscServer(live, port, host=args.osc_host, allow=args.osc_allow, notify=parse_targets(args.osc_notify))
     server.bind()
     return server
 
