@@ -578,3 +578,73 @@ def test_the_key_mode_takes_suspend_quit_and_flow_control_from_the_terminal():
     finally:
         os.close(primary)
         os.close(secondary)
+
+
+# Pastes: whatever text is between the terminal's paste marks, none of it is a key.
+PASTES = [b"Iraqy see you ", b"a\x1b", b"\x1b\x1b", b"\x1b[1", b"\x1b]0;title", b"\x1bP", b"\x1b[200~q y",
+          b"\x1b[201", b"\x1b[20", b"\x1b[M", b" \r\n\t\x03\x1a" * 3, b"\xe3\x83\xad \xff\x9b q", b"\x1b" * 7]
+
+
+@pytest.mark.parametrize("text", PASTES, ids=lambda b: b.hex(" "))
+def test_a_paste_is_skipped_whatever_it_holds_in_any_chunks(text: bytes) -> None:
+    data = b"\x1b[200~" + text + b"\x1b[201~"
+    for cut in range(1, len(data) + 1):  # the paste's end split across reads at every byte
+        parser = KeyParser()
+        assert parser.feed(data[:cut]) + parser.feed(data[cut:]) == [], cut
+        assert not parser.pending and parser.feed(b"q ") == ["q", "go"]
+    bytewise = KeyParser()
+    assert [k for byte in data for k in bytewise.feed(bytes([byte]))] == [] and not bytewise.pending
+
+
+def test_a_megabyte_paste_gives_no_key() -> None:
+    text = b"x q y \x1b \x1b[201 \x1b]0;t\x07 " * 40_000
+    parser = KeyParser()
+    data = b"\x1b[200~" + text + b"\x1b[201~ "
+    keys = [k for at in range(0, len(data), 4096) for k in parser.feed(data[at:at + 4096])]
+    assert keys == ["go"]  # only the space after the paste
+
+
+def test_a_pause_in_a_paste_is_not_its_end():
+    """A big paste over a slow link comes in pieces: the escape wait ends no paste."""
+    read, write = os.pipe()
+    keys: list[str] = []
+    reader = KeyReader(read, keys.append, escape_wait_s=0.01, paste_wait_s=30.0)
+    reader.start()
+    try:
+        os.write(write, b"\x1b[200~first part ")
+        time.sleep(0.1)  # ten escape waits
+        os.write(write, b"q y \x1b[201~")
+        got = threading.Event()
+        reader.on_key = lambda key: (keys.append(key), got.set())
+        os.write(write, b" ")
+        assert got.wait(5) and keys == ["go"]
+    finally:
+        reader.close()
+        os.close(write)
+        os.close(read)
+
+
+def test_the_console_asks_the_terminal_to_mark_pastes_and_stops_asking_after(tmp_path):
+    primary, secondary = pty.openpty()
+    with os.fdopen(secondary, "r") as tty:
+        session = Session.prepare(RunRequest(str(write_show(tmp_path, GO_SHOW)), no_log=True))
+        out = io.StringIO()
+        console = Console(session, Live(StopRequest()), out=out, keys=tty, width=80)
+        console.start()
+        assert "\x1b[?2004h" in out.getvalue() and "\x1b[?2004l" not in out.getvalue()
+        console.close()
+        assert out.getvalue().rfind("\x1b[?2004l") > out.getvalue().rfind("\x1b[?2004h")
+    os.close(primary)
+
+
+@needs_tmux
+def test_a_paste_is_no_key_in_a_run(tmp_path, pane):
+    run = pane(GO_SHOW)
+    run.wait_for("GO waits: 'applause'")
+    run._tmux("set-buffer", "-b", "text", "Iraqy: see you at the party, q y\n")
+    run._tmux("paste-buffer", "-p", "-b", "text", "-t", "run")
+    run.keys("Space")
+    run.wait_for("GO waits: 'encore'")
+    run.keys("Enter")
+    assert run.exit_code() == 0
+    assert commands_in(tmp_path) == [("go", "key", "ok"), ("go", "key", "ok")]

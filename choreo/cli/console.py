@@ -51,6 +51,7 @@ QUIET_BEFORE_S = 0.06  # no redraw starts this close before a step falls due (a 
 QUIET_AFTER_S = 0.03  # nor this soon after it, or after a GO (its frames go out then)
 MAX_POSTPONE_S = 0.5  # cues closer together than this still let the screen move
 ESCAPE_WAIT_S = 0.03  # a byte this soon after Esc makes it an escape sequence (an arrow key), not Esc
+PASTE_WAIT_S = 0.5  # a paste's rest may come this late (a big paste over ssh) and still be a paste
 KEY_POLL_S = 0.05  # how often the key reader looks up from the terminal to see whether to stop
 NOTES = 5  # lines of log and answers on screen
 LATENCIES = 20  # the replies link health is the median of
@@ -292,7 +293,8 @@ def _in_foreground(fd: int) -> bool:
 KEYS = {ord(" "): "go", ord("\r"): "go", ord("\n"): "go", ord("q"): "q", ord("Q"): "q"}
 ESC = 0x1B
 LONGEST_SEQUENCE = 256  # bytes: past this a sequence is given up (its rest may read as keys)
-PASTE_START, PASTE_END = b"[200~", b"[201~"  # bracketed paste: the text between is not keys
+PASTE_START, PASTE_END = b"[200~", b"\x1b[201~"  # bracketed paste: the text between is not keys
+PASTE_ON, PASTE_OFF = "\x1b[?2004h", "\x1b[?2004l"  # ask the terminal to bracket what is pasted
 
 
 class KeyParser:
@@ -304,14 +306,17 @@ class KeyParser:
     terminal replies (`ESC ] ... BEL`, `ESC P ... ESC \\`), mouse reports and bracketed pastes.
     Each is read whole and ignored: only a bare Esc panics, an Esc with nothing after it before
     the reader's wait runs out (`timeout`). Esc pressed twice (`ESC ESC` and nothing) is still
-    Esc, and a third Esc right after makes that pair one. A pause (`timeout`) also ends any
-    sequence or paste cut short, so the next key is read afresh whatever came before; non-ASCII
-    bytes and control bytes other than Enter are not keys."""
+    Esc, and a third Esc right after makes that pair one. A paste is text up to its end marker
+    (`ESC [201~`), whatever it holds (Esc, half sequences, spaces, q and y), skipped whole and
+    fast (a megabyte costs the show nothing). A pause (`timeout`) also ends any sequence or
+    paste cut short, so the next key is read afresh whatever came before; non-ASCII bytes and
+    control bytes other than Enter are not keys."""
 
     def __init__(self) -> None:
         self._sequence = bytearray()  # the escape sequence read so far, after its ESC
         self._in_escape = False
         self._pasting = False
+        self._paste_tail = b""  # a paste's last bytes: its end marker may be split across reads
 
     @property
     def pending(self) -> bool:
@@ -319,16 +324,44 @@ class KeyParser:
         and calls `timeout` if nothing comes."""
         return self._in_escape or self._pasting
 
+    @property
+    def pasting(self) -> bool:
+        """A paste is under way (and no sequence): the reader may wait longer for its rest."""
+        return self._pasting and not self._in_escape
+
     def feed(self, data: bytes) -> list[str]:
-        keys = [self._byte(byte) for byte in data]
-        return [key for key in keys if key is not None]
+        keys: list[str] = []
+        at = 0
+        while at < len(data):
+            if self._pasting:
+                at = self._skip_paste(data, at)
+                continue
+            key = self._byte(data[at])
+            at += 1
+            if key is not None:
+                keys.append(key)
+        return keys
 
     def timeout(self) -> list[str]:
-        """Nothing more came: a bare Esc (or Esc twice) is Esc; any other sequence is over."""
-        bare = self._in_escape and not self._pasting and bytes(self._sequence) in (b"", b"\x1b")
+        """Nothing more came: a bare Esc (or Esc twice) is Esc; any other sequence is over,
+        and so is a paste cut short."""
+        bare = self._in_escape and bytes(self._sequence) in (b"", b"\x1b")
         self._sequence.clear()
         self._in_escape = self._pasting = False
+        self._paste_tail = b""
         return ["escape"] if bare else []
+
+    def _skip_paste(self, data: bytes, at: int) -> int:
+        """Where keys start again in `data` after the paste's end marker (its end if none)."""
+        tail = self._paste_tail
+        seen = tail + data[at:]
+        end = seen.find(PASTE_END)
+        if end < 0:
+            self._paste_tail = seen[-(len(PASTE_END) - 1):]
+            return len(data)
+        self._pasting = False
+        self._paste_tail = b""
+        return at + end + len(PASTE_END) - len(tail)
 
     def _byte(self, byte: int) -> str | None:
         if not self._in_escape:
@@ -352,8 +385,6 @@ class KeyParser:
     def _ended(self, sequence: bytes) -> None:
         if sequence == PASTE_START:
             self._pasting = True
-        elif sequence == PASTE_END:
-            self._pasting = False
         elif len(sequence) > 1 and sequence[-1] == ESC and not _is_string(sequence):
             self._in_escape = True  # a sequence broken off by an Esc: that Esc starts the next
 
@@ -383,12 +414,15 @@ def _complete(sequence: bytes) -> bool:
 class KeyReader:
     """Reads the terminal in a thread of its own and hands each key to `on_key` by name
     (`KeyParser` tells keys from sequences): it waits ESCAPE_WAIT_S after an Esc for the rest
-    of a sequence before taking it for the Esc key."""
+    of a sequence before taking it for the Esc key, and PASTE_WAIT_S for the rest of a paste
+    (a pause in a big one must not turn its spaces into GOs)."""
 
-    def __init__(self, fd: int, on_key: Callable[[str], None], escape_wait_s: float = ESCAPE_WAIT_S) -> None:
+    def __init__(self, fd: int, on_key: Callable[[str], None], escape_wait_s: float = ESCAPE_WAIT_S,
+                 paste_wait_s: float = PASTE_WAIT_S) -> None:
         self.fd = fd
         self.on_key = on_key
         self.escape_wait_s = escape_wait_s
+        self.paste_wait_s = paste_wait_s
         self.parser = KeyParser()
         self._done = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="choreo-keys", daemon=True)
@@ -403,20 +437,21 @@ class KeyReader:
 
     def _loop(self) -> None:
         while not self._done.is_set():
-            pending = self.parser.pending
-            data = self._read(self.escape_wait_s if pending else KEY_POLL_S)
+            pending, pasting = self.parser.pending, self.parser.pasting
+            data = self._read(self.paste_wait_s if pasting else self.escape_wait_s if pending else KEY_POLL_S,
+                              4096 if pasting else 64)
             keys = self.parser.feed(data) if data is not None else self.parser.timeout() if pending else []
             for key in keys:
                 self.on_key(key)
 
-    def _read(self, timeout: float) -> bytes | None:
+    def _read(self, timeout: float, size: int) -> bytes | None:
         """What the terminal has (None if nothing came within `timeout`); the end of input
         stops the reader."""
         try:
             ready, _, _ = select.select([self.fd], [], [], timeout)
             if not ready:
                 return None
-            data = os.read(self.fd, 64)
+            data = os.read(self.fd, size)
         except (OSError, ValueError):
             data = b""
         if not data:
@@ -487,6 +522,7 @@ class Console:
             return
         self._mode = TerminalMode(fd)
         self._mode.enter()
+        self._bracket_pastes(True)
         self._reader = KeyReader(fd, self.on_key)
         self._reader.start()
 
@@ -514,9 +550,19 @@ class Console:
         finally:
             self._restore_terminal()
 
+    def _bracket_pastes(self, on: bool) -> None:
+        """Ask the terminal to mark a paste's start and end (`KeyParser` skips what is between):
+        unmarked, a pasted `qy` would stop the show and every space in it be a GO."""
+        try:
+            self.out.write(PASTE_ON if on else PASTE_OFF)
+            self.out.flush()
+        except (OSError, ValueError):
+            pass  # no screen to ask: its keys are not read either
+
     def _restore_terminal(self) -> None:
         mode, self._mode = self._mode, None
         if mode is not None:
+            self._bracket_pastes(False)
             try:
                 mode.restore()
             except (termios.error, OSError):
