@@ -13,6 +13,8 @@ from pathlib import Path
 from textwrap import dedent
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 import yaml
 
 from choreo.errors import Problem, ShowError
@@ -412,6 +414,30 @@ def test_a_deep_key_at_a_block_scalars_column_is_said_in_choreos_words(tmp_path,
     assert [p.message for p in found] == [f"nested more than {MAX_DEPTH} levels deep"]
 
 
+_DEEP_CONTEXTS = ["", "version: 1\nsteps:\n  - play: ", "- ", "a:\n  b: ", "name: 'x'\nsteps: ", "--- ",
+                  "version: 1\nsteps:\n- play: |\n  ", "? ", "a: &x ", "a: !!seq "]
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
+@given(st.sampled_from(_DEEP_CONTEXTS),
+       st.lists(st.tuples(st.sampled_from(["[", "{a: ", "[1, ", "{? ", "[ ", '["s", ', "['q', "]),
+                          st.sampled_from(["", " ", "\n  ", " # c\n  ", "\r\n  "])), min_size=41, max_size=600),
+       st.booleans())
+def test_no_parser_limit_ever_decides_a_deep_files_message(context, parts, closed):
+    """Any deep nesting, in any context, read by libyaml, the Python parser or a strict one: the
+    parser's own limit never reaches the user; in a plain context the message is choreo's depth."""
+    text = context + "".join(opener + gap for opener, gap in parts) + ("1" + "]" * len(parts) if closed else "")
+    for name, parser in _PARSERS.items():
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr("choreo.show.load._Parser", parser)
+            with pytest.raises(ShowError) as info:
+                load_show_bytes(text.encode())
+        messages = [p.message for p in info.value.problems]
+        assert not any("exceeded" in m or "maximum" in m for m in messages), (name, messages)
+        if not any(c in context for c in "|?!&") and "{?" not in text:
+            assert f"nested more than {MAX_DEPTH} levels deep" in messages, (name, messages)
+
+
 @pytest.mark.parametrize("parser", sorted(_PARSERS))
 def test_a_parsers_limit_past_a_syntax_error_leaves_the_syntax_error(tmp_path, monkeypatch, parser):
     """libyaml's scanner reads ahead to its nesting limit before its parser reaches `[a[b`."""
@@ -533,6 +559,27 @@ def test_wait_values(tmp_path, value, message):
     problem = only(tmp_path, f"version: 1\nsteps:\n  - play: 1\n  - wait: {value}\n")
     assert (problem.line, problem.column, problem.path) == (4, 11, "steps[1].wait")
     assert problem.message == message
+
+
+@pytest.mark.parametrize("value", [
+    "1" + "0" * 5000,  # past Python's 4,300 digits for int(text): a ValueError, not a problem
+    "-" + "9" * 4400,
+    "0" + "1" * 5000,  # the leading-zero message converts it too
+    "0x" + "f" * 5000,  # converts, but cannot be printed in a message
+    "0o" + "7" * 5000,
+    "!!int 0x" + "f" * 5000,
+    "!!int 0b" + "1" * 20000,
+    "1" + "0" * 40,
+])
+def test_a_whole_number_too_long_for_any_value_is_a_located_problem(tmp_path, value):
+    problem = only(tmp_path, f"version: 1\nsteps:\n  - play: {value}\n")
+    assert (problem.line, problem.column, problem.path) == (3, 11, "steps[0].play")
+    assert "characters long" in problem.message and len(problem.message) < 120
+
+
+def test_a_long_value_a_tag_cannot_read_is_shown_cut(tmp_path):
+    problem = only(tmp_path, "version: 1\nsteps:\n  - play: !!int 1" + "0" * 5000 + "\n")
+    assert problem.message.startswith("cannot read '1000") and len(problem.message) < 80
 
 
 def test_timeout_goes_with_wait_done_only(tmp_path):
