@@ -410,12 +410,22 @@ class _Builder:
         try:
             value = construct(node)
         except (ValueError, KeyError, TypeError, ArithmeticError, yaml.YAMLError):
-            self.report.add(_mark_of(event), path, f"cannot read {event.value!r} as {tag.rsplit(':', 1)[-1]}")
+            shown = event.value if len(event.value) <= 40 else event.value[:40] + "…"
+            self.report.add(_mark_of(event), path, f"cannot read {shown!r} as {tag.rsplit(':', 1)[-1]}")
             return None
         if isinstance(value, float) and math.isnan(value):
             self.report.add(_mark_of(event), path, "not-a-number (.nan) is not allowed here")
             return None
+        if isinstance(value, int) and abs(value).bit_length() > _NUMBER_BITS_MAX:
+            self._too_long_number(event, path)
+            return None
         return value
+
+    def _too_long_number(self, event: yaml.ScalarEvent, path: JsonPath) -> None:
+        """A whole number far past any value a show holds: Python would not even turn one of more
+        than 4,300 digits into text (a ValueError in the middle of a message)."""
+        self.report.add(_mark_of(event), path, f"a whole number {len(event.value)} characters long "
+                        f"({event.value[:12]}…): no value in a show needs more than {_NUMBER_DIGITS_MAX}")
 
 
     def _core(self, event: yaml.ScalarEvent, path: JsonPath) -> Any:
@@ -426,6 +436,9 @@ class _Builder:
         file would mean two things. A wrong slot is the worst error a show runner can make.
         """
         text = event.value
+        if len(text) > _NUMBER_DIGITS_MAX and _WHOLE_NUMBER.fullmatch(text):
+            self._too_long_number(event, path)
+            return None
         if _LEADING_ZERO.fullmatch(text):
             digits = text.lstrip("+-")
             sign = "-" if text.startswith("-") else ""
@@ -452,6 +465,9 @@ _CORE_FLOAT = re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?")
 _CORE_INF = re.compile(r"[-+]?\.(inf|Inf|INF)")
 _CORE_NAN = re.compile(r"\.(nan|NaN|NAN)")
 _LEADING_ZERO = re.compile(r"[-+]?0[0-9]+")
+_WHOLE_NUMBER = re.compile(r"[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+")
+_NUMBER_DIGITS_MAX = 30  # characters of a whole number; a show's largest values have 6
+_NUMBER_BITS_MAX = 100  # and its value (a tagged `!!int` is converted by PyYAML, not here)
 
 
 def _core_value(text: str) -> Any:
