@@ -6,7 +6,10 @@ memory, descriptors and time, and the operator's GO still gets through:
   a byte of it is read). The packet handler decides; this module only asks.
 - TCP connections are capped, in total and per sender address (`OscLimits`). When full, a new
   connection takes the place of the oldest one that has not sent a whole message yet (so idle
-  sockets cannot lock out a QLab that connects and speaks), else the new one is closed.
+  sockets cannot lock out a QLab that connects and speaks); with every place taken by
+  connections that speak, of the least lately heard one of the address holding the most (so
+  a few addresses cannot lock a new one out either). A sender at its own cap of connections
+  that all speak gets no more.
 - A connection must complete a message within `message_timeout_s` of opening or of beginning
   it (a trickle of bytes does not keep it open); one that has sent messages is closed after
   `idle_timeout_s` of silence. Buffered bytes are bounded by the frame limit.
@@ -25,6 +28,7 @@ import selectors
 import socket
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -76,6 +80,7 @@ class _Slot:
     due: float
     opened: float
     proven: bool = False  # has sent a whole message
+    spoke: float = 0.0  # when it last sent a whole message
     pending: bool = False  # a message begun
 
 
@@ -96,8 +101,9 @@ class ConnectionTable:
         same = [k for k, slot in self._slots.items() if slot.host == host]
         if len(same) >= self.limits.max_per_sender:
             evict.append(self._silent(same))
-        if len(self._slots) - len(evict) >= self.limits.max_connections:
-            evict.append(self._silent([k for k in self._slots if k not in evict]))
+        if None not in evict and len(self._slots) - len(evict) >= self.limits.max_connections:
+            others = [k for k in self._slots if k not in evict]
+            evict.append(self._silent(others) or self._crowded(others))
         if None in evict:
             return False, []
         for old in evict:
@@ -118,6 +124,15 @@ class ConnectionTable:
         silent = [k for k in keys if not self._slots[k].proven]
         return min(silent, key=lambda k: self._slots[k].opened, default=None)
 
+    def _crowded(self, keys: list[object]) -> object:
+        """Of `keys` (all speaking), the one that spoke least lately of the address holding
+        the most: when every place is taken by connections that speak, a new address still
+        gets in (else a few allowed addresses, each with its share of connections sending
+        junk now and then, would keep the operator's QLab out), at the cost of the address
+        with the most."""
+        held = Counter(self._slots[k].host for k in keys)
+        return min(keys, key=lambda k: (-held[self._slots[k].host], self._slots[k].spoke))
+
     def heard(self, key: object, now: float, *, messages: int, pending: bool) -> None:
         """Bytes came: `messages` whole ones, and a message is `pending` (begun) after them. A
         message begun must end within the timeout; only whole messages earn more time."""
@@ -126,6 +141,7 @@ class ConnectionTable:
             return
         if messages:
             slot.proven = True
+            slot.spoke = now
         if not slot.proven:
             pass  # the first message is due within the timeout of connecting, however it trickles
         elif pending and (messages or not slot.pending):

@@ -197,7 +197,30 @@ def test_a_new_connection_takes_the_place_of_the_oldest_silent_one():
     assert table.admit("d1", "10.0.0.4", 5.0) == (True, ["b1"])  # in total: the oldest silent goes
     for key in ("c1", "d1"):
         table.heard(key, 5.0, messages=1, pending=False)
-    assert table.admit("e1", "10.0.0.5", 6.0) == (False, [])
+    table.heard("a3", 5.5, messages=1, pending=False)
+    # every place taken by connections that speak: the address holding the most gives up the one
+    # heard least lately (a new address is never locked out)
+    assert table.admit("e1", "10.0.0.5", 6.0) == (True, ["a2"])
+
+
+def test_connections_that_speak_from_a_few_addresses_cannot_lock_a_new_address_out():
+    """Four allowed addresses, each with its share of connections, each sending a junk frame
+    now and then, held every place: the operator's QLab, connecting from a fifth, was refused
+    ("too many connections") for as long as they went on."""
+    limits = OscLimits(max_connections=32, max_per_sender=8)
+    table = ConnectionTable(limits)
+    for n in range(32):
+        key = f"junk{n}"
+        assert table.admit(key, f"127.0.1.{n % 4}", float(n))[0]
+        table.heard(key, 100.0 + n, messages=1, pending=False)
+    taken, evicted = table.admit("qlab", "127.0.0.9", 200.0)
+    assert taken and evicted == ["junk0"]  # of an address with 8, the one heard least lately
+    table.heard("qlab", 200.0, messages=1, pending=False)
+    for n in range(40):  # the junk senders reconnect: they push out their own, never QLab
+        key = f"again{n}"
+        assert table.admit(key, f"127.0.1.{n % 4}", 300.0 + n)[0]
+        table.heard(key, 300.0 + n, messages=1, pending=False)
+    assert len(table) == 32 and "qlab" in table._slots  # noqa: SLF001 - who holds a place is the point
 
 
 def test_out_of_descriptors_the_oldest_silent_connection_makes_room():
