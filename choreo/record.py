@@ -118,7 +118,7 @@ class RunInfo:
     unison: bool = False  # the robots share their steps (a unison play's starts are comparable)
 
     def metadata(self) -> dict[str, str]:
-        return {**self._run(), **self._robots()}
+        return {key: _utf8(value) for key, value in {**self._run(), **self._robots()}.items()}
 
     def _robots(self) -> dict[str, str]:
         """`robots: left,right` and `robot.left.port` etc.: MCAP metadata is flat text."""
@@ -145,6 +145,12 @@ class RunInfo:
             "python": platform.python_version(),
             "platform": sys.platform,
         }
+
+
+def _utf8(text: str) -> str:
+    """`text` as MCAP metadata can hold it (UTF-8): a file name's bytes that are not UTF-8
+    (lone surrogates, as Python reads them) kept as escapes (`\\udcff`), not a crash at start."""
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def _iso(ns: int) -> str:
@@ -259,7 +265,7 @@ class Recorder:
         self._writer.add_metadata(METADATA_NAME, info.metadata())
         self._writer.add_attachment(
             create_time=info.start_ns, log_time=info.start_ns,
-            name=Path(info.show_path).name, media_type="application/yaml", data=info.show_source,
+            name=_utf8(Path(info.show_path).name), media_type="application/yaml", data=info.show_source,
         )
         self._writer.flush()
         self._file.flush()
@@ -474,7 +480,7 @@ class Recorder:
                 self._write_pending()
                 if self.failure is None:
                     if result is not None:
-                        self._writer.add_metadata(RESULT_METADATA_NAME, result)
+                        self._writer.add_metadata(RESULT_METADATA_NAME, {k: _utf8(v) for k, v in result.items()})
                     self._writer.finish()
                     self._file.flush()
                     os.fsync(self._file.fileno())

@@ -365,3 +365,21 @@ def test_a_non_blocking_output_is_waited_for_not_given_up(tmp_path) -> None:
         reader.join(10)
     os.close(read)
     assert drained[0].endswith(b"after the wait\n")
+
+
+def test_a_show_and_a_log_named_with_bytes_that_are_not_utf8_run_review_and_replay(tmp_path, capsys,
+                                                                                     monkeypatch) -> None:
+    """A file name is bytes: one that is not UTF-8 (`\\xff`, a lone surrogate to Python) was a
+    traceback when the log's metadata and the show's attachment were written."""
+    monkeypatch.chdir(tmp_path)  # replay writes its own log under ./runs
+    folder = os.fsencode(tmp_path)
+    show = folder + b"/show\x1b]0;t\x07\xff.yaml"
+    Path(os.fsdecode(show)).write_text("version: 1\nsteps:\n  - play: 1\n  - wait: done\n")
+    log = os.fsdecode(folder + b"/log\xfe\x1b[2J.mcap")
+    assert vmain(["run", "--no-console", os.fsdecode(show), "--log", log]) == 0
+    assert vmain(["log", "summary", log]) == 0
+    assert vmain(["replay", log]) == 0
+    assert vmain(["log", "summary", "--json", log]) == 0
+    out, err = capsys.readouterr()
+    assert_safe(out + err)
+    assert "\\udcff" in out and "Traceback" not in err
