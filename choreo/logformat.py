@@ -104,16 +104,18 @@ class _Record:
         if not isinstance(message, dict):
             raise TypeError(f"a JSON object, not {type(message).__name__}")
         try:
-            return cls(**message)  # what choreo wrote: exactly the record's fields (the fast path)
+            record = cls(**message)  # what choreo wrote: exactly the record's fields (the fast path)
         except TypeError:
-            pass  # a field missing, or one from another version of choreo: field by field
+            pass
+        else:
+            return record._checked()  # a field missing, or one from another version of choreo: field by field
         given = {}
         for f in fields(cls):  # type: ignore[arg-type]
             if f.name in message:
                 given[f.name] = message[f.name]
             elif f.default is MISSING and f.default_factory is MISSING:
                 raise KeyError(f.name)
-        return cls(**given)
+        return cls(**given)._checked()
 
     @classmethod
     def partial(cls, message: Any) -> Any:
@@ -128,10 +130,37 @@ class _Record:
                 given[f.name] = message[f.name]
             elif f.default is MISSING and f.default_factory is MISSING:
                 given[f.name] = _BLANK[f.type]  # type: ignore[index]
-        return cls(**given)
+        return cls(**given)._checked()
+
+    def _checked(self) -> Any:
+        """The record if every field holds a value of its annotated type, in range; TypeError or
+        ValueError naming the field if not. A log is a file from outside: a `motion` of 1e308,
+        NaN or a list, or a 30-digit `latency_ms`, must fail here, in the one way every review
+        turns into one line, not as an OverflowError or a format error deep in a review."""
+        for name, kinds in _field_kinds(type(self)):
+            value = getattr(self, name)
+            kind = _KIND_OF.get(type(value))
+            if kind not in kinds:
+                raise TypeError(f"field {name!r} holds {type(value).__name__}, not {' or '.join(kinds)}")
+            if kind in ("int", "float") and not -_NUMBER_MAX <= value <= _NUMBER_MAX:  # NaN fails too
+                raise ValueError(f"field {name!r} holds {value!r:.40}, out of range")
+        return self
 
 
 _BLANK = {"int": 0, "float": 0.0, "str": ""}  # a required field's blank, by its annotation
+# A JSON value's Python type -> the annotations it may fill (bool is not a number here).
+_KIND_OF = {int: "int", float: "float", str: "str", bool: "bool", dict: "dict", type(None): "None"}
+_NUMBER_MAX = 2 ** 63  # nanoseconds since 1970 fit, with room; no field of a log holds more
+
+
+@lru_cache(maxsize=None)
+def _field_kinds(cls: type) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """Each field and the kinds of value its annotation allows (`float` takes an int too)."""
+    out = []
+    for f in fields(cls):  # type: ignore[arg-type]
+        kinds = tuple(part.strip() for part in str(f.type).split("|"))
+        out.append((f.name, kinds + (("int",) if "float" in kinds else ())))
+    return tuple(out)
 
 
 @dataclass(frozen=True, slots=True)

@@ -197,3 +197,61 @@ def test_a_replay_of_an_hth4_run_uses_an_hth4_simulator(tmp_path, capsys):
     report = replay(log, speed=5, log_path=tmp_path / "r.mcap")
     assert "layout=hth4-2.2" in report.port
     assert report.board_differences == 0
+
+
+def _rewritten(source: Path, target: Path, topic: str, key: str, value) -> bool:
+    """The log again with the first `topic` message's `key` set to `value` (False: no such field)."""
+    import json
+
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(source, "rb") as stream:
+        reader = make_reader(stream)
+        messages = list(reader.iter_messages(log_time_order=False))
+        metadata = list(reader.iter_metadata())
+        attachments = list(reader.iter_attachments())
+    changed = False
+    with open(target, "wb") as stream:
+        writer = Writer(stream)
+        writer.start()
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in messages:
+            if channel.id not in channels:
+                if schema.id not in schemas:
+                    schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+                channels[channel.id] = writer.register_channel(channel.topic, channel.message_encoding,
+                                                               schemas[schema.id], channel.metadata)
+            data = message.data
+            if not changed and channel.topic == topic:
+                fields = json.loads(data)
+                if key in fields:
+                    fields[key] = value
+                    data, changed = json.dumps(fields).encode(), True
+            writer.add_message(channels[channel.id], message.log_time, data, message.publish_time, message.sequence)
+        for attachment in attachments:
+            writer.add_attachment(attachment.create_time, attachment.log_time, attachment.name,
+                                  attachment.media_type, attachment.data)
+        for record in metadata:
+            writer.add_metadata(record.name, dict(record.metadata))
+        writer.finish()
+    return changed
+
+
+@pytest.mark.parametrize("topic, key", [
+    ("/rcb4/tx", "seq"), ("/rcb4/tx", "motion"), ("/rcb4/tx", "step"), ("/rcb4/rx", "latency_ms"),
+    ("/rcb4/rx", "seq"), ("/choreo/step", "actual_s"), ("/choreo/step", "late_ms"), ("/choreo/step", "index"),
+    ("/choreo/clock", "show_s"), ("/choreo/clock", "monotonic_ns"),
+])
+@pytest.mark.parametrize("value", [10**30, -10**30, 1e308, -1e308, float("inf"), float("nan"), [], {}, True, "x"],
+                         ids=["huge", "-huge", "1e308", "-1e308", "inf", "nan", "list", "dict", "bool", "text"])
+def test_a_field_of_the_wrong_type_or_range_is_one_line_in_every_review(run_log, tmp_path, capsys, topic, key, value):
+    """Found by rewriting logs: OverflowError, 'unhashable type' and format errors were tracebacks."""
+    hostile = tmp_path / "hostile.mcap"
+    assert _rewritten(run_log, hostile, topic, key, value)
+    for command, code, err in review_all(hostile, capsys):
+        assert code in (0, 2), (command, err)
+        assert "Traceback" not in err
+        if code == 2:
+            assert len(err.strip().splitlines()) == 1, (command, err)
