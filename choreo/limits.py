@@ -92,6 +92,13 @@ class Budget:
             skipped, self._skipped = self._skipped, 0
             return skipped
 
+    def empty_for_s(self) -> float:
+        """0 while a token is left; once spent, the time to refill whole (a sender that
+        emptied its bucket is let rest until it may send a burst again, not one at a time)."""
+        with self._lock:
+            self._refill()
+            return 0.0 if self._tokens >= 1.0 else (self.burst - self._tokens) / self.per_s
+
     @property
     def full(self) -> bool:
         """Nothing taken lately: the bucket has refilled (its owner is idle)."""
@@ -123,6 +130,9 @@ class Budgets:
 
     def take(self, key: Hashable) -> bool:
         return self._budget(key).take() is not None
+
+    def empty_for_s(self, key: Hashable) -> float:
+        return self._budget(key).empty_for_s()
 
     def _budget(self, key: Hashable) -> Budget:
         with self._lock:
@@ -168,6 +178,11 @@ class SenderLimits:
         packets are refused, never read; their addresses are the easiest to forge, and many of
         them must not take the table's places from the allowed ones)."""
         return self._packets.take(host) if allowed else self._refused_packets.take() is not None
+
+    def rest_s(self, host: str) -> float:
+        """How long an allowed TCP sender that has spent its packets' budget is not read (TCP
+        holds its bytes meanwhile, at no cost to choreo); 0 while it has some left."""
+        return self._packets.empty_for_s(host)
 
     def admit(self, host: str) -> bool:
         """May a command from `host` be carried out now? Its own budget first, so a flooding

@@ -261,6 +261,11 @@ class OscServer:
                 replies = self._messages(transport, sender, decoded.messages)
         return [reply.encoded() for reply in replies if reply is not None]
 
+    def rest_s(self, sender: Sender) -> float:
+        """A TCP sender over its rate of packets: how long its connections are not read."""
+        host, allowed = self._verdict(sender[0])
+        return self._limits.rest_s(host) if allowed else 0.0
+
     def _verdict(self, host: str) -> tuple[str, bool]:
         """A sender's plain host and whether it may command the show, remembered (at most
         `SENDERS_KNOWN` of them: the table starts again when full)."""

@@ -16,6 +16,9 @@ memory, descriptors and time, and the operator's GO still gets through:
 - Out of descriptors (EMFILE: the process's limit is lower than the caps need), the oldest
   connection that has not sent a message is closed to make room; with none, accepting pauses
   for `ACCEPT_PAUSE_S` instead of spinning on a listener that stays readable.
+- A TCP sender over its rate of packets (the handler's `rest_s`) is not read for a while: its
+  bytes wait in the network, TCP's own flow control holds the sender, and a flood over TCP
+  costs nothing while it rests (read, its frames would cost more than any other peer's turn).
 - A reply never blocks the thread: what a peer does not read is queued up to `max_unsent`
   bytes, then the connection is closed; a UDP reply that cannot go at once is dropped.
 - Any datagram up to 64 KB is read whole (a smaller buffer would cut it without a word).
@@ -69,6 +72,9 @@ class PacketHandler(Protocol):
 
     def dropped(self, transport: str, sender: Sender, why: str) -> None:
         """Something was dropped or closed (a bad frame, a cap, a timeout): to count and tell."""
+
+    def rest_s(self, sender: Sender) -> float:
+        """How long a TCP sender's connections are to rest unread (0: not at all)."""
 
 
 # -- the connections' bookkeeping (pure: times are given) -------------------------------------
@@ -180,6 +186,8 @@ class _Connection:
     sender: Sender
     reader: FrameReader
     unsent: bytearray = field(default_factory=bytearray)
+    resting_until: float | None = None  # not read until then: its sender is over its rate
+    watched: int = 0  # the selector events it is registered for (0: none)
 
 
 class OscNet:
@@ -284,7 +292,9 @@ class OscNet:
             self._read(what)  # type: ignore[arg-type]
 
     def _timeout(self) -> float | None:
-        dues = [due for due in (self._table.next_due(), self._accept_paused_until) if due is not None]
+        resting = (c.resting_until for c in self._connections if c.resting_until is not None)
+        dues = [due for due in (self._table.next_due(), self._accept_paused_until, min(resting, default=None))
+                if due is not None]
         return max(0.0, min(dues) - self._now()) if dues else None
 
     def _drain_wake(self) -> None:
@@ -300,6 +310,9 @@ class OscNet:
             self._selector.register(self._tcp, selectors.EVENT_READ, "accept")  # type: ignore[union-attr]
         for connection, why in self._table.expired(now):
             self._drop(connection, why)  # type: ignore[arg-type]
+        for connection in [c for c in self._connections if c.resting_until is not None and c.resting_until <= now]:
+            connection.resting_until = None
+            self._watch(connection)
 
     # -- UDP --------------------------------------------------------------------------------
 
@@ -366,7 +379,7 @@ class OscNet:
         except OSError:
             pass
         self._connections.add(connection)
-        self._selector.register(sock, selectors.EVENT_READ, connection)  # type: ignore[union-attr]
+        self._watch(connection)
         self._read(connection)  # a message sent with the connection (QLab's GO) proves it at once
 
     def _read(self, connection: _Connection) -> None:
@@ -389,8 +402,14 @@ class OscNet:
                 connection.unsent += connection.reader.frame(reply)
         if fed.fatal is not None:
             self._drop(connection, f"closed: {fed.fatal}")
-        elif connection.unsent:
+            return
+        rest = self.handler.rest_s(connection.sender) if fed.packets else 0.0
+        if rest > 0:
+            connection.resting_until = self._now() + rest
+        if connection.unsent:
             self._flush(connection)
+        else:
+            self._watch(connection)
 
     def _flush(self, connection: _Connection) -> None:
         try:
@@ -404,8 +423,24 @@ class OscNet:
         if len(connection.unsent) > self.limits.max_unsent:
             self._drop(connection, f"closed: it does not read its replies ({len(connection.unsent)} bytes unsent)")
             return
-        events = selectors.EVENT_READ | (selectors.EVENT_WRITE if connection.unsent else 0)
-        self._selector.modify(connection.sock, events, connection)  # type: ignore[union-attr]
+        self._watch(connection)
+
+    def _watch(self, connection: _Connection) -> None:
+        """Register for what the connection waits for: reading unless it rests, writing while
+        replies are unsent."""
+        events = (0 if connection.resting_until is not None else selectors.EVENT_READ) | (
+            selectors.EVENT_WRITE if connection.unsent else 0)
+        if events == connection.watched:
+            return
+        selector = self._selector
+        assert selector is not None
+        if not events:
+            selector.unregister(connection.sock)
+        elif connection.watched:
+            selector.modify(connection.sock, events, connection)
+        else:
+            selector.register(connection.sock, events, connection)
+        connection.watched = events
 
     def _drop(self, connection: _Connection, why: str) -> None:
         self._close(connection)
@@ -415,10 +450,12 @@ class OscNet:
         self._table.remove(connection)
         if connection in self._connections:
             self._connections.discard(connection)
-            try:
-                self._selector.unregister(connection.sock)  # type: ignore[union-attr]
-            except (KeyError, ValueError):
-                pass
+            if connection.watched:
+                try:
+                    self._selector.unregister(connection.sock)  # type: ignore[union-attr]
+                except (KeyError, ValueError):
+                    pass
+                connection.watched = 0
         try:
             connection.sock.shutdown(socket.SHUT_RDWR)
         except OSError:
