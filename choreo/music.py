@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from choreo.errors import ChoreoError, UsageError
+from choreo.numtext import whole_number
 from choreo.show.model import MUSIC_FORMATS_TEXT, Music
 
 PERIOD_MS = 10  # how much the device asks for at a time
@@ -279,8 +280,9 @@ def pick_output(given: str | None, listed: Callable[[], list[Output]] | None = N
     if given.strip().lower() == NULL_DEVICE:
         return NULL_OUTPUT
     choices = [o for o in (listed or outputs)() if o.name != NULL_DEVICE]
-    if given.strip().isdigit():
-        match = [o for o in choices if o.number == int(given)]
+    number = whole_number(given)
+    if number is not None:
+        match = [o for o in choices if o.number == number]
     else:
         match = [o for o in choices if given.strip().lower() in o.name.lower()]
     names = "; ".join(f"{o.number}: {o.name}" for o in choices) or "none found"

@@ -199,7 +199,7 @@ def test_a_replay_of_an_hth4_run_uses_an_hth4_simulator(tmp_path, capsys):
     assert report.board_differences == 0
 
 
-def _rewritten(source: Path, target: Path, topic: str, key: str, value) -> bool:
+def _rewritten(source: Path, target: Path, topic: str, key: str, value, metadata: dict | None = None) -> bool:
     """The log again with the first `topic` message's `key` set to `value` (False: no such field)."""
     import json
 
@@ -209,7 +209,7 @@ def _rewritten(source: Path, target: Path, topic: str, key: str, value) -> bool:
     with open(source, "rb") as stream:
         reader = make_reader(stream)
         messages = list(reader.iter_messages(log_time_order=False))
-        metadata = list(reader.iter_metadata())
+        recorded = list(reader.iter_metadata())
         attachments = list(reader.iter_attachments())
     changed = False
     with open(target, "wb") as stream:
@@ -233,8 +233,9 @@ def _rewritten(source: Path, target: Path, topic: str, key: str, value) -> bool:
         for attachment in attachments:
             writer.add_attachment(attachment.create_time, attachment.log_time, attachment.name,
                                   attachment.media_type, attachment.data)
-        for record in metadata:
-            writer.add_metadata(record.name, dict(record.metadata))
+        for record in recorded:
+            writer.add_metadata(record.name, {**record.metadata, **(metadata or {})} if record.name == "choreo"
+                                else dict(record.metadata))
         writer.finish()
     return changed
 
@@ -255,3 +256,13 @@ def test_a_field_of_the_wrong_type_or_range_is_one_line_in_every_review(run_log,
         assert "Traceback" not in err
         if code == 2:
             assert len(err.strip().splitlines()) == 1, (command, err)
+
+
+@pytest.mark.parametrize("key", ["start_ns", "baud"])
+@pytest.mark.parametrize("value", ["²", "1" * 5000])
+def test_a_metadata_number_that_is_no_number_is_not_a_traceback(run_log, tmp_path, capsys, key, value):
+    hostile = tmp_path / "hostile.mcap"
+    _rewritten(run_log, hostile, "/rcb4/tx", "-", None, {key: value})
+    for command, code, err in review_all(hostile, capsys):
+        assert code == 0, (command, err)
+    assert main(["replay", str(hostile), "--speed", "100", "--log", str(tmp_path / "replay.mcap"), "-q"]) == 0

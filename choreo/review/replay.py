@@ -26,6 +26,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from choreo.clock import TimeSource
+from choreo.numtext import whole_number
 from choreo.errors import UsageError
 from choreo.protocol import Frame, FrameKind
 from choreo.review.attached import AttachedShow, attached_show
@@ -238,7 +239,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         show = attached_show(reader)
         recorded_baud = reader.run_info.get("baud", "")
         if baud is None:
-            recorded = int(recorded_baud) if recorded_baud.isdigit() else None
+            recorded = whole_number(recorded_baud)
             baud = recorded if port and recorded in BAUD_RATES else DEFAULT_BAUD
         given_layout = layout
         layout = layout or _recorded_layout(reader, None)  # logs before layouts: seed
@@ -300,7 +301,8 @@ def _robot_link(reader: LogReader, show: AttachedShow, robot: str, layout_name: 
     from choreo.session import RobotLink, with_show_durations
 
     baud_text = reader.run_info.get(f"robot.{robot}.baud", "")
-    baud = int(baud_text) if baud_text.isdigit() and int(baud_text) in BAUD_RATES else DEFAULT_BAUD
+    recorded = whole_number(baud_text)
+    baud = recorded if recorded in BAUD_RATES else DEFAULT_BAUD
     layout = layout_named(layout_name)
     plan = show.plan_of(robot)
     abort = show.show.abort_motion(robot) if show.show is not None and plan is not None else None

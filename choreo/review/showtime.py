@@ -32,8 +32,9 @@ LOOKAHEAD_MESSAGES = 10_000
 
 def show_zero_ns(reader: LogReader) -> int | None:
     """The run's start as the metadata gives it (wall-clock ns), before a step says better."""
-    start = reader.run_info.get("start_ns")
-    return int(start) if start and start.isdigit() else None
+    from choreo.numtext import whole_number
+
+    return whole_number(reader.run_info.get("start_ns") or "")
 
 
 class ShowTimes:

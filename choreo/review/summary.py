@@ -15,6 +15,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from choreo.numtext import whole_number
 from choreo.logformat import (CHOREO_TOPICS, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING,
                               ClockRecord, CommandRecord, LogLayouts, LogRecord, MotionPlay, MotionTracker, RxRecord, StepRecord, TxRecord,
                               is_late, parse, slipped)
@@ -639,8 +640,7 @@ def _render_commands(summary: Summary) -> Iterable[str]:
 
 
 def _int(result: dict[str, str] | None, key: str) -> int | None:
-    text = (result or {}).get(key, "")
-    return int(text) if text.isdigit() else None
+    return whole_number((result or {}).get(key, ""))
 
 
 def _render_robots(summary: Summary) -> Iterable[str]:

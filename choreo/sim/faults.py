@@ -48,6 +48,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from choreo import protocol as p
+from choreo.numtext import whole_number
 from choreo.protocol import nak
 
 # Order matters: precedence when several hit one frame, and the order of random draws.
@@ -115,8 +116,8 @@ class Trigger:
     def parse(cls, text: str) -> Trigger:
         """`5` -> every 5th frame, `0.2` -> probability 0.2 (see the module docstring)."""
         text = text.strip()
-        if text.isdigit():
-            every = int(text)
+        every = whole_number(text)
+        if every is not None:
             if every < 1:
                 raise ValueError("every K-th frame needs K >= 1 (leave the fault out for never)")
             return cls(every=every)
