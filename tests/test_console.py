@@ -648,3 +648,47 @@ def test_a_paste_is_no_key_in_a_run(tmp_path, pane):
     run.keys("Enter")
     assert run.exit_code() == 0
     assert commands_in(tmp_path) == [("go", "key", "ok"), ("go", "key", "ok")]
+
+
+WIDE_NAMES = """\
+version: 1
+name: ロボットのショー with a name long enough to be cut e\u0301\u0301 終わり
+robots:
+  alpha: {}
+  bravo: {}
+motions:
+  歩く: {number: 2, duration: 0.1}
+tracks:
+  alpha:
+    - play: 歩く
+      label: ラベルの長い名前です
+    - play: 1
+      at: go
+      label: 日本語のキュー
+  bravo:
+    - play: 3
+      at: 30
+"""
+
+
+@needs_tmux
+def test_after_each_resize_every_line_on_the_terminal_fits_it(tmp_path, pane):
+    """tmux re-wraps the screen when its width changes, as VTE and iTerm2 do: a redraw that moved
+    up over the old lines left pieces of them above the console, wider than the terminal."""
+    from choreo.textfit import display_width
+
+    run = pane(WIDE_NAMES, 80)
+    run.wait_for("GO waits")
+    for width in (25, 60, 20, 33, 100, 40):
+        run._tmux("resize-window", "-t", "run", "-x", str(width))
+        deadline = time.monotonic() + 5
+        while True:
+            joined = run._tmux("capture-pane", "-p", "-J", "-t", "run").splitlines()  # wrapped rows joined
+            wide = [line for line in joined if display_width(line.rstrip()) > width]
+            if not wide and any("show " in line and " s · " in line for line in joined):
+                break
+            assert time.monotonic() < deadline, (width, wide)
+            time.sleep(0.05)
+    run.keys("Escape")
+    assert run.exit_code() == 130
+    assert run.terminal_restored()

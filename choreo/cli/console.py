@@ -32,6 +32,7 @@ from typing import TextIO
 
 from rich.console import Console as RichConsole
 from rich.console import Group, RenderableType
+from rich.control import Control
 from rich.file_proxy import FileProxy
 from rich.live import Live as RichLive
 from rich.rule import Rule
@@ -591,8 +592,22 @@ class Console:
         self._fit_terminal()
         drawn = (screen, self._screen.width)
         if drawn != self._drawn:
+            if self._drawn is not None and drawn[1] != self._drawn[1]:
+                self._start_afresh()
             self._rich.update(render(screen, drawn[1]), refresh=True)
             self._drawn = drawn
+
+    def _start_afresh(self) -> None:
+        """The terminal's width changed. Many terminals (tmux, VTE, iTerm2, kitty) re-wrap what
+        is on screen then, so the lines drawn before no longer sit where a redraw would move
+        up to: it would leave pieces of them, wider than the terminal, above the new screen.
+        The screen is cleared and the console drawn from its top instead."""
+        live_render = getattr(self._rich, "_live_render", None)
+        if live_render is None or not hasattr(live_render, "_shape"):
+            return  # a rich that keeps its shape elsewhere: leave it to rich
+        with getattr(self._rich, "_lock", threading.RLock()):
+            self._screen.control(Control.clear(), Control.home())
+            live_render._shape = None  # nothing of the old screen left to move over
 
     def _quiet_left(self) -> float:
         """How long until no runner is about to send (0: now), at most MAX_POSTPONE_S."""
