@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import random
 import struct
+import sys
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -16,7 +17,7 @@ from pythonosc.osc_message_builder import OscMessageBuilder, build_msg
 
 from choreo.oscnet import ConnectionTable
 from choreo.osclimits import LIMITS, OscLimits
-from choreo.oscwire import (BUNDLE, Decoded, FrameReader, Message, decode_packet, encode_bundle, encode_message,
+from choreo.oscwire import (BUNDLE, END, Decoded, FrameReader, Message, decode_packet, encode_bundle, encode_message,
                             slip_decode, slip_encode)
 
 GO = build_msg("/choreo/go", []).dgram
@@ -335,3 +336,39 @@ def test_fuzz_tcp_framing_is_bounded(chunks, first):
         if fed.fatal is not None:
             return
         assert len(reader._buffer) <= 2 * 64 + 64
+
+
+def _steps(feed) -> int:  # type: ignore[no-untyped-def]
+    """How many calls (Python functions and builtins) `feed()` makes: the work it does, counted
+    rather than timed."""
+    calls = [0]
+
+    def count(frame, event, arg):  # type: ignore[no-untyped-def]
+        if event in ("call", "c_call"):
+            calls[0] += 1
+
+    sys.setprofile(count)
+    try:
+        feed()
+    finally:
+        sys.setprofile(None)
+    return calls[0]
+
+
+@pytest.mark.parametrize("filler", [END, b"\x00\x00\x00\x00"], ids=["SLIP ENDs", "zero lengths"])
+def test_bytes_that_frame_nothing_cost_no_step_each(filler):
+    """A stream of ENDs (SLIP) or of zero lengths (length-prefixed) frames nothing; each cost a
+    Python step (8 connections sending them used a whole core and held a GO 211 ms). Now the
+    work is the same for 400 KB of them as for 4 KB, and the packet after them still comes."""
+    head = slip_encode(GO) if filler == END else struct.pack(">I", len(GO)) + GO
+    tail = slip_encode(GO) if filler == END else struct.pack(">I", len(GO)) + GO
+
+    def work(size: int) -> int:
+        reader = FrameReader()
+        reader.feed(head)
+        fed: list = []
+        steps = _steps(lambda: fed.append(reader.feed(filler * (size // len(filler)) + tail)))
+        assert fed[0].packets == [GO] and fed[0].fatal is None and not reader.pending
+        return steps
+
+    assert work(400_000) <= work(4_000) + 5
