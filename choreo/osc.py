@@ -246,7 +246,7 @@ class OscServer:
         not read, at the least cost (a flood that costs choreo more than its sender outruns the
         socket, which then drops the operator's GO too). A malformed packet is refused whole."""
         host, allowed = self._verdict(sender[0])
-        if not self._limits.may_read(host, allowed):
+        if not self._limits.may_read(budget_key(transport, host), allowed):
             self.counts[UNREAD] += 1
             self.live.count(UNREAD if allowed else "refused", f"osc {transport} {host}")
             return []
@@ -256,7 +256,7 @@ class OscServer:
         else:
             decoded = decode_packet(data, self.wire_limits)
             if decoded.error is not None:
-                replies = [self._malformed(host, source, decoded.error, decoded.address)]
+                replies = [self._malformed(budget_key(transport, host), source, decoded.error, decoded.address)]
             else:
                 replies = self._messages(transport, sender, decoded.messages)
         return [reply.encoded() for reply in replies if reply is not None]
@@ -264,7 +264,7 @@ class OscServer:
     def rest_s(self, sender: Sender) -> float:
         """A TCP sender over its rate of packets: how long its connections are not read."""
         host, allowed = self._verdict(sender[0])
-        return self._limits.rest_s(host) if allowed else 0.0
+        return self._limits.rest_s(budget_key("tcp", host)) if allowed else 0.0
 
     def _verdict(self, host: str) -> tuple[str, bool]:
         """A sender's plain host and whether it may command the show, remembered (at most
@@ -287,14 +287,14 @@ class OscServer:
         what one packet may do."""
         return [self._receive(transport, sender, message.address, message.args) for message in messages]
 
-    def _malformed(self, host: str, source: str, error: str, address: str | None) -> Reply | None:
+    def _malformed(self, budget: str, source: str, error: str, address: str | None) -> Reply | None:
         """A packet choreo cannot read whole: nothing of it is carried out. Its sender (allowed)
         is answered when the refused message's address could be read."""
         self.counts["malformed"] += 1
         address = self._shown(address) if address else address
         message = f"refused: OSC that choreo cannot read ({error}); nothing in the packet was carried out"
         self._report(Command("malformed", source, address), Answer("error", message))
-        return self._answer(host, Reply(address, "error", message)) if address else None
+        return self._answer(budget, Reply(address, "error", message)) if address else None
 
     # -- one message -------------------------------------------------------------------------
 
@@ -308,26 +308,27 @@ class OscServer:
         address = self._shown(address)
         if not allowed:
             return self._refuse(host, source, address)
+        budget = budget_key(transport, host)
         if address.startswith(ECHOES):  # a reply or notification come back: answering it could loop
             self._report(Command(ECHO, source, address), Answer("error", echo_message(address)))
             return None
         wanted = command_for(address)
         if wanted is None:  # costs a reply and a log line, both bounded; a desk's fader moves spend no GO
-            return self._answer(host, self._unknown(source, address))
+            return self._answer(budget, self._unknown(source, address))
         name, label = wanted
-        if not self._limits.admit(host):
+        if not self._limits.admit(budget):
             message = self._limits.over_rate(host)
             self._report(Command(name, source, label), Answer("error", message))
-            return self._answer(host, Reply(address, "error", message))
+            return self._answer(budget, Reply(address, "error", message))
         if is_release(args):
-            return self._answer(host, Reply(address, "ok", "ignored: a button's release (argument 0) is not a "
-                                            "command", {"ignored": True}))
+            release = "ignored: a button's release (argument 0) is not a command"
+            return self._answer(budget, Reply(address, "ok", release, {"ignored": True}))
         answer = self.live.command(Command(name, source, label))
-        return self._answer(host, Reply(address, answer.status, answer.message, answer.data))
+        return self._answer(budget, Reply(address, answer.status, answer.message, answer.data))
 
-    def _answer(self, host: str, reply: Reply) -> Reply | None:
+    def _answer(self, budget: str, reply: Reply) -> Reply | None:
         """The reply, if the sender's reply budget allows (one packet can ask for many)."""
-        return reply if self._limits.may_reply(host) else None
+        return reply if self._limits.may_reply(budget) else None
 
     def _refuse(self, host: str, source: str, address: str) -> Reply | None:
         message = f"refused: {host} may not command this show (give --osc-allow {host} to let it)"
@@ -380,6 +381,13 @@ class OscServer:
         if self._notifier is not None:
             self._notifier.put(f"{NOTIFY}/done", result.outcome, result.steps_run, result.late_steps,
                                round(result.show_s, 6))
+
+
+def budget_key(transport: str, host: str) -> str:
+    """Whose budgets a packet spends: its sender's, over TCP apart from UDP. A TCP peer's address
+    is proven by its handshake, a UDP sender's can be forged: a flood of datagrams forged in
+    QLab's name must not spend the budgets of QLab's own TCP connection."""
+    return host if transport == "udp" else f"{host} (tcp)"
 
 
 def echo_message(address: str) -> str:

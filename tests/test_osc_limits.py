@@ -632,3 +632,18 @@ def test_a_tcp_sender_over_its_rate_rests_unread_and_another_go_gets_through(ser
         other.close()
     assert heard.messages("start") == ["starting"]
     assert handled < sent / 2  # what the reads before its rest held, not the whole flood
+
+
+def test_a_udp_flood_in_a_senders_name_does_not_spend_its_tcp_budgets(clock):
+    """A UDP sender's address can be forged (an allowed one too: QLab's): a flood of datagrams
+    in its name spent the budgets its own TCP connection, whose address the handshake proves,
+    needed for its GO. Over TCP a sender has budgets of its own."""
+    live = Live(StopRequest(), wait_start=True, now=clock.now)
+    heard = Heard()
+    live.listeners.append(heard)
+    server = OscServer(live, 0, now=clock.now)
+    for _ in range(500):
+        server.packet("udp", ("127.0.0.2", 9), bundle("/choreo/go", 4))
+    replies = server.packet("tcp", ("127.0.0.2", 53000), message("/choreo/start"))
+    live.close()
+    assert len(replies) == 1 and heard.messages("start") == ["starting"]
