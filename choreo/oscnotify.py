@@ -115,6 +115,10 @@ class Notifier:
                                  "machine: each notification would come back as a command (give the port "
                                  "the receiver listens on)")
             family, kind, proto, _, address = found[0]
+            if (family, address) in self._addresses:  # localhost:9000 and 127.0.0.1:9000: one receiver
+                self.close()
+                raise UsageError(f"--osc-notify {show_target(target)}: given twice (another spelling of a "
+                                 "target given before): each notification would be sent to it twice")
             if family not in self._sockets:
                 self._sockets[family] = socket.socket(family, kind, proto)
                 self._sockets[family].setblocking(False)

@@ -439,6 +439,8 @@ BAD_OPTIONS = {
     "notify port 0": (["--osc", "0", "--osc-notify", "127.0.0.1:0"], "--osc-notify 127.0.0.1:0: give HOST:PORT"),
     "notify twice": (["--osc", "0", "--osc-notify", "127.0.0.1:9", "--osc-notify", "127.0.0.1:9"],
                      "--osc-notify 127.0.0.1:9: given twice"),
+    "notify twice, spelt two ways": (["--osc", "0", "--osc-notify", "localhost:9", "--osc-notify", "127.0.0.1:9"],
+                                     "--osc-notify 127.0.0.1:9: given twice"),
     "notify nowhere": (["--osc", "0", "--osc-notify", "no-such-host.invalid:9"], "--osc-notify no-such-host.invalid:9: "),
     "notify itself": (["--osc", "{free}", "--osc-notify", "localhost:{free}"], "--osc-notify localhost:{free}: that is "
                       "choreo's own --osc port"),
