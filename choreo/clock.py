@@ -59,8 +59,13 @@ class TimeSource(Protocol):
     def sleep(self, seconds: float) -> None:
         """Let `seconds` pass."""
 
-    def doze(self, seconds: float) -> None:
-        """Let up to `seconds` pass: `notify` ends it early (a deadline that moved)."""
+    def doze(self, seconds: float, seen: int | None = None) -> None:
+        """Let up to `seconds` pass: `notify` ends it early (a deadline that moved), and so
+        does one that came after `notified()` read `seen` (before the doze began: the deadline
+        the sleeper read may already have moved)."""
+
+    def notified(self) -> int:
+        """How many times `notify` was called: read before a deadline, given to `doze`."""
 
     def spin(self) -> None:
         """One turn of a busy wait (the last SPIN_S before a cue)."""
@@ -95,13 +100,18 @@ class SystemTime:
     def sleep(self, seconds: float) -> None:
         time.sleep(max(seconds, 0.0))
 
-    def doze(self, seconds: float) -> None:
+    def doze(self, seconds: float, seen: int | None = None) -> None:
         with self._changed:
-            self._changed.wait(max(seconds, 0.0))
+            if seen is None or seen == self._notified:
+                self._changed.wait(max(seconds, 0.0))
+
+    def notified(self) -> int:
+        return self._notified
 
     def __init__(self) -> None:
         self._changed = threading.Condition()
         self._threads = 0  # threads of one run sharing this time (several robots)
+        self._notified = 0  # notify calls so far: a doze that missed one does not begin
 
     def spin(self) -> None:
         """A busy-wait turn; with several robots' threads, one that lets the others run: one
@@ -127,6 +137,7 @@ class SystemTime:
     def notify(self) -> None:
         """Something a `wait_for` predicate reads has changed."""
         with self._changed:
+            self._notified += 1
             self._changed.notify_all()
 
     def wait_for(self, ready: Callable[[], bool], should_stop: Callable[[], bool]) -> bool:
@@ -161,6 +172,7 @@ class VirtualTime:
         self._sleepers: dict[object, int] = {}  # token -> wake-up time (ns)
         self._waiting: dict[object, Callable[[], bool]] = {}  # token -> what it waits for
         self._dozing: set[object] = set()  # sleepers `notify` wakes early
+        self._notified = 0  # notify calls so far: a doze that missed one does not begin
 
     def now(self) -> float:
         return self._ns / 1e9
@@ -177,12 +189,14 @@ class VirtualTime:
             self._sleepers[token] = self._ns + max(1, math.ceil(seconds * 1e9))
             self._block(token, self._sleepers)
 
-    def doze(self, seconds: float) -> None:
+    def doze(self, seconds: float, seen: int | None = None) -> None:
         """A sleep that `notify` ends early; alone (no other thread to notify), a sleep."""
         if self._running is None:
             self.advance(seconds)
             return
         with self._lock:
+            if seen is not None and seen != self._notified:
+                return  # notified since the sleeper read its deadline: no time passes
             token = object()
             self._sleepers[token] = self._ns + max(1, math.ceil(seconds * 1e9))
             self._dozing.add(token)
@@ -204,6 +218,9 @@ class VirtualTime:
         if seconds > 0:
             with self._lock:
                 self._ns += math.ceil(seconds * 1e9)
+
+    def notified(self) -> int:
+        return self._notified
 
     def wall_ns(self) -> int:
         return self._wall_ns + self._ns
@@ -229,6 +246,7 @@ class VirtualTime:
         """Dozers wake now, at this instant (their deadline moved); `wait_for` predicates
         are read when time would move: nothing to wake for them."""
         with self._lock:
+            self._notified += 1
             woken = [token for token in self._dozing if token in self._sleepers]
             if not woken:
                 return
@@ -324,10 +342,11 @@ class RunClock:
         """
         source = self.source
         due = deadline if callable(deadline) else lambda: deadline
-        nap = source.doze if callable(deadline) else source.sleep
+        moves = callable(deadline)
         while True:
             if should_stop():
                 return False
+            seen = source.notified() if moves else None  # before reading where the deadline is
             left = due() - source.now()
             if left <= 0:
                 return True
@@ -337,7 +356,11 @@ class RunClock:
                     left = due() - source.now()
                     if left <= SPIN_S:
                         continue
-                nap(min(left - SPIN_S, slice_s))
+                nap = min(left - SPIN_S, slice_s)
+                if moves:
+                    source.doze(nap, seen)
+                else:
+                    source.sleep(nap)
             elif source.virtual:
                 source.sleep(left)  # nothing to gain by spinning on time that only sleeping moves
             else:

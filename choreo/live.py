@@ -118,6 +118,11 @@ class HoldingShowClock:
             for listener in self.on_resume:
                 listener()
 
+    def wake(self) -> None:
+        """Every runner dozing towards a due time looks again now: a stop or a panic given
+        while a GO cue holds ends the others' dozes at once, not a sleep slice later."""
+        self._wake()
+
     def mono_at(self, show_s: float) -> float:
         if self._hold_s is not None and show_s > self._hold_s + 1e-9:
             return float("inf")
@@ -328,6 +333,8 @@ class Live:
     def _wake(self) -> None:
         with self._changed:
             self._changed.notify_all()
+        if isinstance(self.show, HoldingShowClock):
+            self.show.wake()  # runners dozing towards a cue see the stop now
 
 
 def summary_of(held: Held) -> tuple[Command, Answer]:

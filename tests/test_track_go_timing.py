@@ -110,3 +110,90 @@ def test_notify_ends_a_doze_at_once_and_leaves_a_sleep_alone() -> None:
     for thread in threads:
         thread.join(10)
     assert ended == {"doze": 0.25, "sleep": 2.0}
+
+
+class _GoInTheGap:
+    """A held clock whose first 'not yet' answer is followed at once by the GO, before the
+    asker has begun to doze: the moment a loaded machine may switch threads at."""
+
+    def __init__(self, show: HoldingShowClock) -> None:
+        self.show = show
+        self.gone = False
+
+    def mono_at(self, show_s: float) -> float:
+        due = self.show.mono_at(show_s)
+        if due == float("inf") and not self.gone:
+            self.gone = True
+            threading.Thread(target=self.show.resume).start()  # the operator's GO, from its own thread
+            time_to_run = threading.Event()
+            time_to_run.wait(0.05)  # real time: the GO's thread runs (virtual time stands still)
+        return due
+
+    def show_at(self, mono: float) -> float:
+        return self.show.show_at(mono)
+
+
+def test_a_go_between_reading_the_held_time_and_dozing_still_wakes_the_doze() -> None:
+    """The GO's wake-up came before the other track's runner dozed: it was lost, and the cue due
+    just after the GO waited out the rest of a 50 ms sleep slice."""
+    source = VirtualTime()
+    clock = RunClock(source)
+    zero = clock.mono()
+    show = HoldingShowClock(zero, clock.mono, source.notify)
+    show.hold_at(0.5)
+    source.advance(0.7)  # the GO cue has waited 0.2 s
+    woke: list[float] = []
+
+    def track_b() -> None:
+        assert sleep_until_show(clock, _GoInTheGap(show), 0.501)  # type: ignore[arg-type]
+        woke.append(clock.mono())
+        source.leave()
+
+    def company() -> None:  # another robot's thread, so that time is shared (a doze is not a sleep)
+        source.sleep(1.0)
+        source.leave()
+
+    threads = [threading.Thread(target=track_b), threading.Thread(target=company)]
+    source.admit(len(threads))
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(10)
+    go = zero + 0.7
+    assert woke and abs(woke[0] - (go + 0.001)) <= TOLERANCE_S, woke[0] - (go + 0.001)
+
+
+def test_panic_or_stop_while_a_go_cue_holds_ends_every_other_tracks_doze_at_once() -> None:
+    """Another track dozes towards a cue past the held time: a panic (or stop) given then ends
+    its doze at that instant, not at the end of its 50 ms sleep slice."""
+    from choreo.live import Command, Live
+    from choreo.runner import StopRequest
+
+    for command in ("panic", "stop"):
+        source = VirtualTime()
+        clock = RunClock(source)
+        zero = clock.mono()
+        show = HoldingShowClock(zero, clock.mono, source.notify)
+        stop = StopRequest()
+        live = Live(stop, now=clock.mono)
+        live.show = show
+        show.hold_at(0.5)
+        ended: list[float] = []
+
+        def track_b() -> None:
+            assert not sleep_until_show(clock, show, 0.8, stop)
+            ended.append(clock.mono())
+            source.leave()
+
+        def operator() -> None:
+            source.sleep(0.6123)  # the GO cue has waited 0.1123 s
+            assert live.command(Command(command, "test")).ok
+            source.leave()
+
+        threads = [threading.Thread(target=track_b), threading.Thread(target=operator)]
+        source.admit(len(threads))
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join(10)
+        assert ended and ended[0] - (zero + 0.6123) <= TOLERANCE_S, (command, ended[0] - (zero + 0.6123))
