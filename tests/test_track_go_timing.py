@@ -19,6 +19,17 @@ from choreo.live import HoldingShowClock
 TOLERANCE_S = 0.001
 
 
+def _share(source: VirtualTime, *bodies) -> None:  # type: ignore[no-untyped-def]
+    """Run `bodies` as threads sharing `source`'s time (each ends with `source.leave()`)."""
+    threads = [threading.Thread(target=body) for body in bodies]
+    source.admit(len(threads))
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(10)
+    assert not any(thread.is_alive() for thread in threads)
+
+
 def _track_cues(hold_s: float, go_s: float, cues: list[float]) -> tuple[list[float], float, float]:
     """Robot A's track reaches a GO cue at show time `hold_s` and gets its GO at monotonic
     `go_s` after the start; robot B's thread sleeps towards each of its timed `cues` as its
@@ -44,13 +55,7 @@ def _track_cues(hold_s: float, go_s: float, cues: list[float]) -> tuple[list[flo
             woke.append(clock.mono())
         source.leave()
 
-    threads = [threading.Thread(target=track_a), threading.Thread(target=track_b)]
-    source.admit(len(threads))
-    for thread in threads:
-        thread.start()
-    for thread in threads:
-        thread.join(10)
-    assert not any(thread.is_alive() for thread in threads)
+    _share(source, track_a, track_b)
     return woke, zero, went[0]
 
 
@@ -103,12 +108,7 @@ def test_notify_ends_a_doze_at_once_and_leaves_a_sleep_alone() -> None:
         source.notify()
         source.leave()
 
-    threads = [threading.Thread(target=f) for f in (dozer, sleeper, notifier)]
-    source.admit(len(threads))
-    for thread in threads:
-        thread.start()
-    for thread in threads:
-        thread.join(10)
+    _share(source, dozer, sleeper, notifier)
     assert ended == {"doze": 0.25, "sleep": 2.0}
 
 
@@ -153,12 +153,7 @@ def test_a_go_between_reading_the_held_time_and_dozing_still_wakes_the_doze() ->
         source.sleep(1.0)
         source.leave()
 
-    threads = [threading.Thread(target=track_b), threading.Thread(target=company)]
-    source.admit(len(threads))
-    for thread in threads:
-        thread.start()
-    for thread in threads:
-        thread.join(10)
+    _share(source, track_b, company)
     go = zero + 0.7
     assert woke and abs(woke[0] - (go + 0.001)) <= TOLERANCE_S, woke[0] - (go + 0.001)
 
@@ -190,10 +185,5 @@ def test_panic_or_stop_while_a_go_cue_holds_ends_every_other_tracks_doze_at_once
             assert live.command(Command(command, "test")).ok
             source.leave()
 
-        threads = [threading.Thread(target=track_b), threading.Thread(target=operator)]
-        source.admit(len(threads))
-        for thread in threads:
-            thread.start()
-        for thread in threads:
-            thread.join(10)
+        _share(source, track_b, operator)
         assert ended and ended[0] - (zero + 0.6123) <= TOLERANCE_S, (command, ended[0] - (zero + 0.6123))
