@@ -692,3 +692,40 @@ def test_after_each_resize_every_line_on_the_terminal_fits_it(tmp_path, pane):
     run.keys("Escape")
     assert run.exit_code() == 130
     assert run.terminal_restored()
+
+
+def test_keys_typed_before_the_console_takes_the_terminal_are_dropped():
+    """A Space typed while choreo loaded started a show run with --wait-start as soon as the
+    console read keys."""
+    primary, secondary = pty.openpty()
+    keys: list[str] = []
+    got = threading.Event()
+    reader = KeyReader(secondary, lambda key: (keys.append(key), got.set()))
+    try:
+        os.write(primary, b" \r")  # typed before: the terminal holds it, unread
+        mode = TerminalMode(secondary)
+        mode.enter()
+        reader.start()
+        os.write(primary, b"q")
+        assert got.wait(5) and keys == ["q"]
+        mode.restore()
+    finally:
+        reader.close()
+        os.close(primary)
+        os.close(secondary)
+
+
+@needs_tmux
+def test_a_space_typed_while_choreo_loads_does_not_start_a_wait_start_show(tmp_path):
+    show = write_show(tmp_path, GO_SHOW)
+    run = Pane(tmp_path, [str(show), "--wait-start", "--log", str(tmp_path / "run.mcap")])
+    try:
+        run.keys("Space")  # choreo is still loading
+        run.wait_for("the show waits for its start")
+        time.sleep(0.3)  # had it read the Space, the show would be under way by now
+        assert "the show waits for its start" in run.screen()
+        run.keys("Escape")
+        assert run.exit_code() == 130
+        assert commands_in(tmp_path) == [("panic", "key", "ok")]
+    finally:
+        run.close()
