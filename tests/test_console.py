@@ -729,3 +729,19 @@ def test_a_space_typed_while_choreo_loads_does_not_start_a_wait_start_show(tmp_p
         assert commands_in(tmp_path) == [("panic", "key", "ok")]
     finally:
         run.close()
+
+
+# Replies and sequences longer than the parser keeps: a clipboard's (OSC 52), a capability list
+# (DCS), a CSI with many parameters, Alt with one; each with keys in it, none of them keys.
+LONG = [b"\x1b]52;c;" + b"QUJD q y " * 200 + b"\x07", b"\x1bP1+r" + b"q y " * 300 + b"\x1b\\",
+        b"\x1b[" + b"1;" * 500 + b"m", b"\x1b\x1b]" + b"q y " * 300 + b"\x1b\\", b"\x1bO" + b"2;" * 300 + b"P",
+        b"\x1b_" + b"\x1b[201~ q " * 100 + b"\x1b\\"]
+
+
+@pytest.mark.parametrize("sequence", LONG, ids=lambda b: f"{b[:3].hex(' ')}x{len(b)}")
+def test_a_sequence_of_any_length_is_read_to_its_end(sequence: bytes) -> None:
+    parser = KeyParser()
+    assert parser.feed(sequence) == [] and not parser.pending
+    assert parser.feed(b" q") == ["go", "q"]
+    bytewise = KeyParser()
+    assert [k for byte in sequence + b" " for k in bytewise.feed(bytes([byte]))] == ["go"]

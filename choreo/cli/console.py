@@ -295,7 +295,7 @@ def _in_foreground(fd: int) -> bool:
 
 KEYS = {ord(" "): "go", ord("\r"): "go", ord("\n"): "go", ord("q"): "q", ord("Q"): "q"}
 ESC = 0x1B
-LONGEST_SEQUENCE = 256  # bytes: past this a sequence is given up (its rest may read as keys)
+LONGEST_SEQUENCE = 256  # bytes of a sequence kept: past this, its start and its last bytes (it reads on to its end)
 PASTE_START, PASTE_END = b"[200~", b"\x1b[201~"  # bracketed paste: the text between is not keys
 PASTE_ON, PASTE_OFF = "\x1b[?2004h", "\x1b[?2004l"  # ask the terminal to bracket what is pasted
 
@@ -378,8 +378,13 @@ class KeyParser:
             self._sequence.clear()  # ESC ESC ESC: Esc twice, and a new sequence starts
             return "escape"
         self._sequence.append(byte)
+        if len(self._sequence) >= LONGEST_SEQUENCE:
+            # a long reply (a clipboard's, a capability list, a long CSI) is read to its end,
+            # however long: only its kind and its last two bytes (`ESC \\` ends a string) are kept
+            head = len(self._sequence) - len(self._sequence.lstrip(b"\x1b")) + 1
+            del self._sequence[head:-2]
         sequence = bytes(self._sequence)
-        if _complete(sequence) or len(sequence) >= LONGEST_SEQUENCE:
+        if _complete(sequence):
             self._sequence.clear()
             self._in_escape = False
             self._ended(sequence)
