@@ -209,6 +209,14 @@ def test_output_file_is_written_and_validates_with_a_schema_line_that_points_at_
     assert main(["validate", str(show_path)]) == 0
 
 
+def test_output_dash_is_standard_output_as_for_log_export(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    path = write_project(tmp_path, project_xml(JAPANESE))
+    assert main(["import", str(path), "-o", "-"]) == 0
+    assert capsys.readouterr().out == imported(capsys, path)
+    assert not (tmp_path / "-").exists()
+
+
 def test_output_never_overwrites(tmp_path, capsys):
     project = write_project(tmp_path, project_xml(JAPANESE))
     existing = tmp_path / "show.yaml"

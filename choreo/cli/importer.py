@@ -29,7 +29,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "-o",
         "--output",
         metavar="SHOW.yaml",
-        help="write the show to this file (never overwrites one: exit 2 if it exists); default: standard output",
+        help="write the show to this file (never overwrites one: exit 2 if it exists); default (or -): "
+        "standard output, as `log export` takes - for it",
     )
     command.set_defaults(handler=run_import)
 
@@ -41,7 +42,7 @@ def run_import(args: argparse.Namespace) -> int:
     from choreo.show.starter import schema_reference, starter_show
 
     project = read_project(args.project)
-    if args.output is None:
+    if args.output in (None, "-"):  # a file named "-" is ./-
         _write_stdout(starter_show(project))
         return 0
     output = Path(args.output)
