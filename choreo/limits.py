@@ -12,8 +12,8 @@ whose address may be forged. So:
   `commands_per_sender` carried out, and all of them together `commands_total` (a bundle's
   messages count one by one; an address choreo does not know is no command and spends none);
   the rest are not carried out;
-- each allowed sender's packets are read within `packets_per_sender` (a datagram, a TCP frame; a
-  bundle is one), and all refused senders' within one such budget: past it a packet is counted, not read, at the least cost there is, so that a flood
+- each allowed sender's packets are read within `packets_per_sender` (a datagram, a TCP frame;
+  each message of a bundle after its first spends one more), and all refused senders' within one such budget: past it a packet is counted, not read, at the least cost there is, so that a flood
   costs choreo less than it costs the sender and the operator's GO, from another address, is
   still read in time (a flood the socket cannot keep up with would drop it);
 - each sender gets at most `replies_per_sender` replies, and the senders refused (not allowed)
@@ -50,7 +50,7 @@ class Rate:
 class Limits:
     """Every limit on what commands from outside may cost (the README lists them)."""
 
-    packets_per_sender: Rate = Rate(64, 32.0)  # packets read for one sender (its host); the rest counted
+    packets_per_sender: Rate = Rate(256, 128.0)  # packets (a bundle's messages) read for one sender; the rest counted
     commands_per_sender: Rate = Rate(10, 5.0)  # commands carried out for one sender (its host)
     commands_total: Rate = Rate(20, 10.0)  # commands carried out for all allowed senders together
     replies_per_sender: Rate = Rate(10, 5.0)  # replies sent to one sender
@@ -254,10 +254,10 @@ class ReportGate:
         self.hold(name, source)
         return False
 
-    def hold(self, name: str, source: str) -> None:
-        """One more `name` not reported one by one (a packet not even read: no budget spent)."""
+    def hold(self, name: str, source: str, n: int = 1) -> None:
+        """`n` more `name` not reported one by one (packets not even read: no budget spent)."""
         with self._lock:
-            self._counts[name] += 1
+            self._counts[name] += n
             if source not in self._sources:
                 if len(self._sources) < Held.SOURCES_KEPT:
                     self._sources[source] = None

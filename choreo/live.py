@@ -254,10 +254,10 @@ class Live:
         self.flush_reports()  # the summary of what came before, first
         self._tell(command, answer)
 
-    def count(self, name: str, source: str) -> None:
-        """One more `name` from `source` refused without a word (a packet over its sender's
-        rate, not read): only counted, for the next summary (the ticker's)."""
-        self._reports.hold(name, source)
+    def count(self, name: str, source: str, n: int = 1) -> None:
+        """`n` more `name` from `source` refused without a word (packets or a bundle's messages
+        over their sender's rate, not read): only counted, for the next summary (the ticker's)."""
+        self._reports.hold(name, source, n)
 
     def flush_reports(self, force: bool = False) -> None:
         """Tell the listeners the commands held back since the last summary, if it is time
