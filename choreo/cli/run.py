@@ -475,9 +475,18 @@ def _layout_line(session) -> str:
     return line + {"show": ", from the show", "command line": ", from --layout"}.get(session.layout_source, "")
 
 
+# Ctrl-\\ stops a show as Ctrl-C does: killed by it, no robot would get its abort motion and the
+# log would be left unfinished.
+_QUIT = tuple(getattr(signal, name) for name in ("SIGQUIT",) if hasattr(signal, name))
+# A show cannot be suspended: Ctrl-Z (SIGTSTP), or a background run writing to a terminal set
+# to `stty tostop` (SIGTTOU), would freeze it mid-motion, every later cue late. Ignored while it runs.
+_HELD = tuple(getattr(signal, name) for name in ("SIGTSTP", "SIGTTOU") if hasattr(signal, name))
+
+
 class _StopOnSignals:
-    """First Ctrl-C or SIGTERM: finish the frame in flight, play the abort motion, close the log.
-    Second: leave at once (the log is still closed on the way out)."""
+    """First Ctrl-C, Ctrl-\\ or SIGTERM: finish the frame in flight, play the abort motion,
+    close the log. Second: leave at once (the log is still closed on the way out). Ctrl-Z does
+    not suspend the show (`_HELD`)."""
 
     def __init__(self, stop) -> None:  # type: ignore[no-untyped-def]
         self.stop = stop
@@ -485,8 +494,10 @@ class _StopOnSignals:
         self._signalled = False  # a stop the log asked for is not a first Ctrl-C
 
     def __enter__(self):
-        for signum in STOP_SIGNALS:
+        for signum in (*STOP_SIGNALS, *_QUIT):
             self._previous[signum] = signal.signal(signum, self._handle)
+        for signum in _HELD:
+            self._previous[signum] = signal.signal(signum, signal.SIG_IGN)
         return self.stop
 
     def _handle(self, signum, frame) -> None:
