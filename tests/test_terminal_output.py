@@ -385,11 +385,9 @@ def test_a_show_and_a_log_named_with_bytes_that_are_not_utf8_run_review_and_repl
     assert "\\udcff" in out and "Traceback" not in err
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTSTP, signal.SIGTTOU])
-def test_ctrl_z_does_not_suspend_a_show(tmp_path, signum) -> None:
-    """Ctrl-Z (or a background run writing to a `stty tostop` terminal) stopped the process
-    mid-show: no later cue played until someone typed `fg`."""
-    show = write_show(tmp_path, TIMED_SHOW)
+def _signalled_run(tmp_path: Path, body: str, signum: int) -> tuple[int, bytes, Path]:
+    """`choreo run --no-console` given `signum` once its show is under way: exit status, stderr, log."""
+    show = write_show(tmp_path, body)
     log = tmp_path / "run.mcap"
     process = subprocess.Popen([sys.executable, "-m", "choreo", "run", str(show), "--no-console", "--log", str(log)],
                                stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO)
@@ -397,28 +395,25 @@ def test_ctrl_z_does_not_suspend_a_show(tmp_path, signum) -> None:
         assert wait_for(log.exists, timeout=20)  # the show's signal handlers are in place before it opens
         process.send_signal(signum)
         _, err = process.communicate(timeout=20)
-        assert process.returncode == 0, err
     finally:
         if process.poll() is None:
             process.kill()
             process.wait()
+    return process.returncode, err, log
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTSTP, signal.SIGTTOU])
+def test_ctrl_z_does_not_suspend_a_show(tmp_path, signum) -> None:
+    """Ctrl-Z (or a background run writing to a `stty tostop` terminal) stopped the process
+    mid-show: no later cue played until someone typed `fg`."""
+    code, err, log = _signalled_run(tmp_path, TIMED_SHOW, signum)
+    assert code == 0, err
     assert len([m for m in read_log(log).topic("/choreo/step") if m.get("event") == "start"]) == 12
 
 
 def test_ctrl_backslash_stops_a_show_as_ctrl_c_does(tmp_path) -> None:
     """SIGQUIT (Ctrl-\\ without the console) killed choreo: no abort motion, the log unfinished."""
-    show = write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n  - wait: 30\n")
-    log = tmp_path / "run.mcap"
-    process = subprocess.Popen([sys.executable, "-m", "choreo", "run", str(show), "--no-console", "--log", str(log)],
-                               stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO)
-    try:
-        assert wait_for(log.exists, timeout=20)  # the show's signal handlers are in place before it opens
-        process.send_signal(signal.SIGQUIT)
-        _, err = process.communicate(timeout=30)
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.wait()
-    assert process.returncode == 130, err
+    code, err, log = _signalled_run(tmp_path, "version: 1\nsteps:\n  - play: 1\n  - wait: 30\n", signal.SIGQUIT)
+    assert code == 130, err
     assert b"show stopped (SIGQUIT)" in err and b"Traceback" not in err
     assert read_log(log).topic("/choreo/step")  # the log was closed: it reads
