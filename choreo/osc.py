@@ -64,6 +64,7 @@ NOTIFY = f"{ROOT}/notify"
 PATTERN_CHARS = frozenset("*?[]{}")
 ECHOES = ("/reply", NOTIFY)  # replies and notifications: never commands, never answered (two would loop)
 ECHO = "echo"  # the command name a reply or notification sent to us is logged under
+LOST = "lost"  # the command name datagrams the system dropped before choreo read them are counted under
 UNREAD = "unread"  # the command name a packet over its sender's rate is counted under (not read)
 SENDERS_KNOWN = 4096  # senders whose verdict is remembered (an address's parse costs more than a refusal)
 
@@ -265,6 +266,12 @@ class OscServer:
         """A TCP sender over its rate of packets: how long its connections are not read."""
         host, allowed = self._verdict(sender[0])
         return self._limits.rest_s(budget_key("tcp", host)) if allowed else 0.0
+
+    def lost(self, transport: str, count: int) -> None:
+        """Datagrams the system dropped unread (a flood faster than choreo reads): counted,
+        so that the log's counts are what was sent (whose they were is not known)."""
+        self.counts[LOST] += count
+        self.live.count(LOST, f"osc {transport} (dropped by the system, unread)", count)
 
     def _verdict(self, host: str) -> tuple[str, bool]:
         """A sender's plain host and whether it may command the show, remembered (at most

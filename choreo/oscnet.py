@@ -22,13 +22,18 @@ memory, descriptors and time, and the operator's GO still gets through:
 - A reply never blocks the thread: what a peer does not read is queued up to `max_unsent`
   bytes, then the connection is closed; a UDP reply that cannot go at once is dropped.
 - Any datagram up to 64 KB is read whole (a smaller buffer would cut it without a word).
+- Datagrams the system dropped because they came faster than choreo read them are counted
+  where the system says how many (Linux's SO_RXQ_OVFL): the log's counts are what was sent.
 """
 
 from __future__ import annotations
 
 import errno
+import platform
 import selectors
 import socket
+import struct
+import sys
 import threading
 import time
 from collections import Counter
@@ -47,6 +52,11 @@ LISTEN_BACKLOG = 128  # connections the OS holds until accepted (accepting is qu
 RECV_BYTES = 16384  # read at once from a TCP peer
 UDP_BUFFER = 65536  # larger than any UDP payload: a datagram is never cut
 OUT_OF_DESCRIPTORS = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
+# Linux's SO_RXQ_OVFL (not in Python's socket module): each datagram then carries how many the
+# socket has dropped so far. 40 but on PA-RISC and SPARC; elsewhere the drops go uncounted.
+SO_RXQ_OVFL = 40 if sys.platform.startswith("linux") and not platform.machine().startswith(("parisc", "sparc")) \
+    else None
+DROPS_DATA = socket.CMSG_SPACE(4) if hasattr(socket, "CMSG_SPACE") else 0
 
 
 class ListenFailed(Exception):
@@ -75,6 +85,9 @@ class PacketHandler(Protocol):
 
     def rest_s(self, sender: Sender) -> float:
         """How long a TCP sender's connections are to rest unread (0: not at all)."""
+
+    def lost(self, transport: str, count: int) -> None:
+        """`count` datagrams the system dropped before they could be read (a flood)."""
 
 
 # -- the connections' bookkeeping (pure: times are given) -------------------------------------
@@ -210,6 +223,7 @@ class OscNet:
         self._closing = threading.Event()
         self._thread: threading.Thread | None = None
         self._port: int | None = None
+        self._drops_seen = 0  # the socket's count of dropped datagrams, as last told
         self.faults = 0  # events whose handling failed (a bug): counted, and serving goes on
 
     @property
@@ -319,11 +333,13 @@ class OscNet:
     def _read_datagrams(self) -> None:
         for _ in range(UDP_BATCH):
             try:
-                data, sender = self._udp.recvfrom(UDP_BUFFER)  # type: ignore[union-attr]
+                data, ancillary, _, sender = self._udp.recvmsg(UDP_BUFFER, DROPS_DATA)  # type: ignore[union-attr]
             except BlockingIOError:
                 return
             except OSError:  # e.g. an ICMP error about an earlier reply: not this datagram's fault
                 continue
+            if ancillary:
+                self._count_drops(ancillary)
             if len(data) > self.limits.max_datagram:
                 self.handler.dropped("udp", sender, f"a datagram of {len(data)} bytes "
                                                     f"(the limit is {self.limits.max_datagram})")
@@ -333,6 +349,14 @@ class OscNet:
                     self._udp.sendto(reply, sender)  # type: ignore[union-attr]
                 except OSError:
                     pass  # a full buffer or an unreachable sender: the reply is not worth a wait
+
+    def _count_drops(self, ancillary: list[tuple[int, int, bytes]]) -> None:
+        for level, kind, value in ancillary:
+            if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(value) >= 4:
+                (drops,) = struct.unpack("=I", value[:4])
+                if drops > self._drops_seen:
+                    self.handler.lost("udp", drops - self._drops_seen)
+                self._drops_seen = drops
 
     # -- TCP --------------------------------------------------------------------------------
 
@@ -496,6 +520,8 @@ def _listen(host: str, port: int, kind: int, limits: OscLimits) -> socket.socket
         sock.bind((address[0], port, *address[2:]))
         if kind == socket.SOCK_STREAM:
             sock.listen(LISTEN_BACKLOG)
+        elif SO_RXQ_OVFL is not None:
+            _set(sock, socket.SOL_SOCKET, SO_RXQ_OVFL, 1)  # how many datagrams a flood made it drop
         sock.setblocking(False)
     except (OSError, OverflowError) as exc:
         sock.close()

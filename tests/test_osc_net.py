@@ -376,3 +376,53 @@ def test_fuzz_packets_through_the_server(live, packet):
     server = OscServer(live, 0)
     for reply in server.packet("udp", ("127.0.0.1", 9), packet):
         assert decode_packet(reply).messages[0].address.startswith("/reply")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the system says how many datagrams it dropped on Linux only")
+def test_datagrams_the_system_dropped_are_counted():
+    """A flood faster than choreo reads fills the socket's buffer and the system drops the rest
+    before choreo sees them: `log summary` said fewer commands than were sent (620,000 sent,
+    85% counted). The system's count of drops is read with each datagram and logged as `lost`."""
+    from choreo.clock import VirtualTime
+    from choreo.limits import UNLOGGED, Limits, Rate
+    from choreo.live import Live
+    from choreo.runner import StopRequest
+
+    clock = VirtualTime()
+    plenty = Rate(10**7, 1.0)
+    live = Live(StopRequest(), wait_start=True, now=clock.now, limits=Limits(reported=plenty))
+    heard = Commands()
+    live.listeners.append(heard)
+    server = OscServer(live, 0, now=clock.now, limits=Limits(packets_per_sender=plenty, replies_per_sender=Rate(0, 0.0)))
+    server.bind()  # listening, not reading yet: the buffer fills, the rest is dropped
+    flooder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    flooder.bind(("127.0.0.2", 0))
+    sent = 0
+    try:
+        for _ in range(5000):
+            flooder.sendto(encode_message("/choreo/x"), ("127.0.0.1", server.port))
+            sent += 1
+        server.start()
+        assert wait_for(lambda: server.counts["lost"] == 0 and len(heard.seen()) > 0, TIMEOUT_S)
+        assert wait_for(lambda: _settled(heard), TIMEOUT_S)
+        flooder.sendto(encode_message("/choreo/x"), ("127.0.0.1", server.port))  # it carries the count
+        sent += 1
+        assert wait_for(lambda: server.counts["lost"] > 0, TIMEOUT_S)
+        assert wait_for(lambda: _settled(heard), TIMEOUT_S)
+    finally:
+        flooder.close()
+        server.close()
+    live.close()
+    seen = heard.seen()
+    read = sum(1 for name, *_ in seen if name == "unknown")
+    summed = [event for event in heard.events if event.command.name == UNLOGGED]
+    lost = sum(event.answer.data["counts"].get("lost", 0) for event in summed)
+    assert lost == server.counts["lost"] > 0
+    assert read + lost == sent
+
+
+def _settled(heard: Commands) -> bool:
+    """No command heard for 0.3 s."""
+    before = len(heard.seen())
+    time.sleep(0.3)
+    return len(heard.seen()) == before
