@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from choreo.errors import ChoreoError, UsageError
+from choreo.errors import ChoreoError, UsageError, one_line
 from choreo.probe import BoardInfo
 from choreo.usb import KONDO_USB, NEW_ID_FIX, SYSFS, latency_fix, latency_timer_ms, usb_devices
 
@@ -31,8 +31,9 @@ class Finding:
     fix: str | None = None
 
     def line(self) -> str:
+        """One line, whatever a port's name put in it (a line break too)."""
         mark = {OK: "ok     ", PROBLEM: "PROBLEM", NOTE: "note   "}[self.level]
-        return f"{mark} {self.check}: {self.text}" + (f" -> fix: {self.fix}" if self.fix else "")
+        return one_line(f"{mark} {self.check}: {self.text}" + (f" -> fix: {self.fix}" if self.fix else ""))
 
 
 @dataclass(frozen=True)
@@ -128,7 +129,7 @@ def _board(port: str, probe: Callable[[str], BoardInfo]) -> Finding:
     try:
         info = probe(port)
     except ChoreoError as exc:
-        return Finding(PROBLEM, "board", str(exc).splitlines()[0], f"choreo probe --port {port} says "
+        return Finding(PROBLEM, "board", exc.lines()[0], f"choreo probe --port {port} says "
                        "more; check the cable, the board's power and its baud")
     version = f", version {info.version!r}" if info.version else ""
     return Finding(OK, "board", f"a board answers on {port} at {info.baud} baud{version}")

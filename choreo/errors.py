@@ -17,14 +17,22 @@ def did_you_mean(given: str, known: Iterable[str]) -> str:
     return f": did you mean '{close[0]}'?" if close else ""
 
 
+def one_line(text: str) -> str:
+    """`text` with its line breaks (and every other control or invisible character) escaped."""
+    from choreo.textfit import visible
+
+    return visible(text)
+
+
 class ChoreoError(Exception):
     """Base of every error choreo reports to its user."""
 
     exit_code = 1
 
     def lines(self) -> list[str]:
-        """The message as the one-problem-a-line text the CLI prints."""
-        return [str(self)]
+        """The message as the one-problem-a-line text the CLI prints: one line, whatever a name
+        from outside put in it (a port or file named with a line break, a log's text)."""
+        return [one_line(str(self))]
 
 
 class UsageError(ChoreoError):
@@ -79,7 +87,7 @@ class ShowError(ChoreoError):
         super().__init__("\n".join(str(p) for p in self.problems))
 
     def lines(self) -> list[str]:
-        return [str(p) for p in self.problems]
+        return [one_line(str(p)) for p in self.problems]
 
 
 class LinkError(ChoreoError):

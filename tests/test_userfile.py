@@ -141,6 +141,6 @@ def test_a_name_no_file_can_have_is_one_line(tmp_path):
     show.write_text('version: 1\nmusic: {file: "a\\0b.wav"}\nsteps:\n  - play: 1\n', encoding="utf-8")
     with pytest.raises(ShowError) as info:
         load_show(show)
-    assert f"music.file: a\0b.wav: {says} (" in info.value.lines()[0]
+    assert f"music.file: a\\x00b.wav: {says} (" in info.value.lines()[0]  # printed escaped
     with pytest.raises(InputError, match=r"cannot read the log folder: no file can have this name"):
         listing(tmp_path / "a\0b", "log folder")

@@ -1,0 +1,49 @@
+"""Every failure is one line, whatever a name from outside holds: a port or a file named with a
+line break printed two (found: validate/plan/run of a show named `nl\\nbad.yaml`, probe, doctor,
+run and replay of a port named `a\\nb`)."""
+
+from __future__ import annotations
+
+import pytest
+
+from choreo.cli import main
+from choreo.errors import InputError, LinkError, Problem, ShowError
+
+NAME = "a\nb\r\x1b[2J\u202e"
+
+
+@pytest.mark.parametrize("error", [
+    LinkError(f"port {NAME}: cannot open"),
+    InputError(NAME, "not a regular file"),
+    ShowError([Problem(NAME, 4, 1, "", "YAML syntax error"), Problem("x.yaml", 1, 1, "name", NAME)]),
+])
+def test_an_errors_lines_are_one_line_each_and_escaped(error):
+    for line in error.lines():
+        assert "\n" not in line and "\r" not in line and "\x1b" not in line and "\u202e" not in line
+        assert "\\x0a" in line or "x.yaml" in line
+
+
+def _one_line_exit(capsys, argv: list[str], code: int) -> str:
+    assert main(argv) == code
+    err = capsys.readouterr().err
+    assert len(err.strip("\n").splitlines()) == 1, err
+    return err
+
+
+def test_a_show_file_named_with_a_line_break(tmp_path, capsys):
+    show = tmp_path / "nl\nbad.yaml"
+    show.write_text("version: 1\nsteps:\n  - play: [\n")
+    for command in ("validate", "plan", "run"):
+        assert "nl\\x0abad.yaml:4:1: YAML syntax error" in _one_line_exit(capsys, [command, str(show)], 2)
+
+
+@pytest.mark.parametrize("argv", [["probe", "--port", "a\nb", "--timeout", "0.02"]])
+def test_a_port_named_with_a_line_break(capsys, argv):
+    assert "port a\\x0ab: cannot open" in _one_line_exit(capsys, argv, 3)
+
+
+def test_doctors_findings_are_one_line_each(capsys):
+    assert main(["doctor", "--port", "a\nb"]) == 1
+    out = capsys.readouterr().out
+    assert all(line.startswith(("ok ", "PROBLEM ", "note ")) for line in out.strip("\n").splitlines()), out
+    assert "PROBLEM board: port a\\x0ab: cannot open" in out
