@@ -11,6 +11,9 @@ library, serial, mcap: tens of milliseconds):
   noted and acted on once it has loaded; from then on it interrupts the command (exit 130,
   "interrupted"), until `choreo run` installs its own handlers for the show.
 
+- A traceback (a bug) is printed with control characters escaped, as all output is
+  (`show_crashes_visibly`): the CLI's escaping streams are gone by the time Python prints it.
+
 What remains is the interpreter's own start-up, before this module runs (README, "Stopping").
 """
 
@@ -19,6 +22,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 
 STANDARD_FDS = (0, 1, 2)
 # Ctrl-C, `kill`, and a closed terminal or SSH session: the same stop.
@@ -28,6 +32,7 @@ STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SI
 def main() -> int:
     """Make the process safe, then hand over to the CLI."""
     reopen_closed_standard_fds()
+    show_crashes_visibly()
     signals = SignalGuard()
     signals.install()
     from choreo.cli import main as cli_main  # a signal now is noted, and acted on in cli_main
@@ -50,6 +55,28 @@ def reopen_closed_standard_fds() -> None:
             mode = "r" if fd == 0 else "w"
             setattr(sys, name, open(fd, mode, buffering=1 if fd else -1, closefd=False,
                                     errors="backslashreplace"))
+
+
+def show_crashes_visibly() -> None:
+    """A traceback (a bug: every error choreo knows is one line) is printed with its control
+    characters escaped like every other output: an exception's message may hold outside text
+    (a file name, an OSC address), and the CLI's visible streams are gone by the time Python
+    prints it. A thread's too."""
+    sys.excepthook = _print_visibly
+    threading.excepthook = lambda hook: _print_visibly(hook.exc_type, hook.exc_value, hook.exc_traceback,
+                                                       hook.thread)
+
+
+def _print_visibly(kind, value, trace, thread=None) -> None:  # type: ignore[no-untyped-def]
+    import traceback
+
+    from choreo.textfit import visible
+
+    if sys.stderr is None or kind is SystemExit:
+        return
+    where = f"Exception in thread {thread.name}:\n" if thread is not None else ""
+    sys.stderr.write(visible(where + "".join(traceback.format_exception(kind, value, trace)), keep="\n"))
+    sys.stderr.flush()
 
 
 class SignalGuard:

@@ -417,3 +417,17 @@ def test_ctrl_backslash_stops_a_show_as_ctrl_c_does(tmp_path) -> None:
     assert code == 130, err
     assert b"show stopped (SIGQUIT)" in err and b"Traceback" not in err
     assert read_log(log).topic("/choreo/step")  # the log was closed: it reads
+
+
+def test_a_traceback_shows_outside_text_escaped_too() -> None:
+    """A crash prints after the CLI's visible streams are gone: its message may hold a file name."""
+    code = ("import threading, choreo.__main__ as entry\n"
+            "entry.show_crashes_visibly()\n"
+            "def crash():\n    raise OSError(f'cannot read {chr(27)}]0;pwned{chr(7)}{chr(0x202e)}')\n"
+            "thread = threading.Thread(target=crash, name=f'thread{chr(27)}[2J')\n"
+            "thread.start(); thread.join(); crash()\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=60)
+    assert done.returncode == 1
+    assert_safe(done.stderr)
+    assert done.stderr.count("OSError: cannot read \\x1b]0;pwned\\x07\\u202e") == 2
+    assert "Exception in thread thread\\x1b[2J" in done.stderr
