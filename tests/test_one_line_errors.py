@@ -47,3 +47,23 @@ def test_doctors_findings_are_one_line_each(capsys):
     out = capsys.readouterr().out
     assert all(line.startswith(("ok ", "PROBLEM ", "note ")) for line in out.strip("\n").splitlines()), out
     assert "PROBLEM board: port a\\x0ab: cannot open" in out
+
+
+def test_outputs_that_name_a_file_with_a_line_break_keep_to_one_line(tmp_path, capsys, monkeypatch):
+    """validate's ok line, import's summary line, log latest (found printing the break raw)."""
+    from test_import import JAPANESE, project_xml
+
+    monkeypatch.chdir(tmp_path)
+    show = tmp_path / "nl\nx.yaml"
+    show.write_text("version: 1\nsteps:\n  - play: 1\n  - wait: done\n")
+    project = tmp_path / "robot.h4p"
+    project.write_bytes(project_xml(JAPANESE))
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "nl\nrun.mcap").write_bytes(b"x")
+    for argv, expected in ([["validate", str(show)], "nl\\x0ax.yaml: ok"],
+                           [["import", str(project), "-o", "nl\nout.yaml"], "nl\\x0aout.yaml: 6 motions"],
+                           [["log", "latest", str(logs)], "nl\\x0arun.mcap"]):
+        assert main(argv) == 0
+        out = capsys.readouterr().out
+        assert len(out.strip("\n").splitlines()) == 1 and expected in out, out

@@ -54,8 +54,10 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(json_record(song.path, found), ensure_ascii=False))
         return 0
+    from choreo.errors import one_line
+
     for line in text_lines(song.path, found, with_beats=args.beats):
-        print(line)
+        print(one_line(line))  # a song named with a line break must not add a line to the YAML
     return 0
 
 

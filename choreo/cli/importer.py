@@ -38,6 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run_import(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from choreo.errors import one_line
     from choreo.hth4 import read_project
     from choreo.show.starter import schema_reference, starter_show
 
@@ -48,7 +49,8 @@ def run_import(args: argparse.Namespace) -> int:
     output = Path(args.output)
     _write_new(output, starter_show(project, schema_reference(output)))
     count = len(project.motions)
-    print(f"{output}: {count} motion{'s' if count != 1 else ''}, layout {project.layout}: check it with `choreo plan {output}`")
+    print(one_line(f"{output}: {count} motion{'s' if count != 1 else ''}, layout {project.layout}: "
+                   f"check it with `choreo plan {output}`"))
     return 0
 
 

@@ -156,7 +156,7 @@ def run_summary(args: argparse.Namespace) -> int:
 def run_latest(args: argparse.Namespace) -> int:
     if not os.path.lexists(args.dir):  # the usual case on a new machine: say where logs go
         raise UsageError(f"{visible(args.dir)}: no such folder (`choreo run` writes its logs to runs/)")
-    print(_folder_logs(Path(args.dir))[-1])
+    print(visible(str(_folder_logs(Path(args.dir))[-1])))  # one line, even for a name with a line break
     return 0
 
 

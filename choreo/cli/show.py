@@ -39,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_validate(args: argparse.Namespace) -> int:
     from choreo.cli.jsonout import problem_record
-    from choreo.errors import ShowError
+    from choreo.errors import ShowError, one_line
     from choreo.show.load import load_show
     from choreo.show.plan import compile_plans
 
@@ -57,7 +57,7 @@ def run_validate(args: argparse.Namespace) -> int:
             record = _show_record(show, *plans.values()) if not show.ensemble else _plans_record(show, plans)
             files.append({"path": path, "ok": True, **record})
         else:
-            print(summary_line(show, plans), flush=True)
+            print(one_line(summary_line(show, plans)), flush=True)  # a file named with a line break
     if args.json:  # its files' record says the problems; stderr as without --json
         print(json.dumps({"ok": not problems, "exit": 2 if problems else 0, "files": files}, ensure_ascii=False))
         for line in ShowError(problems).lines():
