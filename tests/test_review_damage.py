@@ -266,3 +266,32 @@ def test_a_metadata_number_that_is_no_number_is_not_a_traceback(run_log, tmp_pat
     for command, code, err in review_all(hostile, capsys):
         assert code == 0, (command, err)
     assert main(["replay", str(hostile), "--speed", "100", "--log", str(tmp_path / "replay.mcap"), "-q"]) == 0
+
+
+def _record_ends(data: bytes) -> list[int]:
+    """Where each top-level chunk or message record ends (the data section: what a run writes)."""
+    ends, pos = [], len(MAGIC)
+    while pos + 9 <= len(data):
+        opcode, length = struct.unpack_from("<BQ", data, pos)
+        pos += 9 + length
+        if opcode in (0x05, 0x06):
+            ends.append(pos)
+    return ends
+
+
+@pytest.mark.parametrize("into_the_next_head", [0, 1, 5, 7, 8])
+def test_a_log_that_grows_while_it_is_read_is_read_as_it_was_when_opened(run_log, tmp_path, into_the_next_head):
+    """A run still writing its log: `log timeline` of it said 'message N is not a choreo message
+    (read length must be non-negative or -1)' (a record head past the size it was opened with)."""
+    data = run_log.read_bytes()
+    growing = tmp_path / "growing.mcap"
+    ends = _record_ends(data)
+    cut = ends[0] + into_the_next_head
+    growing.write_bytes(data[:cut])
+    with LogReader(growing) as reader:
+        with open(growing, "ab") as writer:  # the run writes on after the review opened the log
+            writer.write(data[cut:])
+        messages = list(reader.messages())
+        assert reader.cut is not None and reader.cut.size == cut
+    with LogReader(run_log) as whole:
+        assert len(messages) <= len(list(whole.messages()))

@@ -337,7 +337,9 @@ class LogReader:
         try:
             while True:
                 start = f.tell()
-                head = read(head_size)
+                # The log as it was when opened: a run still writing it makes it longer meanwhile
+                # (a record past `size` would be read as a negative rest: a ValueError).
+                head = read(min(head_size, max(size - start, 0)))
                 if len(head) < head_size:
                     self._ended(start, head)
                     return
