@@ -745,3 +745,24 @@ def test_a_sequence_of_any_length_is_read_to_its_end(sequence: bytes) -> None:
     assert parser.feed(b" q") == ["go", "q"]
     bytewise = KeyParser()
     assert [k for byte in sequence + b" " for k in bytewise.feed(bytes([byte]))] == ["go"]
+
+
+# A terminal sending 8-bit controls (VT220 and up, xterm after S8C1T): raw, or as UTF-8 (C2 9B).
+EIGHT_BIT = [b"\x9bA", b"\x9b1;5C", b"\x8fP", b"\x9b200~go q y \r\x9b201~", b"\x9bM !!", b"\x9bM  q",
+             b"\x9d11;rgb:0000/0000/0000 q y\x9c", b"\x90q y $r0m\x9c", b"\x9f q y \x07",
+             b"\xc2\x9bA", b"\xc2\x9b200~ q y \xc2\x9b201~", b"\xc2\x9d0;\xe3\x80\x9c q y\xc2\x9c", b"\xc2\x9bM q "]
+
+
+@pytest.mark.parametrize("sequence", EIGHT_BIT, ids=lambda b: b.hex(" "))
+def test_a_sequence_begun_by_an_8_bit_control_is_no_key(sequence: bytes) -> None:
+    parser = KeyParser()
+    assert parser.feed(sequence) + parser.timeout() == []
+    bytewise = KeyParser()
+    assert [k for byte in sequence for k in bytewise.feed(bytes([byte]))] + bytewise.timeout() == []
+    assert parser.feed(b" q") == ["go", "q"]
+
+
+def test_utf8_text_typed_is_no_key_and_no_sequence() -> None:
+    parser = KeyParser()  # 〛 and 〜 end in 9B and 9C: continuation bytes, not 8-bit controls
+    assert parser.feed("〛 q 〜 ロボ\u009c ".encode()) == ["go", "q", "go", "go", "go"]
+    assert not parser.pending

@@ -296,7 +296,13 @@ def _in_foreground(fd: int) -> bool:
 KEYS = {ord(" "): "go", ord("\r"): "go", ord("\n"): "go", ord("q"): "q", ord("Q"): "q"}
 ESC = 0x1B
 LONGEST_SEQUENCE = 256  # bytes of a sequence kept: past this, its start and its last bytes (it reads on to its end)
-PASTE_START, PASTE_END = b"[200~", b"\x1b[201~"  # bracketed paste: the text between is not keys
+PASTE_START = b"[200~"  # bracketed paste: the text between is not keys, up to an end marker
+PASTE_ENDS = (b"\x1b[201~", b"\x9b201~", b"\xc2\x9b201~")  # 7-bit, 8-bit, 8-bit as UTF-8
+# A terminal set to send 8-bit controls (VT220 and up, xterm after S8C1T) starts a sequence with
+# one byte (or its UTF-8 form, U+0080-U+009F): CSI, SS3, DCS, SOS, OSC, PM, APC, as ESC and this.
+EIGHT_BIT = {0x9B: ord("["), 0x8F: ord("O"), 0x90: ord("P"), 0x98: ord("X"), 0x9D: ord("]"), 0x9E: ord("^"),
+             0x9F: ord("_")}
+EIGHT_BIT_ST = 0x9C  # ends a string an 8-bit control began
 PASTE_ON, PASTE_OFF = "\x1b[?2004h", "\x1b[?2004l"  # ask the terminal to bracket what is pasted
 
 
@@ -312,14 +318,17 @@ class KeyParser:
     Esc, and a third Esc right after makes that pair one. A paste is text up to its end marker
     (`ESC [201~`), whatever it holds (Esc, half sequences, spaces, q and y), skipped whole and
     fast (a megabyte costs the show nothing). A pause (`timeout`) also ends any sequence or
-    paste cut short, so the next key is read afresh whatever came before; non-ASCII bytes and
-    control bytes other than Enter are not keys."""
+    paste cut short, so the next key is read afresh whatever came before; UTF-8 characters and
+    control bytes other than Enter are not keys, and an 8-bit control (`EIGHT_BIT`) begins a
+    sequence as its ESC form does."""
 
     def __init__(self) -> None:
         self._sequence = bytearray()  # the escape sequence read so far, after its ESC
         self._in_escape = False
+        self._eight_bit = 0  # the sequence began with an 8-bit control: 1 raw (0x9C ends it), 2 UTF-8 (C2 9C)
         self._pasting = False
         self._paste_tail = b""  # a paste's last bytes: its end marker may be split across reads
+        self._utf8 = (0, 0)  # a UTF-8 character under way: its first byte, continuation bytes to come
 
     @property
     def pending(self) -> bool:
@@ -348,31 +357,36 @@ class KeyParser:
     def timeout(self) -> list[str]:
         """Nothing more came: a bare Esc (or Esc twice) is Esc; any other sequence is over,
         and so is a paste cut short."""
-        bare = self._in_escape and bytes(self._sequence) in (b"", b"\x1b")
+        bare = self._in_escape and not self._eight_bit and bytes(self._sequence) in (b"", b"\x1b")
         self._sequence.clear()
         self._in_escape = self._pasting = False
+        self._eight_bit = 0
         self._paste_tail = b""
+        self._utf8 = (0, 0)
         return ["escape"] if bare else []
 
     def _skip_paste(self, data: bytes, at: int) -> int:
         """Where keys start again in `data` after the paste's end marker (its end if none)."""
         tail = self._paste_tail
         seen = tail + data[at:]
-        end = seen.find(PASTE_END)
-        if end < 0:
-            self._paste_tail = seen[-(len(PASTE_END) - 1):]
+        found = [(end, len(marker)) for marker in PASTE_ENDS if (end := seen.find(marker)) >= 0]
+        if not found:
+            self._paste_tail = seen[-(max(map(len, PASTE_ENDS)) - 1):]
             return len(data)
+        end, length = min(found)
         self._pasting = False
         self._paste_tail = b""
-        return at + end + len(PASTE_END) - len(tail)
+        return at + end + length - len(tail)
 
     def _byte(self, byte: int) -> str | None:
         if not self._in_escape:
             if byte == ESC:
                 self._in_escape = True
                 return None
-            if self._pasting or byte >= 0x80:
+            if byte >= 0x80:
+                self._high(byte)
                 return None
+            self._utf8 = (0, 0)  # an ASCII byte ends a UTF-8 character cut short
             return KEYS.get(byte, chr(byte) if 0x20 < byte < 0x7F else None)
         if byte == ESC and self._sequence == b"\x1b" and not self._pasting:
             self._sequence.clear()  # ESC ESC ESC: Esc twice, and a new sequence starts
@@ -384,11 +398,40 @@ class KeyParser:
             head = len(self._sequence) - len(self._sequence.lstrip(b"\x1b")) + 1
             del self._sequence[head:-2]
         sequence = bytes(self._sequence)
-        if _complete(sequence):
+        if _complete(sequence) or self._eight_bit_end(sequence):
             self._sequence.clear()
             self._in_escape = False
+            self._eight_bit = 0
             self._ended(sequence)
         return None
+
+    def _eight_bit_end(self, sequence: bytes) -> bool:
+        """A string an 8-bit control began ends with 8-bit ST, in the same form (a raw 0x9C
+        inside UTF-8 text is a continuation byte, not an end)."""
+        if not self._eight_bit or sequence[-1] != EIGHT_BIT_ST or not _is_string(sequence):
+            return False
+        return self._eight_bit == 1 or sequence[-2:-1] == b"\xc2"
+
+    def _high(self, byte: int) -> None:
+        """A byte past ASCII outside a sequence: part of a UTF-8 character (no key), or an
+        8-bit control, raw or as UTF-8 (`C2 9B`), which begins a sequence."""
+        lead, left = self._utf8
+        if left and 0x80 <= byte <= 0xBF:
+            self._utf8 = (lead, left - 1)
+            if lead == 0xC2 and byte in EIGHT_BIT:  # U+0080-U+009F: a C1 control
+                self._begin_eight_bit(byte, 2)
+            return
+        if 0xC2 <= byte <= 0xF4:
+            self._utf8 = (byte, 1 if byte < 0xE0 else 2 if byte < 0xF0 else 3)
+            return
+        self._utf8 = (0, 0)
+        if byte in EIGHT_BIT:
+            self._begin_eight_bit(byte, 1)
+
+    def _begin_eight_bit(self, byte: int, form: int) -> None:
+        self._in_escape = True
+        self._eight_bit = form
+        self._sequence[:] = bytes([EIGHT_BIT[byte]])
 
     def _ended(self, sequence: bytes) -> None:
         if sequence == PASTE_START:
