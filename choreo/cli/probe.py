@@ -14,7 +14,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Send the ACK check at 115200, 625000 and 1250000 baud (even parity) until the "
         "board answers, then read its version text, config word (decoded) and program counter, and "
         "say what they suggest about its memory layout (a hint, never a fact). It never writes RAM "
-        "and never sends a CALL: the robot does not move. Exit 3 if nothing answers, or something answers the ACK check but none of the questions after it (a line that echoes what is sent).",
+        "and never sends a CALL: the robot does not move. Exit 3 if nothing answers, or something "
+        "answers the ACK check but none of the questions after it (a line that echoes what is sent).",
     )
     parser.add_argument("--port", help="pyserial URL or device (default: Kondo's USB adapter when "
                         "exactly one is plugged in); sim:// probes the built-in simulator")
