@@ -765,4 +765,5 @@ def test_a_sequence_begun_by_an_8_bit_control_is_no_key(sequence: bytes) -> None
 def test_utf8_text_typed_is_no_key_and_no_sequence() -> None:
     parser = KeyParser()  # 〛 and 〜 end in 9B and 9C: continuation bytes, not 8-bit controls
     assert parser.feed("〛 q 〜 ロボ\u009c ".encode()) == ["go", "q", "go", "go", "go"]
+    assert parser.feed("\x1b〛 q".encode()) == ["go", "q"]  # Alt+〛, then keys
     assert not parser.pending

@@ -436,6 +436,8 @@ class KeyParser:
     def _ended(self, sequence: bytes) -> None:
         if sequence == PASTE_START:
             self._pasting = True
+        elif len(sequence) == 1 and sequence[0] >= 0x80:
+            self._high(sequence[0])  # Alt and a non-ASCII key: the rest of its UTF-8 follows
         elif len(sequence) > 1 and sequence[-1] == ESC and not _is_string(sequence):
             self._in_escape = True  # a sequence broken off by an Esc: that Esc starts the next
 
