@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from typing import Any, ParamSpec, TextIO, TypeVar
 
+from choreo.numtext import whole_number
 from choreo.textfit import fit, visible
 
 P = ParamSpec("P")
@@ -33,8 +34,8 @@ def columns(stream: TextIO | None = None) -> int | None:
             return width
     except (OSError, ValueError, AttributeError):
         pass
-    given = os.environ.get("COLUMNS", "")
-    return int(given) if given.isdigit() and int(given) > 0 else None
+    given = whole_number(os.environ.get("COLUMNS", ""), max_digits=6)  # `²` or 5,000 digits: no width
+    return given if given else None
 
 
 class VisibleStream:
