@@ -542,7 +542,11 @@ class Console:
         self._reader: KeyReader | None = None
         self._redraw: threading.Thread | None = None
         self._width = width  # fixed (tests); None: the terminal's, measured at each redraw
-        self._screen = RichConsole(file=out, width=width, highlight=False, emoji=False, markup=False)
+        # rich would read COLUMNS and LINES with int() (`²` or 5,000 digits: ValueError); the
+        # console measures the terminal itself, so rich is given an environment without them
+        environ = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+        self._screen = RichConsole(file=out, width=width, highlight=False, emoji=False, markup=False,
+                                   _environ=environ)
         self._rich = RichLive(console=self._screen, auto_refresh=False, transient=False,
                               redirect_stdout=False, redirect_stderr=out is sys.__stderr__)
         self._drawn: tuple[Screen, int] | None = None  # what is on the terminal, at which width
