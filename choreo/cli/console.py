@@ -262,9 +262,11 @@ class TerminalMode:
         disabled = bytes([_vdisable(self.fd)])
         for key in _TAKEN_KEYS:
             mode[6][key] = disabled
+        termios.tcsetattr(self.fd, termios.TCSANOW, mode)
         # keys typed while choreo loaded were meant for no console (a Space then would start a
-        # show run with --wait-start as soon as the keys are read): dropped, as at the end
-        termios.tcsetattr(self.fd, termios.TCSAFLUSH, mode)
+        # show run with --wait-start as soon as the keys are read): dropped, as at the end (not
+        # by TCSAFLUSH, which would first wait for an output stopped with Ctrl-S)
+        termios.tcflush(self.fd, termios.TCIFLUSH)
         self._saved = saved
 
     def restore(self) -> None:
