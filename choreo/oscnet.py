@@ -19,6 +19,8 @@ memory, descriptors and time, and the operator's GO still gets through:
 - A TCP sender over its rate of packets (the handler's `rest_s`) is not read for a while: its
   bytes wait in the network, TCP's own flow control holds the sender, and a flood over TCP
   costs nothing while it rests (read, its frames would cost more than any other peer's turn).
+  So does a connection whose read was mostly bytes that frame nothing (a stream of SLIP ENDs
+  or zero lengths, which spend no packet: 8 of them cost 60% of a core).
 - A reply never blocks the thread: what a peer does not read is queued up to `max_unsent`
   bytes, then the connection is closed; a UDP reply that cannot go at once is dropped.
 - Any datagram up to 64 KB is read whole (a smaller buffer would cut it without a word).
@@ -50,6 +52,7 @@ ACCEPT_BATCH = 4  # connections accepted a turn: a peer accepted is read before 
 UDP_BATCH = 64  # datagrams read a wake-up, then TCP peers get their turn
 LISTEN_BACKLOG = 128  # connections the OS holds until accepted (accepting is quick)
 RECV_BYTES = 16384  # read at once from a TCP peer
+FILLER_REST = (RECV_BYTES // 2, 0.1)  # bytes framing nothing in one read, and the rest they cost (s)
 UDP_BUFFER = 65536  # larger than any UDP payload: a datagram is never cut
 OUT_OF_DESCRIPTORS = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
 # Linux's SO_RXQ_OVFL (not in Python's socket module): each datagram then carries how many the
@@ -428,6 +431,10 @@ class OscNet:
             self._drop(connection, f"closed: {fed.fatal}")
             return
         rest = self.handler.rest_s(connection.sender) if fed.packets else 0.0
+        if fed.filler >= FILLER_REST[0]:
+            rest = max(rest, FILLER_REST[1])
+            self.handler.dropped("tcp", connection.sender, f"{fed.filler} bytes that frame nothing: not read for "
+                                                           f"{FILLER_REST[1]:g} s")
         if rest > 0:
             connection.resting_until = self._now() + rest
         if connection.unsent:

@@ -226,6 +226,7 @@ class Fed:
     packets: list[bytes] = field(default_factory=list)
     bad: list[str] = field(default_factory=list)
     fatal: str | None = None
+    filler: int = 0  # bytes that framed nothing (ENDs past the two around a frame, zero lengths)
 
 
 class FrameReader:
@@ -260,7 +261,9 @@ class FrameReader:
         fed = Fed()
         last = self._buffer.rfind(END, self._scanned)
         if last >= 0:
-            for frame in _SLIP_FRAMES.findall(self._buffer, 0, last):  # ENDs in a row frame nothing
+            frames = _SLIP_FRAMES.findall(self._buffer, 0, last)  # ENDs in a row frame nothing
+            fed.filler = max(0, last + 1 - sum(map(len, frames)) - 2 * len(frames))
+            for frame in frames:
                 packet = slip_decode(bytes(frame))
                 if packet is None:
                     fed.bad.append("a SLIP frame with a bad escape")
@@ -281,7 +284,9 @@ class FrameReader:
                 break
             if size == 0:  # empty packets: nothing to do, however many
                 zeros = _ZEROS.match(self._buffer, start)
-                start += (zeros.end() - start) // 4 * 4 if zeros else 4
+                empty = (zeros.end() - start) // 4 * 4 if zeros else 4
+                fed.filler += empty
+                start += empty
                 continue
             if len(self._buffer) - start < 4 + size:
                 break

@@ -426,3 +426,23 @@ def _settled(heard: Commands) -> bool:
     before = len(heard.seen())
     time.sleep(0.3)
     return len(heard.seen()) == before
+
+
+def test_a_stream_of_bytes_that_frame_nothing_rests_its_connection(live, server):
+    """SLIP ENDs (or zero lengths) frame nothing and spend no packet: eight connections sending
+    them as fast as TCP took them cost 60% of a core and held a GO from another address 87
+    ms. A read that is mostly such bytes rests its connection (TCP holds the rest meanwhile):
+    256 KB of ENDs, then a GO, is not all read at once, and another peer's GO is."""
+    filler = socket.create_connection(("127.0.0.1", server.port), timeout=TIMEOUT_S)
+    try:
+        filler.sendall(b"\xc0" * 262_144 + slip_encode(encode_message("/choreo/start")))
+        time.sleep(0.2)
+        with send("tcp", server.port, encode_message("/choreo/stop")) as other:
+            address, answer = tcp_reply(other)
+        assert address == "/reply/choreo/stop" and answer["status"] == "ok"
+        filler.settimeout(0.3)
+        with pytest.raises(socket.timeout):  # its own message waits behind its filler
+            filler.recv(4096)
+    finally:
+        filler.close()
+    assert server.counts["dropped"] >= 1  # each rest is told (within the log's limit) and counted
