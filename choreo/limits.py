@@ -82,13 +82,13 @@ class Budget:
     def of(cls, rate: Rate, now: Callable[[], float] = time.monotonic) -> Budget:
         return cls(rate.burst, rate.per_s, now)
 
-    def take(self) -> int | None:
+    def take(self, tokens: int = 1) -> int | None:
         with self._lock:
             self._refill()
-            if self._tokens < 1.0:
+            if self._tokens < tokens:
                 self._skipped += 1
                 return None
-            self._tokens -= 1.0
+            self._tokens -= tokens
             skipped, self._skipped = self._skipped, 0
             return skipped
 
@@ -128,8 +128,8 @@ class Budgets:
         self._lock = threading.Lock()
         self._swept_at: float | None = None  # when idle buckets were last looked for
 
-    def take(self, key: Hashable) -> bool:
-        return self._budget(key).take() is not None
+    def take(self, key: Hashable, tokens: int = 1) -> bool:
+        return self._budget(key).take(tokens) is not None
 
     def empty_for_s(self, key: Hashable) -> float:
         return self._budget(key).empty_for_s()
@@ -173,11 +173,14 @@ class SenderLimits:
         self._replies = Budgets(limits.replies_per_sender, limits.senders_tracked, now)
         self._refusals = Budget.of(limits.refusals, now)
 
-    def may_read(self, host: str, allowed: bool) -> bool:
-        """May a packet from `host` be read now? Senders not allowed share one budget (their
-        packets are refused, never read; their addresses are the easiest to forge, and many of
-        them must not take the table's places from the allowed ones)."""
-        return self._packets.take(host) if allowed else self._refused_packets.take() is not None
+    def may_read(self, host: str, allowed: bool, tokens: int = 1) -> bool:
+        """May a packet from `host` be read now (`tokens`: what reading it costs, a big one
+        more)? Senders not allowed share one budget (their packets are refused, never read;
+        their addresses are the easiest to forge, and many of them must not take the table's
+        places from the allowed ones)."""
+        if not allowed:
+            return self._refused_packets.take(tokens) is not None
+        return self._packets.take(host, tokens)
 
     def rest_s(self, host: str) -> float:
         """How long an allowed TCP sender that has spent its packets' budget is not read (TCP

@@ -247,7 +247,8 @@ class OscServer:
         not read, at the least cost (a flood that costs choreo more than its sender outruns the
         socket, which then drops the operator's GO too). A malformed packet is refused whole."""
         host, allowed = self._verdict(sender[0])
-        if not self._limits.may_read(budget_key(transport, host), allowed):
+        cost = 1 + (len(data) - 1) // self.wire_limits.packet_bytes_per_token if data else 1  # reading is by the byte
+        if not self._limits.may_read(budget_key(transport, host), allowed, cost):
             self.counts[UNREAD] += 1
             self.live.count(UNREAD if allowed else "refused", f"osc {transport} {host}")
             return []

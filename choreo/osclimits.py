@@ -21,6 +21,8 @@ class OscLimits:
     # one packet: bundles nested at most this deep, and this many elements (messages and bundles)
     max_bundle_depth: int = 8
     max_bundle_elements: int = 256
+    max_arguments: int = 256  # in one packet, all its messages' together
+    packet_bytes_per_token: int = 4096  # a packet spends a token of its sender's packets per 4 KB begun
     # TCP connections: open at once, from one sender's address, and the bytes queued to a peer
     # that does not read its replies (then it is closed)
     max_connections: int = 32

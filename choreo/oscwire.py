@@ -5,7 +5,7 @@ OSC 1.0, as liblo sends: Pure Data, SuperCollider, Max). Pure: bytes in, values 
 Why not python-osc's parser: a bundle element whose size is 0 or negative sends it into an
 endless loop, it executes a message whose type tags it cannot read, and it logs through the root
 logger (setting up logging for the whole process). Here every size is checked against what
-remains before it is used, nesting and element counts are bounded (`OscLimits`), so the work a
+remains before it is used, nesting, element and argument counts are bounded (`OscLimits`), so the work a
 packet costs is linear in its length; any fault makes the whole packet malformed, with the
 reason, and nothing is executed from it.
 """
@@ -66,7 +66,7 @@ def decode_packet(packet: bytes, limits: OscLimits = LIMITS) -> Decoded:
         return Decoded(error=f"a packet of {len(packet)} bytes (the limit is {limits.max_message})")
     messages: list[Message] = []
     try:
-        _element(bytes(packet), 0, len(packet), 0, messages, [0], limits)
+        _element(bytes(packet), 0, len(packet), 0, messages, [0, 0], limits)  # elements, arguments
     except _Malformed as bad:
         return Decoded(error=bad.why, address=bad.address)
     return Decoded(tuple(messages))
@@ -82,7 +82,7 @@ def _element(data: bytes, start: int, end: int, depth: int, out: list[Message], 
     if data[start:start + len(BUNDLE)] == BUNDLE:
         _bundle(data, start, end, depth + 1, out, count, limits)
     else:
-        out.append(_message(data, start, end))
+        out.append(_message(data, start, end, count, limits))
 
 
 def _bundle(data: bytes, start: int, end: int, depth: int, out: list[Message], count: list[int],
@@ -105,7 +105,9 @@ def _bundle(data: bytes, start: int, end: int, depth: int, out: list[Message], c
         at += size
 
 
-def _message(data: bytes, start: int, end: int) -> Message:
+def _message(data: bytes, start: int, end: int, count: list[int], limits: OscLimits) -> Message:
+    """`count[1]`: the packet's arguments so far, bounded before any is read (a 64 KB packet of
+    13,000 arguments took 10 ms to read; no command takes more than one)."""
     reader = _Reader(data, start, end)
     address = reader.string("address")
     if not address.startswith("/"):
@@ -116,6 +118,9 @@ def _message(data: bytes, start: int, end: int) -> Message:
         tags = reader.string("type tags")
         if not tags.startswith(","):
             raise _Malformed("type tags that do not start with ','")
+        count[1] += len(tags) - 1
+        if count[1] > limits.max_arguments:
+            raise _Malformed(f"more than {limits.max_arguments} arguments in one packet")
         args = tuple(reader.arg(tag) for tag in tags[1:])
         if reader.at != end:
             raise _Malformed(f"{end - reader.at} bytes after the arguments")

@@ -668,3 +668,19 @@ def test_a_bundles_messages_are_read_within_the_senders_budget_of_packets(clock)
     burst = LIMITS.packets_per_sender.burst
     assert heard.names().count("unknown") == burst
     assert server.counts["unread"] == 2 * 200 - burst + 1  # the second bundle's rest, and the third whole
+
+
+def test_a_big_packet_spends_more_of_its_senders_budget(clock, monkeypatch):
+    """Reading is by the byte: 256 packets of 60 KB at once held the thread that reads the
+    operator's GO for seconds. A packet spends a token per 4 KB begun."""
+    from choreo.osclimits import LIMITS as WIRE
+
+    decodes = _decodes(monkeypatch)
+    live = Live(StopRequest(), wait_start=True, now=clock.now)
+    server = OscServer(live, 0, now=clock.now)
+    big = message("/x" + "x" * 60_000)
+    cost = 1 + (len(big) - 1) // WIRE.packet_bytes_per_token
+    for _ in range(100):
+        server.packet("udp", ("127.0.0.2", 9), big)
+    assert decodes[0] == LIMITS.packets_per_sender.burst // cost
+    assert server.counts["unread"] == 100 - decodes[0]

@@ -372,3 +372,16 @@ def test_bytes_that_frame_nothing_cost_no_step_each(filler):
         return steps
 
     assert work(400_000) <= work(4_000) + 5
+
+
+def test_a_packets_arguments_are_bounded_before_they_are_read():
+    """A 64 KB packet of 13,000 arguments took 10 ms to read (no command takes more than one);
+    a packet has at most `max_arguments`, all its messages' together, counted from the type
+    tags before any argument is read."""
+    most = LIMITS.max_arguments
+    assert decode_packet(encode_message("/x", [True] * most)).error is None
+    assert decode_packet(encode_message("/x", [True] * (most + 1))).error == f"more than {most} arguments in one packet"
+    spread = encode_bundle([encode_message("/x", [1] * (most // 4))] * 4 + [encode_message("/y", [1])])
+    assert decode_packet(spread).error == f"more than {most} arguments in one packet"
+    tags_only = b"/x\x00\x00" + encode_message("", [None] * 60_000)[4:]  # 60,000 tags and no data
+    assert _steps(lambda: decode_packet(tags_only)) < 100
