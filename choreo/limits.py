@@ -13,9 +13,11 @@ whose address may be forged. So:
   messages count one by one; an address choreo does not know is no command and spends none);
   the rest are not carried out;
 - each allowed sender's packets are read within `packets_per_sender` (a datagram, a TCP frame;
-  each message of a bundle after its first spends one more), and all refused senders' within one such budget: past it a packet is counted, not read, at the least cost there is, so that a flood
-  costs choreo less than it costs the sender and the operator's GO, from another address, is
-  still read in time (a flood the socket cannot keep up with would drop it);
+  one more token per 4 KB past its first, and for each message of a bundle after its first),
+  over TCP apart from UDP, and all refused senders' within one such budget: past it a packet is
+  counted, not read, at the least cost there is, so that a flood costs choreo less than it costs
+  the sender and the operator's GO, from another address, is still read in time (a flood the
+  socket cannot keep up with would drop it); a TCP sender past it rests unread;
 - each sender gets at most `replies_per_sender` replies, and the senders refused (not allowed)
   `refusals` replies between them (their addresses are the easiest to forge);
 - a command that is taken (`ok`) is always logged and shown; refused and ignored ones are, one
