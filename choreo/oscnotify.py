@@ -19,6 +19,7 @@ from typing import Any
 
 from choreo.errors import UsageError
 from choreo.limits import LIMITS
+from choreo.numtext import whole_number
 from choreo.oscwire import encode_message
 
 QUEUED = 1000  # notifications waiting to be sent; past this they are dropped
@@ -27,14 +28,11 @@ Target = tuple[str, int]
 
 
 def port_number(text: str, lowest: int = 1) -> int | None:
-    """A port number as typed: ASCII digits only, `lowest`..65535, else None. (`int` also takes
-    ' 5', '+5', '1_000' and '٥', the Arabic-Indic 5; `str.isdigit` passes '²', which `int`
-    refuses with an exception; and a number of thousands of digits is an exception too.)"""
-    digits = text.lstrip("0") or ("0" if text else "")
-    if not digits or len(digits) > 5 or not digits.isascii() or not digits.isdigit():
-        return None
-    port = int(digits)
-    return port if lowest <= port <= 65535 else None
+    """A port number as typed: ASCII digits (`choreo.numtext`: `int` would also take '+5', '1_000'
+    and the Arabic-Indic '٥'), no blank around them (' 5' is a slip, not a port), `lowest`..65535;
+    else None."""
+    number = whole_number(text) if text == text.strip() else None
+    return number if number is not None and lowest <= number <= 65535 else None
 
 
 def parse_target(text: str, option: str = "--osc-notify") -> Target:
