@@ -23,7 +23,7 @@ from common import ShowRun, median, percentile, pty_sim, row, run_show, temp_dir
 
 GOAL_P99_MS = 1.0
 FULL = (3, 100)  # runs, cues a run
-QUICK = (1, 50)
+QUICK = (1, 40)
 
 
 def cue_times(count: int, seed: int = 6) -> list[float]:

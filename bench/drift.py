@@ -17,7 +17,7 @@ from common import median, pty_sim, row, run_show, temp_dir, write_show
 
 GOAL_MS = 1.0
 STEPS = 200
-QUICK_STEPS = 60  # --quick: 6 s of the show
+QUICK_STEPS = 40  # --quick: 4 s of the show
 FULL_RUNS = 3
 QUICK_RUNS = 1
 WAIT_S = 0.1

@@ -21,7 +21,7 @@ from choreo.session import RunRequest, Session
 GOAL_P99_MS = 1.0
 BAUDS = (115200, 625000, 1250000)
 TIMERS = (0, 1, 16)
-FULL, QUICK = 30, 10  # cued plays a run
+FULL, QUICK = 30, 8  # cued plays a run
 
 
 def cued_show(plays: int, baud: int) -> str:

@@ -25,7 +25,7 @@ from choreo.review.reader import LogReader
 from choreo.runner import StopRequest
 from choreo.session import RunRequest, Session
 
-FULL_S, QUICK_S = 300.0, 12.0  # the song's length
+FULL_S, QUICK_S = 300.0, 8.0  # the song's length
 RATE = 22050
 CUE_EVERY_S, QUICK_CUE_EVERY_S = 2.0, 0.5  # --quick: a shorter song, cued as often, so p99 still has ~20 plays
 GOAL_MS = 1.0
