@@ -55,11 +55,13 @@ def exchange(port: serial.Serial, frame: p.Frame) -> bytes:
     return first + port.read(first[0] - 1)
 
 
-def read_all(port: serial.Serial, frame: p.Frame, wait: float = 0.15, quiet: float = 0.01) -> bytes:
+def read_all(port: serial.Serial, frame: p.Frame, wait: float = 0.3, quiet: float = 0.05) -> bytes:
     """Write a frame and collect whatever comes (junk, short replies too) until the line is quiet.
 
     Waits up to `wait` for a first byte, then until `quiet` passes without one. Polls in_waiting
     rather than changing the port's timeout: every timeout change is a tcsetattr on the pty.
+    `quiet` is far above the wire's gaps (0.1 ms a byte) so that a loaded machine pausing the
+    server's thread mid-reply (a fresh clone's CI saw 10 ms) does not cut a reply in two.
     """
     port.write(frame.data)
     got = b""
