@@ -737,7 +737,9 @@ def test_polls_and_cues_over_a_pty(tmp_path):
     start = next(m for m in log.tx if m.get("label") == "cue" and m["kind"] == "restore")
     lead_ms = next(m for m in log.steps if m.get("label") == "cue" and m["event"] == "end")["lead_ms"]
     assert 0 < lead_ms < 50 and cue["_log_time"] - zero >= 700_000_000 - lead_ms * 1e6  # early by its lead
-    assert start["_log_time"] - zero >= 700_000_000 - 5_000_000  # the motion's start frame: on the cue
+    # the motion's start frame: not before the cue by more than the lead it was sent early by (a
+    # loaded machine's slow exchange can inflate the lead; how close it comes is bench/motion_start's)
+    assert start["_log_time"] - zero >= 700_000_000 - lead_ms * 1e6
 
 
 RETRIED_SHOW = """

@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import pytest
+from mcap.reader import make_reader
 from rich.console import Console as RichConsole
 
 from choreo.cli.console import Note, Row, Screen, render
@@ -416,7 +417,8 @@ def test_ctrl_backslash_stops_a_show_as_ctrl_c_does(tmp_path) -> None:
     code, err, log = _signalled_run(tmp_path, "version: 1\nsteps:\n  - play: 1\n  - wait: 30\n", signal.SIGQUIT)
     assert code == 130, err
     assert b"show stopped (SIGQUIT)" in err and b"Traceback" not in err
-    assert read_log(log).topic("/choreo/step")  # the log was closed: it reads
+    with log.open("rb") as stream:  # the log was closed (a killed run leaves no summary); the
+        assert make_reader(stream).get_summary() is not None  # signal may come before the first step
 
 
 def test_a_traceback_shows_outside_text_escaped_too() -> None:
