@@ -7,7 +7,8 @@
 Each benchmark module exposes `run(quick: bool = False) -> list[dict]` with rows
 `{name, value, unit, goal, ok}` (ok None: a figure without a goal). A benchmark that cannot run
 (a missing module, an error) becomes a failed row saying why, so the table is always complete.
-Exit status 1 if any goal is missed.
+Exit status 1 if any goal is missed (with --quick, only if a benchmark could not run: its few
+samples show the figures, the full run judges the goals).
 """
 
 from __future__ import annotations
@@ -170,7 +171,13 @@ def main(argv: list[str] | None = None) -> int:
     if not args.quick and not args.only:
         write_results(sections, info, "python bench/run.py", took_s)
         print(f"wrote {RESULTS.relative_to(BENCH.parent)}")
-    return 0 if all(r["ok"] is not False for _, rows in sections for r in rows) else 1
+    return 1 if any(_fails(r, args.quick) for _, rows in sections for r in rows) else 0
+
+
+def _fails(row: dict, quick: bool) -> bool:
+    """A missed goal fails the full run; --quick's few samples put p99 near the worst one, so
+    there only a benchmark that could not run fails (its rows still say pass/FAIL)."""
+    return row["ok"] is False and (not quick or row["goal"] == "runs")
 
 
 if __name__ == "__main__":
