@@ -13,6 +13,8 @@ import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -98,6 +100,17 @@ def choreo(*args: str, cwd: Path | None = None, timeout: float = 60) -> subproce
 def start_choreo(*args: str, cwd: Path | None = None) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "choreo", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, cwd=cwd or REPO, env=_env())
+
+
+@contextmanager
+def ended_if_left(process: subprocess.Popen) -> Iterator[subprocess.Popen]:
+    """A started choreo, killed and reaped if the test leaves before it ended (a failed assert)."""
+    try:
+        yield process
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
 
 
 def _env() -> dict[str, str]:

@@ -531,6 +531,16 @@ def test_sixty_columns_draw_without_wrapping(tmp_path, pane):
     assert run.terminal_restored()
 
 
+def _two_gos_and_nothing_else(run, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """After keys that must do nothing: Space and Enter GO the two cues, and only they were commands."""
+    run.keys("Space")
+    run.wait_for("GO waits: 'encore'")
+    run.keys("Enter")
+    assert run.exit_code() == 0
+    assert commands_in(tmp_path) == [("go", "key", "ok"), ("go", "key", "ok")]
+    assert run.terminal_restored()
+
+
 @needs_tmux
 def test_alt_arrows_and_alt_f_keys_do_not_panic(tmp_path, pane):
     run = pane(GO_SHOW)
@@ -538,12 +548,7 @@ def test_alt_arrows_and_alt_f_keys_do_not_panic(tmp_path, pane):
     run.keys("M-Left", "M-F1", "M-Up", "Left")  # tmux's own (xterm) sequences
     for raw in ("1b 1b 5b 44", "1b 1b 4f 50", "1b 1b 5b 31 35 7e", "1b 1b 5b 43"):  # ESC ESC [ D ...
         run._tmux("send-keys", "-t", "run", "-H", *raw.split())
-    run.keys("Space")
-    run.wait_for("GO waits: 'encore'")
-    run.keys("Enter")
-    assert run.exit_code() == 0
-    assert commands_in(tmp_path) == [("go", "key", "ok"), ("go", "key", "ok")]
-    assert run.terminal_restored()
+    _two_gos_and_nothing_else(run, tmp_path)
 
 
 @needs_tmux
@@ -554,12 +559,7 @@ def test_ctrl_keys_the_terminal_would_act_on_reach_the_console_and_do_nothing(tm
     run.wait_for("GO waits: 'applause'")
     for key in ("C-z", "C-\\", "C-s", "C-y", "C-v", "C-o", "C-q", "C-d", "C-w", "C-u", "C-r", "C-t"):
         run.keys(key)
-    run.keys("Space")
-    run.wait_for("GO waits: 'encore'")
-    run.keys("Enter")
-    assert run.exit_code() == 0
-    assert commands_in(tmp_path) == [("go", "key", "ok"), ("go", "key", "ok")]
-    assert run.terminal_restored()
+    _two_gos_and_nothing_else(run, tmp_path)
 
 
 def test_the_key_mode_takes_suspend_quit_and_flow_control_from_the_terminal():

@@ -28,7 +28,7 @@ from choreo.limits import Budget
 from choreo.oscwire import encode_message, slip_encode
 from choreo.osc import OscServer, command_for, parse_allow, sender_allowed
 from choreo.runner import PANIC, StopRequest
-from runlog import LiveRun, read_log, start_choreo, wait_for, write_show
+from runlog import LiveRun, ended_if_left, read_log, start_choreo, wait_for, write_show
 
 GO_SHOW = """\
     version: 1
@@ -504,7 +504,7 @@ def test_choreo_run_takes_go_over_osc(tmp_path):
     log_path = tmp_path / "run.mcap"
     port = free_port()
     process = start_choreo("run", str(show), "--osc", str(port), "--log", str(log_path))
-    try:
+    with ended_if_left(process):
         with client("udp", port) as osc:
             deadline = time.monotonic() + 30
             while True:  # until choreo listens and the show has reached its GO cue
@@ -515,10 +515,6 @@ def test_choreo_run_takes_go_over_osc(tmp_path):
                     break
             source = source_of(osc, "udp")
         _, err = process.communicate(timeout=30)
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
     assert process.returncode == 0, err
     assert f"osc: listening on 127.0.0.1:{port} (udp and tcp), commands from this machine only" in err
     commands = read_log(log_path).topic("/choreo/command")

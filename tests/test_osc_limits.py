@@ -26,7 +26,7 @@ from choreo.limits import LIMITS, UNLOGGED, Limits, Rate
 from choreo.live import Command, Live
 from choreo.osc import OscServer
 from choreo.runner import StopRequest
-from runlog import choreo, read_log, start_choreo, wait_for, write_show
+from runlog import choreo, ended_if_left, read_log, start_choreo, wait_for, write_show
 from test_osc import Receiver, free_port, outside_address
 
 TIMEOUT_S = 5.0
@@ -500,7 +500,7 @@ def test_a_flood_over_osc_neither_fills_the_log_nor_the_terminal_and_the_review_
     port = free_port()
     process = start_choreo("run", str(show), "--osc", str(port), "--no-console", "--log", str(log_path))
     sent = 0
-    try:
+    with ended_if_left(process):
         peer = None
         deadline = time.monotonic() + 30
         while peer is None:  # until choreo listens
@@ -526,10 +526,6 @@ def test_a_flood_over_osc_neither_fills_the_log_nor_the_terminal_and_the_review_
             stopped = any(b"stopping" in reply for reply in peer.replies(quiet_s=0.3))
         peer.close()
         _, err = process.communicate(timeout=30)
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
     assert process.returncode == 130, err
     assert err.count("\n") < 100, err[-2000:]  # the terminal: a few lines, not one a command
     assert log_path.stat().st_size < 200_000

@@ -25,7 +25,7 @@ import time
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from runlog import REPO, read_log, write_show, wait_for
+from runlog import REPO, ended_if_left, read_log, wait_for, write_show
 from test_osc_wire import PACKET
 from test_osc import GO_SHOW, TIMEOUT_S, Commands, ask, client, free_port, live, read_to_end, serve, server  # noqa: F401
 
@@ -308,7 +308,7 @@ def test_300_idle_connections_and_256_descriptors_still_go(tmp_path):
     spun on EMFILE and QLab could not connect. Now they are capped and the GO gets through."""
     show, log_path, port = write_show(tmp_path, TWO_CUES), tmp_path / "run.mcap", free_port()
     process = start_choreo_with_descriptors(256, "run", str(show), "--osc", str(port), "--log", str(log_path))
-    try:
+    with ended_if_left(process):
         with client("udp", port) as udp:
             assert wait_for(lambda: process.poll() is None and _answers(udp), 30), "choreo did not listen"
             with IdleAttack(port) as attack:
@@ -330,10 +330,6 @@ def test_300_idle_connections_and_256_descriptors_still_go(tmp_path):
                         time.sleep(0.25)
                 open_now = len(os.listdir(f"/proc/{process.pid}/fd")) if os.path.isdir("/proc") else 0
         _, err = process.communicate(timeout=30)
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
     assert process.returncode == 0, err
     assert max(times) < 1.0, times  # milliseconds in fact; before, never
     assert open_now < 100  # capped: not one descriptor a connection
@@ -351,7 +347,7 @@ def test_choreo_run_answers_after_malformed_packets_and_stops_on_sigterm(tmp_pat
     command still answered, one SIGTERM ending the run (exit 130), and stderr without a flood."""
     show, port = write_show(tmp_path, TWO_CUES), free_port()
     process = start_choreo_with_descriptors(256, "run", str(show), "--osc", str(port), "--no-log")
-    try:
+    with ended_if_left(process):
         with client("udp", port) as udp:
             assert wait_for(lambda: process.poll() is None and _answers(udp), 30), "choreo did not listen"
             for transport in ("udp", "tcp"):
@@ -360,10 +356,6 @@ def test_choreo_run_answers_after_malformed_packets_and_stops_on_sigterm(tmp_pat
             assert wait_for(lambda: _answers(udp), 10), "OSC died"
         process.send_signal(signal.SIGTERM)
         _, err = process.communicate(timeout=30)
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
     assert process.returncode == 130, err
     assert "WARNING" not in err and len(err) < 10_000
 
