@@ -43,6 +43,7 @@ GO_SHOW = """\
         at: go
         label: encore
     """
+ONE_GO_SHOW = GO_SHOW.replace("        label: encore\n", "").replace("      - play: 3\n        at: go\n", "")
 TIMEOUT_S = 5.0
 
 
@@ -499,8 +500,7 @@ def free_port() -> int:
 
 
 def test_choreo_run_takes_go_over_osc(tmp_path):
-    one_cue = GO_SHOW.replace("        label: encore\n", "").replace("      - play: 3\n        at: go\n", "")
-    show = write_show(tmp_path, one_cue)
+    show = write_show(tmp_path, ONE_GO_SHOW)
     log_path = tmp_path / "run.mcap"
     port = free_port()
     process = start_choreo("run", str(show), "--osc", str(port), "--log", str(log_path))

@@ -27,7 +27,7 @@ from choreo.live import Command, Live
 from choreo.osc import OscServer
 from choreo.runner import StopRequest
 from runlog import choreo, ended_if_left, read_log, start_choreo, wait_for, write_show
-from test_osc import Receiver, free_port, outside_address
+from test_osc import ONE_GO_SHOW, Receiver, free_port, outside_address
 
 TIMEOUT_S = 5.0
 EVERY_EVENT = Limits(reported=Rate(1_000_000, 1.0))  # the test hears every command one by one
@@ -480,22 +480,10 @@ def test_a_bad_option_ends_the_run_before_a_log_or_a_board_is_touched(tmp_path, 
 # -- a flood through choreo run --------------------------------------------------------------------
 
 
-GO_SHOW = """\
-    version: 1
-    motions:
-      bow: {number: 2, duration: 0.05}
-    steps:
-      - play: 1
-      - play: bow
-        at: go
-        label: applause
-    """
-
-
 def test_a_flood_over_osc_neither_fills_the_log_nor_the_terminal_and_the_review_counts_it(tmp_path):
     """80,000 GOs in 5 s once wrote a 14 MB log and 4.5 MB of stderr, and `log summary` said
     "38201 commands, 19 refused" where 38,188 were."""
-    show = write_show(tmp_path, GO_SHOW.rstrip(" ") + "      - wait: 60\n")  # after the GO, the show goes on till stopped
+    show = write_show(tmp_path, ONE_GO_SHOW.rstrip(" ") + "      - wait: 60\n")  # after the GO, the show goes on till stopped
     log_path = tmp_path / "run.mcap"
     port = free_port()
     process = start_choreo("run", str(show), "--osc", str(port), "--no-console", "--log", str(log_path))
