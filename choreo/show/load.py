@@ -511,6 +511,11 @@ def _is_empty(event: yaml.Event) -> bool:
     return isinstance(event, yaml.ScalarEvent) and event.value == "" and event.implicit[0] and event.tag is None
 
 
+def _mark_at(text: str, index: int) -> _Mark:
+    """The 1-based line and column of a character of the text."""
+    return text.count("\n", 0, index) + 1, index - (text.rfind("\n", 0, index) + 1) + 1
+
+
 def _too_deep(text: str, report: _Report) -> bool:
     """True (and the depth reported in choreo's words) if the text nests past `MAX_DEPTH`.
 
@@ -535,9 +540,7 @@ def _too_deep(text: str, report: _Report) -> bool:
         # (at its start, or where it was cut), not something inside it: the brackets are
         # nesting, whatever the parser would say of the whole (libyaml 0.2.5: its depth limit;
         # PyYAML 6.0: a key over 1,024 characters).
-        line = text.count("\n", 0, deep.index) + 1
-        column = deep.index - (text.rfind("\n", 0, deep.index) + 1) + 1
-        report.add((line, column), "", f"nested more than {MAX_DEPTH} levels deep")
+        report.add(_mark_at(text, deep.index), "", f"nested more than {MAX_DEPTH} levels deep")
         return True
     return False
 
@@ -604,10 +607,8 @@ def _parse(text: str, report: _Report) -> _Doc | None:
     builder = _Builder(report)
     stand_in = next((ch for ch in _BREAKS_1_1.values() if ch in text), None)
     if stand_in is not None:
-        position = text.index(stand_in)
-        line = text.count("\n", 0, position) + 1
-        column = position - (text.rfind("\n", 0, position) + 1) + 1
-        report.add((line, column), "", f"character U+{ord(stand_in):04X} (private use) is not allowed in a show file")
+        report.add(_mark_at(text, text.index(stand_in)), "",
+                   f"character U+{ord(stand_in):04X} (private use) is not allowed in a show file")
         return None
     text = text.translate(_HIDE_BREAKS)
     if _too_deep(text, report):
@@ -625,12 +626,9 @@ def _parse(text: str, report: _Report) -> _Doc | None:
             _report_syntax(exc, report)
         return None
     except yaml.YAMLError as exc:  # the reader: a character YAML does not allow
-        position = getattr(exc, "position", 0) or 0
-        line = text.count("\n", 0, position) + 1
-        column = position - (text.rfind("\n", 0, position) + 1) + 1
         character = getattr(exc, "character", None)
         what = f"character {character!r}" if isinstance(character, str) else "a character"
-        report.add((line, column), "", f"{what} is not allowed in a YAML file")
+        report.add(_mark_at(text, getattr(exc, "position", 0) or 0), "", f"{what} is not allowed in a YAML file")
         return None
     if builder.documents == 0 or builder.root is None:
         report.add((1, 1), "", "the file holds no show: start with `version: 1` and `steps:`")
