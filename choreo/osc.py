@@ -151,8 +151,7 @@ def plain_host(host: str) -> str:
 
 def where(sender: Sender) -> str:
     """`127.0.0.1:53001`, `[::1]:53001`: how messages and the log name a sender or an address."""
-    host, port = plain_host(sender[0]), sender[1]
-    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+    return show_target((plain_host(sender[0]), sender[1]))
 
 
 class OscServer:
@@ -238,7 +237,7 @@ class OscServer:
         host, allowed = self._verdict(sender[0])
         if allowed:
             return True
-        self._refuse(host, f"osc tcp {where(sender)}", "")
+        self._refuse(host, f"osc tcp {show_target((host, sender[1]))}", "")
         return False
 
     def packet(self, transport: str, sender: Sender, data: bytes) -> list[bytes]:
@@ -247,20 +246,21 @@ class OscServer:
         not read, at the least cost (a flood that costs choreo more than its sender outruns the
         socket, which then drops the operator's GO too). A malformed packet is refused whole."""
         host, allowed = self._verdict(sender[0])
+        budget = budget_key(transport, host)
         cost = 1 + (len(data) - 1) // self.wire_limits.packet_bytes_per_token if data else 1  # reading is by the byte
-        if not self._limits.may_read(budget_key(transport, host), allowed, cost):
+        if not self._limits.may_read(budget, allowed, cost):
             self.counts[UNREAD] += 1
             self.live.count(UNREAD if allowed else "refused", f"osc {transport} {host}")
             return []
-        source = f"osc {transport} {where(sender)}"
+        source = f"osc {transport} {show_target((host, sender[1]))}"  # `where`, from the remembered host
         if not allowed:
             replies = [self._refuse(host, source, "")]  # its address is not read: the reply is `/reply`
         else:
             decoded = decode_packet(data, self.wire_limits)
             if decoded.error is not None:
-                replies = [self._malformed(budget_key(transport, host), source, decoded.error, decoded.address)]
+                replies = [self._malformed(budget, source, decoded.error, decoded.address)]
             else:
-                replies = self._messages(transport, sender, decoded.messages)
+                replies = self._messages(transport, host, budget, source, decoded.messages)
         return [reply.encoded() for reply in replies if reply is not None]
 
     def rest_s(self, sender: Sender) -> float:
@@ -290,21 +290,20 @@ class OscServer:
         self.counts["dropped"] += 1
         self._report(Command("dropped", f"osc {transport} {where(sender)}"), Answer("error", why))
 
-    def _messages(self, transport: str, sender: Sender, messages: Sequence[Message]) -> list[Reply | None]:
+    def _messages(self, transport: str, host: str, budget: str, source: str,
+                  messages: Sequence[Message]) -> list[Reply | None]:
         """One packet's messages in order (a bundle's, all in one call): the place to bound
         what one packet may do. Each message after the first is read within the sender's
         budget of packets as if it came alone (one bundle of 200 unknown addresses cost 7.5
         ms, 64 of them half a second of the thread that reads the operator's GO); the rest
-        are counted, not read."""
-        host, _ = self._verdict(sender[0])
-        budget = budget_key(transport, host)
+        are counted, not read. The sender is allowed: a refused one's packet is not read."""
         replies = []
         for index, message in enumerate(messages):
             if index and not self._limits.may_read(budget, True):
                 self.counts[UNREAD] += len(messages) - index
                 self.live.count(UNREAD, f"osc {transport} {host}", len(messages) - index)
                 break
-            replies.append(self._receive(transport, sender, message.address, message.args))
+            replies.append(self._receive(host, budget, source, message.address, message.args))
         return replies
 
     def _malformed(self, budget: str, source: str, error: str, address: str | None) -> Reply | None:
@@ -318,17 +317,11 @@ class OscServer:
 
     # -- one message -------------------------------------------------------------------------
 
-    def _receive(self, transport: str, sender: Sender, address: str, args: tuple) -> Reply | None:
-        """A message from `sender` (one of a bundle's, each counted alone): its reply (None:
-        none is sent). What it may cost is bounded (`choreo.limits`): a refused sender's reply
-        comes out of a budget all of them share; an allowed sender's commands are carried out
-        and answered within its own budgets, and past them ignored (and counted)."""
-        source = f"osc {transport} {where(sender)}"
-        host, allowed = self._verdict(sender[0])
+    def _receive(self, host: str, budget: str, source: str, address: str, args: tuple) -> Reply | None:
+        """A message from an allowed sender (one of a bundle's, each counted alone): its reply
+        (None: none is sent). What it may cost is bounded (`choreo.limits`): its commands are
+        carried out and answered within its own budgets, and past them ignored (and counted)."""
         address = self._shown(address)
-        if not allowed:
-            return self._refuse(host, source, address)
-        budget = budget_key(transport, host)
         if address.startswith(ECHOES):  # a reply or notification come back: answering it could loop
             self._report(Command(ECHO, source, address), Answer("error", echo_message(address)))
             return None
