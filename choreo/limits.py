@@ -68,8 +68,7 @@ LIMITS = Limits()
 
 
 class Budget:
-    """A token bucket of `Rate`: `take` returns how many were refused since the last one taken
-    (None: over budget now)."""
+    """A token bucket of `Rate`: `take` says whether the tokens were there (and takes them)."""
 
     def __init__(self, burst: int, per_s: float, now: Callable[[], float] = time.monotonic) -> None:
         self.burst = burst
@@ -77,22 +76,19 @@ class Budget:
         self._now = now
         self._tokens = float(burst)
         self._at = now()
-        self._skipped = 0
         self._lock = threading.Lock()
 
     @classmethod
     def of(cls, rate: Rate, now: Callable[[], float] = time.monotonic) -> Budget:
         return cls(rate.burst, rate.per_s, now)
 
-    def take(self, tokens: int = 1) -> int | None:
+    def take(self, tokens: int = 1) -> bool:
         with self._lock:
             self._refill()
             if self._tokens < tokens:
-                self._skipped += 1
-                return None
+                return False
             self._tokens -= tokens
-            skipped, self._skipped = self._skipped, 0
-            return skipped
+            return True
 
     def empty_for_s(self) -> float:
         """0 while a token is left; once spent, the time to refill whole (a sender that
@@ -131,7 +127,7 @@ class Budgets:
         self._swept_at: float | None = None  # when idle buckets were last looked for
 
     def take(self, key: Hashable, tokens: int = 1) -> bool:
-        return self._budget(key).take(tokens) is not None
+        return self._budget(key).take(tokens)
 
     def empty_for_s(self, key: Hashable) -> float:
         return self._budget(key).empty_for_s()
@@ -181,7 +177,7 @@ class SenderLimits:
         their addresses are the easiest to forge, and many of them must not take the table's
         places from the allowed ones)."""
         if not allowed:
-            return self._refused_packets.take(tokens) is not None
+            return self._refused_packets.take(tokens)
         return self._packets.take(host, tokens)
 
     def rest_s(self, host: str) -> float:
@@ -192,7 +188,7 @@ class SenderLimits:
     def admit(self, host: str) -> bool:
         """May a command from `host` be carried out now? Its own budget first, so a flooding
         sender spends its own tokens, not the others' share of the total."""
-        return self._commands.take(host) and self._total.take() is not None
+        return self._commands.take(host) and self._total.take()
 
     def may_reply(self, host: str) -> bool:
         return self._replies.take(host)
@@ -200,7 +196,7 @@ class SenderLimits:
     def may_answer_refusal(self) -> bool:
         """A reply to a sender not allowed (shared by all of them: their addresses are forged
         most easily)."""
-        return self._refusals.take() is not None
+        return self._refusals.take()
 
     def over_rate(self, host: str) -> str:
         """Why a command from `host` was not carried out."""
@@ -254,7 +250,7 @@ class ReportGate:
 
     def passes(self, name: str, source: str, ok: bool) -> bool:
         """Report this one now? If not, it is counted for the next summary."""
-        if ok or self._budget.take() is not None:
+        if ok or self._budget.take():
             return True
         self.hold(name, source)
         return False
