@@ -28,6 +28,7 @@ from pathlib import Path
 
 from choreo.errors import UsageError
 from choreo.layouts import LAYOUTS
+from choreo.numtext import whole_number
 from choreo.protocol import MOTION_SLOTS, SLOT_SIZE
 from choreo.textfit import visible
 
@@ -249,9 +250,10 @@ def _whole(value: ET.Element, field: str, key: str, path: str) -> int | None:
     text = _text(_child(value, field)).strip()
     if not text:
         return None
-    if not (text.isascii() and text.isdigit() and len(text) <= 9):
+    number = whole_number(text, max_digits=9)
+    if number is None:
         raise ProjectError(f"{path}: slot {key} has {field} {text[:20]!r}, not a whole number (up to 9 digits)")
-    return int(text)
+    return number
 
 
 def _address(address: int | None, layout: str = "") -> str:

@@ -248,11 +248,10 @@ class Live:
         source refused itself (a sender not allowed, an address it does not know). Refused
         ones only within the limits (`choreo.limits.ReportGate`): the rest are counted and told
         later as one `unlogged` summary."""
-        if not self._reports.passes(command.name, command.source, answer.ok):
-            self.flush_reports()
-            return
+        passes = self._reports.passes(command.name, command.source, answer.ok)
         self.flush_reports()  # the summary of what came before, first
-        self._tell(command, answer)
+        if passes:
+            self._tell(command, answer)
 
     def count(self, name: str, source: str, n: int = 1) -> None:
         """`n` more `name` from `source` refused without a word (packets or a bundle's messages

@@ -159,14 +159,14 @@ class OscServer:
     command listener) notifies progress; see the module's docstring."""
 
     def __init__(self, live: Live, port: int, *, host: str = "127.0.0.1", allow: Sequence[str] = (),
-                 notify: Sequence[Target] | Target | None = None, limits: Limits = LIMITS,
+                 notify: Sequence[Target] = (), limits: Limits = LIMITS,
                  now: Callable[[], float] = time.monotonic, wire_limits: OscLimits = WIRE_LIMITS) -> None:
         self.live = live
         self.host = host
         self.requested_port = port
         self.allow_given = tuple(allow)
         self.allow = parse_allow(allow)
-        self.notify = _targets(notify)
+        self.notify = tuple(notify)
         self._notifier = Notifier(self.notify) if self.notify else None
         self._limits = SenderLimits(limits, now)  # what a sender's messages may cost
         self.wire_limits = wire_limits
@@ -406,15 +406,6 @@ def budget_key(transport: str, host: str) -> str:
 def echo_message(address: str) -> str:
     return (f"ignored: {address} is a reply or a notification, not a command (is a program's --osc-notify "
             "or reply port set to choreo's own?)")
-
-
-def _targets(notify: Sequence[Target] | Target | None) -> tuple[Target, ...]:
-    """--osc-notify's targets: none, one (HOST, PORT), or several."""
-    if not notify:
-        return ()
-    if isinstance(notify[0], str):
-        return (notify,)  # type: ignore[return-value]
-    return tuple(notify)  # type: ignore[arg-type]
 
 
 def _is_loopback_host(host: str) -> bool:

@@ -239,10 +239,6 @@ class OscNet:
         """TCP connections open now."""
         return len(self._connections)
 
-    def start(self) -> None:
-        self.bind()
-        self.serve()
-
     def bind(self) -> None:
         """Listen on both transports (ListenFailed), not serving yet: the port's problems are
         known before a show starts."""

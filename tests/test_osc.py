@@ -296,7 +296,7 @@ def receiver():  # type: ignore[no-untyped-def]
 
 
 def test_the_shows_progress_is_notified(shows, receiver):
-    run = shows(notify=receiver.address)
+    run = shows(notify=[receiver.address])
     assert run.server.listening.endswith(f"; progress to 127.0.0.1:{receiver.address[1]}")
     with client("udp", run.server.port) as osc:
         wait_until(lambda: receiver.of("go"))  # announced as the show reaches it, before any GO
@@ -325,7 +325,7 @@ def test_the_shows_progress_is_notified(shows, receiver):
 
 
 def test_a_notify_address_that_does_not_resolve_is_a_usage_error(live):
-    server = OscServer(live, 0, notify=("no-such-host.invalid", 53001))
+    server = OscServer(live, 0, notify=[("no-such-host.invalid", 53001)])
     with pytest.raises(UsageError, match=r"^--osc-notify no-such-host.invalid:53001: "):
         server.start()
     server.close()

@@ -308,7 +308,7 @@ def receivers():  # type: ignore[no-untyped-def]
 
 def test_replies_and_notifications_sent_back_are_never_answered_nor_notified(live, clock, heard, receivers):
     receiver = receivers[0]
-    server = OscServer(live, 0, now=clock.now, notify=receiver.address)
+    server = OscServer(live, 0, now=clock.now, notify=[receiver.address])
     server.start()
     live.listeners.append(server)
     peer = Peer("udp", server.port)
@@ -363,7 +363,7 @@ def test_notifying_choreos_own_port_is_refused_at_start_up(live, host):
             pytest.skip("this machine has no address but loopback")
     for _ in range(10):  # a port free a moment ago may be taken by another test worker first
         port = free_port()
-        server = OscServer(live, port, host="0.0.0.0", notify=(host, port))
+        server = OscServer(live, port, host="0.0.0.0", notify=[(host, port)])
         with pytest.raises(UsageError) as refused:
             server.start()
         server.close()
@@ -373,7 +373,7 @@ def test_notifying_choreos_own_port_is_refused_at_start_up(live, host):
                                          "that is choreo's own --osc port on this machine")
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as again:
         again.bind(("0.0.0.0", port))  # the port was let go
-    OscServer(live, port, notify=(host, port + 1 if port < 65535 else port - 1)).close()  # another port is fine
+    OscServer(live, port, notify=[(host, port + 1 if port < 65535 else port - 1)]).close()  # another port is fine
 
 
 def test_a_notify_target_on_another_machine_and_port_is_taken(live):
