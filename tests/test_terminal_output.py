@@ -368,6 +368,23 @@ def test_a_non_blocking_output_is_waited_for_not_given_up(tmp_path) -> None:
     assert drained[0].endswith(b"after the wait\n")
 
 
+def test_a_stuck_output_is_waited_for_once_however_often_the_writer_is_closed() -> None:
+    """`choreo run` closes its progress at the end and again in its `finally`: on a stuck
+    output (Ctrl-S, a pipe nobody reads) each close waited its second, two in all."""
+    class Stuck(io.StringIO):
+        def write(self, text: str) -> int:
+            threading.Event().wait(3)
+            return len(text)
+
+    writer = StatusWriter(Stuck(), fit_lines=False)
+    writer.line("a line the output never takes")
+    writer.close(0.05)
+    joins = []
+    writer._thread.join = lambda *args: joins.append(args)  # type: ignore[method-assign]
+    writer.close(0.05)
+    assert joins == []
+
+
 def test_a_show_and_a_log_named_with_bytes_that_are_not_utf8_run_review_and_replay(tmp_path, capsys,
                                                                                      monkeypatch) -> None:
     """A file name is bytes: one that is not UTF-8 (`\\xff`, a lone surrogate to Python) was a

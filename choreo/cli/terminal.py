@@ -137,7 +137,10 @@ class StatusWriter:
 
     def close(self, wait_s: float = 1.0) -> None:
         """Write what waits, clear the status line, and stop; an output that takes nothing
-        for `wait_s` is left behind (its thread ends with the process)."""
+        for `wait_s` is left behind (its thread ends with the process). Once: a second close
+        (a run's `finally` after its end) does not wait for a stuck output again."""
+        if self._closing:
+            return
         self._closing = True
         self._wake.set()
         if self._thread is not threading.current_thread():
