@@ -70,6 +70,11 @@ class Song:
     def path(self) -> str:
         return str(self.music.path)
 
+    @property
+    def end_show_s(self) -> float:
+        """The show time at which the song's last sample is heard."""
+        return self.duration_s - self.music.start
+
     @classmethod
     def open(cls, music: Music, show_path: str) -> Song:
         """The song's facts, read from its header; AudioError naming the show if it will not
@@ -403,8 +408,7 @@ class Player:
 
     @property
     def end_show_s(self) -> float:
-        """The show time at which the song's last sample is heard."""
-        return self.song.duration_s - self.song.music.start
+        return self.song.end_show_s
 
     def close(self) -> None:
         if self._device is not None:

@@ -711,7 +711,7 @@ def _rate(length: float) -> str:
 def _check_in_song(song: Song, origin: float, given: str) -> None:
     """In a music show, show time is the song's position: a start at or past its end would run
     the show in silence, on a clock that no longer moves with anything."""
-    end = song.duration_s - song.music.start  # the show time the song ends at
+    end = song.end_show_s
     if origin >= end - 1e-9:
         raise UsageError(f"{given}: it starts at {origin:.3f} s of show time, past the end of the music "
                          f"({song.path} ends at {max(end, 0.0):.3f} s): nothing would play; give an earlier "
