@@ -45,11 +45,9 @@ class InputError(UsageError):
     """A file the user named that cannot be read as what it should be (`choreo.userfile`)."""
 
     def __init__(self, path: str, reason: str) -> None:
-        from choreo.textfit import visible
-
         self.path = path
         self.reason = reason
-        super().__init__(f"{visible(path)}: {reason}")
+        super().__init__(f"{one_line(path)}: {reason}")
 
 
 class OutputError(ChoreoError):

@@ -141,7 +141,8 @@ def run_summary(args: argparse.Namespace) -> int:
             summary = summarize(path)
         except ChoreoError as exc:
             failed += 1
-            print(str(exc), file=sys.stderr)
+            for line in exc.lines():  # escaped, one line, as cli.main prints every error
+                print(line, file=sys.stderr)
             if args.json:
                 out.write(json.dumps({**error_record(exc), "log": str(path)}, ensure_ascii=False) + "\n")
             continue
@@ -155,7 +156,7 @@ def run_summary(args: argparse.Namespace) -> int:
 
 def run_latest(args: argparse.Namespace) -> int:
     if not os.path.lexists(args.dir):  # the usual case on a new machine: say where logs go
-        raise UsageError(f"{visible(args.dir)}: no such folder (`choreo run` writes its logs to runs/)")
+        raise UsageError(f"{args.dir}: no such folder (`choreo run` writes its logs to runs/)")
     print(visible(str(_folder_logs(Path(args.dir))[-1])))  # one line, even for a name with a line break
     return 0
 
@@ -199,7 +200,7 @@ def _folder_logs(folder: Path) -> list[Path]:
             logs.append((modified, path.name, path))
     if not logs:
         passed = f" ({others} named *.mcap are not regular files)" if others else ""
-        raise UsageError(f"{visible(str(folder))}: no .mcap logs in this folder{passed}")
+        raise UsageError(f"{folder}: no .mcap logs in this folder{passed}")
     return [path for _, _, path in sorted(logs)]
 
 
@@ -317,7 +318,7 @@ def _output(path: str, command: str, binary: bool = False) -> Iterator[IO]:
         file = os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8", newline="")
     except OSError as exc:
         why = "a named pipe nobody reads" if exc.errno == errno.ENXIO else exc.strerror or exc
-        raise UsageError(f"{command} {visible(path)}: cannot write: {why}") from None
+        raise UsageError(f"{command} {path}: cannot write: {why}") from None
     finished = False
     try:
         yield file
