@@ -40,6 +40,12 @@ class ConfigWord:
         return bool(self.word >> n & 1)
 
     @property
+    def flags(self) -> dict[str, bool]:
+        """The on/off bits by name (`probe --json`'s keys), in the order `lines` shows them."""
+        return {"rom_run": self.bit(1), "ics": self.bit(0), "end_message": self.bit(2),
+                "vector_jump": self.bit(3), "green_led": self.bit(15)}
+
+    @property
     def frame_ms(self) -> int:
         return FRAME_PERIODS_MS[self.word >> 4 & 0b11]
 
@@ -56,16 +62,17 @@ class ConfigWord:
             return f"{value} baud" if value else f"unknown code {code:02b}"
 
         on = {True: "on", False: "off"}
+        flags = self.flags
         return [
             f"config    0x{self.word:04x}",
-            f"  ROM program run      {on[self.bit(1)]}" + ("" if self.bit(1) else " (the board's program is stopped)"),
-            f"  ICS servo bus        {on[self.bit(0)]}",
-            f"  end-of-move message  {on[self.bit(2)]}",
-            f"  vector jump          {on[self.bit(3)]}",
+            f"  ROM program run      {on[flags['rom_run']]}" + ("" if flags["rom_run"] else " (the board's program is stopped)"),
+            f"  ICS servo bus        {on[flags['ics']]}",
+            f"  end-of-move message  {on[flags['end_message']]}",
+            f"  vector jump          {on[flags['vector_jump']]}",
             f"  servo frame period   {self.frame_ms} ms",
             f"  COM baud             {baud(self.com_baud, self.word >> 6 & 3)}",
             f"  ICS baud             {baud(self.ics_baud, self.word >> 13 & 3)}",
-            f"  green LED            {on[self.bit(15)]}",
+            f"  green LED            {on[flags['green_led']]}",
         ]
 
 

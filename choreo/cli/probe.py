@@ -52,9 +52,8 @@ def board_record(info) -> dict:  # type: ignore[no-untyped-def]  # BoardInfo: im
     return {
         "ok": True, "exit": 0, "port": info.port, "baud": info.baud, "version": info.version,
         "config": None if config is None else {
-            "word": config.word, "rom_run": config.bit(1), "ics": config.bit(0), "end_message": config.bit(2),
-            "vector_jump": config.bit(3), "frame_ms": config.frame_ms, "com_baud": config.com_baud,
-            "ics_baud": config.ics_baud, "green_led": config.bit(15)},
+            "word": config.word, **config.flags, "frame_ms": config.frame_ms, "com_baud": config.com_baud,
+            "ics_baud": config.ics_baud},
         "counter": None if counter is None else {
             "program_counter": counter.program_counter, "in_call": counter.in_call, "hex": counter.data.hex(" ")},
         "notes": list(info.notes), "hints": info.hints(),
