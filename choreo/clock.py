@@ -181,16 +181,14 @@ class VirtualTime:
         return self._ns
 
     def sleep(self, seconds: float) -> None:
-        if self._running is None:
-            self.advance(seconds)
-            return
-        with self._lock:
-            token = object()
-            self._sleepers[token] = self._ns + max(1, math.ceil(seconds * 1e9))
-            self._block(token, self._sleepers)
+        self._nap(seconds, dozing=False)
 
     def doze(self, seconds: float, seen: int | None = None) -> None:
         """A sleep that `notify` ends early; alone (no other thread to notify), a sleep."""
+        self._nap(seconds, dozing=True, seen=seen)
+
+    def _nap(self, seconds: float, dozing: bool, seen: int | None = None) -> None:
+        """`seconds` of virtual time; a dozing nap is one `notify` may end early."""
         if self._running is None:
             self.advance(seconds)
             return
@@ -199,7 +197,8 @@ class VirtualTime:
                 return  # notified since the sleeper read its deadline: no time passes
             token = object()
             self._sleepers[token] = self._ns + max(1, math.ceil(seconds * 1e9))
-            self._dozing.add(token)
+            if dozing:
+                self._dozing.add(token)
             try:
                 self._block(token, self._sleepers)
             finally:
