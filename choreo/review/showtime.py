@@ -82,12 +82,9 @@ class ShowTimes:
         if step.event == "start":
             self.see_start(log_time, step.actual_s)
 
-    def see_start(self, log_time: int, actual_s: float) -> None:
-        """A step started at `actual_s` on the show clock: the first word of the clock fixes the zero."""
-        self._anchor(log_time, actual_s)
-
-    def _anchor(self, log_time: int, show_s: float) -> None:
-        """The zero, from the first show time that is a number (a damaged record's is not)."""
+    def see_start(self, log_time: int, show_s: float) -> None:
+        """A step started at `show_s` on the show clock: the first show time that is a number
+        (a damaged record's is not), of a step or a clock sample, fixes the zero."""
         if self.anchored or not isinstance(show_s, (int, float)) or not math.isfinite(show_s * 1e9):
             return
         self.zero_ns = log_time - round(show_s * 1e9)
@@ -95,7 +92,7 @@ class ShowTimes:
 
     def see_clock(self, log_time: int, sample: ClockRecord) -> None:
         """A /choreo/clock sample: where show time really stood at `log_time`."""
-        self._anchor(log_time, sample.show_s)
+        self.see_start(log_time, sample.show_s)
         predicted = self.seconds(log_time) if (self._break_ns or self.zero_ns is not None) else None
         if predicted is None or abs(predicted - sample.show_s) > BREAK_S:
             at = bisect_right(self._break_ns, log_time)

@@ -339,10 +339,11 @@ class _Part:
 
     @classmethod
     def named(cls, reader: LogReader, robot: str, whole: _Tally) -> _Part:
+        layouts = LogLayouts.of(reader.run_info)
         run = {"port": reader.run_info.get(f"robot.{robot}.port", "?"),
                "baud": reader.run_info.get(f"robot.{robot}.baud", "?"),
-               "layout": LogLayouts.of(reader.run_info).name(robot)}
-        tracker = MotionTracker(LogLayouts.of(reader.run_info).layout(robot))
+               "layout": layouts.name(robot)}
+        tracker = MotionTracker(layouts.layout(robot))
         return cls(Summary(reader.path, run, None, False, None), _Tally(whole.times), tracker)
 
     def see(self, topic: str, record, log_time: int, whole: _Tally) -> None:  # type: ignore[no-untyped-def]
@@ -651,13 +652,14 @@ def _render_robots(summary: Summary) -> Iterable[str]:
         skew = summary.skew
         yield (f"unison    motion starts apart: median {_ms(skew.median)}, p99 {_ms(skew.p99)}, max "
                f"{_ms(skew.max)} ({len(skew)} plays by several robots; first robot's start to the last's)")
+    layouts = LogLayouts.of(summary.run)
     for name, robot in summary.robots.items():
         run = robot.run
         late = f", {robot.steps_late} late" if robot.steps_late else ""
         failed = f", {robot.steps_failed} failed" if robot.steps_failed else ""
         aborted = f", {robot.steps_aborted} aborted" if robot.steps_aborted else ""
         yield (f"robot {name}: {run.get('port', '?')} at {run.get('baud', '?')} baud, "
-               f"layout {LogLayouts.of(summary.run).describe(name)}; "
+               f"layout {layouts.describe(name)}; "
                f"{robot.steps_run} steps{late}{failed}{aborted}, {robot.frames_sent} frames, {robot.retries} retries, "
                f"{robot.plays_total} plays")
         lat, cues = robot.latency, robot.lateness
