@@ -90,11 +90,17 @@ def frame_kind(data: bytes) -> str:
 def parse_frame_kinds(text: str) -> frozenset[str]:
     """`play,restore` -> the frame kinds `faults_on` names; ValueError lists the kinds."""
     kinds = frozenset(part.strip() for part in text.split(",") if part.strip())
-    unknown = sorted(kinds - set(FRAME_KINDS))
-    if unknown or not kinds:
-        what = f"unknown frame kind {unknown[0]!r}" if unknown else "no frame kind"
-        raise ValueError(f"{what} (known: {', '.join(FRAME_KINDS)})")
+    if not kinds:
+        raise ValueError(f"no frame kind (known: {', '.join(FRAME_KINDS)})")
+    check_frame_kinds(kinds)
     return kinds
+
+
+def check_frame_kinds(kinds: frozenset[str]) -> None:
+    """ValueError naming the first kind that is not a frame kind, and the known ones."""
+    unknown = sorted(kinds - set(FRAME_KINDS))
+    if unknown:
+        raise ValueError(f"unknown frame kind {unknown[0]!r} (known: {', '.join(FRAME_KINDS)})")
 
 
 @dataclass(frozen=True)
@@ -154,9 +160,7 @@ class FaultPlan:
         unknown = sorted(set(self.triggers) - set(FAULT_KINDS))
         if unknown:
             raise ValueError(f"unknown fault kind {unknown[0]!r} (known: {', '.join(FAULT_KINDS)})")
-        if not self.on <= set(FRAME_KINDS):
-            raise ValueError(f"unknown frame kind {sorted(self.on - set(FRAME_KINDS))[0]!r} "
-                             f"(known: {', '.join(FRAME_KINDS)})")
+        check_frame_kinds(self.on)
         if self.late_s < 0:
             raise ValueError(f"late_ms must be >= 0, not {self.late_s * 1000:g}")
 
