@@ -83,8 +83,8 @@ def _read_name(data: bytes, layout: Layout | None) -> str:
 _CONFIG_READ = p.read_frame(p.CONFIG_ADDRESS, 2).data  # the hth4-2.2 link reads it at open
 # What the RAM a frame can read holds (address, bytes, name): the config word, then the program
 # counter, the return address a CALL pushed, and the call depth.
-_RAM_FIELDS = ((p.CONFIG_ADDRESS, 2, "config"), (p.PROGRAM_COUNTER_ADDRESS, 3, "program counter"),
-               (0x0005, 3, "return address"), (0x0008, 1, "depth"))
+_RAM_FIELDS = ((p.CONFIG_ADDRESS, 2, "config"), (p.PROGRAM_COUNTER_ADDRESS, p.ADDRESS_BYTES, "program counter"),
+               (p.RETURN_ADDRESS_ADDRESS, p.ADDRESS_BYTES, "return address"), (p.CALL_DEPTH_ADDRESS, 1, "depth"))
 
 
 def describe_reply(data: bytes, frame: bytes | None, layout: Layout | None, motion: int | None = None) -> str:
@@ -135,7 +135,7 @@ def _ram_words(address: int, ram: bytes, layout: Layout | None) -> str:
         if address <= start and start + size <= address + len(ram):
             value = int.from_bytes(ram[start - address:start - address + size], "little")
             words.append(f"{name} {value}" if name == "depth" else
-                         f"{name} 0x{value:0{size * 2}x}{_in_slot(value, layout) if size == 3 else ''}")
+                         f"{name} 0x{value:0{size * 2}x}{_in_slot(value, layout) if size == p.ADDRESS_BYTES else ''}")
     return ", ".join(words)
 
 

@@ -32,6 +32,9 @@ EXECUTING_BYTE = 0x23
 CONFIG_ADDRESS = 0x0000
 RUN_BIT = 0x0002  # config word bit 1, "ROM program run": stop frames clear it, the start frame sets it
 PROGRAM_COUNTER_ADDRESS = 0x0002  # program counter (3 bytes), return address (3), call depth
+RETURN_ADDRESS_ADDRESS = 0x0005  # what a CALL pushed (3 bytes): where the program goes back to
+CALL_DEPTH_ADDRESS = 0x0008  # call depth (1 byte): return addresses pushed
+ADDRESS_BYTES = 3  # a program address (counter, return address) is 3 bytes, little endian
 PROGRAM_STATE_BYTES = 12  # RAM 0x0000-0x000B: config word, counter, return address, depth, 3 more
 COUNTER_READ_BYTES = 10  # Kondo's library reads this much at 0x0002 to see whether a motion runs
 FIRST_CALLED_ADDRESS = 0x0B80  # no slot of any layout starts lower: a counter at or above is in one
@@ -318,8 +321,11 @@ def program_state(data: bytes) -> ProgramState | None:
     ram = bytes(data)[2:-1]
     if len(ram) < PROGRAM_STATE_BYTES:
         return None
-    return ProgramState(config=int.from_bytes(ram[0:2], "little"), counter=int.from_bytes(ram[2:5], "little"),
-                        return_address=int.from_bytes(ram[5:8], "little"), depth=ram[8])
+    def word(at: int, size: int) -> int:
+        return int.from_bytes(ram[at - CONFIG_ADDRESS:at - CONFIG_ADDRESS + size], "little")
+
+    return ProgramState(config=word(CONFIG_ADDRESS, 2), counter=word(PROGRAM_COUNTER_ADDRESS, ADDRESS_BYTES),
+                        return_address=word(RETURN_ADDRESS_ADDRESS, ADDRESS_BYTES), depth=word(CALL_DEPTH_ADDRESS, 1))
 
 
 def ack(command: int) -> bytes:

@@ -77,9 +77,10 @@ from choreo.sim.faults import NOT_EXECUTED, FaultInjector, FaultPlan
 RAM_SIZE = 0x0400
 POWER_ON_CONFIG = 0x0002
 RUN_BIT = p.RUN_BIT  # config bit 1: ROM program run
-PROGRAM_COUNTER = range(0x0002, 0x0005)  # where the stop frame saves the program counter
-RETURN_ADDRESS = range(0x0005, 0x0008)  # what a CALL pushes: where the program goes back to
-CALL_DEPTH = 0x0008
+# where the stop frame saves the program counter
+PROGRAM_COUNTER = range(p.PROGRAM_COUNTER_ADDRESS, p.PROGRAM_COUNTER_ADDRESS + p.ADDRESS_BYTES)
+RETURN_ADDRESS = range(p.RETURN_ADDRESS_ADDRESS, p.RETURN_ADDRESS_ADDRESS + p.ADDRESS_BYTES)  # what a CALL pushes
+CALL_DEPTH = p.CALL_DEPTH_ADDRESS
 STATUS_SPAN = p.PROGRAM_STATE_BYTES  # RAM the status refresh covers: the config word and the program state
 BITS_PER_BYTE = 11  # start + 8 data + even parity + stop
 BOARD_BAUDS = (115200, 625000, 1250000)
