@@ -240,7 +240,9 @@ def _print_frames_json(reader, args: argparse.Namespace) -> None:  # type: ignor
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise reader.not_choreo(TX_TOPIC, exchange.seq, exc) from None
     cut = {"state": reader.cut.state, "reason": str(reader.cut)} if reader.cut is not None else None
-    print(json.dumps({"ok": True, "log": str(reader.path), "frames": records, "cut": cut}, ensure_ascii=False))
+    from choreo.cli.jsonout import print_json
+
+    print_json({"ok": True, "log": str(reader.path), "frames": records, "cut": cut})
 
 
 def run_timeline(args: argparse.Namespace) -> int:
@@ -371,7 +373,9 @@ def run_replay(args: argparse.Namespace) -> int:
                     time_source=args.time_source)
     code = 1 if args.strict and report.board_differences else 0
     if args.json:
-        print(json.dumps(_replay_record(report, code), ensure_ascii=False))
+        from choreo.cli.jsonout import print_json
+
+        print_json(_replay_record(report, code))
         return code
     unmatched = f", {report.unmatched} with no recorded reply" if report.unmatched else ""
     cut = f"; the recorded log is {report.cut.state}: {report.cut.reason}" if report.cut else ""

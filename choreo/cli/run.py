@@ -103,7 +103,7 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     from choreo.session import RunRequest, Session
 
     port, robot_ports = port_arguments(args.port)
-    osc_port = _check_osc_options(args)
+    osc_port, notify = _check_osc_options(args)
     request = RunRequest(args.show, port=port, baud=args.baud, log_path=args.log,
                          no_log=args.no_log, from_step=args.from_step, timeout=args.timeout,
                          retries=args.retries, layout=args.layout, robot_ports=robot_ports,
@@ -115,7 +115,7 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     _check_go_sources(session, console, args)
     stop = StopRequest()
     live = _live(args, stop, console)
-    osc = _bound_osc(args, osc_port, live)  # listening (not serving yet) before a line is said or anything opens
+    osc = _bound_osc(args, osc_port, notify, live)  # listening (not serving yet) before a line is said or anything opens
     say = _Say(sys.stderr, quiet=args.quiet)
     if session.show.ensemble:
         for line in _robot_lines(session):
@@ -188,10 +188,10 @@ def _check_go_sources(session, console: bool, args: argparse.Namespace) -> None:
             raise UsageError(f"{step_ref(step)} waits for GO, but nothing can give it: {where}")
 
 
-def _check_osc_options(args: argparse.Namespace) -> int | None:
+def _check_osc_options(args: argparse.Namespace) -> tuple[int | None, tuple]:
     """The OSC options' values, checked before anything is loaded or opened (the port's binding
     and the notify targets' look-up come next, still before the session opens): --osc's port
-    number (None: no OSC)."""
+    number (None: no OSC) and --osc-notify's targets."""
     from choreo.errors import UsageError
     from choreo.osc import parse_allow
     from choreo.oscnotify import parse_targets, port_number
@@ -202,8 +202,7 @@ def _check_osc_options(args: argparse.Namespace) -> int | None:
     if not args.osc_host.strip():
         raise UsageError("--osc-host '': give the address to listen on (127.0.0.1, 0.0.0.0, ::)")
     parse_allow(args.osc_allow)
-    parse_targets(args.osc_notify)
-    return port
+    return port, parse_targets(args.osc_notify)
 
 
 def _live(args: argparse.Namespace, stop, console: bool):  # type: ignore[no-untyped-def]
@@ -216,16 +215,15 @@ def _live(args: argparse.Namespace, stop, console: bool):  # type: ignore[no-unt
     return Live(stop, wait_start=args.wait_start)
 
 
-def _bound_osc(args: argparse.Namespace, port: int | None, live):  # type: ignore[no-untyped-def]
+def _bound_osc(args: argparse.Namespace, port: int | None, notify: tuple, live):  # type: ignore[no-untyped-def]
     """With --osc, the OSC server listening and its notify targets looked up, serving nothing
     yet (`_controls` starts it): a port in use, a host it cannot listen on, a notify target that
     is this very port, end the run with one line before anything is said or opened."""
     if args.osc is None:
         return None
     from choreo.osc import OscServer
-    from choreo.oscnotify import parse_targets
 
-    server = OscServer(live, port, host=args.osc_host, allow=args.osc_allow, notify=parse_targets(args.osc_notify))
+    server = OscServer(live, port, host=args.osc_host, allow=args.osc_allow, notify=notify)
     server.bind()
     return server
 
