@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from choreo import __version__
 from choreo.cli.parser import ChoreoParser
-from choreo.cli.terminal import shows_outside_text_safely
+from choreo.cli.terminal import visible_output
 from choreo.cli.output import OUTPUT_ERROR_EXIT, Output, drop_output
 from choreo.errors import ChoreoError, OutputError
 
@@ -51,7 +51,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-@shows_outside_text_safely  # every line printed, a show's names and error messages too
 def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = None,
          time_source: TimeSource | None = None) -> int:
     """Run one command; every error and interruption becomes one message and an exit code here.
@@ -61,16 +60,17 @@ def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = Non
     `time_source`: the time a run or replay keeps (the machine's unless given; an embedding
     program or a test may pass `VirtualTime` to run shows on the in-process simulator at once).
     """
-    output = Output(sys.stdout)  # every command's output: a failed write is known and reported
-    sys.stdout = output  # type: ignore[assignment]
-    try:
-        code = _outcome(argv, signals, time_source, output)
-    finally:
-        sys.stdout = output.wrapped
-    if output.failure is not None:  # reported here, even if a command swallowed the exception
-        print(output.message(), file=sys.stderr)
-        return code or OUTPUT_ERROR_EXIT  # a command that failed anyway keeps its own status
-    return code
+    with visible_output():  # every line printed, a show's names and error messages too, made visible
+        output = Output(sys.stdout)  # every command's output: a failed write is known and reported
+        sys.stdout = output  # type: ignore[assignment]
+        try:
+            code = _outcome(argv, signals, time_source, output)
+        finally:
+            sys.stdout = output.wrapped
+        if output.failure is not None:  # reported here, even if a command swallowed the exception
+            print(output.message(), file=sys.stderr)
+            return code or OUTPUT_ERROR_EXIT  # a command that failed anyway keeps its own status
+        return code
 
 
 def _outcome(argv: Sequence[str] | None, signals: SignalGuard | None, time_source: TimeSource | None,

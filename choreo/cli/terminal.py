@@ -4,7 +4,6 @@ show outside text safely (`choreo.textfit.visible`)."""
 
 from __future__ import annotations
 
-import functools
 import os
 import select
 import sys
@@ -12,13 +11,10 @@ import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
-from typing import Any, ParamSpec, TextIO, TypeVar
+from typing import Any, TextIO
 
 from choreo.numtext import whole_number
 from choreo.textfit import fit, visible
-
-P = ParamSpec("P")
-R = TypeVar("R")
 
 # Where the output is not a terminal (a file, a pipe, a test) and COLUMNS does not say: lines
 # that need a width (the timeline's bars) use this; lines that are data (log frames) stay whole.
@@ -80,18 +76,6 @@ def visible_output() -> Iterator[None]:
         yield
     finally:
         sys.stdout, sys.stderr = saved
-
-
-def shows_outside_text_safely(function: Callable[P, R]) -> Callable[P, R]:
-    """`function` run inside `visible_output`: the CLI's entry, the one place its output
-    passes through on the way to the user."""
-
-    @functools.wraps(function)
-    def wrapped(*args: P.args, **kwargs: P.kwargs) -> R:
-        with visible_output():
-            return function(*args, **kwargs)
-
-    return wrapped
 
 
 class StatusWriter:
