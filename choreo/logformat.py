@@ -108,8 +108,8 @@ class _Record:
         except TypeError:
             pass
         else:
-            return record._checked()  # a field missing, or one from another version of choreo: field by field
-        given = {}
+            return record._checked()
+        given = {}  # a field missing, or one from another version of choreo: field by field
         for f in fields(cls):  # type: ignore[arg-type]
             if f.name in message:
                 given[f.name] = message[f.name]

@@ -205,11 +205,9 @@ class _Scan:
                 return
             self.i += 1
 
-    def _skip(self, chars: str) -> int:
-        start = self.i
+    def _skip(self, chars: str) -> None:
         while self.i < len(self.text) and self.text[self.i] in chars:
             self.i += 1
-        return self.i - start
 
     def _skip_word(self) -> None:
         while self.i < len(self.text) and self.text[self.i] not in _BLANKS + _BREAKS:
