@@ -135,3 +135,14 @@ def test_from_inside_the_music_or_without_it_is_taken(tmp_path):
     show = str(write_show(tmp_path, MUSIC_SHOW.replace("START", "0")))
     assert Session.prepare(RunRequest(show, from_step="edge", no_log=True, audio_device="null")).origin == 0.9
     assert Session.prepare(RunRequest(show, from_step="late", no_log=True, no_music=True)).origin == 2.0
+
+
+@pytest.mark.parametrize("ref", ["9" * 5000, "9" * 20, "1" + "0" * 4400])
+@pytest.mark.parametrize("option", ["--from", "--loop"])
+def test_a_step_number_too_long_for_any_show_is_one_line(tmp_path, capsys, ref, option):
+    """int() refuses a number past 4,300 digits: `--from 999…` was a ValueError traceback."""
+    show = write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n  - play: 2\n")
+    value = ref if option == "--from" else f"0..{ref}"
+    assert main(["run", str(show), "--no-log", option, value]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err[-500:]

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
 
+from choreo.numtext import whole_number
 from choreo.protocol import Frame
 from choreo.textfit import is_hidden
 
@@ -256,8 +257,9 @@ class Plan:
 
     def find(self, ref: str) -> int:
         """The index of a step named by `--from`: an index or a label. KeyError if none."""
-        if ref.isascii() and ref.isdigit() and int(ref) < len(self.steps):  # `１` is a label
-            return int(ref)
+        index = whole_number(ref) if ref == ref.strip() else None  # `１` and ` 5` are labels
+        if index is not None and index < len(self.steps):  # 5,000 digits: no index (int() refuses them)
+            return index
         for step in self.steps:
             if step.label == ref:
                 return step.index
