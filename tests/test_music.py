@@ -247,9 +247,13 @@ def test_a_music_show_plays_on_the_music_clock_with_tempo_cues_and_a_cue_at_0(tm
         # the motion starts on its cue on the music's clock (generous: a loaded machine)
         assert abs(start - cue) < 0.02, (cue, start)
         assert began < start  # its first frame went out early, by the lead
-    # the cue at 0: the play went out before the music's first moment, so the motion starts with it
-    first_cue, first_start, first_began = cue_and_start(log)[0]
-    assert first_began < 0 and abs(first_start) < 0.02
+    # the cue at 0: the play was due before the music's first moment (by its lead), so the motion
+    # starts with it. When the thread woke is the scheduler's business on a loaded machine (CI saw
+    # it wake 3.6 ms past a lead of less than that); when it was due is the runner's decision.
+    first = next(m for m in log.topic("/choreo/step") if m["event"] == "start")
+    lead_s = next(m["lead_ms"] for m in log.topic("/choreo/step") if m["event"] == "end") / 1e3
+    assert lead_s > 0 and first["planned_s"] == pytest.approx(-lead_s, abs=1e-6)
+    assert abs(cue_and_start(log)[0][1]) < 0.02
     clock = log.topic("/choreo/clock")
     assert {m["source"] for m in clock} == {"music"} and len(clock) >= 3
     result = log.metadata["choreo.result"]
