@@ -27,9 +27,9 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from choreo.link import RxEvent, TxEvent  # noqa: E402
-from choreo.runner import Runner, RunResult, StepEvent  # noqa: E402
-from choreo.session import RunRequest, Session  # noqa: E402
+from choreo.board.link import RxEvent, TxEvent  # noqa: E402
+from choreo.run.runner import Runner, RunResult, StepEvent  # noqa: E402
+from choreo.run.session import RunRequest, Session  # noqa: E402
 
 
 def row(name: str, value: float | str | None, unit: str, goal: str | None, ok: bool | None) -> dict:

@@ -29,11 +29,11 @@ from pythonosc.udp_client import SimpleUDPClient
 
 from common import Capture, median, percentile, pty_sim, row, temp_dir, write_show
 
-from choreo.live import Live
+from choreo.live.controls import Live
 from choreo.limits import Limits, Rate
-from choreo.osc import OscServer
-from choreo.runner import StopRequest
-from choreo.session import RunRequest, Session
+from choreo.live.osc import OscServer
+from choreo.run.runner import StopRequest
+from choreo.run.session import RunRequest, Session
 
 GOAL_MS = 5.0
 FULL, QUICK = 30, 10  # GOs counted a transport

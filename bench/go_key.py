@@ -44,7 +44,7 @@ from common import ROOT, env, median, percentile, pty_sim, row, temp_dir, write_
 
 GOAL_MS = 5.0
 FULL, QUICK = 25, 8  # GO presses a run
-LOCKOUT_S = 0.5  # choreo.live.LOCKOUT_S: a second GO sooner is refused as a double press
+LOCKOUT_S = 0.5  # choreo.live.controls.LOCKOUT_S: a second GO sooner is refused as a double press
 JITTER_S = (0.05, 0.15)  # the extra wait before a press, seeded
 
 

@@ -51,11 +51,11 @@ def generate_log(path: Path, messages: int) -> int:
     Returns the number of messages written. Times advance as on a real run (frames a millisecond
     apart, polls 50 ms apart), so durations and latencies in the summary look like a show's.
     """
-    from choreo import protocol
-    from choreo.link import RxEvent, Tag, TxEvent
-    from choreo.logformat import WARNING
-    from choreo.record import Recorder, RunInfo
-    from choreo.runner import StepEvent
+    from choreo.wire import protocol
+    from choreo.board.link import RxEvent, Tag, TxEvent
+    from choreo.log.format import WARNING
+    from choreo.log.recorder import Recorder, RunInfo
+    from choreo.run.runner import StepEvent
     from choreo.show.model import PlannedStep, StepKind
 
     start_ns = 1_790_000_000_000_000_000
@@ -126,7 +126,7 @@ def generate_log(path: Path, messages: int) -> int:
         index += 1
         step(wait, lambda tag: t.__setitem__(0, t[0] + 250_000_000))
         cycle += 1
-    from choreo.runner import RunResult
+    from choreo.run.runner import RunResult
 
     recorder.close(RunResult("done", index, 0, (t[0] - zero) / 1e9).metadata())
     return recorder.messages

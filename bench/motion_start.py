@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from common import median, percentile, pty_sim, row, temp_dir, write_show
 
-from choreo.runner import StopRequest
-from choreo.session import RunRequest, Session
+from choreo.run.runner import StopRequest
+from choreo.run.session import RunRequest, Session
 
 GOAL_P99_MS = 1.0
 BAUDS = (115200, 625000, 1250000)

@@ -20,10 +20,10 @@ from pathlib import Path
 
 from common import median, percentile, pty_sim, row, temp_dir, write_show
 
-from choreo.logformat import CLOCK_TOPIC, parse
-from choreo.review.reader import LogReader
-from choreo.runner import StopRequest
-from choreo.session import RunRequest, Session
+from choreo.log.format import CLOCK_TOPIC, parse
+from choreo.log.reader import LogReader
+from choreo.run.runner import StopRequest
+from choreo.run.session import RunRequest, Session
 
 FULL_S, QUICK_S = 300.0, 8.0  # the song's length
 RATE = 22050

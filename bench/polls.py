@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import sys
 
-from choreo.link import TxEvent
-from choreo.protocol import FrameKind
+from choreo.board.link import TxEvent
+from choreo.wire.protocol import FrameKind
 from common import ShowRun, median, percentile, pty_sim, row, run_show, temp_dir, write_show
 
 POLL_MS = 50.0

@@ -19,8 +19,8 @@ import sys
 import time
 from pathlib import Path
 
-from choreo.link import Link, RxEvent, Tag, TxEvent
-from choreo.record import Recorder, RunInfo
+from choreo.board.link import Link, RxEvent, Tag, TxEvent
+from choreo.log.recorder import Recorder, RunInfo
 from common import Capture, median, percentile, row, run_show, temp_dir, write_show
 
 GOAL_US = 30.0

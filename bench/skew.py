@@ -4,7 +4,7 @@ N robots (2, 4, 8), each on its own `choreo sim` process on its own pseudo-termi
 of shared steps: every play goes to all of them at once, on a cue. For each play the figure is
 the spread of the moments the robots' motion-start frames (the restore that starts the motion)
 were handed to their ports' write calls: the last robot's minus the first's. Each robot's link
-runs in its own thread (choreo.ensemble), so this is what one Python process driving N serial
+runs in its own thread (choreo.run.ensemble), so this is what one Python process driving N serial
 lines achieves: the threads' spin to the due time and Python's lock between them.
 
 Goal (issue 12): p99 under 1 ms on a quiet machine.
@@ -17,9 +17,9 @@ from contextlib import ExitStack
 
 from common import Capture, median, percentile, pty_sim, row, temp_dir, write_show
 
-from choreo.protocol import FrameKind
-from choreo.runner import StopRequest
-from choreo.session import RunRequest, Session
+from choreo.wire.protocol import FrameKind
+from choreo.run.runner import StopRequest
+from choreo.run.session import RunRequest, Session
 
 GOAL_P99_MS = 1.0
 FULL = (2, 4, 8), 40  # robot counts, plays a run

@@ -19,8 +19,8 @@ import sys
 import time
 
 from choreo.clock import RunClock
-from choreo.link import BAUD_RATES, Link
-from choreo.protocol import play_sequence
+from choreo.board.link import BAUD_RATES, Link
+from choreo.wire.protocol import play_sequence
 from choreo.sim.board import BITS_PER_BYTE
 from common import Capture, median, percentile, pty_sim, row
 

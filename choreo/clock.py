@@ -155,7 +155,7 @@ class VirtualTime:
     any machine. Its wall clock starts at the real one, so logs look like any other run's.
 
     Only the in-process simulator (`sim://`) can keep up with it: a real port answers in real
-    time, so a session refuses the pair (see `choreo.session`).
+    time, so a session refuses the pair (see `choreo.run.session`).
     """
 
     virtual = True

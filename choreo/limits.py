@@ -1,7 +1,7 @@
 """What the outside may cost a running show: the limits on commands, replies, log lines and
 printed lines, in one place (the README's OSC section, "Limits", lists them), and the token
 buckets that keep them. (The network's own limits, connections, sizes and timeouts, are
-`choreo.osclimits`.)
+`choreo.live.osclimits`.)
 
 Why they exist: a command from the network costs the show a log line, a line on the terminal and
 a reply. A flood of them (80,000 GOs in 5 s) would fill the disk, which stops the show, and the

@@ -166,7 +166,7 @@ def vmain(argv: list[str]) -> int:
 def prepare(request):  # type: ignore[no-untyped-def]
     """`Session.prepare` on virtual time (see `vmain`)."""
     from choreo.clock import VirtualTime
-    from choreo.session import Session
+    from choreo.run.session import Session
 
     return Session.prepare(request, VirtualTime())
 
@@ -180,9 +180,9 @@ class LiveRun:
                  attach=None, **request) -> None:  # type: ignore[no-untyped-def]
         import threading
 
-        from choreo.live import Live
-        from choreo.runner import StopRequest
-        from choreo.session import RunRequest, Session
+        from choreo.live.controls import Live
+        from choreo.run.runner import StopRequest
+        from choreo.run.session import RunRequest, Session
 
         show = write_show(tmp_path, body)
         self.log_path = tmp_path / "run.mcap"
@@ -204,7 +204,7 @@ class LiveRun:
 
     def go(self, name: str = "go", **kwargs):  # type: ignore[no-untyped-def]
         """A command from the test, as from a key or an OSC message."""
-        from choreo.live import Command
+        from choreo.live.controls import Command
 
         return self.live.command(Command(name, "test", **kwargs))
 

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import choreo
-from choreo import beats
-from choreo.beats import estimate, read_song
+import choreo.music
+from choreo.music import beats
+from choreo.music.beats import estimate, read_song
 from choreo.cli import main
 from choreo.cli.beats import MUSIC_EXTRA
 from choreo.show.load import load_show
@@ -200,8 +200,8 @@ def test_bad_options_are_usage_errors(songs, capsys, argv, says):
 
 
 def test_without_numpy_the_command_names_the_extra_to_install(songs, capsys, monkeypatch):
-    monkeypatch.delitem(sys.modules, "choreo.beats")
-    monkeypatch.delattr(choreo, "beats")
+    monkeypatch.delitem(sys.modules, "choreo.music.beats")
+    monkeypatch.delattr(choreo.music, "beats")
     monkeypatch.setitem(sys.modules, "numpy", None)
     assert main(["beats", str(songs["96"])]) == 2
     assert capsys.readouterr().err == MUSIC_EXTRA + "\n"

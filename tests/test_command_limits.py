@@ -1,5 +1,5 @@
 """The limits on what commands may cost a show (`choreo.limits`), and the commands a stopping
-show refuses (`choreo.live`): on the virtual clock, no network.
+show refuses (`choreo.live.controls`): on the virtual clock, no network.
 
 A flood of commands must not fill the log or the terminal (what is refused is logged one by one
 only within a budget; the rest is counted and summed up in `unlogged` records whose counts the
@@ -18,11 +18,11 @@ import pytest
 
 from choreo.clock import VirtualTime
 from choreo.limits import LIMITS, UNLOGGED, Budgets, Limits, Rate, ReportGate, SenderLimits
-from choreo.live import Command, Live
-from choreo.logformat import CommandRecord
-from choreo.record import Recorder, RunInfo
+from choreo.live.controls import Command, Live
+from choreo.log.format import CommandRecord
+from choreo.log.recorder import Recorder, RunInfo
 from choreo.review.summary import render, summarize
-from choreo.runner import PANIC, StopRequest
+from choreo.run.runner import PANIC, StopRequest
 from choreo.show.model import PlannedStep, StepKind
 
 SCHEMA = json.loads((Path(__file__).resolve().parent.parent / "schemas" / "log.command.schema.json").read_text())
@@ -219,7 +219,7 @@ def test_the_log_carries_the_counts_and_the_review_adds_them_up(tmp_path):
 
 
 def test_a_summary_record_without_counts_is_counted_by_its_count(tmp_path):
-    from choreo.live import Answer, CommandEvent
+    from choreo.live.controls import Answer, CommandEvent
 
     time = VirtualTime()
     path = tmp_path / "short.mcap"
@@ -242,7 +242,7 @@ def test_a_log_whose_summary_record_does_not_add_up_is_refused_in_one_line(tmp_p
     """A log written by another program (or edited) must not make the review count wrong or
     raise a traceback."""
     from choreo.errors import ChoreoError
-    from choreo.live import Answer, CommandEvent
+    from choreo.live.controls import Answer, CommandEvent
 
     time = VirtualTime()
     path = tmp_path / "forged.mcap"

@@ -30,12 +30,12 @@ from hypothesis import strategies as st
 
 from choreo.cli.console import (LEGEND, Console, KeyParser, KeyReader, Note, Row, Screen, TerminalMode,
                                 _LinkWatch, render)
-from choreo.link import RxEvent, TxEvent
-from choreo.live import Answer, Command, CommandEvent, Live
-from choreo.logformat import WARNING
-from choreo.protocol import Reply, ReplyKind
-from choreo.runner import StepEvent, StopRequest
-from choreo.session import RunRequest, Session
+from choreo.board.link import RxEvent, TxEvent
+from choreo.live.controls import Answer, Command, CommandEvent, Live
+from choreo.log.format import WARNING
+from choreo.wire.protocol import Reply, ReplyKind
+from choreo.run.runner import StepEvent, StopRequest
+from choreo.run.session import RunRequest, Session
 from runlog import REPO, read_log, write_show
 
 GO_SHOW = """\

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from choreo import doctor
+from choreo.board import doctor
 from choreo.cli import main
-from choreo.doctor import NOTE, OK, PROBLEM, SerialPort, examine
-from choreo.usb import latency_timer_ms
+from choreo.board.doctor import NOTE, OK, PROBLEM, SerialPort, examine
+from choreo.board.usb import latency_timer_ms
 from runlog import vmain
 
 
@@ -103,8 +103,8 @@ class FakeSerial:
 
 
 def test_a_run_asks_for_low_latency_and_says_once_what_a_slow_timer_costs(monkeypatch):
-    from choreo import usb
-    from choreo.link import usb_latency_note
+    from choreo.board import usb
+    from choreo.board.link import usb_latency_note
 
     monkeypatch.setattr(usb, "latency_timer_ms", lambda device, sysfs=usb.SYSFS: 16)
     port = FakeSerial("/dev/ttyUSB0")
@@ -119,8 +119,8 @@ def test_a_run_asks_for_low_latency_and_says_once_what_a_slow_timer_costs(monkey
 
 
 def test_the_audio_output_is_checked_with_a_fix_when_it_does_not_open():
-    from choreo.doctor import NOTE, OK, PROBLEM, audio_output
-    from choreo.music import AudioError
+    from choreo.board.doctor import NOTE, OK, PROBLEM, audio_output
+    from choreo.music.player import AudioError
 
     def will_not_open() -> str:
         raise AudioError("it will not open (failed to init device)")

@@ -10,8 +10,8 @@ from textwrap import dedent
 import pytest
 
 from choreo.errors import LinkError, UsageError
-from choreo.runner import StopRequest
-from choreo.session import RunRequest
+from choreo.run.runner import StopRequest
+from choreo.run.session import RunRequest
 from runlog import prepare, read_log, vmain
 
 UNISON = """

@@ -14,8 +14,8 @@ import time
 import pytest
 
 from choreo.cli import main
-from choreo.runner import PANIC, StopRequest
-from choreo.session import RunRequest, Session
+from choreo.run.runner import PANIC, StopRequest
+from choreo.run.session import RunRequest, Session
 from runlog import LiveRun as Running, read_log, wait_for, write_show
 
 GO_SHOW = """\
@@ -329,7 +329,7 @@ def test_the_reviews_place_frames_on_the_held_clock(tmp_path, capsys):
     starts = [play.start_s for play in summarize(run.log_path).plays]
     assert abs(starts[2] - 0.5) < 0.03, starts  # the motion on its cue, on the show clock (0.9 if the hold counted)
     from choreo.review.timeline import build
-    from choreo.review.reader import LogReader
+    from choreo.log.reader import LogReader
 
     with LogReader(run.log_path) as reader:
         runs = [r for r in build(reader).runs if r.motion == 3]

@@ -20,10 +20,10 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import choreo.hth4
+import choreo.show.hth4
 from choreo.cli import main
 from choreo.errors import ShowError
-from choreo.hth4 import LAYOUT_FIRST_SLOT, parse_project, read_project
+from choreo.show.hth4 import LAYOUT_FIRST_SLOT, parse_project, read_project
 from choreo.show.load import load_show, load_show_bytes
 from choreo.show.model import hidden_character
 from choreo.show.starter import starter_show, yaml_key, yaml_text
@@ -205,7 +205,7 @@ def test_output_file_is_written_and_validates_with_a_schema_line_that_points_at_
     first = show_path.read_text(encoding="utf-8").splitlines()[0]
     assert first.startswith("# yaml-language-server: $schema=")
     schema = first.split("=", 1)[1]
-    assert (show_path.parent / schema).resolve() == (Path(choreo.hth4.__file__).parent / "schemas" / "show.schema.json").resolve()
+    assert (show_path.parent / schema).resolve() == (Path(choreo.show.hth4.__file__).parent.parent / "schemas" / "show.schema.json").resolve()
     assert main(["validate", str(show_path)]) == 0
 
 
@@ -296,7 +296,7 @@ def test_a_missing_file_and_a_directory_are_exit_2(tmp_path, capsys):
 
 
 def test_a_file_over_the_cap_is_refused_before_parsing(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(choreo.hth4, "MAX_PROJECT_BYTES", 1024 * 1024)
+    monkeypatch.setattr(choreo.show.hth4, "MAX_PROJECT_BYTES", 1024 * 1024)
     path = write_project(tmp_path, project_xml(JAPANESE) + b" " * (1024 * 1024))
     assert_one_line_exit_2(capsys, ["import", str(path)], "over 1 MiB, too big for a Heart to Heart 4 project")
 

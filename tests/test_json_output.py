@@ -229,11 +229,11 @@ def test_bad_arguments_without_json_print_nothing_on_stdout(capsys):
 
 
 def test_an_interrupted_json_command_says_so_in_json(capsys, monkeypatch):
-    import choreo.probe
+    import choreo.board.probe
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(choreo.probe, "probe", interrupted)
+    monkeypatch.setattr(choreo.board.probe, "probe", interrupted)
     assert main(["probe", "--port", "sim://", "--json"]) == 130
     assert json.loads(capsys.readouterr().out) == {"ok": False, "exit": 130, "error": "interrupted"}

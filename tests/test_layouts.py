@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import pytest
 
-from choreo import protocol as p
+from choreo.wire import protocol as p
 from choreo.cli import main
-from choreo.layouts import HTH4_22, SEED, layout_named
-from choreo.link import Link
-from choreo.probe import probe
-from choreo.session import RunRequest, Session
+from choreo.wire.layouts import HTH4_22, SEED, layout_named
+from choreo.board.link import Link
+from choreo.board.probe import probe
+from choreo.run.session import RunRequest, Session
 from choreo.sim.board import SimBoard
 from choreo.sim.faults import FaultPlan
 from runlog import prepare, read_log, write_show

@@ -10,9 +10,9 @@ from collections import deque
 
 import pytest
 
-from choreo import protocol as p
+from choreo.wire import protocol as p
 from choreo.errors import LinkError
-from choreo.link import Link, Tag
+from choreo.board.link import Link, Tag
 
 ACK_MOV = p.ack(p.CMD_MOV)
 ACK_CALL = p.ack(p.CMD_CALL)

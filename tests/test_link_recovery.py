@@ -7,10 +7,10 @@ import time
 
 import pytest
 
-from choreo import protocol as p
+from choreo.wire import protocol as p
 from choreo.errors import Interrupted, LinkError
-from choreo.link import Link, Tag
-from choreo.runner import StopRequest
+from choreo.board.link import Link, Tag
+from choreo.run.runner import StopRequest
 from test_link import ACK_CALL, ACK_MOV, IDLE, SYNC_ACK, Events, ScriptedPort, link_for
 
 SYNC_NAK = p.nak(p.CMD_ACK_CHECK)
@@ -107,7 +107,7 @@ def test_silence_to_every_ack_check_is_a_dead_line_and_says_so():
 
 
 def test_a_retry_warning_says_no_reply_not_nothing(tmp_path):
-    from choreo.runner import _RetryReporter
+    from choreo.run.runner import _RetryReporter
 
     lines: list[str] = []
 

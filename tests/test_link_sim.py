@@ -18,9 +18,9 @@ import pytest
 
 from choreo.errors import LinkError
 from choreo.clock import RunClock, VirtualTime
-from choreo.link import Link, RxEvent, TxEvent
-from choreo.protocol import FrameKind
-from choreo.protocol import ReplyKind
+from choreo.board.link import Link, RxEvent, TxEvent
+from choreo.wire.protocol import FrameKind
+from choreo.wire.protocol import ReplyKind
 from choreo.sim.faults import FaultPlan
 from choreo.sim.board import SimBoard
 from choreo.sim.pty import PtyServer

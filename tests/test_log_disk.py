@@ -18,10 +18,10 @@ from pathlib import Path
 
 import pytest
 
-from choreo import record
+from choreo.log import recorder as record
 from choreo.cli import main
 from choreo.errors import LogError
-from choreo.session import RunRequest, Session
+from choreo.run.session import RunRequest, Session
 from runlog import vmain, prepare, REPO, _env, read_log, write_show
 
 MANY_PLAYS = """

@@ -8,7 +8,7 @@ import pytest
 
 from choreo.cli import main
 from choreo.errors import UsageError
-from choreo.session import MIN_LOOP_S, RunRequest, Session
+from choreo.run.session import MIN_LOOP_S, RunRequest, Session
 from runlog import write_show
 from test_music import write_song
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from choreo.session import RunRequest
+from choreo.run.session import RunRequest
 from runlog import prepare, read_log
 
 SHOW = "version: 1\nsteps:\n" + "".join(f"  - play: {1 + i % 3}\n    at: {0.5 * i:g}\n" for i in range(8))

@@ -19,7 +19,7 @@ import pytest
 
 from choreo.cli import main
 from choreo.errors import ShowError, UsageError
-from choreo.music import (LATENCY_S, LOCK_CALLBACKS, NULL_DEVICE, AudioError, Feed, MusicClock, Output, Song,
+from choreo.music.player import (LATENCY_S, LOCK_CALLBACKS, NULL_DEVICE, AudioError, Feed, MusicClock, Output, Song,
                           pick_output)
 from choreo.show.load import load_show, load_show_bytes
 from choreo.show.model import Music
@@ -315,7 +315,7 @@ def test_with_no_sound_output_the_null_output_keeps_time_and_says_so(tmp_path, c
     assert "ALSA" not in err
     assert read_log(tmp_path / "run.mcap").metadata["choreo.result"]["audio.backend"] == "Null"
     # an output asked for by name that will not open is an error, not a silent show
-    monkeypatch.setattr("choreo.music.outputs", lambda: [Output(1, "USB Audio", "ALSA", "id")])
+    monkeypatch.setattr("choreo.music.player.outputs", lambda: [Output(1, "USB Audio", "ALSA", "id")])
     assert main(["run", str(show), "--audio-device", "usb", "--no-log"]) == 2
     assert "audio output 'USB Audio' will not open" in capsys.readouterr().err
 

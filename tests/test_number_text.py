@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from choreo.errors import UsageError
-from choreo.music import Output, pick_output
+from choreo.music.player import Output, pick_output
 from choreo.numtext import whole_number
 from choreo.sim.faults import Trigger
 

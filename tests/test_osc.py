@@ -1,4 +1,4 @@
-"""OSC control (`choreo.osc`), driven with python-osc's own clients over UDP and TCP (SLIP): every
+"""OSC control (`choreo.live.osc`), driven with python-osc's own clients over UDP and TCP (SLIP): every
 command and its QLab-style reply, unknown commands, refused senders, notifications, a port in
 use, and one run through the CLI.
 
@@ -22,12 +22,12 @@ from pythonosc.tcp_client import SimpleTCPClient
 from pythonosc.udp_client import SimpleUDPClient
 
 from choreo.errors import UsageError
-from choreo.live import Live
-from choreo.logformat import ERROR, WARNING
+from choreo.live.controls import Live
+from choreo.log.format import ERROR, WARNING
 from choreo.limits import Budget
-from choreo.oscwire import encode_message, slip_encode
-from choreo.osc import OscServer, command_for, parse_allow, sender_allowed
-from choreo.runner import PANIC, StopRequest
+from choreo.live.oscwire import encode_message, slip_encode
+from choreo.live.osc import OscServer, command_for, parse_allow, sender_allowed
+from choreo.run.runner import PANIC, StopRequest
 from runlog import LiveRun, ended_if_left, read_log, start_choreo, wait_for, write_show
 
 GO_SHOW = """\

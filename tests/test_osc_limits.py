@@ -1,4 +1,4 @@
-"""OSC on a hostile network, what a packet may cost (`choreo.limits` through `choreo.osc`): one
+"""OSC on a hostile network, what a packet may cost (`choreo.limits` through `choreo.live.osc`): one
 bundle of many GOs carries out and answers only what one sender's budget allows; replies and
 notifications sent back to choreo are never answered nor notified; `--osc-notify` pointed at
 choreo's own port is refused at start-up, and every target given is notified; `choreo run`
@@ -23,9 +23,9 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 from choreo.clock import VirtualTime
 from choreo.errors import UsageError
 from choreo.limits import LIMITS, UNLOGGED, Limits, Rate
-from choreo.live import Command, Live
-from choreo.osc import OscServer
-from choreo.runner import StopRequest
+from choreo.live.controls import Command, Live
+from choreo.live.osc import OscServer
+from choreo.run.runner import StopRequest
 from runlog import choreo, ended_if_left, read_log, start_choreo, wait_for, write_show
 from test_osc import ONE_GO_SHOW, Receiver, free_port, outside_address
 
@@ -543,8 +543,8 @@ def test_a_network_port_without_host_and_port_is_a_bad_argument_not_a_failed_lin
 
 
 def _decodes(monkeypatch) -> list[int]:  # type: ignore[no-untyped-def]
-    """Counts the packets choreo.osc decodes."""
-    import choreo.osc as osc
+    """Counts the packets choreo.live.osc decodes."""
+    import choreo.live.osc as osc
 
     calls = [0]
     decode = osc.decode_packet
@@ -660,7 +660,7 @@ def test_a_bundles_messages_are_read_within_the_senders_budget_of_packets(clock)
 def test_a_big_packet_spends_more_of_its_senders_budget(clock, monkeypatch):
     """Reading is by the byte: 256 packets of 60 KB at once held the thread that reads the
     operator's GO for seconds. A packet spends a token per 4 KB begun."""
-    from choreo.osclimits import LIMITS as WIRE
+    from choreo.live.osclimits import LIMITS as WIRE
 
     decodes = _decodes(monkeypatch)
     live = Live(StopRequest(), wait_start=True, now=clock.now)

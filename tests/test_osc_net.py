@@ -1,4 +1,4 @@
-"""OSC on a hostile network (`choreo.osc` over `choreo.oscnet`): malformed packets, unknown type
+"""OSC on a hostile network (`choreo.live.osc` over `choreo.live.oscnet`): malformed packets, unknown type
 tags, big datagrams, liblo's length-prefixed TCP, idle and trickling connections, and 300 idle
 connections against a process with 256 descriptors (a Mac's default), all on loopback.
 
@@ -29,10 +29,10 @@ from runlog import REPO, ended_if_left, read_log, wait_for, write_show
 from test_osc_wire import PACKET
 from test_osc import GO_SHOW, TIMEOUT_S, Commands, ask, client, free_port, live, read_to_end, serve, server  # noqa: F401
 
-from choreo import osc as osc_module
-from choreo.osc import OscServer
-from choreo.osclimits import OscLimits
-from choreo.oscwire import BUNDLE, decode_packet, encode_message, slip_encode
+from choreo.live import osc as osc_module
+from choreo.live.osc import OscServer
+from choreo.live.osclimits import OscLimits
+from choreo.live.oscwire import BUNDLE, decode_packet, encode_message, slip_encode
 
 START = encode_message("/choreo/start")
 GO = encode_message("/choreo/go")
@@ -377,8 +377,8 @@ def test_datagrams_the_system_dropped_are_counted():
     85% counted). The system's count of drops is read with each datagram and logged as `lost`."""
     from choreo.clock import VirtualTime
     from choreo.limits import UNLOGGED, Limits, Rate
-    from choreo.live import Live
-    from choreo.runner import StopRequest
+    from choreo.live.controls import Live
+    from choreo.run.runner import StopRequest
 
     clock = VirtualTime()
     plenty = Rate(10**7, 1.0)

@@ -1,5 +1,5 @@
-"""choreo's own OSC decoding and TCP framing (`choreo.oscwire`) and the connections' caps and
-timeouts as decisions (`choreo.oscnet.ConnectionTable`): pure, no sockets. The packets choreo
+"""choreo's own OSC decoding and TCP framing (`choreo.live.oscwire`) and the connections' caps and
+timeouts as decisions (`choreo.live.oscnet.ConnectionTable`): pure, no sockets. The packets choreo
 must read are built with python-osc's builders (another implementation than the one tested);
 hostile ones by hand, and by the thousand in the fuzz tests at the end."""
 
@@ -15,9 +15,9 @@ from hypothesis import strategies as st
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder, build_msg
 
-from choreo.oscnet import ConnectionTable
-from choreo.osclimits import LIMITS, OscLimits
-from choreo.oscwire import (BUNDLE, END, Decoded, FrameReader, Message, decode_packet, encode_bundle, encode_message,
+from choreo.live.oscnet import ConnectionTable
+from choreo.live.osclimits import LIMITS, OscLimits
+from choreo.live.oscwire import (BUNDLE, END, Decoded, FrameReader, Message, decode_packet, encode_bundle, encode_message,
                             slip_decode, slip_encode)
 
 GO = build_msg("/choreo/go", []).dgram

@@ -5,14 +5,14 @@ from __future__ import annotations
 
 import pytest
 
-from choreo import protocol as p
+from choreo.wire import protocol as p
 from choreo.errors import LinkError
-from choreo.link import Link, Tag
-from choreo.runner import Runner, StopRequest
+from choreo.board.link import Link, Tag
+from choreo.run.runner import Runner, StopRequest
 from choreo.show.load import load_show
 from choreo.show.plan import compile_plan
 from runlog import write_show
-from choreo.layouts import SEED, StartState
+from choreo.wire.layouts import SEED, StartState
 from test_link import ACK_CALL, ACK_MOV, Events, ScriptedPort, link_for
 
 BAD_SUM = ACK_MOV[:3] + bytes([(ACK_MOV[3] + 1) & 0xFF])
@@ -162,7 +162,7 @@ SHORT_DURATIONS = "durations=1:0.05,2:0.1,3:0.15"  # every one over before the 5
 
 
 def run_short(tmp_path, layout: str, faults: str):
-    from choreo.session import RunRequest
+    from choreo.run.session import RunRequest
     from runlog import prepare, read_log
 
     show = write_show(tmp_path, SHORT)
@@ -190,7 +190,7 @@ def board_state(layout_name: str, frames_sent: int, read_at: float) -> StartStat
     """The verdict on the simulated board's own answer to the state read, after the first
     `frames_sent` frames of motion 1's play sequence (sent 10 ms apart from t=0.1, the last at
     0.12 or 0.13; motion 1 runs 0.05 s; the status refreshes at 0.15 and 0.2)."""
-    from choreo.layouts import layout_named
+    from choreo.wire.layouts import layout_named
     from choreo.sim.board import SimBoard
 
     layout = layout_named(layout_name)

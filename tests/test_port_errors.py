@@ -13,7 +13,7 @@ import serial
 import serial.serialposix
 
 from choreo.cli import main
-from choreo.urlhandler import protocol_sim
+from choreo.sim import protocol_sim
 from runlog import vmain
 
 REFUSALS = [

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pytest
 
-from choreo import protocol as p
+from choreo.wire import protocol as p
 from choreo.cli import main
 from choreo.errors import LinkError
-from choreo.probe import ConfigWord, Counter, _counter_hints, probe
+from choreo.board.probe import ConfigWord, Counter, _counter_hints, probe
 from runlog import SimPty, vmain
 
 
@@ -21,7 +21,7 @@ def test_the_simulator_answers_at_its_own_baud_and_is_only_read():
 
 
 def test_probing_never_writes_ram_nor_calls():
-    from choreo.link import Link
+    from choreo.board.link import Link
 
     seen: list[bytes] = []
 

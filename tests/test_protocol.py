@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from choreo import protocol as p
+from choreo.wire import protocol as p
 from choreo.errors import MotionRangeError
-from choreo.framewords import describe_frame, describe_reply
-from choreo.layouts import SEED
+from choreo.wire.framewords import describe_frame, describe_reply
+from choreo.wire.layouts import SEED
 
 DATA = Path(__file__).parent / "data"
 

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import pytest
 
 from choreo.errors import UsageError
-from choreo.review.replay import ReplayReport, _recorded_layout
+from choreo.run.replay import ReplayReport, _recorded_layout
 from runlog import read_log, vmain, write_show
 
 MIXED = """

@@ -26,7 +26,7 @@ from mcap.reader import NonSeekingReader
 
 from choreo.cli import main
 from runlog import vmain
-from choreo.review.reader import LogReader
+from choreo.log.reader import LogReader
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -482,7 +482,7 @@ def test_replay_of_a_clean_run_is_clean_at_any_speed(live_log, capsys, tmp_path,
 def test_speed_scales_a_sim_board_and_nothing_else():
     from urllib.parse import parse_qsl
 
-    from choreo.review.replay import at_speed
+    from choreo.run.replay import at_speed
     from choreo.sim.options import parse_query
 
     def options(url: str) -> dict[str, str]:
@@ -543,7 +543,7 @@ def test_not_a_log_is_exit_2_with_one_line(logs, capsys):
 def test_a_poll_the_replay_sent_late_is_not_held_against_the_board(live_log, capsys, tmp_path, monkeypatch):
     """A busy machine holds one poll back 30 ms (300 ms of the run at speed 10): it finds the motion
     over where the run found it executing. Reported, but not a difference --strict fails on."""
-    from choreo.link import Link
+    from choreo.board.link import Link
 
     send = Link.send
     polls = {"n": 0}

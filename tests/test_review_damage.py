@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from choreo.cli import main
-from choreo.review.reader import LogReader
-from choreo.review.replay import Difference, _polls_at_motion_ends, replay
+from choreo.log.reader import LogReader
+from choreo.run.replay import Difference, _polls_at_motion_ends, replay
 from runlog import vmain, write_show
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -141,7 +141,7 @@ def test_two_replays_in_the_same_second_get_two_logs(run_log, tmp_path, monkeypa
     monkeypatch.chdir(tmp_path)
     from datetime import datetime, timezone
 
-    import choreo.record as record
+    import choreo.log.recorder as record
 
     fixed = datetime(2026, 11, 23, 6, 0, 0, tzinfo=timezone.utc)
     real = record.default_log_path
@@ -174,7 +174,7 @@ def test_polls_next_to_a_motions_end_are_known_from_the_recording(run_log):
 
 
 def test_only_a_status_difference_at_a_motions_end_is_excused():
-    from choreo.logformat import RxRecord
+    from choreo.log.format import RxRecord
 
     status = lambda executing: RxRecord(7, "status", executing=executing)  # noqa: E731
     at_end = Difference(7, 1, "status", 1.0, status(False), status(True), at_end=True)

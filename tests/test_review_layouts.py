@@ -16,12 +16,12 @@ from pathlib import Path
 import pytest
 
 from choreo.clock import VirtualTime
-from choreo.framewords import describe_frame
-from choreo.layouts import HTH4_22, SEED
-from choreo.logformat import (ClockRecord, LogLayouts, RxRecord, StepRecord, TxRecord, frame_meaning,
+from choreo.wire.framewords import describe_frame
+from choreo.wire.layouts import HTH4_22, SEED
+from choreo.log.format import (ClockRecord, LogLayouts, RxRecord, StepRecord, TxRecord, frame_meaning,
                               reply_meaning)
-from choreo.review.reader import LogReader
-from choreo.review.replay import replay
+from choreo.log.reader import LogReader
+from choreo.run.replay import replay
 from choreo.review.showtime import ShowTimes
 from choreo.review.summary import summarize
 from choreo.review.timeline import build
@@ -157,7 +157,7 @@ def test_summary_places_a_warning_at_open_before_the_show(tmp_path, monkeypatch)
     """A warning the run logs as the port opens (a USB adapter's slow latency timer) is listed
     where it was logged, before the show clock started (on virtual time the clock starts the
     same instant), not at the time the port's frames took after the run was prepared."""
-    monkeypatch.setattr("choreo.link.usb_latency_note", lambda port: "port X: the latency timer is 16 ms")
+    monkeypatch.setattr("choreo.board.link.usb_latency_note", lambda port: "port X: the latency timer is 16 ms")
     show = write_show(tmp_path, ONE)
     log = tmp_path / "note.mcap"
     assert vmain(["run", str(show), "--log", str(log), "-q"]) == 0
@@ -257,7 +257,7 @@ class _StepEvent:
 
 def _hostile_log(path: Path, show_s: object) -> Path:
     """A log whose first clock sample and first step start carry `show_s`, then a good step."""
-    from choreo.record import Recorder, RunInfo
+    from choreo.log.recorder import Recorder, RunInfo
 
     recorder = Recorder(path, RunInfo("show.yaml", "x", b"version: 1\n", "sim://", 115200, 10**18, "hth4-2.2"))
     recorder.on_tx(_TxEvent(1, 10**18 + 1_000_000))
@@ -270,7 +270,7 @@ def _hostile_log(path: Path, show_s: object) -> Path:
 
 class _TxEvent:
     def __init__(self, seq: int, time_ns: int) -> None:
-        from choreo.protocol import sync_frame
+        from choreo.wire.protocol import sync_frame
 
         self.seq, self.frame, self.attempt, self.time_ns, self.tag = seq, sync_frame(), 1, time_ns, None
 

@@ -9,12 +9,12 @@ import json
 
 import pytest
 
-from choreo.layouts import HTH4_22, SEED
-from choreo.logformat import MotionTracker, RxRecord, TxRecord
-from choreo.review.reader import LogReader
+from choreo.wire.layouts import HTH4_22, SEED
+from choreo.log.format import MotionTracker, RxRecord, TxRecord
+from choreo.log.reader import LogReader
 from choreo.review.summary import render, summarize
 from choreo.review.timeline import build
-from choreo.session import RunRequest
+from choreo.run.session import RunRequest
 from runlog import prepare, vmain, write_show
 from test_play_once import NEVER, OVER, RUNNING, run_short
 
@@ -179,7 +179,7 @@ def test_a_motion_no_layout_can_judge_is_left_to_the_links_next_frame(motion):
 
 @pytest.mark.parametrize("motion", [1.0, True, 999, "x"])
 def test_export_words_of_a_state_read_with_a_motion_no_layout_can_judge(motion):
-    from choreo.logformat import LogLayouts, reply_meaning
+    from choreo.log.format import LogLayouts, reply_meaning
 
     tx = TxRecord(4, "read", SEED.start_read.hex, step=0, motion=motion)
     words = reply_meaning(RxRecord(4, "status", NEVER.hex(" ")), tx, LogLayouts({None: "seed"}))

@@ -18,8 +18,8 @@ from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
 
 from choreo.errors import LogError
-from choreo.logformat import decode
-from choreo.review.reader import MAGIC, LogReader
+from choreo.log.format import decode
+from choreo.log.reader import MAGIC, LogReader
 from choreo.review.summary import Distribution, summarize
 
 REPO = Path(__file__).resolve().parent.parent
@@ -303,9 +303,9 @@ def _log_with_stale_replies(path: Path) -> None:
     replies to earlier frames (one, then two) that the link set aside."""
     from dataclasses import replace
 
-    from choreo import protocol
-    from choreo.link import RxEvent, Tag, TxEvent
-    from choreo.record import Recorder, RunInfo
+    from choreo.wire import protocol
+    from choreo.board.link import RxEvent, Tag, TxEvent
+    from choreo.log.recorder import Recorder, RunInfo
 
     start = 1_790_000_000_000_000_000
     recorder = Recorder(path, RunInfo("s.yaml", "stale", b"version: 1\n", "sim://", 115200, start))
@@ -356,11 +356,11 @@ def _log_with_late_plays(path: Path) -> None:
     """Four plays as `choreo run` logs them: on time; late at its start and retried (late once);
     on time but delayed by its retries (late, as the runner counts it, with its warning line);
     on time with a slow first frame but no retry (not late); then one aborted by a second Ctrl-C."""
-    from choreo import protocol
-    from choreo.link import RxEvent, Tag, TxEvent
-    from choreo.logformat import WARNING
-    from choreo.record import Recorder, RunInfo
-    from choreo.runner import StepEvent
+    from choreo.wire import protocol
+    from choreo.board.link import RxEvent, Tag, TxEvent
+    from choreo.log.format import WARNING
+    from choreo.log.recorder import Recorder, RunInfo
+    from choreo.run.runner import StepEvent
     from choreo.show.model import PlannedStep, StepKind
 
     start = 1_790_000_000_000_000_000

@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 import serial
 
-from choreo import protocol as p
+from choreo.wire import protocol as p
 from choreo.cli import main
-from choreo.session import RunRequest, Session
+from choreo.run.session import RunRequest, Session
 from runlog import (vmain, prepare, SimPty, choreo, log_has_steps, read_log, read_log_linear, start_choreo, wait_for,
                     write_show)
 
@@ -495,7 +495,7 @@ def test_live_progress_line_redraws_in_place(tmp_path):
     import io
 
     from choreo.cli.run import Progress
-    from choreo.runner import StepEvent
+    from choreo.run.runner import StepEvent
 
     session = prepare(RunRequest(str(write_show(tmp_path, WIRE_SHOW)), no_log=True))
     out = io.StringIO()

@@ -6,9 +6,9 @@ import time
 
 import pytest
 
-from choreo import protocol as p
-from choreo.link import Link
-from choreo.runner import Runner, StopRequest
+from choreo.wire import protocol as p
+from choreo.board.link import Link
+from choreo.run.runner import Runner, StopRequest
 from choreo.show.load import load_show
 from choreo.show.plan import compile_plan
 from runlog import write_show

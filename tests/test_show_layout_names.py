@@ -16,7 +16,7 @@ import subprocess
 import pytest
 
 from choreo.errors import ShowError
-from choreo.layouts import LAYOUT_NAMES
+from choreo.wire.layouts import LAYOUT_NAMES
 from choreo.show.load import load_schema, load_show_bytes
 from choreo.show.model import MOTION_NAME_MAX, is_motion_name
 

@@ -7,7 +7,7 @@ from textwrap import dedent
 
 import pytest
 
-from choreo import protocol
+from choreo.wire import protocol
 from choreo.show.load import load_show
 from choreo.show.model import DEFAULT_DONE_TIMEOUT_S, DEFAULT_MOTION_S, Repeat, Show, Step, StepKind
 from choreo.show.plan import compile_plan, late_cues, load_plan

@@ -13,9 +13,9 @@ import pytest
 
 from choreo.cli import main
 from choreo.errors import ShowError, UsageError
-from choreo.record import default_log_path
+from choreo.log.recorder import default_log_path
 from runlog import vmain, prepare
-from choreo.session import RunRequest, Session
+from choreo.run.session import RunRequest, Session
 from choreo.show.load import load_show, load_show_bytes
 from choreo.show.plan import compile_plan
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from choreo import protocol as p
-from choreo.layouts import HTH4_22, SEED
+from choreo.wire import protocol as p
+from choreo.wire.layouts import HTH4_22, SEED
 from choreo.sim.board import RAM_SIZE, SimBoard, Transmission
 from choreo.sim.faults import FAULT_KINDS, JUNK, FaultPlan, Trigger
 from choreo.sim.options import parse_durations, parse_options, parse_query
-from choreo.sim.wire import Framer, Line, LineSettings
+from choreo.sim.line import Framer, Line, LineSettings
 
 STOP = p.stop_frame().data
 RESTORE = p.restore_frame().data
@@ -384,7 +384,7 @@ def test_unknown_fault_kind_is_refused():
 
 @pytest.mark.parametrize("layout", ["seed", "hth4-2.2"])
 def test_frame_kind_names_each_frame_of_both_play_sequences(layout):
-    from choreo.layouts import layout_named
+    from choreo.wire.layouts import layout_named
     from choreo.sim.faults import frame_kind
 
     chosen = layout_named(layout)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from choreo.sim.options import parse_query
-from choreo.sim.wire import FTDI_PACKET, LatencyTimer
+from choreo.sim.line import FTDI_PACKET, LatencyTimer
 from runlog import read_log, vmain
 
 

@@ -13,7 +13,7 @@ import time
 import pytest
 import serial
 
-from choreo import protocol as p
+from choreo.wire import protocol as p
 from choreo.sim.board import SimBoard
 from choreo.sim.faults import JUNK, FaultPlan
 from choreo.sim.pty import PtyServer, ServeEnd, read_settings

@@ -7,12 +7,12 @@ import time
 import pytest
 import serial
 
-from choreo import protocol as p
-from choreo import urlhandler
+from choreo.wire import protocol as p
+from choreo.board.link import register_url_handlers
 from choreo.sim.faults import JUNK, FaultPlan
 from choreo.sim.board import SimBoard
 
-urlhandler.register()
+register_url_handlers()
 
 STATUS = p.status_frame()
 IDLE = p.ram_reply(b"\x02\x00")
@@ -40,7 +40,7 @@ def port():
 
 
 def test_serial_for_url_opens_the_simulator(port):
-    assert type(port).__module__ == "choreo.urlhandler.protocol_sim"
+    assert type(port).__module__ == "choreo.sim.protocol_sim"
     assert port.is_open and port.board.baud == 115200
 
 
@@ -158,7 +158,7 @@ def test_the_handler_module_imports_cleanly():
     # serial_for_url swallows an ImportError from the handler and reports an unknown scheme.
     import importlib
 
-    module = importlib.import_module("choreo.urlhandler.protocol_sim")
+    module = importlib.import_module("choreo.sim.protocol_sim")
     assert issubclass(module.Serial, serial.SerialBase)
 
 
@@ -338,8 +338,8 @@ def test_sim_url_refuses_what_the_simulator_refuses(url, message):
 
 def test_a_runs_port_gets_what_its_url_leaves_unsaid_and_keeps_what_it_says():
     from choreo.errors import UsageError
-    from choreo.layouts import layout_named
-    from choreo.session import with_show_durations
+    from choreo.wire.layouts import layout_named
+    from choreo.run.session import with_show_durations
     from choreo.sim.options import SimUrl
 
     hth4 = layout_named("hth4-2.2")

@@ -7,12 +7,12 @@ from __future__ import annotations
 import pytest
 
 from choreo.cli import main
-from choreo.logformat import MotionTracker, RxRecord, TxRecord, parse
-from choreo.review.reader import LogReader
+from choreo.log.format import MotionTracker, RxRecord, TxRecord, parse
+from choreo.log.reader import LogReader
 from choreo.review.summary import summarize
 from choreo.review.timeline import build, render_text
-from choreo.runner import StopRequest
-from choreo.session import RunRequest
+from choreo.run.runner import StopRequest
+from choreo.run.session import RunRequest
 from runlog import prepare, vmain, write_show
 
 SHOW = """

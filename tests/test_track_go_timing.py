@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from choreo.clock import RunClock, VirtualTime, sleep_until_show
-from choreo.live import HoldingShowClock
+from choreo.live.controls import HoldingShowClock
 
 TOLERANCE_S = 0.001
 
@@ -161,8 +161,8 @@ def test_a_go_between_reading_the_held_time_and_dozing_still_wakes_the_doze() ->
 def test_panic_or_stop_while_a_go_cue_holds_ends_every_other_tracks_doze_at_once() -> None:
     """Another track dozes towards a cue past the held time: a panic (or stop) given then ends
     its doze at that instant, not at the end of its 50 ms sleep slice."""
-    from choreo.live import Command, Live
-    from choreo.runner import StopRequest
+    from choreo.live.controls import Command, Live
+    from choreo.run.runner import StopRequest
 
     for command in ("panic", "stop"):
         source = VirtualTime()

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from choreo.errors import InputError, ShowError
-from choreo.music import AudioError, Song
+from choreo.music.player import AudioError, Song
 from choreo.show.load import load_show
 from choreo.show.model import Music
 from choreo.userfile import listing, open_input, problem, read_input, reading

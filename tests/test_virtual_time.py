@@ -9,8 +9,8 @@ import pytest
 
 from choreo.clock import RunClock, SystemTime, VirtualTime
 from choreo.errors import LinkError
-from choreo.link import Link
-from choreo.session import RunRequest
+from choreo.board.link import Link
+from choreo.run.session import RunRequest
 from runlog import prepare, read_log, write_show
 
 SHOW = """

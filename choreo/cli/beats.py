@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     from choreo.errors import UsageError
 
     try:
-        from choreo import beats
+        from choreo.music import beats
     except ModuleNotFoundError as exc:
         if exc.name not in ("numpy", "miniaudio"):
             raise
@@ -83,7 +83,7 @@ def tempo_line(found) -> str:  # type: ignore[no-untyped-def]  # BeatEstimate: i
 
 def summary_lines(path: str, found) -> list[str]:  # type: ignore[no-untyped-def]
     """What the block rests on, as YAML comments, so that they may be pasted along with it."""
-    from choreo.beats import ON_BEAT_S
+    from choreo.music.beats import ON_BEAT_S
 
     lines = [f"# {path} ({found.duration_s:.1f} s): {found.bpm:g} bpm; {found.confirmed} of {len(found.beats)} "
              f"beats from bar 1 on have an onset within {1000 * ON_BEAT_S:.0f} ms of the grid "

@@ -40,10 +40,10 @@ from rich.table import Table
 from rich.text import Text
 
 from choreo.cli.terminal import raw_stream, visible_stream
-from choreo.link import Link, RxEvent, TxEvent
-from choreo.live import Command, CommandEvent, HoldingShowClock, Live
-from choreo.logformat import ERROR, INFO, WARNING
-from choreo.runner import StepEvent
+from choreo.board.link import Link, RxEvent, TxEvent
+from choreo.live.controls import Command, CommandEvent, HoldingShowClock, Live
+from choreo.log.format import ERROR, INFO, WARNING
+from choreo.run.runner import StepEvent
 from choreo.show.model import SOLO, PlannedStep, StepKind
 from choreo.textfit import visible
 

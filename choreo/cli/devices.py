@@ -19,7 +19,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from choreo.music import NULL_DEVICE, outputs
+    from choreo.music.player import NULL_DEVICE, outputs
 
     found = outputs()
     if args.json:

@@ -27,8 +27,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from serial.tools import list_ports
 
-    from choreo.doctor import PROBLEM, SerialPort, examine
-    from choreo.probe import probe
+    from choreo.board.doctor import PROBLEM, SerialPort, examine
+    from choreo.board.probe import probe
 
     ports = [SerialPort(p.device, p.vid, p.pid) for p in list_ports.comports()]
 
@@ -36,8 +36,8 @@ def run(args: argparse.Namespace) -> int:
         return probe(port, time_source=args.time_source)
 
     def audio():  # type: ignore[no-untyped-def]
-        from choreo.doctor import audio_output
-        from choreo.music import pick_output, try_output
+        from choreo.board.doctor import audio_output
+        from choreo.music.player import pick_output, try_output
 
         return audio_output(lambda: try_output(pick_output(args.audio_device)), args.audio_device)
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from choreo.errors import UsageError
-from choreo.layouts import LAYOUT_NAMES
+from choreo.wire.layouts import LAYOUT_NAMES
 
 KINDS = ("play", "stop", "counter", "restore", "status")
 
@@ -30,8 +30,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from choreo.layouts import layout_named
-    from choreo.protocol import BAUD_CODES
+    from choreo.wire.layouts import layout_named
+    from choreo.wire.protocol import BAUD_CODES
 
     layout = layout_named(args.layout)
     if args.baud not in BAUD_CODES:
@@ -76,6 +76,6 @@ def _motion(args: argparse.Namespace) -> int:
         motion = int(args.motion, 10)
     except ValueError:
         raise UsageError(f"frames play: motion {args.motion!r} is not a whole number 0..119") from None
-    from choreo.protocol import check_motion
+    from choreo.wire.protocol import check_motion
 
     return check_motion(motion)

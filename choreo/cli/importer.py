@@ -39,7 +39,7 @@ def run_import(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from choreo.errors import one_line
-    from choreo.hth4 import read_project
+    from choreo.show.hth4 import read_project
     from choreo.show.starter import schema_reference, starter_show
 
     project = read_project(args.project)

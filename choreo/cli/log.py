@@ -206,7 +206,7 @@ def _folder_logs(folder: Path) -> list[Path]:
 
 def run_frames(args: argparse.Namespace) -> int:
     from choreo.review.frames import frame_lines
-    from choreo.review.reader import LogReader
+    from choreo.log.reader import LogReader
 
     with LogReader(args.log) as reader:
         robots = reader.robots
@@ -226,7 +226,7 @@ def run_frames(args: argparse.Namespace) -> int:
 def _print_frames_json(reader, args: argparse.Namespace) -> None:  # type: ignore[no-untyped-def]
     """One object, printed once the whole log is read: a log that turns out not to be choreo's
     half-way is the failure object alone, never half an object and then another."""
-    from choreo.logformat import TX_TOPIC, LogLayouts
+    from choreo.log.format import TX_TOPIC, LogLayouts
     from choreo.review.export import row
     from choreo.review.frames import exchanges, matches
 
@@ -246,7 +246,7 @@ def _print_frames_json(reader, args: argparse.Namespace) -> None:  # type: ignor
 
 
 def run_timeline(args: argparse.Namespace) -> int:
-    from choreo.review.reader import LogReader
+    from choreo.log.reader import LogReader
     from choreo.review.timeline import build, render_text
 
     if args.png:
@@ -261,7 +261,7 @@ def run_timeline(args: argparse.Namespace) -> int:
 
 def _timeline_png(log: str, png: str) -> int:
     """Check what can fail fast (the log's head, matplotlib, the output file), then read and draw."""
-    from choreo.review.reader import LogReader
+    from choreo.log.reader import LogReader
     from choreo.review.timeline import build, counted, render_png, require_matplotlib
 
     with LogReader(log) as reader:
@@ -277,7 +277,7 @@ def _timeline_png(log: str, png: str) -> int:
 
 def run_export(args: argparse.Namespace) -> int:
     from choreo.review.export import CsvSink, JsonLinesSink, JsonSink, export
-    from choreo.review.reader import LogReader
+    from choreo.log.reader import LogReader
 
     targets = [(name, value) for name, value in (("csv", args.csv), ("json", args.json),
                                                  ("jsonl", args.jsonl)) if value]
@@ -309,7 +309,7 @@ def _output(path: str, command: str, binary: bool = False) -> Iterator[IO]:
     not finish (the disk filled, the log turned out not to be choreo's) is removed, never left
     half written; anything that was there before (a device such as /dev/stdout) is left alone.
     """
-    from choreo.session import check_output_folder
+    from choreo.run.session import check_output_folder
 
     target = Path(path)
     check_output_folder(target, command)
@@ -351,7 +351,7 @@ def _discard(file: IO, created: Path | None) -> None:
 
 
 def run_replay(args: argparse.Namespace) -> int:
-    from choreo.review.replay import replay
+    from choreo.run.replay import replay
 
     say = not args.quiet and not args.json
 

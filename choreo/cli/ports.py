@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from choreo.usb import KONDO_USB
+from choreo.board.usb import KONDO_USB
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -27,8 +27,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from choreo.probe import probe
-    from choreo.session import check_timeout
+    from choreo.board.probe import probe
+    from choreo.run.session import check_timeout
 
     check_timeout(args.timeout)
     port = args.port if args.port is not None else _kondo_adapter()
@@ -64,7 +64,7 @@ def _kondo_adapter() -> str:
     """The one Kondo adapter plugged in; otherwise the user must say which port."""
     from serial.tools import list_ports
 
-    from choreo.usb import KONDO_USB
+    from choreo.board.usb import KONDO_USB
 
     ports = list_ports.comports()
     kondo = [p.device for p in ports if (p.vid, p.pid) == KONDO_USB]

@@ -15,7 +15,7 @@ from choreo.__main__ import STOP_SIGNALS
 from choreo.cli.terminal import StatusWriter
 from choreo.cli.terminal import columns as terminal_columns
 from choreo.errors import ChoreoError, Interrupted
-from choreo.layouts import LAYOUT_NAMES
+from choreo.wire.layouts import LAYOUT_NAMES
 from choreo.textfit import fit
 
 
@@ -99,8 +99,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, report: "_RunReport") -> int:
-    from choreo.runner import StopRequest
-    from choreo.session import RunRequest, Session
+    from choreo.run.runner import StopRequest
+    from choreo.run.session import RunRequest, Session
 
     port, robot_ports = port_arguments(args.port)
     osc_port, notify = _check_osc_options(args)
@@ -148,7 +148,7 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
         if session.log_path:
             say(f"log: {session.log_path}")
         if result.outcome != "done":
-            from choreo.runner import PANIC
+            from choreo.run.runner import PANIC
 
             raise Interrupted("show stopped by panic: stop frames, then the abort motions"
                               if stop.reason == PANIC else f"show {stop.reason}")
@@ -183,7 +183,7 @@ def _check_go_sources(session, console: bool, args: argparse.Namespace) -> None:
     for plan in session.plans.values():
         step = next((s for s in plan.steps[session.starts[plan.robot]:] if s.go), None)
         if step is not None:
-            from choreo.runner import step_ref
+            from choreo.run.runner import step_ref
 
             raise UsageError(f"{step_ref(step)} waits for GO, but nothing can give it: {where}")
 
@@ -193,8 +193,8 @@ def _check_osc_options(args: argparse.Namespace) -> tuple[int | None, tuple]:
     and the notify targets' look-up come next, still before the session opens): --osc's port
     number (None: no OSC) and --osc-notify's targets."""
     from choreo.errors import UsageError
-    from choreo.osc import parse_allow
-    from choreo.oscnotify import parse_targets, port_number
+    from choreo.live.osc import parse_allow
+    from choreo.live.oscnotify import parse_targets, port_number
 
     port = None if args.osc is None else port_number(args.osc, lowest=0)
     if args.osc is not None and port is None:
@@ -210,7 +210,7 @@ def _live(args: argparse.Namespace, stop, console: bool):  # type: ignore[no-unt
     None for a show run as before."""
     if not console and args.osc is None:
         return None
-    from choreo.live import Live
+    from choreo.live.controls import Live
 
     return Live(stop, wait_start=args.wait_start)
 
@@ -221,7 +221,7 @@ def _bound_osc(args: argparse.Namespace, port: int | None, notify: tuple, live):
     is this very port, end the run with one line before anything is said or opened."""
     if args.osc is None:
         return None
-    from choreo.osc import OscServer
+    from choreo.live.osc import OscServer
 
     server = OscServer(live, port, host=args.osc_host, allow=args.osc_allow, notify=notify)
     server.bind()
@@ -279,7 +279,7 @@ def _console(session, live, console: bool, listeners: list):  # type: ignore[no-
 def port_arguments(values: list[str] | None) -> tuple[str | None, dict[str, str]]:
     """`--port URL` (one robot) and `--port NAME=URL` (repeatable, one robot of several)."""
     from choreo.errors import UsageError
-    from choreo.session import split_robot_port
+    from choreo.run.session import split_robot_port
 
     plain: list[str] = []
     named: dict[str, str] = {}
@@ -447,7 +447,7 @@ def _music_line(session) -> str:  # type: ignore[no-untyped-def]
         return f"music: {session.show.music.file} not played (--no-music): the machine's clock keeps the show"
     song = session.song
     start = song.music.start + session.origin
-    from choreo.music import output_name
+    from choreo.music.player import output_name
 
     where = output_name(session.output)
     return f"music: {song.music.file} from {start:.1f} s of {song.duration_s:.1f} s, on {where}: the show clock"

@@ -206,7 +206,7 @@ def _step_table(steps, shared: bool = False) -> list[str]:  # type: ignore[no-un
 def _layout_note(plan) -> str:  # type: ignore[no-untyped-def]
     if plan.layout == "seed":
         return ""
-    from choreo.layouts import EXAMPLE_CONFIG
+    from choreo.wire.layouts import EXAMPLE_CONFIG
 
     return (f" (suspend and resume shown for config 0x{EXAMPLE_CONFIG:04x}: the run makes them "
             "from the config word it reads from the board)")

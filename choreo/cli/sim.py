@@ -149,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _server(options, args: argparse.Namespace, start: float, number: int | None):  # type: ignore[no-untyped-def]
     from choreo.sim.pty import PtyServer
-    from choreo.sim.wire import PTY_GAP_S
+    from choreo.sim.line import PTY_GAP_S
 
     on_entry = None
     if args.verbose:

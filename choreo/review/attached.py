@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from choreo.review.reader import LogReader
+from choreo.log.reader import LogReader
 
 
 @dataclass(frozen=True)

@@ -12,9 +12,9 @@ import json
 from collections.abc import Iterator
 from typing import TextIO
 
-from choreo.logformat import LogLayouts, frame_meaning, reply_meaning
+from choreo.log.format import LogLayouts, frame_meaning, reply_meaning
 from choreo.review.frames import Exchange, exchanges
-from choreo.review.reader import LogReader
+from choreo.log.reader import LogReader
 
 COLUMNS = (
     "seq",

@@ -11,9 +11,9 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from choreo.logformat import (ABORT_LABEL, CLOCK_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, LogLayouts, RxRecord, TxRecord,
+from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, LogLayouts, RxRecord, TxRecord,
                               frame_meaning, parse, reply_meaning)
-from choreo.review.reader import LogReader
+from choreo.log.reader import LogReader
 from choreo.review.showtime import ShowTimes
 from choreo.review.summary import stale_replies
 

@@ -20,8 +20,8 @@ from __future__ import annotations
 import math
 from bisect import bisect_right
 
-from choreo.logformat import CLOCK_TOPIC, STEP_TOPIC, ClockRecord, StepRecord, parse
-from choreo.review.reader import LogReader
+from choreo.log.format import CLOCK_TOPIC, STEP_TOPIC, ClockRecord, StepRecord, parse
+from choreo.log.reader import LogReader
 
 BREAK_S = 0.001  # a clock sample this far from the mapping's prediction starts a new piece
 # How far `ShowTimes.of` reads ahead for the show clock's start: what comes before it is what a

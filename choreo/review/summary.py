@@ -3,7 +3,7 @@
 One linear pass over the log (see `reader`), in memory that does not grow with the log: counts,
 distributions kept as counters of microsecond-rounded values (reply latencies are bounded by the
 reply timeout, cue lateness by the show), per-slot motion statistics, and only the first few
-plays and log lines listed one by one. Records come typed from `choreo.logformat`, and plays
+plays and log lines listed one by one. Records come typed from `choreo.log.format`, and plays
 from its motion tracker, the one the timeline uses too.
 """
 
@@ -16,10 +16,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from choreo.numtext import whole_number
-from choreo.logformat import (CHOREO_TOPICS, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING,
+from choreo.log.format import (CHOREO_TOPICS, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING,
                               ClockRecord, CommandRecord, LogLayouts, LogRecord, MotionPlay, MotionTracker, RxRecord, StepRecord, TxRecord,
                               is_late, parse, slipped)
-from choreo.review.reader import Cut, LogReader
+from choreo.log.reader import Cut, LogReader
 from choreo.review.showtime import ShowTimes
 FRAME_KINDS = ("stop", "play", "restore", "status")
 REPLY_KINDS = ("ack", "nak", "status", "timeout", "invalid")

@@ -18,9 +18,9 @@ from typing import BinaryIO
 from choreo.errors import ChoreoError
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.showtime import ShowTimes
-from choreo.logformat import (ABORT_LABEL, CLOCK_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, LogLayouts, MotionPlay, MotionTracker,
+from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, LogLayouts, MotionPlay, MotionTracker,
                               RxRecord, StepRecord, is_late, parse, slipped)
-from choreo.review.reader import Cut, LogReader
+from choreo.log.reader import Cut, LogReader
 from choreo.textfit import fit
 
 

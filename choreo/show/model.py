@@ -13,7 +13,7 @@ from enum import Enum
 from pathlib import Path
 
 from choreo.numtext import whole_number
-from choreo.protocol import Frame
+from choreo.wire.protocol import Frame
 from choreo.textfit import is_hidden
 
 DEFAULT_MOTION_S = 1.0  # a motion's expected length when the show does not say (the simulator's default)
@@ -69,7 +69,7 @@ class RobotSettings:
     baud: int | None = None
     timeout: float | None = None  # seconds to wait for one reply
     retries: int | None = None  # extra tries after a failed one (default 2: 3 tries in all)
-    layout: str | None = None  # one of `choreo.layouts.LAYOUT_NAMES`; None: the show does not say (the run assumes seed)
+    layout: str | None = None  # one of `choreo.wire.layouts.LAYOUT_NAMES`; None: the show does not say (the run assumes seed)
     on_abort: int | None = None  # this robot's abort motion; None: the show's `on_abort`
     on_fault: str = "stop"  # `ON_FAULT`: stop the show, or let the other robots go on
 

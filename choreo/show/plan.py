@@ -20,8 +20,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from choreo import protocol
-from choreo.layouts import Layout, layout_named
+from choreo.wire import protocol
+from choreo.wire.layouts import Layout, layout_named
 from choreo.show.model import DEFAULT_MOTION_S, Plan, PlannedStep, Repeat, Show, Step, StepKind
 
 _DIGITS = 9  # sums are rounded to the nanosecond so that 0.1 + 0.2 plans as 0.3

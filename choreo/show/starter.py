@@ -14,7 +14,7 @@ import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
 
-from choreo.hth4 import LAYOUT_FIRST_SLOT, Project, ProjectSlot
+from choreo.show.hth4 import LAYOUT_FIRST_SLOT, Project, ProjectSlot
 from choreo.show.model import MOTION_NAME_MAX, hidden_character, is_motion_name
 
 NAME_MAX = 200  # characters of a show's `name` and of an `hth4_name` (the schema's maxLength)

@@ -20,7 +20,7 @@ What it models, following the spec and its errata:
   may still see the word from before it, and two queries within one period get the same value.
   Writes change the real word at once; only the read is stale. A tick at the very instant a
   frame arrives sees the board as it was before the frame. `refresh_s` 0: reads are live.
-- A layout (`seed` or `hth4-2.2`, `choreo.layouts`) says where its motion slots start. CALL of a
+- A layout (`seed` or `hth4-2.2`, `choreo.wire.layouts`) says where its motion slots start. CALL of a
   slot's start address arms that slot: the program counter (RAM 0x0002-0x0004) moves there and
   the old counter is pushed as the return address (0x0005-0x0007), the call depth at 0x0008.
   A CALL of any other address (another layout's slot, say) is ACKed, journalled as a `stray`
@@ -69,9 +69,9 @@ from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
-from choreo import protocol as p
-from choreo.framewords import describe_frame
-from choreo.layouts import SEED, Layout
+from choreo.wire import protocol as p
+from choreo.wire.framewords import describe_frame
+from choreo.wire.layouts import SEED, Layout
 from choreo.sim.faults import NOT_EXECUTED, FaultInjector, FaultPlan
 
 RAM_SIZE = 0x0400

@@ -47,9 +47,9 @@ import random
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from choreo import protocol as p
+from choreo.wire import protocol as p
 from choreo.numtext import whole_number
-from choreo.protocol import nak
+from choreo.wire.protocol import nak
 
 # Order matters: precedence when several hit one frame, and the order of random draws.
 FRAME_FAULTS: tuple[str, ...] = ("lose", "drop", "nak", "badsum", "short", "junk", "late")

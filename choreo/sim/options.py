@@ -30,8 +30,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
-from choreo.layouts import SEED, Layout, layout_named
-from choreo.protocol import MOTION_SLOTS
+from choreo.wire.layouts import SEED, Layout, layout_named
+from choreo.wire.protocol import MOTION_SLOTS
 from choreo.sim.board import (
     BOARD_BAUDS,
     DEFAULT_BAUD,

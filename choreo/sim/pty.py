@@ -31,7 +31,7 @@ import tty
 from enum import Enum
 
 from choreo.sim.board import SimBoard
-from choreo.sim.wire import PTY_GAP_S, Line, LineSettings
+from choreo.sim.line import PTY_GAP_S, Line, LineSettings
 
 _TCGETS2 = 0x802C542A  # Linux: termios2 with the actual speeds (custom bauds use BOTHER)
 _TCSETS2 = 0x402C542B

@@ -21,7 +21,7 @@ from typing import Protocol
 
 from choreo.clock import MachineShowClock, ShowClock
 from choreo.limits import LIMITS, UNLOGGED, Held, Limits, ReportGate
-from choreo.runner import PANIC, StopRequest
+from choreo.run.runner import PANIC, StopRequest
 from choreo.show.model import PlannedStep
 
 LOCKOUT_S = 0.5  # a second GO this soon after one is taken for a double press, and refused

@@ -14,11 +14,11 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Protocol
 
-from choreo import protocol
+from choreo.wire import protocol
 from choreo.clock import RunClock
-from choreo.layouts import SEED, Layout, StartState
+from choreo.wire.layouts import SEED, Layout, StartState
 from choreo.errors import Interrupted, LinkError
-from choreo.protocol import Frame, FrameKind, Reply, ReplyKind
+from choreo.wire.protocol import Frame, FrameKind, Reply, ReplyKind
 
 if TYPE_CHECKING:
     import serial
@@ -107,6 +107,21 @@ class PortLost(Exception):
     """The port failed under us mid-exchange (adapter unplugged, device gone)."""
 
 
+# pyserial's `serial_for_url` imports `protocol_<scheme>` from each package named in
+# `serial.protocol_handler_packages`: the simulator's `sim://` is found by its package's name, so
+# the board layer never imports the simulator.
+URL_HANDLER_PACKAGES = ("choreo.sim",)
+
+
+def register_url_handlers() -> None:
+    """Let pyserial open choreo's own URLs (`sim://`); idempotent."""
+    import serial
+
+    for package in URL_HANDLER_PACKAGES:
+        if package not in serial.protocol_handler_packages:
+            serial.protocol_handler_packages.append(package)
+
+
 def open_port(url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TIMEOUT_S,
               exclusive: bool = True, clock: RunClock | None = None) -> serial.SerialBase:
     """Open any pyserial URL (and `sim://`) with the board's line settings, or a LinkError.
@@ -116,9 +131,7 @@ def open_port(url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TI
     """
     import serial
 
-    from choreo import urlhandler
-
-    urlhandler.register()
+    register_url_handlers()
     try:
         port = serial.serial_for_url(
             url, baudrate=baud, bytesize=serial.EIGHTBITS, parity=serial.PARITY_EVEN,
@@ -138,7 +151,7 @@ def open_port(url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TI
 def usb_latency_note(port: serial.SerialBase) -> str | None:
     """Ask a real serial device's driver for low latency; if its FTDI latency timer still holds
     replies over 1 ms, what that costs and the command that fixes it (said once, at open)."""
-    from choreo.usb import LOW_LATENCY_MS, ask_low_latency, latency_fix, latency_timer_ms
+    from choreo.board.usb import LOW_LATENCY_MS, ask_low_latency, latency_fix, latency_timer_ms
 
     device = str(getattr(port, "port", "") or "")
     if not device.startswith("/dev/"):

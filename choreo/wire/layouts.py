@@ -28,8 +28,8 @@ from dataclasses import dataclass
 from enum import Enum
 from functools import lru_cache
 
-from choreo import protocol as p
-from choreo.protocol import Frame, FrameKind
+from choreo.wire import protocol as p
+from choreo.wire.protocol import Frame, FrameKind
 
 DEFAULT_LAYOUT = "seed"
 # The config word a real HTH4 2.2+ project saves (LAYOUTS.md's example): what `choreo plan` and

@@ -20,7 +20,7 @@ from typing import Any
 from choreo.errors import UsageError
 from choreo.limits import LIMITS
 from choreo.numtext import whole_number
-from choreo.oscwire import encode_message
+from choreo.live.oscwire import encode_message
 
 QUEUED = 1000  # notifications waiting to be sent; past this they are dropped
 

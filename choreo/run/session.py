@@ -20,13 +20,13 @@ from pathlib import Path
 from choreo.clock import (MachineShowClock, RunClock, ShowClock, SystemTime, TimeSource, quick_thread_switches,
                           sleep_until_show)
 from choreo.errors import ChoreoError, Interrupted, LinkError, UsageError, did_you_mean
-from choreo.layouts import SEED, Layout, layout_named
-from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
-from choreo.live import HoldingShowClock, Live
-from choreo.logformat import CLOCK_EVERY_S, ERROR, INFO, WARNING, ClockRecord
-from choreo.music import LEAD_IN_S, Output, Player, Song, pick_output
-from choreo.record import Recorder, RobotInfo, RunInfo, default_log_path
-from choreo.runner import RunListener, Runner, RunResult, StopRequest
+from choreo.wire.layouts import SEED, Layout, layout_named
+from choreo.board.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S, DEFAULT_TRIES, Link
+from choreo.live.controls import HoldingShowClock, Live
+from choreo.log.format import CLOCK_EVERY_S, ERROR, INFO, WARNING, ClockRecord
+from choreo.music.player import LEAD_IN_S, Output, Player, Song, pick_output
+from choreo.log.recorder import Recorder, RobotInfo, RunInfo, default_log_path
+from choreo.run.runner import RunListener, Runner, RunResult, StopRequest
 from choreo.show.model import DEFAULT_MOTION_S, Plan, RobotSettings, Show
 from choreo.sim.options import SimUrl, durations_text, is_simulator
 
@@ -274,7 +274,7 @@ class Session:
             return result
 
     def _ensemble(self, runners: dict[str, Runner], stop: StopRequest, listeners: list):  # type: ignore[no-untyped-def]
-        from choreo.ensemble import Ensemble, Part
+        from choreo.run.ensemble import Ensemble, Part
 
         parts = [Part(name, runner, self.links[name].on_fault) for name, runner in runners.items()]
         return Ensemble(parts, self.clock, stop, unison=self.plan.unison, origin=self.origin,

@@ -18,8 +18,8 @@ from functools import lru_cache
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any, ClassVar
 
-from choreo.framewords import describe_frame, describe_reply, is_slot
-from choreo.layouts import DEFAULT_LAYOUT, LAYOUTS, Layout, StartState
+from choreo.wire.framewords import describe_frame, describe_reply, is_slot
+from choreo.wire.layouts import DEFAULT_LAYOUT, LAYOUTS, Layout, StartState
 
 TX_TOPIC = "/rcb4/tx"
 RX_TOPIC = "/rcb4/rx"

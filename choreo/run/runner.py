@@ -15,13 +15,13 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 from choreo.clock import MachineShowClock, RunClock, ShowClock, sleep_until_show
-from choreo.logformat import ABORT_LABEL, ERROR, INFO, LATE_MS, WARNING, StepRecord
+from choreo.log.format import ABORT_LABEL, ERROR, INFO, LATE_MS, WARNING, StepRecord
 from choreo.errors import ChoreoError, Interrupted, LinkError
-from choreo.link import Link, Played, RxEvent, Tag, TxEvent
+from choreo.board.link import Link, Played, RxEvent, Tag, TxEvent
 from choreo.show.model import SOLO, Plan, PlannedStep, StepKind
 
 if TYPE_CHECKING:
-    from choreo.live import Live
+    from choreo.live.controls import Live
 
 POLL_S = 0.05  # the board refreshes its status every 50 ms: never poll faster
 PANIC = "panic"  # a stop request's reason for the operator's panic: stop frames, then every abort
@@ -95,7 +95,7 @@ class WaitTimeout(LinkError):
 
 
 class Cues(Protocol):
-    """Where a robot's runner meets the others on shared steps (`choreo.ensemble.Gates`)."""
+    """Where a robot's runner meets the others on shared steps (`choreo.run.ensemble.Gates`)."""
 
     def through(self, index: int, robot: str, end: float | None, idle: float | None = None) -> float | None:
         """`robot` is through step `index` (ended at `end` on the show clock, None: not its
@@ -110,7 +110,7 @@ class Cues(Protocol):
 
 class Runner:
     """Plays one robot's plan over its link on the show clock (one of several, with `robot`,
-    `zero` and `cues` given by `choreo.ensemble`)."""
+    `zero` and `cues` given by `choreo.run.ensemble`)."""
 
     def __init__(self, plan: Plan, link: Link, *, clock: RunClock | None = None,
                  listeners: Iterable[RunListener] = (), start: int = 0, on_abort: int | None = None,

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from choreo.errors import ChoreoError, UsageError, one_line
-from choreo.probe import BoardInfo
-from choreo.usb import KONDO_USB, NEW_ID_FIX, SYSFS, latency_fix, latency_timer_ms, usb_devices
+from choreo.board.probe import BoardInfo
+from choreo.board.usb import KONDO_USB, NEW_ID_FIX, SYSFS, latency_fix, latency_timer_ms, usb_devices
 
 OK, PROBLEM, NOTE = "ok", "problem", "note"
 

@@ -43,8 +43,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from choreo.oscwire import FrameReader
-from choreo.osclimits import LIMITS, OscLimits
+from choreo.live.oscwire import FrameReader
+from choreo.live.osclimits import LIMITS, OscLimits
 
 Sender = tuple  # (host, port) or, over IPv6, (host, port, flowinfo, scope)
 ACCEPT_PAUSE_S = 0.1  # out of descriptors: try accepting again this much later
@@ -74,7 +74,7 @@ class ListenFailed(Exception):
 
 
 class PacketHandler(Protocol):
-    """What the sockets ask and tell their user (`choreo.osc.OscServer`); called from the
+    """What the sockets ask and tell their user (`choreo.live.osc.OscServer`); called from the
     serving thread."""
 
     def admit(self, sender: Sender) -> bool:

@@ -47,14 +47,14 @@ from mcap.writer import CompressionType, Writer
 from choreo import __version__
 from choreo.errors import LogError
 from choreo.limits import UNLOGGED
-from choreo.logformat import (CLOCK_TOPIC, COMMAND_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC, STEP_TOPIC,
+from choreo.log.format import (CLOCK_TOPIC, COMMAND_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC, STEP_TOPIC,
                               TX_TOPIC, ClockRecord, CommandRecord, LogRecord, RxRecord, TxRecord, channels_for, layout_key,
                               robot_topic)
 
 if TYPE_CHECKING:
-    from choreo.link import RxEvent, TxEvent
-    from choreo.live import CommandEvent
-    from choreo.runner import StepEvent
+    from choreo.board.link import RxEvent, TxEvent
+    from choreo.live.controls import CommandEvent
+    from choreo.run.runner import StepEvent
 
 FLUSH_EVERY_S = 0.5
 BATCH = 16  # messages the background flusher writes before it lets the runner have the GIL
@@ -317,11 +317,11 @@ class Recorder:
         self._queue((LOG_TOPIC, time_ns, _log_message, (level, message, time_ns)))
 
     def on_clock(self, record: ClockRecord, time_ns: int) -> None:
-        """Queued only: a sample of the show clock (`choreo.session.ClockSampler`)."""
+        """Queued only: a sample of the show clock (`choreo.run.session.ClockSampler`)."""
         self._queue((CLOCK_TOPIC, time_ns, _record_message, record))
 
     def on_command(self, event: CommandEvent) -> None:
-        """Queued only: an operator's command and its answer (`choreo.live`)."""
+        """Queued only: an operator's command and its answer (`choreo.live.controls`)."""
         command, answer = event.command, event.answer
         label = command.label or answer.data.get("cue")  # a plain GO: the cue it released
         summed = command.name == UNLOGGED  # commands held back by the limits, summed up

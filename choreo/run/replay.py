@@ -28,12 +28,12 @@ from pathlib import Path
 from choreo.clock import TimeSource
 from choreo.numtext import whole_number
 from choreo.errors import UsageError
-from choreo.protocol import Frame, FrameKind
+from choreo.wire.protocol import Frame, FrameKind
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.showtime import ShowTimes
-from choreo.logformat import (LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, LogLayouts, RxRecord, StepRecord,
+from choreo.log.format import (LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, LogLayouts, RxRecord, StepRecord,
                               TxRecord, parse, reply_meaning)
-from choreo.review.reader import Cut, LogReader
+from choreo.log.reader import Cut, LogReader
 from choreo.sim.options import is_simulator
 
 LISTED_DIFFERENCES = 200  # kept in the report; all are counted (and written to the new log)
@@ -137,9 +137,9 @@ def default_port(show: AttachedShow, baud: int | None = None, layout: str = "see
 def _with_durations(url: str, show: AttachedShow, baud: int | None = None, layout: str = "seed") -> str:
     """`--port sim://?drop=5`: still the show's durations and the replay's baud and layout (as
     `choreo run` does: one rule, `session.with_show_durations`)."""
-    from choreo.layouts import layout_named
-    from choreo.link import DEFAULT_BAUD
-    from choreo.session import with_show_durations
+    from choreo.wire.layouts import layout_named
+    from choreo.board.link import DEFAULT_BAUD
+    from choreo.run.session import with_show_durations
 
     return with_show_durations(url, show.show, show.plan, baud or DEFAULT_BAUD, layout_named(layout))
 
@@ -181,9 +181,9 @@ MIN_SPEED = 0.01  # a 10-minute show replays in at most 1000 minutes: slower is 
 
 def check_options(speed: float, baud: int | None, timeout: float | None, layout: str | None = None) -> None:
     """Refuse what would make a meaningless replay, before anything is opened (UsageError, exit 2)."""
-    from choreo.layouts import layout_named
-    from choreo.link import BAUD_RATES
-    from choreo.session import check_timeout
+    from choreo.wire.layouts import layout_named
+    from choreo.board.link import BAUD_RATES
+    from choreo.run.session import check_timeout
 
     if not (math.isfinite(speed) and MIN_SPEED <= speed <= MAX_SPEED):
         raise UsageError(f"--speed {speed:g}: give a speed from {MIN_SPEED:g} to {MAX_SPEED:g} "
@@ -226,13 +226,13 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
     """
     check_options(speed, baud, timeout, layout)
     if log_path is not None:
-        from choreo.session import check_output_folder
+        from choreo.run.session import check_output_folder
 
         check_output_folder(Path(log_path), "--log")
     from choreo.clock import RunClock, SystemTime
-    from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S
-    from choreo.record import RobotInfo, RunInfo, default_log_path
-    from choreo.session import RobotLink, Stage
+    from choreo.board.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S
+    from choreo.log.recorder import RobotInfo, RunInfo, default_log_path
+    from choreo.run.session import RobotLink, Stage
     from choreo.show.model import SOLO
 
     with LogReader(source) as reader:
@@ -296,9 +296,9 @@ def _robot_link(reader: LogReader, show: AttachedShow, robot: str, layout_name: 
                 timeout: float | None):
     """A recorded robot's replay link: its own simulator of `layout_name`, set up from its plan,
     at its baud."""
-    from choreo.layouts import layout_named
-    from choreo.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S
-    from choreo.session import RobotLink, with_show_durations
+    from choreo.wire.layouts import layout_named
+    from choreo.board.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S
+    from choreo.run.session import RobotLink, with_show_durations
 
     baud_text = reader.run_info.get(f"robot.{robot}.baud", "")
     recorded = whole_number(baud_text)
@@ -349,7 +349,7 @@ def _replay_robots(source: str | Path, stage, clock, speed: float, report: Repla
 def _recorded_layout(reader: LogReader, robot: str | None) -> str:
     """The layout the log records for the robot's frames (seed for a log from before layouts
     were recorded); UsageError for one this choreo does not know."""
-    from choreo.layouts import LAYOUT_NAMES
+    from choreo.wire.layouts import LAYOUT_NAMES
 
     layouts = LogLayouts.of(reader.run_info)
     if layouts.layout(robot) is None:
@@ -386,7 +386,7 @@ def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, repor
 
     `robot`: only that robot's frames and steps; `start`: the monotonic time of recorded show
     time 0, shared by every robot's thread (else the replay starts at its first event)."""
-    from choreo.link import Tag
+    from choreo.board.link import Tag
 
     at_end = _polls_at_motion_ends(reader, robot)
     recorded_clock = ShowTimes.of(reader)

@@ -27,12 +27,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from choreo.errors import UsageError
-from choreo.layouts import LAYOUTS
+from choreo.wire.layouts import LAYOUTS
 from choreo.numtext import whole_number
-from choreo.protocol import MOTION_SLOTS, SLOT_SIZE
+from choreo.wire.protocol import MOTION_SLOTS, SLOT_SIZE
 from choreo.textfit import visible
 
-# Where each layout puts slot 0 (choreo.layouts is the one place the layouts are defined; the
+# Where each layout puts slot 0 (choreo.wire.layouts is the one place the layouts are defined; the
 # show schema's `robot.layout` enum lists their names too, and a test holds them equal).
 LAYOUT_FIRST_SLOT: dict[str, int] = {layout.name: layout.first_slot for layout in LAYOUTS.values()}
 

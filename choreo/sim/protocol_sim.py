@@ -1,6 +1,6 @@
 """`sim://`: a simulated RCB-4 board behind pyserial's own API, in-process.
 
-`choreo.urlhandler.register()` makes `serial.serial_for_url("sim://?motion_s=0.5&drop=5")`
+`choreo.board.link.register_url_handlers()` makes `serial.serial_for_url("sim://?motion_s=0.5&drop=5")`
 open one; anything that talks to a pyserial port (the link, a test) then talks to the board
 model exactly as to a real board over a USB adapter, without hardware or threads.
 
@@ -27,7 +27,7 @@ from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_
 from choreo.clock import SystemTime, TimeSource
 from choreo.sim.board import SimBoard
 from choreo.sim.options import SimOptions, SimUrl
-from choreo.sim.wire import REAL_GAP_S, Line, LineSettings
+from choreo.sim.line import REAL_GAP_S, Line, LineSettings
 
 _MAX_SLEEP_S = 0.05  # upper bound of one sleep while waiting, so a closed port is noticed
 

@@ -10,8 +10,8 @@ then named by whichever known layout's slot it fits.
 
 from __future__ import annotations
 
-from choreo import protocol as p
-from choreo.layouts import Layout, layout_of_call
+from choreo.wire import protocol as p
+from choreo.wire.layouts import Layout, layout_of_call
 
 
 def describe_frame(data: bytes, layout: Layout | None) -> str:

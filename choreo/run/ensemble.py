@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 
 from choreo.clock import MachineShowClock, RunClock, ShowClock, quick_thread_switches, sleep_until_show
 from choreo.errors import LinkError
-from choreo.logformat import ERROR, WARNING
-from choreo.runner import Runner, RunResult, StopRequest
+from choreo.log.format import ERROR, WARNING
+from choreo.run.runner import Runner, RunResult, StopRequest
 from choreo.show.model import PlannedStep
 
 SYNC_S = 0.002  # how far ahead a gate opened late releases the next step (see the docstring)

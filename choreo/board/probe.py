@@ -13,11 +13,11 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from choreo import protocol
+from choreo.wire import protocol
 from choreo.errors import LinkError
 from choreo.clock import RunClock, SystemTime, TimeSource
-from choreo.link import BAUD_RATES, DEFAULT_TIMEOUT_S, Link
-from choreo.protocol import ReplyKind
+from choreo.board.link import BAUD_RATES, DEFAULT_TIMEOUT_S, Link
+from choreo.wire.protocol import ReplyKind
 
 CONFIG_ADDRESS = 0x0000
 COUNTER_ADDRESS = 0x0002  # program counter (3 bytes), return address (3), call depth and flags

@@ -3,15 +3,15 @@ a lighting desk) can give the GO: `/choreo/go`, `/choreo/panic`, `/choreo/start`
 and `/choreo/cue/LABEL/go`, over UDP and over TCP framed with SLIP (OSC 1.1, as QLab sends it)
 or with a length prefix (OSC 1.0, as liblo sends it: Pure Data, SuperCollider), on one port number.
 
-Packets are read by choreo's own bounded decoder (`choreo.oscwire`), and the sockets served by
-`choreo.oscnet` (connection caps, timeouts; the sizes and counts are `choreo.osclimits`): a
+Packets are read by choreo's own bounded decoder (`choreo.live.oscwire`), and the sockets served by
+`choreo.live.oscnet` (connection caps, timeouts; the sizes and counts are `choreo.live.osclimits`): a
 malformed packet (a bad size, a type tag choreo does not know) is refused whole, counted, and
 nothing of it is carried out. python-osc does not receive here: its parser loops for ever on a
 bundle element of size 0, and it logs through the root logger.
 
 Every message is answered to its sender as QLab answers: `/reply` + the address, with one JSON
 string `{"address", "status": ok|error|denied, "message", "data"}`; the commands themselves are
-carried out by `choreo.live.Live`, exactly as the console's keys are, so both are answered and
+carried out by `choreo.live.controls.Live`, exactly as the console's keys are, so both are answered and
 logged alike. With a notify address, the show's progress goes out as OSC too (steps, GO cues
 waiting, commands, warnings and faults) from a thread of its own: a slow or absent receiver
 never holds a runner.
@@ -45,18 +45,18 @@ from typing import TYPE_CHECKING, Any
 
 from choreo.errors import UsageError, did_you_mean
 from choreo.limits import LIMITS, UNLOGGED, Limits, SenderLimits
-from choreo.live import Answer, Command, CommandEvent, GoCue, Live
-from choreo.logformat import ERROR, WARNING
-from choreo.oscnet import ListenFailed, OscNet
-from choreo.osclimits import LIMITS as WIRE_LIMITS
-from choreo.osclimits import OscLimits
-from choreo.oscnotify import Notifier, Target, show_target
-from choreo.oscwire import Message, decode_packet, encode_message
+from choreo.live.controls import Answer, Command, CommandEvent, GoCue, Live
+from choreo.log.format import ERROR, WARNING
+from choreo.live.oscnet import ListenFailed, OscNet
+from choreo.live.osclimits import LIMITS as WIRE_LIMITS
+from choreo.live.osclimits import OscLimits
+from choreo.live.oscnotify import Notifier, Target, show_target
+from choreo.live.oscwire import Message, decode_packet, encode_message
 
 if TYPE_CHECKING:
-    from choreo.runner import RunResult, StepEvent
+    from choreo.run.runner import RunResult, StepEvent
 
-# OSC addresses, not log topics (those are spelled in choreo.logformat), though both start /choreo
+# OSC addresses, not log topics (those are spelled in choreo.log.format), though both start /choreo
 ROOT = "/choreo"
 COMMANDS = {f"{ROOT}/{name}": name for name in ("go", "panic", "start", "stop")}
 CUE_PREFIX, CUE_SUFFIX = f"{ROOT}/cue/", "/go"
@@ -230,7 +230,7 @@ class OscServer:
             line += f"; progress to {', '.join(show_target(target) for target in self.notify)}"
         return line
 
-    # -- packets (choreo.oscnet asks) --------------------------------------------------------
+    # -- packets (choreo.live.oscnet asks) --------------------------------------------------------
 
     def admit(self, sender: Sender) -> bool:
         """A TCP peer, at accept: a refused one is closed before a byte of it is read."""

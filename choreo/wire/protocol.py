@@ -190,8 +190,8 @@ def version_frame() -> Frame:
 
 def play_sequence(motion: int) -> tuple[Frame, ...]:
     """Steps 1-3 of the document: stop and save, CALL the slot, restore (the seed layout at
-    115200 baud; `choreo.layouts` has every layout). Sent as one unit."""
-    from choreo.layouts import SEED
+    115200 baud; `choreo.wire.layouts` has every layout). Sent as one unit."""
+    from choreo.wire.layouts import SEED
 
     return SEED.play_sequence(motion)
 

@@ -28,7 +28,7 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 
-from choreo.protocol import MAX_FRAME_SIZE
+from choreo.wire.protocol import MAX_FRAME_SIZE
 from choreo.sim.board import SimBoard
 
 REAL_GAP_S = 0.00015  # the board drops a frame after ~150 us without a byte

@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import IO
 
 from choreo.errors import InputError, LogError
-from choreo.logformat import CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME, base_topic
+from choreo.log.format import CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME, base_topic
 from choreo.userfile import open_input, reading
 
 MAGIC = b"\x89MCAP0\r\n"

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Union
 
-from choreo.osclimits import LIMITS, OscLimits
+from choreo.live.osclimits import LIMITS, OscLimits
 
 Arg = Union[str, int, float, bool, bytes, None]
 BUNDLE = b"#bundle\x00"
