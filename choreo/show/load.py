@@ -37,6 +37,7 @@ from choreo.errors import Problem, ShowError
 from choreo.show.nesting import too_deep_at
 from choreo.show.model import (
     hidden_character,
+    same_port,
     SOLO,
     Tempo,
     DEFAULT_DONE_TIMEOUT_S,
@@ -996,13 +997,6 @@ def _check_robots(walk: _Walk) -> None:
         if first != name:
             walk.report.add(walk.doc.mark(here + ("port",)), here + ("port",),
                             f"port {port} is already robot {first}'s: each robot needs its own port")
-
-
-def same_port(port: str) -> str:
-    """A port as compared for sharing: a device path normalised (`/dev/../dev/ttyUSB0`, a
-    trailing space), a URL as written."""
-    port = port.strip()
-    return os.path.normpath(port) if "://" not in port else port
 
 
 def _check_tracks(walk: _Walk, tracks: dict[str, Any]) -> None:

@@ -7,6 +7,7 @@ never looks at YAML; it walks the plan.
 
 from __future__ import annotations
 
+import os
 import unicodedata
 from dataclasses import dataclass, field
 from enum import Enum
@@ -69,9 +70,17 @@ class RobotSettings:
     baud: int | None = None
     timeout: float | None = None  # seconds to wait for one reply
     retries: int | None = None  # extra tries after a failed one (default 2: 3 tries in all)
-    layout: str | None = None  # one of `choreo.wire.layouts.LAYOUT_NAMES`; None: the show does not say (the run assumes seed)
+    layout: str | None = None  # one of `choreo.wire.layouts.LAYOUT_NAMES`; None: not said (the run assumes seed)
     on_abort: int | None = None  # this robot's abort motion; None: the show's `on_abort`
     on_fault: str = "stop"  # `ON_FAULT`: stop the show, or let the other robots go on
+
+
+def same_port(port: str) -> str:
+    """A port as compared for sharing: a device path normalised (`/dev/../dev/ttyUSB0`, a
+    trailing space), a URL as written. The show's checks and the run's (a port given on the
+    command line) must agree on when two robots would share one device."""
+    port = port.strip()
+    return os.path.normpath(port) if "://" not in port else port
 
 
 @dataclass(frozen=True)
