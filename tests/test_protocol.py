@@ -59,6 +59,48 @@ def test_play_sequence_is_stop_call_restore():
     assert p.play_sequence(7)[1].motion == 7
 
 
+def test_play_sequence_at_every_baud_is_the_seed_layouts_and_carries_the_bauds_code():
+    for baud, code in p.BAUD_CODES.items():
+        stop, play, restore = p.play_sequence(4, baud)
+        assert (stop, play, restore) == SEED.play_sequence(4, baud=baud)
+        assert stop.data[6] >> 6 == restore.data[6] >> 6 == code and play == p.play_frame(4)
+        assert {stop.motion, restore.motion} == {4}
+    with pytest.raises(ValueError, match="baud 9600: the RCB-4 runs at 115200, 625000, 1250000"):
+        p.play_sequence(4, 9600)
+
+
+def test_the_protocol_does_not_import_the_layouts_that_build_on_it():
+    import subprocess
+    import sys
+
+    code = "import sys, choreo.wire.protocol; print('choreo.wire.layouts' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+def test_the_bauds_are_spelt_from_the_one_list():
+    assert p.BAUDS == (115200, 625000, 1250000) and p.DEFAULT_BAUD in p.BAUDS
+    assert p.spell_bauds() == "115200, 625000, 1250000"
+    assert p.spell_bauds("or") == "115200, 625000 or 1250000"
+    assert p.spell_bauds("and") == "115200, 625000 and 1250000"
+    assert p.spell_bauds("or", mark_default=True) == "115200 (default), 625000 or 1250000"
+    assert p.spell_bauds(mark_default=True) == "115200 (default), 625000, 1250000"
+
+
+def test_a_baud_code_names_its_baud_and_a_config_word_takes_one():
+    assert [p.baud_of_code(code) for code in range(4)] == [115200, 625000, 1250000, None]
+    assert p.with_baud(0x8721, 625000) == 0x8761 and p.with_baud(0x87E1, 115200) == 0x8721
+    assert p.check_baud(1250000) == 1250000
+
+
+def test_kondos_running_rule_wants_a_counter_in_the_slots_and_something_pushed():
+    pushed = p.little_endian(0x0B80, 3) + p.little_endian(0x00044B, 3) + bytes((1, 0, 0, 0))
+    assert p.in_called_motion(pushed)
+    assert not p.in_called_motion(p.little_endian(0x0B7F, 3) + pushed[3:])  # below every slot
+    assert not p.in_called_motion(pushed[:3] + bytes(7))  # nothing pushed
+    assert p.in_called_motion(pushed[:3] + bytes(4) + b"\x01" + bytes(2))  # the byte after the depth counts
+
+
 @pytest.mark.parametrize("bad", [-1, 120, 140, 1.5, "3", True, None])
 def test_out_of_range_or_non_integer_motion_is_refused(bad):
     with pytest.raises(MotionRangeError, match="0..119"):

@@ -8,9 +8,8 @@ or fixed), and which status read says "still running". Nothing here does I/O.
 
 - `seed`: the source document's frames, byte for byte (slots at 0x0BB8 + N*0x800, one 12-byte
   write that stops the program, config 0x8723 to run it, status = low byte 0x23 of the config).
-  At 625000 or 1250000 baud its fixed config words carry that baud in bits 7-6: the document's
-  words say 115200, and whether the board switches its speed the moment the word is written is
-  not documented (LAYOUTS.md), so choreo never writes a speed other than the one it talks at.
+  At another baud than 115200 its fixed config words carry that baud in bits 7-6 (see
+  `protocol.play_sequence`, which builds them).
 - `hth4-2.2`: what Kondo's own library sends for boards written by HTH4 2.2 and later (slots at
   0x0B80 + N*0x800). Suspend and resume are the board's config word, read once when the port
   opens, with only bits 0-3 changed; the program counter is set to the main loop 0x00044B; a
@@ -32,17 +31,12 @@ from choreo.wire import protocol as p
 from choreo.wire.protocol import Frame, FrameKind
 
 DEFAULT_LAYOUT = "seed"
-# The config word a real HTH4 2.2+ project saves (LAYOUTS.md's example): what `choreo plan` and
+# The config word a real HTH4 2.2+ project saves (docs/hardware.md, "Layouts": the example): what `choreo plan` and
 # `choreo frames` show for hth4-2.2 when no board has been read.
 EXAMPLE_CONFIG = 0x821B
 RUN_BITS_MASK = 0x000F  # bits 0-3: ICS, program run, end-of-move message, vector jump
 RESUME_SET = 0x000B  # ICS, program run, vector jump
 RESUME_CLEAR = 0x0004  # end-of-move message off
-
-
-def with_baud(word: int, baud: int) -> int:
-    """The config word with its COM baud bits (7-6) set to `baud`'s code."""
-    return (word & ~p.COM_BAUD_MASK) | p.BAUD_CODES[baud] << p.COM_BAUD_SHIFT
 
 
 @dataclass(frozen=True)
@@ -75,8 +69,7 @@ class Layout:
 
         `config`: the board's config word (hth4-2.2; None: EXAMPLE_CONFIG, for plans).
         """
-        if baud not in p.BAUD_CODES:
-            raise ValueError(f"baud {baud}: the RCB-4 runs at {', '.join(map(str, p.BAUD_CODES))}")
+        p.check_baud(baud)
         word = EXAMPLE_CONFIG if config is None else config
         return _sequence(self, p.check_motion(motion), word & 0xFFFF if self.reads_config else 0, baud)
 
@@ -127,23 +120,20 @@ def _sequence(layout: Layout, motion: int, config: int, baud: int) -> tuple[Fram
 
 
 def _seed_sequence(layout: Layout, motion: int, config: int, baud: int) -> tuple[Frame, ...]:
-    stop = p.mov_write(p.CONFIG_ADDRESS, _le(with_baud(p.SUSPENDED_CONFIG, baud), 2)
-                       + _le(p.SUSPEND_PROGRAM_COUNTER, 3) + bytes(7))
-    restore = p.mov_write(p.CONFIG_ADDRESS, _le(with_baud(p.RESUMED_CONFIG, baud), 2))
-    return (Frame(FrameKind.STOP, stop, motion), layout.play_frame(motion),
-            Frame(FrameKind.RESTORE, restore, motion))
+    """The document's frames, which the protocol module holds (the seed layout's slots are the
+    ones its CALL names)."""
+    return p.play_sequence(motion, baud)
 
 
 def _hth4_sequence(layout: Layout, motion: int, config: int, baud: int) -> tuple[Frame, ...]:
-    suspend = p.mov_write(p.CONFIG_ADDRESS, _le(config & ~RUN_BITS_MASK, 2))
-    counter = p.mov_write(p.PROGRAM_COUNTER_ADDRESS, _le(layout.main_loop, 3) + bytes(7))
-    resume = p.mov_write(p.CONFIG_ADDRESS, _le((config | RESUME_SET) & ~RESUME_CLEAR, 2))
-    return (Frame(FrameKind.STOP, suspend, motion), Frame(FrameKind.COUNTER, counter, motion),
-            layout.play_frame(motion), Frame(FrameKind.RESTORE, resume, motion))
+    def config_write(word: int) -> bytes:
+        return p.mov_write(p.CONFIG_ADDRESS, p.little_endian(word, p.CONFIG_BYTES))
 
-
-def _le(value: int, width: int) -> bytes:
-    return value.to_bytes(width, "little")
+    main_loop = p.little_endian(layout.main_loop, p.ADDRESS_BYTES).ljust(p.COUNTER_READ_BYTES, b"\0")
+    return (Frame(FrameKind.STOP, config_write(config & ~RUN_BITS_MASK), motion),
+            Frame(FrameKind.COUNTER, p.mov_write(p.PROGRAM_COUNTER_ADDRESS, main_loop), motion),
+            layout.play_frame(motion),
+            Frame(FrameKind.RESTORE, config_write((config | RESUME_SET) & ~RESUME_CLEAR), motion))
 
 
 SEED = Layout(
@@ -158,8 +148,8 @@ SEED = Layout(
 HTH4_22 = Layout(
     name="hth4-2.2",
     source="Kondo's Rcb4BaseLib (HTH4 2.2 and later): config word read from the board",
-    first_slot=0x0B80,
-    main_loop=0x00044B,
+    first_slot=p.FIRST_CALLED_ADDRESS,  # the lowest slot of any layout, which the running rule reads
+    main_loop=0x00044B,  # HTH4 2.0 and later
     reads_config=True,
     status=Frame(FrameKind.STATUS, p.mov_read(p.PROGRAM_COUNTER_ADDRESS, p.COUNTER_READ_BYTES)),
     build=_hth4_sequence,

@@ -31,17 +31,23 @@ EXECUTING_BYTE = 0x23
 
 CONFIG_ADDRESS = 0x0000
 RUN_BIT = 0x0002  # config word bit 1, "ROM program run": stop frames clear it, the start frame sets it
+CONFIG_BYTES = 2  # the config word: 16 bits, little endian
 PROGRAM_COUNTER_ADDRESS = 0x0002  # program counter (3 bytes), return address (3), call depth
 RETURN_ADDRESS_ADDRESS = 0x0005  # what a CALL pushed (3 bytes): where the program goes back to
 CALL_DEPTH_ADDRESS = 0x0008  # call depth (1 byte): return addresses pushed
 ADDRESS_BYTES = 3  # a program address (counter, return address) is 3 bytes, little endian
 PROGRAM_STATE_BYTES = 12  # RAM 0x0000-0x000B: config word, counter, return address, depth, 3 more
 COUNTER_READ_BYTES = 10  # Kondo's library reads this much at 0x0002 to see whether a motion runs
-FIRST_CALLED_ADDRESS = 0x0B80  # no slot of any layout starts lower: a counter at or above is in one
-DEFAULT_BAUD = 115200
-BAUD_CODES = {115200: 0, 625000: 1, 1250000: 2}  # the config word's COM (7-6) and ICS (14-13) codes
+FIRST_CALLED_ADDRESS = 0x0B80  # hth4-2.2's slot 0, the lowest of any layout: a counter at or above is in one
+# The bauds an RCB-4 runs at, each with its code in the config word's COM (bits 7-6) and ICS
+# (bits 14-13) baud fields: the one list every check, message and help text is built from.
+BAUD_CODES = {115200: 0, 625000: 1, 1250000: 2}
+BAUDS = tuple(BAUD_CODES)
+DEFAULT_BAUD = 115200  # what a board leaves the factory with, and the document's frames say
+BAUD_CODE_BITS = 0b11
 COM_BAUD_SHIFT = 6
-COM_BAUD_MASK = 0b11 << COM_BAUD_SHIFT
+ICS_BAUD_SHIFT = 13
+COM_BAUD_MASK = BAUD_CODE_BITS << COM_BAUD_SHIFT
 SUSPENDED_CONFIG = 0x8721  # ROM program run bit (bit 1) cleared: the board stops its program
 RESUMED_CONFIG = 0x8723  # run bit set again: the board runs what the CALL pushed
 SUSPEND_PROGRAM_COUNTER = 0x0003FD
@@ -49,6 +55,31 @@ SUSPEND_PROGRAM_COUNTER = 0x0003FD
 TYPE1_REPLY_SIZE = 4
 STATUS_REPLY_SIZE = 5
 REPLY_SIZES = (TYPE1_REPLY_SIZE, STATUS_REPLY_SIZE)  # what a play sequence or a status query gets
+
+
+def spell_bauds(last: str = ",", *, mark_default: bool = False) -> str:
+    """The bauds for a message or a help text, so that none of them types the list again:
+    `115200, 625000, 1250000`; `last="or"`: `115200, 625000 or 1250000`; `mark_default`:
+    `115200 (default), ...`."""
+    words = [f"{baud} (default)" if mark_default and baud == DEFAULT_BAUD else str(baud) for baud in BAUDS]
+    if last == ",":
+        return ", ".join(words)
+    return f"{', '.join(words[:-1])} {last} {words[-1]}"
+
+
+def baud_of_code(code: int) -> int | None:
+    """The baud a config word's 2-bit baud field names (None: code 3, which names none)."""
+    return next((baud for baud, known in BAUD_CODES.items() if known == code), None)
+
+
+def with_baud(word: int, baud: int) -> int:
+    """The config word with its COM baud bits (7-6) set to `baud`'s code."""
+    return (word & ~COM_BAUD_MASK) | BAUD_CODES[baud] << COM_BAUD_SHIFT
+
+
+def little_endian(value: int, width: int) -> bytes:
+    """A RAM word or address as the board stores it (every multi-byte value is little endian)."""
+    return value.to_bytes(width, "little")
 
 
 def checksum(data: bytes) -> int:
@@ -67,21 +98,17 @@ def build_frame(command: int, args: bytes) -> bytes:
 
 def mov_write(address: int, data: bytes) -> bytes:
     """MOV COM -> RAM: write the literal bytes at a RAM address."""
-    return build_frame(CMD_MOV, bytes((MOV_COM_TO_RAM,)) + _le(address, 3) + data)
+    return build_frame(CMD_MOV, bytes((MOV_COM_TO_RAM,)) + little_endian(address, ADDRESS_BYTES) + data)
 
 
 def mov_read(address: int, count: int) -> bytes:
     """MOV RAM -> COM: ask for `count` bytes of RAM from `address`."""
-    return build_frame(CMD_MOV, bytes((MOV_RAM_TO_COM, 0, 0, 0)) + _le(address, 2) + bytes((count,)))
+    return build_frame(CMD_MOV, bytes((MOV_RAM_TO_COM, 0, 0, 0)) + little_endian(address, 2) + bytes((count,)))
 
 
 def call(address: int, condition: int = 0) -> bytes:
     """CALL a ROM address (condition 0: always)."""
-    return build_frame(CMD_CALL, _le(address, 3) + bytes((condition,)))
-
-
-def _le(value: int, width: int) -> bytes:
-    return value.to_bytes(width, "little")
+    return build_frame(CMD_CALL, little_endian(address, ADDRESS_BYTES) + bytes((condition,)))
 
 
 def hexbytes(data: bytes) -> str:
@@ -148,24 +175,49 @@ def motion_address(motion: int) -> int:
     return FIRST_SLOT_ADDRESS + check_motion(motion) * SLOT_SIZE
 
 
-# Step 1: config word 0x8721, program counter 0x0003FD, and zeros: 12 bytes at RAM 0x0000.
-_STOP = mov_write(CONFIG_ADDRESS, _le(SUSPENDED_CONFIG, 2) + _le(SUSPEND_PROGRAM_COUNTER, 3) + bytes(7))
-_RESTORE = mov_write(CONFIG_ADDRESS, _le(RESUMED_CONFIG, 2))
-_STATUS = mov_read(CONFIG_ADDRESS, 2)
+_STATUS = mov_read(CONFIG_ADDRESS, CONFIG_BYTES)
 _SYNC = build_frame(CMD_ACK_CHECK, bytes((ACK_BYTE,)))
 _VERSION = build_frame(CMD_VERSION, b"")
 
 
-def stop_frame() -> Frame:
-    return Frame(FrameKind.STOP, _STOP)
+def check_baud(baud: int) -> int:
+    """`baud` if an RCB-4 runs at it, else a ValueError that lists the bauds it runs at."""
+    if baud not in BAUD_CODES:
+        raise ValueError(f"baud {baud}: the RCB-4 runs at {spell_bauds()}")
+    return baud
+
+
+def stop_frame(baud: int = DEFAULT_BAUD, motion: int | None = None) -> Frame:
+    """Step 1, stop and save: config word 0x8721 (its COM baud bits `baud`'s code), program
+    counter 0x0003FD, and zeros: 12 bytes at RAM 0x0000."""
+    state = (little_endian(with_baud(SUSPENDED_CONFIG, check_baud(baud)), CONFIG_BYTES)
+             + little_endian(SUSPEND_PROGRAM_COUNTER, ADDRESS_BYTES))
+    return Frame(FrameKind.STOP, mov_write(CONFIG_ADDRESS, state.ljust(PROGRAM_STATE_BYTES, b"\0")), motion)
 
 
 def play_frame(motion: int) -> Frame:
+    """Step 2: CALL the motion's slot."""
     return Frame(FrameKind.PLAY, call(motion_address(motion)), motion)
 
 
-def restore_frame() -> Frame:
-    return Frame(FrameKind.RESTORE, _RESTORE)
+def restore_frame(baud: int = DEFAULT_BAUD, motion: int | None = None) -> Frame:
+    """Step 3: config word 0x8723, the run bit set again (and `baud`'s code): the board runs
+    what the CALL pushed."""
+    word = with_baud(RESUMED_CONFIG, check_baud(baud))
+    return Frame(FrameKind.RESTORE, mov_write(CONFIG_ADDRESS, little_endian(word, CONFIG_BYTES)), motion)
+
+
+def play_sequence(motion: int, baud: int = DEFAULT_BAUD) -> tuple[Frame, ...]:
+    """Steps 1-3 of the document: stop and save, CALL the slot, restore, sent as one unit, each
+    frame carrying the motion for the log. These are the seed layout's frames
+    (`choreo.wire.layouts.SEED`, which builds on this module; the other layouts live there).
+
+    The document's config words say 115200 in bits 7-6; at another baud they carry that baud's
+    code, because whether the board switches its speed the moment the word is written is not
+    documented (docs/hardware.md, "Layouts"): choreo never writes a speed other than the one it
+    talks at.
+    """
+    return (stop_frame(baud, motion), play_frame(motion), restore_frame(baud, motion))
 
 
 def status_frame() -> Frame:
@@ -186,14 +238,6 @@ def read_frame(address: int, count: int) -> Frame:
 def version_frame() -> Frame:
     """Ask the firmware's version text (`03 fd 00`)."""
     return Frame(FrameKind.VERSION, _VERSION)
-
-
-def play_sequence(motion: int) -> tuple[Frame, ...]:
-    """Steps 1-3 of the document: stop and save, CALL the slot, restore (the seed layout at
-    115200 baud; `choreo.wire.layouts` has every layout). Sent as one unit."""
-    from choreo.wire.layouts import SEED
-
-    return SEED.play_sequence(motion)
 
 
 class ReplyKind(str, Enum):
@@ -292,12 +336,24 @@ def _status(frame: Frame, data: bytes) -> Reply:
     inside the slots and the return address and call depth after it are not all zero.
     """
     command = parse_command(frame.data)
-    if command.address == PROGRAM_COUNTER_ADDRESS and len(data) >= 3 + 8:
-        counter = int.from_bytes(data[2:5], "little")
-        running = counter >= FIRST_CALLED_ADDRESS and any(data[5:10])
-        return Reply(ReplyKind.STATUS, data, executing=running, status=counter)
+    if command.address == PROGRAM_COUNTER_ADDRESS and len(data) >= 3 + _CALL_STATE_BYTES:
+        ram = data[2:-1]
+        counter = int.from_bytes(ram[:ADDRESS_BYTES], "little")
+        return Reply(ReplyKind.STATUS, data, executing=in_called_motion(ram), status=counter)
     word = data[2] | data[3] << 8
     return Reply(ReplyKind.STATUS, data, executing=data[2] == EXECUTING_BYTE, status=word)
+
+
+# What the running rule looks at from 0x0002: the counter, the return address, the call depth and
+# the byte after it (0x0009), as Kondo's library does.
+_CALL_STATE_BYTES = 8
+
+
+def in_called_motion(counter_ram: bytes) -> bool:
+    """Kondo's rule for "a motion runs", on RAM read from 0x0002: the program counter inside
+    the slots, with a return address or a call depth pushed after it."""
+    counter = int.from_bytes(counter_ram[:ADDRESS_BYTES], "little")
+    return counter >= FIRST_CALLED_ADDRESS and any(counter_ram[ADDRESS_BYTES:_CALL_STATE_BYTES])
 
 
 @dataclass(frozen=True)
