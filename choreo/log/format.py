@@ -13,9 +13,9 @@ and refuses a topic whose schema allows null.
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from functools import lru_cache
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Any, ClassVar
 
 from choreo.wire.framewords import describe_frame, describe_reply, is_slot
@@ -87,7 +87,7 @@ LATE_MS = 1.0
 @lru_cache(maxsize=None)
 def _field_names(cls: type) -> tuple[str, ...]:
     """A record type's field names, worked out once (the recorder serialises every frame)."""
-    return tuple(f.name for f in fields(cls))  # type: ignore[arg-type]
+    return tuple(f.name for f in fields(cls))
 
 
 class _Record:
@@ -96,8 +96,9 @@ class _Record:
     topic: ClassVar[str]
 
     def to_json(self) -> dict:
-        values = (getattr(self, name) for name in _field_names(type(self)))
-        return {name: value for name, value in zip(_field_names(type(self)), values) if value is not None}
+        record_type: type = self.__class__  # as `type`: mypy takes a class's unbound __hash__ for unhashable
+        names = _field_names(record_type)
+        return {name: value for name in names if (value := getattr(self, name)) is not None}
 
     @classmethod
     def from_json(cls, message: Any) -> Any:
@@ -110,7 +111,7 @@ class _Record:
         else:
             return record._checked()
         given = {}  # a field missing, or one from another version of choreo: field by field
-        for f in fields(cls):  # type: ignore[arg-type]
+        for f in _fields(cls):
             if f.name in message:
                 given[f.name] = message[f.name]
             elif f.default is MISSING and f.default_factory is MISSING:
@@ -125,11 +126,11 @@ class _Record:
         if not isinstance(message, dict):
             raise TypeError(f"a JSON object, not {type(message).__name__}")
         given = {}
-        for f in fields(cls):  # type: ignore[arg-type]
+        for f in _fields(cls):
             if f.name in message:
                 given[f.name] = message[f.name]
             elif f.default is MISSING and f.default_factory is MISSING:
-                given[f.name] = _BLANK[f.type]  # type: ignore[index]
+                given[f.name] = _BLANK[str(f.type)]  # annotations are strings here (future import)
         return cls(**given)._checked()
 
     def _checked(self) -> Any:
@@ -137,7 +138,8 @@ class _Record:
         ValueError naming the field if not. A log is a file from outside: a `motion` of 1e308,
         NaN or a list, or a 30-digit `latency_ms`, must fail here, in the one way every review
         turns into one line, not as an OverflowError or a format error deep in a review."""
-        for name, kinds in _field_kinds(type(self)):
+        record_type: type = self.__class__  # as `type`, for mypy: see to_json
+        for name, kinds in _field_kinds(record_type):
             value = getattr(self, name)
             kind = _KIND_OF.get(type(value))
             if kind not in kinds:
@@ -153,11 +155,16 @@ _KIND_OF = {int: "int", float: "float", str: "str", bool: "bool", dict: "dict", 
 _NUMBER_MAX = 2 ** 63  # nanoseconds since 1970 fit, with room; no field of a log holds more
 
 
+def _fields(cls: type) -> tuple[Field[Any], ...]:
+    """A record class's dataclass fields (`_Record` itself is no dataclass: its subclasses are)."""
+    return fields(cls)
+
+
 @lru_cache(maxsize=None)
 def _field_kinds(cls: type) -> tuple[tuple[str, tuple[str, ...]], ...]:
     """Each field and the kinds of value its annotation allows (`float` takes an int too)."""
     out = []
-    for f in fields(cls):  # type: ignore[arg-type]
+    for f in fields(cls):
         kinds = tuple(part.strip() for part in str(f.type).split("|"))
         out.append((f.name, kinds + (("int",) if "float" in kinds else ())))
     return tuple(out)
@@ -291,11 +298,12 @@ class CommandRecord(_Record):
 
 
 Record = TxRecord | RxRecord | StepRecord | LogRecord | ClockRecord | CommandRecord
-RECORD_TYPES: dict[str, type] = {TX_TOPIC: TxRecord, RX_TOPIC: RxRecord, STEP_TOPIC: StepRecord,
+RECORD_TYPES: dict[str, type[_Record]] = {TX_TOPIC: TxRecord, RX_TOPIC: RxRecord, STEP_TOPIC: StepRecord,
                                  LOG_TOPIC: LogRecord, CLOCK_TOPIC: ClockRecord, COMMAND_TOPIC: CommandRecord}
 
 
-_scan_once = json.JSONDecoder().scan_once
+# The C scanner json.loads itself calls; typeshed leaves the attribute out of JSONDecoder's stub.
+_scan_once: Callable[[str, int], tuple[Any, int]] = json.JSONDecoder().scan_once  # type: ignore[attr-defined]  # not in typeshed
 
 
 def decode(data: bytes) -> dict:
@@ -425,10 +433,11 @@ class MotionTracker:
 
     def _judge(self, lost: _Armed, reply: RxRecord, read_ns: int) -> None:
         """The program state read after a lost restore reply, judged by the robot's layout."""
-        if self.layout is None or not is_slot(lost.motion):
+        motion = lost.motion
+        if self.layout is None or motion is None or not is_slot(motion):
             self._asked = True
             return
-        state = self.layout.start_state(lost.motion, _hex_bytes(reply.hex))
+        state = self.layout.start_state(motion, _hex_bytes(reply.hex))
         if not state.started:
             self._lost_start = None  # the link sends the sequence again from its stop frame
             return
@@ -515,7 +524,8 @@ class LogLayouts:
         """What a review says of the layouts it read the frames with, where the log did not
         record one or recorded one this choreo does not know."""
         notes = []
-        for robot in robots or [None]:
+        whom: list[str | None] = [*robots] or [None]
+        for robot in whom:
             whose = f"robot {robot}: " if robot is not None else ""
             if self.assumed(robot):
                 notes.append(f"{whose}the log does not record a board layout: frames read with the "
