@@ -11,15 +11,16 @@ Text by default; `--png` draws the same with matplotlib (the optional extra `cho
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 from choreo.errors import ChoreoError
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.showtime import ShowTimes
-from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, LogLayouts, MotionPlay, MotionTracker,
-                              RxRecord, StepRecord, is_late, parse, slipped)
+from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC,
+                               ClockRecord, LogLayouts, LogRecord, MotionPlay, MotionTracker, Record, RxRecord,
+                               StepRecord, TxRecord, is_late, parse, slipped)
 from choreo.log.reader import Cut, LogReader
 from choreo.textfit import fit
 
@@ -150,53 +151,69 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
     marks (late plays by the same rule), the cues, and the plan's plays the run never reached."""
     show = show or attached_show(reader)
     timeline = Timeline(reader.run_info.get("show") or reader.path.stem, show_problem=show.problem)
-    clock = ShowTimes.of(reader)
-    trackers: dict[str | None, MotionTracker] = {}  # by robot: each robot's motions are its own
-    layouts = LogLayouts.of(reader.run_info)  # a lost start reply is judged by the robot's layout
-    steps: dict[tuple[str | None, int], _Step] = {}
-    last_ns: int | None = None
+    seen = _Pass(timeline, ShowTimes.of(reader), LogLayouts.of(reader.run_info))
     topic, number = None, 0
     try:
         for topic, log_time, data in reader.messages((STEP_TOPIC, TX_TOPIC, RX_TOPIC, LOG_TOPIC, CLOCK_TOPIC)):
             number += 1
-            record = parse(topic, data)
-            if topic == CLOCK_TOPIC:
-                clock.see_clock(log_time, record)
-                continue
-            last_ns = log_time if last_ns is None else max(last_ns, log_time)
-            if topic == STEP_TOPIC:
-                if record.event == "start":
-                    clock.see_start(log_time, record.actual_s)
-                _see_step(timeline, steps, record, clock.seconds(log_time))
-            elif topic == TX_TOPIC:
-                _tracker(trackers, layouts, record.robot).tx(record, log_time)
-                if record.label == ABORT_LABEL and not any(m.kind == "abort" for m in timeline.marks):
-                    timeline.marks.append(Mark(clock.seconds(log_time) or 0.0, "abort",
-                                               f"show stopped: abort motion {record.motion} played"))
-            elif topic == RX_TOPIC:
-                _tracker(trackers, layouts, record.robot).rx(record, log_time)
-                if not record.answered:
-                    timeline.marks.append(_fault(record, clock.seconds(log_time)))
-            elif record.level >= ERROR:
-                timeline.marks.append(Mark(clock.seconds(log_time) or 0.0, "error", str(record.message)))
+            seen.see(parse(topic, data), log_time)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise reader.not_choreo(topic, number, exc) from None
-    timeline.end_s = (clock.seconds(last_ns) or 0.0) if last_ns is not None else 0.0
-    order = {name: i for i, name in enumerate(reader.robots)}
-    for robot, tracker in trackers.items():
-        for play in tracker.finish(last_ns):
-            known = steps.get((robot, play.step)) if play.step is not None else None
-            timeline.runs.append(_run_of(play, known, show, clock, robot))
-    timeline.runs.sort(key=lambda r: (order.get(r.robot, len(order)),
-                                      r.start_s if r.start_s is not None else r.due_s or 0.0))
-    timeline.marks.sort(key=lambda m: m.show_s)
-    robots = list(show.plans) if show.plans else [None]
-    timeline.unplayed = [run for robot in robots for run in _unplayed(show, steps, robot)]
-    timeline.cut = reader.cut
-    timeline.outcome = (reader.result or {}).get("outcome")
-    if timeline.outcome in ("aborted", "interrupted") and not any(m.kind == "abort" for m in timeline.marks):
-        timeline.marks.append(Mark(timeline.end_s, "abort", f"show {timeline.outcome}"))
+    seen.finish(reader, show)
     return timeline
+
+
+@dataclass
+class _Pass:
+    """What one pass over a log has seen so far, and how each record adds to the timeline."""
+
+    timeline: Timeline
+    clock: ShowTimes
+    layouts: LogLayouts  # a lost start reply is judged by the robot's layout
+    trackers: dict[str | None, MotionTracker] = field(default_factory=dict)  # by robot: motions are each one's own
+    steps: dict[tuple[str | None, int], _Step] = field(default_factory=dict)
+    last_ns: int | None = None
+
+    def see(self, record: Record, log_time: int) -> None:
+        if isinstance(record, ClockRecord):
+            self.clock.see_clock(log_time, record)
+            return
+        self.last_ns = log_time if self.last_ns is None else max(self.last_ns, log_time)
+        marks = self.timeline.marks
+        if isinstance(record, StepRecord):
+            if record.event == "start":
+                self.clock.see_start(log_time, record.actual_s)
+            _see_step(self.timeline, self.steps, record, self.clock.seconds(log_time))
+        elif isinstance(record, TxRecord):
+            _tracker(self.trackers, self.layouts, record.robot).tx(record, log_time)
+            if record.label == ABORT_LABEL and not any(m.kind == "abort" for m in marks):
+                marks.append(Mark(self.clock.seconds(log_time) or 0.0, "abort",
+                                  f"show stopped: abort motion {record.motion} played"))
+        elif isinstance(record, RxRecord):
+            _tracker(self.trackers, self.layouts, record.robot).rx(record, log_time)
+            if not record.answered:
+                marks.append(_fault(record, self.clock.seconds(log_time)))
+        elif isinstance(record, LogRecord) and record.level >= ERROR:
+            marks.append(Mark(self.clock.seconds(log_time) or 0.0, "error", str(record.message)))
+
+    def finish(self, reader: LogReader, show: AttachedShow) -> None:
+        """The runs in robot then time order, the marks in time order, what was never played."""
+        timeline, clock = self.timeline, self.clock
+        timeline.end_s = (clock.seconds(self.last_ns) or 0.0) if self.last_ns is not None else 0.0
+        order: dict[str | None, int] = {name: i for i, name in enumerate(reader.robots)}
+        for robot, tracker in self.trackers.items():
+            for play in tracker.finish(self.last_ns):
+                known = self.steps.get((robot, play.step)) if play.step is not None else None
+                timeline.runs.append(_run_of(play, known, show, clock, robot))
+        timeline.runs.sort(key=lambda r: (order.get(r.robot, len(order)),
+                                          r.start_s if r.start_s is not None else r.due_s or 0.0))
+        timeline.marks.sort(key=lambda m: m.show_s)
+        robots = list(show.plans) if show.plans else [None]
+        timeline.unplayed = [run for robot in robots for run in _unplayed(show, self.steps, robot)]
+        timeline.cut = reader.cut
+        timeline.outcome = (reader.result or {}).get("outcome")
+        if timeline.outcome in ("aborted", "interrupted") and not any(m.kind == "abort" for m in timeline.marks):
+            timeline.marks.append(Mark(timeline.end_s, "abort", f"show {timeline.outcome}"))
 
 
 def _see_step(timeline: Timeline, steps: dict[tuple[str | None, int], _Step], step: StepRecord,
@@ -333,7 +350,7 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
     yield from _listed(timeline)
 
 
-def _lane_order(timeline: Timeline):  # type: ignore[no-untyped-def]
+def _lane_order(timeline: Timeline) -> Callable[[MotionRun], tuple[int, int]]:
     """Runs lane by lane (robots in the order they first played), then as they were."""
     robots: dict[str | None, int] = {}
     for run in timeline.runs + timeline.unplayed:
@@ -389,7 +406,7 @@ def require_matplotlib() -> None:
         import matplotlib
 
         matplotlib.use("Agg")
-        import matplotlib.pyplot  # noqa: F401
+        import matplotlib.pyplot  # noqa: F401 - imported to fail here, before any file is made
     except ImportError:
         raise PlotUnavailable("timeline --png needs matplotlib: pip install 'choreo[plot]' "
                               "(or pip install matplotlib); the text timeline works without it") from None
@@ -449,7 +466,7 @@ _MARK_STYLES = (("fault", "x", RED), ("error", "x", "#8b0000"), ("failure", "X",
                 ("abort", "s", "#ff7f0e"))
 
 
-def _draw_run(ax, run: MotionRun, y: int) -> None:  # type: ignore[no-untyped-def]
+def _draw_run(ax: Any, run: MotionRun, y: int) -> None:  # ax: a matplotlib Axes, imported lazily
     if run.planned_s is not None:
         unplayed = run.ended_by == "not played"
         ax.broken_barh([(run.planned_s, run.expected_s)], (y - 0.42, 0.34),
