@@ -50,7 +50,8 @@ class SerialPort:
 
 
 def examine(ports: Sequence[SerialPort], port: str | None = None, *, sysfs: Path = SYSFS,
-            probe: Callable[[str], BoardInfo] | None = None, audio: Callable[[], Finding] | None = None) -> list[Finding]:
+            probe: Callable[[str], BoardInfo] | None = None,
+            audio: Callable[[], Finding] | None = None) -> list[Finding]:
     """Every check, in the order a user fixes things: adapter, driver, permission, latency,
     the board on `port` (or on the one Kondo adapter found), then the music's output."""
     findings = _adapters(ports, sysfs)

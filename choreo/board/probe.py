@@ -13,26 +13,21 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from choreo.wire import protocol
-from choreo.errors import LinkError
+from choreo.board.link import DEFAULT_TIMEOUT_S, Link
 from choreo.clock import RunClock, SystemTime, TimeSource
-from choreo.board.link import BAUD_RATES, DEFAULT_TIMEOUT_S, Link
+from choreo.errors import LinkError
+from choreo.wire import protocol
+from choreo.wire.layouts import HTH4_22, SEED
 from choreo.wire.protocol import ReplyKind
 
-CONFIG_ADDRESS = 0x0000
-COUNTER_ADDRESS = 0x0002  # program counter (3 bytes), return address (3), call depth and flags
-COUNTER_BYTES = 10
 FRAME_PERIODS_MS = (10, 15, 20, 25)  # config bits 5-4
-BAUD_CODES = {0: 115200, 1: 625000, 2: 1250000}  # config bits 7-6 (COM) and 14-13 (ICS)
-MAIN_LOOP_HTH4_1 = 0x0003FD  # HTH4 1.x, and what the document's stop frame writes
-MAIN_LOOP_HTH4_2 = 0x00044B  # HTH4 2.0 and later (Kondo's library writes it)
-FIRST_SLOT_HTH4_22 = 0x0B80
-FIRST_SLOT_SEED = protocol.FIRST_SLOT_ADDRESS
+MAIN_LOOP_HTH4_1 = SEED.main_loop  # HTH4 1.x's, and what the document's stop frame writes
+MAIN_LOOP_HTH4_2 = HTH4_22.main_loop  # HTH4 2.0 and later (Kondo's library writes it)
 
 
 @dataclass(frozen=True)
 class ConfigWord:
-    """The board's config word, bit by bit (ERRATA.md: RAM 0x0000, little endian)."""
+    """The board's config word, bit by bit (docs/hardware.md, "Errata: The config word": RAM 0x0000, little endian)."""
 
     word: int
 
@@ -49,13 +44,17 @@ class ConfigWord:
     def frame_ms(self) -> int:
         return FRAME_PERIODS_MS[self.word >> 4 & 0b11]
 
+    def baud_code(self, shift: int) -> int:
+        """The 2-bit baud field at `shift` (protocol's COM_BAUD_SHIFT or ICS_BAUD_SHIFT)."""
+        return self.word >> shift & protocol.BAUD_CODE_BITS
+
     @property
     def com_baud(self) -> int | None:
-        return BAUD_CODES.get(self.word >> 6 & 0b11)
+        return protocol.baud_of_code(self.baud_code(protocol.COM_BAUD_SHIFT))
 
     @property
     def ics_baud(self) -> int | None:
-        return BAUD_CODES.get(self.word >> 13 & 0b11)
+        return protocol.baud_of_code(self.baud_code(protocol.ICS_BAUD_SHIFT))
 
     def lines(self) -> list[str]:
         def baud(value: int | None, code: int) -> str:
@@ -65,13 +64,14 @@ class ConfigWord:
         flags = self.flags
         return [
             f"config    0x{self.word:04x}",
-            f"  ROM program run      {on[flags['rom_run']]}" + ("" if flags["rom_run"] else " (the board's program is stopped)"),
+            f"  ROM program run      {on[flags['rom_run']]}"
+            + ("" if flags["rom_run"] else " (the board's program is stopped)"),
             f"  ICS servo bus        {on[flags['ics']]}",
             f"  end-of-move message  {on[flags['end_message']]}",
             f"  vector jump          {on[flags['vector_jump']]}",
             f"  servo frame period   {self.frame_ms} ms",
-            f"  COM baud             {baud(self.com_baud, self.word >> 6 & 3)}",
-            f"  ICS baud             {baud(self.ics_baud, self.word >> 13 & 3)}",
+            f"  COM baud             {baud(self.com_baud, self.baud_code(protocol.COM_BAUD_SHIFT))}",
+            f"  ICS baud             {baud(self.ics_baud, self.baud_code(protocol.ICS_BAUD_SHIFT))}",
             f"  green LED            {on[flags['green_led']]}",
         ]
 
@@ -84,12 +84,12 @@ class Counter:
 
     @property
     def program_counter(self) -> int:
-        return int.from_bytes(self.data[0:3], "little")
+        return int.from_bytes(self.data[:protocol.ADDRESS_BYTES], "little")
 
     @property
     def in_call(self) -> bool:
         """Kondo's rule for 'a motion is running': inside the slots with a return pushed."""
-        return self.program_counter >= FIRST_SLOT_HTH4_22 and any(self.data[3:8])
+        return protocol.in_called_motion(self.data)
 
 
 @dataclass
@@ -119,7 +119,8 @@ class BoardInfo:
         lines += self.config.lines() if self.config else ["config    not answered"]
         if self.counter is not None:
             pc = self.counter.program_counter
-            lines.append(f"program   counter 0x{pc:06x}, then {protocol.hexbytes(self.counter.data[3:])}"
+            pushed = protocol.hexbytes(self.counter.data[protocol.ADDRESS_BYTES:])
+            lines.append(f"program   counter 0x{pc:06x}, then {pushed}"
                          f" ({'inside a called motion' if self.counter.in_call else 'not in a call'})")
         else:
             lines.append("program   not answered")
@@ -128,7 +129,7 @@ class BoardInfo:
 
 def _counter_hints(counter: Counter) -> list[str]:
     pc = counter.program_counter
-    choose = "choose with `robot.layout` in the show or `--layout` (README: Board layouts)"
+    choose = "choose with `robot.layout` in the show or `--layout` (docs/hardware.md: Board layouts)"
     if pc == MAIN_LOOP_HTH4_2:
         return [f"the program is in the main loop at 0x{pc:06x}, where Heart to Heart 4 2.0 and "
                 f"later put it: a board set up with HTH4 2.2 or later uses layout hth4-2.2 (2.0/2.1: "
@@ -139,8 +140,8 @@ def _counter_hints(counter: Counter) -> list[str]:
                 f"seed-layout show; {choose}"]
     if counter.in_call:
         return [f"a motion is running (counter 0x{pc:06x}): "
-                f"{_slot_words(pc, FIRST_SLOT_HTH4_22, 'hth4-2.2')}; "
-                f"{_slot_words(pc, FIRST_SLOT_SEED, 'seed')}; probe again when the robot is still"]
+                f"{_slot_words(pc, HTH4_22.first_slot, HTH4_22.name)}; "
+                f"{_slot_words(pc, SEED.first_slot, SEED.name)}; probe again when the robot is still"]
     return [f"the program counter 0x{pc:06x} is not a main loop choreo knows: no layout hint"]
 
 
@@ -151,7 +152,7 @@ def _slot_words(pc: int, first: int, layout: str) -> str:
     return f"{layout}: slot {slot} + {offset} bytes" if slot < protocol.MOTION_SLOTS else f"past {layout}'s slots"
 
 
-def probe(url: str, *, bauds: Iterable[int] = BAUD_RATES, timeout: float = DEFAULT_TIMEOUT_S,
+def probe(url: str, *, bauds: Iterable[int] = protocol.BAUDS, timeout: float = DEFAULT_TIMEOUT_S,
           time_source: TimeSource | None = None) -> BoardInfo:
     """Find the baud that answers, then read what the board says; LinkError if none answers."""
     clock = RunClock(time_source or SystemTime())
@@ -192,10 +193,11 @@ def _read(link: Link, url: str, baud: int, notes: list[str]) -> BoardInfo:
     version = _ask(link, protocol.version_frame(), info, "version")
     if version is not None:
         info.version = version[2:-1].decode("ascii", "replace").strip()
-    config = _ask(link, protocol.read_frame(CONFIG_ADDRESS, 2), info, "config word")
+    config = _ask(link, protocol.read_frame(protocol.CONFIG_ADDRESS, protocol.CONFIG_BYTES), info, "config word")
     if config is not None:
-        info.config = ConfigWord(int.from_bytes(config[2:4], "little"))
-    counter = _ask(link, protocol.read_frame(COUNTER_ADDRESS, COUNTER_BYTES), info, "program counter")
+        info.config = ConfigWord(int.from_bytes(config[2:2 + protocol.CONFIG_BYTES], "little"))
+    counter = _ask(link, protocol.read_frame(protocol.PROGRAM_COUNTER_ADDRESS, protocol.COUNTER_READ_BYTES),
+                   info, "program counter")
     if counter is not None:
         info.counter = Counter(counter[2:-1])
     if info.version is None and info.config is None and info.counter is None:

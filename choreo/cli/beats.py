@@ -9,6 +9,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # numpy and miniaudio load only when a song is read
+    from choreo.music.beats import Beat, BeatEstimate
 
 MUSIC_EXTRA = "choreo beats needs the music extra: pip install 'choreo[music]'"
 
@@ -76,12 +80,12 @@ def parse_bpm_range(text: str, limits: tuple[float, float]) -> tuple[float, floa
     return bounds
 
 
-def tempo_line(found) -> str:  # type: ignore[no-untyped-def]  # BeatEstimate: imported lazily
+def tempo_line(found: BeatEstimate) -> str:
     """The block as YAML, figures in full (`:g` would cut an offset past 1000 s to 0.01 s)."""
     return f"tempo: {{bpm: {found.bpm!r}, offset: {found.offset!r}, meter: {found.meter}}}"
 
 
-def summary_lines(path: str, found) -> list[str]:  # type: ignore[no-untyped-def]
+def summary_lines(path: str, found: BeatEstimate) -> list[str]:
     """What the block rests on, as YAML comments, so that they may be pasted along with it."""
     from choreo.music.beats import ON_BEAT_S
 
@@ -100,7 +104,7 @@ def summary_lines(path: str, found) -> list[str]:  # type: ignore[no-untyped-def
     return lines
 
 
-def beat_line(beat) -> str:  # type: ignore[no-untyped-def]
+def beat_line(beat: Beat) -> str:
     """`  12.480 s  bar 7 beat 1  onset +0.4 ms` (or `no onset`)."""
     if beat.onset_s is None:
         return f"{beat.time_s:9.3f} s  bar {beat.bar} beat {beat.beat}  no onset"
@@ -108,14 +112,14 @@ def beat_line(beat) -> str:  # type: ignore[no-untyped-def]
     return f"{beat.time_s:9.3f} s  bar {beat.bar} beat {beat.beat}  onset {early_or_late:+.1f} ms"
 
 
-def text_lines(path: str, found, *, with_beats: bool) -> list[str]:  # type: ignore[no-untyped-def]
+def text_lines(path: str, found: BeatEstimate, *, with_beats: bool) -> list[str]:
     lines = [*summary_lines(path, found), tempo_line(found)]
     if with_beats:
         lines.extend(beat_line(beat) for beat in found.beats)
     return lines
 
 
-def json_record(path: str, found) -> dict:  # type: ignore[no-untyped-def]
+def json_record(path: str, found: BeatEstimate) -> dict:
     downbeat = None
     if found.downbeat_contrast is not None:
         contrast = found.downbeat_contrast

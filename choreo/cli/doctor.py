@@ -27,15 +27,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from serial.tools import list_ports
 
-    from choreo.board.doctor import PROBLEM, SerialPort, examine
-    from choreo.board.probe import probe
+    from choreo.board.doctor import PROBLEM, Finding, SerialPort, examine
+    from choreo.board.probe import BoardInfo, probe
 
     ports = [SerialPort(p.device, p.vid, p.pid) for p in list_ports.comports()]
 
-    def probe_port(port: str):  # type: ignore[no-untyped-def]
+    def probe_port(port: str) -> BoardInfo:
         return probe(port, time_source=args.time_source)
 
-    def audio():  # type: ignore[no-untyped-def]
+    def audio() -> Finding:
         from choreo.board.doctor import audio_output
         from choreo.music.player import pick_output, try_output
 

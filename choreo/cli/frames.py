@@ -6,6 +6,7 @@ import argparse
 
 from choreo.errors import UsageError
 from choreo.wire.layouts import LAYOUT_NAMES
+from choreo.wire.protocol import BAUD_CODES, DEFAULT_BAUD, MOTION_SLOTS, spell_bauds
 
 KINDS = ("play", "stop", "counter", "restore", "status")
 
@@ -20,10 +21,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(made from --config, the board's config word); counter is hth4-2.2's program counter write.",
     )
     parser.add_argument("kind", choices=KINDS, help="which frame")
-    parser.add_argument("motion", nargs="?", help="motion slot 0..119 (play only)")
+    parser.add_argument("motion", nargs="?", help=f"motion slot 0..{MOTION_SLOTS - 1} (play only)")
     parser.add_argument("--layout", default="seed", choices=LAYOUT_NAMES,
                         help="the board's memory layout (default seed)")
-    parser.add_argument("--baud", type=int, default=115200, help="115200 (default), 625000 or 1250000")
+    parser.add_argument("--baud", type=int, default=DEFAULT_BAUD, help=spell_bauds("or", mark_default=True))
     parser.add_argument("--config", metavar="WORD", help="hth4-2.2: the board's config word, e.g. "
                         "0x821b (default: that one, what an HTH4 2.2+ project saves)")
     parser.set_defaults(handler=run)
@@ -31,17 +32,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from choreo.wire.layouts import layout_named
-    from choreo.wire.protocol import BAUD_CODES
 
     layout = layout_named(args.layout)
     if args.baud not in BAUD_CODES:
-        raise UsageError(f"--baud {args.baud}: the RCB-4 runs at {', '.join(map(str, BAUD_CODES))}")
+        raise UsageError(f"--baud {args.baud}: the RCB-4 runs at {spell_bauds()}")
     config = _config(args.config, layout.reads_config)
-    if args.kind == "status":
+    if args.kind != "play":
         _no_motion(args)
+    if args.kind == "status":
         print(layout.status.hex)
         return 0
-    motion = _motion(args) if args.kind == "play" else (_no_motion(args) or 0)
+    motion = _motion(args) if args.kind == "play" else 0
     frames = {frame.kind.value: frame for frame in layout.play_sequence(motion, config, args.baud)}
     if args.kind not in frames:
         raise UsageError(f"frames {args.kind}: the {layout.name} layout sends no {args.kind} frame "
@@ -71,11 +72,11 @@ def _no_motion(args: argparse.Namespace) -> None:
 
 def _motion(args: argparse.Namespace) -> int:
     if args.motion is None:
-        raise UsageError("frames play: give a motion number 0..119, e.g. `choreo frames play 3`")
+        raise UsageError(f"frames play: give a motion number 0..{MOTION_SLOTS - 1}, e.g. `choreo frames play 3`")
     try:
         motion = int(args.motion, 10)
     except ValueError:
-        raise UsageError(f"frames play: motion {args.motion!r} is not a whole number 0..119") from None
+        raise UsageError(f"frames play: motion {args.motion!r} is not a whole number 0..{MOTION_SLOTS - 1}") from None
     from choreo.wire.protocol import check_motion
 
     return check_motion(motion)

@@ -351,7 +351,8 @@ def refine(grid: _Grid, ks: np.ndarray, attack: np.ndarray, sample_rate: int) ->
     significant = _SIGNIFICANT * 1.4826 * float(np.median(np.abs(attack - np.median(attack))))
     times = np.full(len(ks), np.nan)
     for reach in _SEARCH_S:
-        found = _attacks_near(grid.time(ks), attack, sample_rate, min(reach, 0.25 * grid.period), significant)
+        found = _attacks_near(np.asarray(grid.time(ks)), attack, sample_rate, min(reach, 0.25 * grid.period),
+                              significant)
         use = heard & ~np.isnan(found)
         if np.count_nonzero(use) < MIN_BEATS:
             break

@@ -24,7 +24,7 @@ import contextlib
 import os
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -90,7 +90,8 @@ class Song:
         try:
             info = miniaudio.get_file_info(str(music.path))
         except (miniaudio.DecodeError, OSError) as exc:
-            raise AudioError(f"{where}: cannot decode it ({_reason(exc)}): is it a {MUSIC_FORMATS_TEXT} file?") from None
+            raise AudioError(f"{where}: cannot decode it ({_reason(exc)}): "
+                             f"is it a {MUSIC_FORMATS_TEXT} file?") from None
         if info.sample_rate <= 0 or info.num_frames <= 0:
             raise AudioError(f"{where}: the file holds no sound")
         song = cls(music, int(info.sample_rate), info.num_frames / info.sample_rate)
@@ -194,7 +195,7 @@ class Feed:
         self._source: Iterator[Any] | None = None
         self._pending = bytearray()
 
-    def generator(self):  # type: ignore[no-untyped-def]
+    def generator(self) -> Generator[bytes, int, None]:
         """What miniaudio's device pulls from: sent a frame count, yields that many frames."""
         wanted = yield b""
         while True:
@@ -399,8 +400,9 @@ class Player:
         if not self.clock.real_time():
             pace = self.clock.handed_s / max(self.clock.span_s, 1e-6)
             self.close()
-            raise AudioError(f"audio output {self.output_name!r} ({self.backend}) takes samples at {pace:.1f}x real time: "
-                             "it cannot keep the show's time; pick another (choreo devices) or --audio-device null")
+            raise AudioError(f"audio output {self.output_name!r} ({self.backend}) takes samples at {pace:.1f}x "
+                             "real time: it cannot keep the show's time; pick another (choreo devices) "
+                             "or --audio-device null")
 
     @property
     def output_name(self) -> str:

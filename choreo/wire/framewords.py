@@ -10,6 +10,8 @@ then named by whichever known layout's slot it fits.
 
 from __future__ import annotations
 
+from typing import TypeGuard
+
 from choreo.wire import protocol as p
 from choreo.wire.layouts import Layout, layout_of_call
 
@@ -112,7 +114,7 @@ def describe_reply(data: bytes, frame: bytes | None, layout: Layout | None, moti
     return words
 
 
-def is_slot(motion: object) -> bool:
+def is_slot(motion: object) -> TypeGuard[int]:
     """A motion number a layout can judge (a log another program wrote may hold anything)."""
     return type(motion) is int and 0 <= motion < p.MOTION_SLOTS
 

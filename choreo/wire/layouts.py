@@ -31,8 +31,8 @@ from choreo.wire import protocol as p
 from choreo.wire.protocol import Frame, FrameKind
 
 DEFAULT_LAYOUT = "seed"
-# The config word a real HTH4 2.2+ project saves (docs/hardware.md, "Layouts": the example): what `choreo plan` and
-# `choreo frames` show for hth4-2.2 when no board has been read.
+# The config word a real HTH4 2.2+ project saves (docs/hardware.md, "Layouts: Two ways to play a
+# motion"): what `choreo plan` and `choreo frames` show for hth4-2.2 when no board has been read.
 EXAMPLE_CONFIG = 0x821B
 RUN_BITS_MASK = 0x000F  # bits 0-3: ICS, program run, end-of-move message, vector jump
 RESUME_SET = 0x000B  # ICS, program run, vector jump

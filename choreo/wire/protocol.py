@@ -214,8 +214,8 @@ def play_sequence(motion: int, baud: int = DEFAULT_BAUD) -> tuple[Frame, ...]:
 
     The document's config words say 115200 in bits 7-6; at another baud they carry that baud's
     code, because whether the board switches its speed the moment the word is written is not
-    documented (docs/hardware.md, "Layouts"): choreo never writes a speed other than the one it
-    talks at.
+    documented (docs/hardware.md, "Layouts: The config word's baud bits"): choreo never writes a
+    speed other than the one it talks at.
     """
     return (stop_frame(baud, motion), play_frame(motion), restore_frame(baud, motion))
 
@@ -305,16 +305,9 @@ def is_stale(frame: Frame, data: bytes) -> bool:
 def parse_reply(frame: Frame, data: bytes) -> Reply:
     """Judge the bytes read for a frame by size byte, command byte and checksum, then meaning."""
     data = bytes(data)
-    if len(data) < TYPE1_REPLY_SIZE:
-        return invalid(data, f"short reply: {len(data)} bytes, expected at least {TYPE1_REPLY_SIZE}")
-    if data[0] != len(data):
-        return invalid(data, f"size byte says {data[0]} but {len(data)} bytes came")
-    if data[0] not in frame.reply_sizes:
-        return invalid(data, f"a {data[0]}-byte reply to a {frame.kind.value} frame")
-    if checksum(data[:-1]) != data[-1]:
-        return invalid(data, f"bad checksum: {data[-1]:02x}, expected {checksum(data[:-1]):02x}")
-    if data[1] != frame.command:
-        return invalid(data, f"reply for command {data[1]:02x}, expected {frame.command:02x}")
+    problem = _form_problem(frame, data)
+    if problem is not None:
+        return invalid(data, problem)
     if frame.kind is FrameKind.STATUS and len(data) > TYPE1_REPLY_SIZE:
         return _status(frame, data)
     if frame.answers_with_data and len(data) > TYPE1_REPLY_SIZE:
@@ -326,6 +319,21 @@ def parse_reply(frame: Frame, data: bytes) -> Reply:
     if data[2] == NAK_BYTE:
         return Reply(ReplyKind.NAK, data, error="the board refused the frame (NAK)")
     return invalid(data, f"third byte {data[2]:02x} is neither ACK (06) nor NAK (15)")
+
+
+def _form_problem(frame: Frame, data: bytes) -> str | None:
+    """What makes `data` no well-formed reply to `frame` (None: nothing)."""
+    if len(data) < TYPE1_REPLY_SIZE:
+        return f"short reply: {len(data)} bytes, expected at least {TYPE1_REPLY_SIZE}"
+    if data[0] != len(data):
+        return f"size byte says {data[0]} but {len(data)} bytes came"
+    if data[0] not in frame.reply_sizes:
+        return f"a {data[0]}-byte reply to a {frame.kind.value} frame"
+    if checksum(data[:-1]) != data[-1]:
+        return f"bad checksum: {data[-1]:02x}, expected {checksum(data[:-1]):02x}"
+    if data[1] != frame.command:
+        return f"reply for command {data[1]:02x}, expected {frame.command:02x}"
+    return None
 
 
 def _status(frame: Frame, data: bytes) -> Reply:
