@@ -11,11 +11,12 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, LogLayouts, RxRecord, TxRecord,
-                              frame_meaning, parse, reply_meaning)
+from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, ClockRecord, LogLayouts,
+                               Record, RxRecord, StepRecord, TxRecord, frame_meaning, parse, reply_meaning)
 from choreo.log.reader import LogReader
 from choreo.review.showtime import ShowTimes
 from choreo.review.summary import stale_replies
+
 
 @dataclass(frozen=True, slots=True)
 class Exchange:
@@ -36,7 +37,8 @@ class Exchange:
     @property
     def robot(self) -> str | None:
         """Whose frame, in a show for several robots."""
-        return (self.tx or self.rx).robot  # type: ignore[union-attr]
+        either = self.tx if self.tx is not None else self.rx
+        return either.robot if either is not None else None
 
     @property
     def frame_kind(self) -> str | None:
@@ -55,35 +57,48 @@ def exchanges(reader: LogReader, clock: ShowTimes | None = None) -> Iterator[Exc
     try:
         for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC, CLOCK_TOPIC)):
             number += 1
-            if topic == STEP_TOPIC:
-                if not clock.anchored:
-                    clock.see_step(log_time, parse(topic, data))
-                continue
-            if topic == CLOCK_TOPIC:
-                clock.see_clock(log_time, parse(topic, data))
-                continue
-            message = parse(topic, data, partial=True)  # shown as it is, whoever wrote it
-            waiting = held.pop(message.robot, None)
-            if isinstance(message, TxRecord):
-                if waiting is not None:
-                    yield _pair(clock, waiting[0], waiting[1], None, None)
-                held[message.robot] = (message, log_time)
-            elif waiting is not None and waiting[0].seq == message.seq:
-                yield _pair(clock, waiting[0], waiting[1], message, log_time)
-            else:  # a reply without its frame in the log
-                if waiting is not None:
-                    yield _pair(clock, waiting[0], waiting[1], None, None)
-                yield _pair(clock, None, None, message, log_time)
+            if topic == CLOCK_TOPIC or (topic == STEP_TOPIC and not clock.anchored):
+                _see_time(clock, parse(topic, data), log_time)
+            elif topic != STEP_TOPIC:  # shown as it is, whoever wrote it
+                yield from _paired(clock, held, parse(topic, data, partial=True), log_time)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise reader.not_choreo(topic, number, exc) from None
     for frame, sent_ns in held.values():
         yield _pair(clock, frame, sent_ns, None, None)
 
 
+def _see_time(clock: ShowTimes, record: Record, log_time: int) -> None:
+    """The show clock's anchor (the first step events) and its samples (/choreo/clock)."""
+    if isinstance(record, StepRecord):
+        clock.see_step(log_time, record)
+    elif isinstance(record, ClockRecord):
+        clock.see_clock(log_time, record)
+
+
+def _paired(clock: ShowTimes, held: dict[str | None, tuple[TxRecord, int]], message: Record,
+            log_time: int) -> Iterator[Exchange]:
+    """The pairs a frame or reply completes: a frame is held (in `held`) until its reply comes;
+    a frame that a second frame follows, or a reply without its frame, goes out alone."""
+    if not isinstance(message, (TxRecord, RxRecord)):
+        return
+    waiting = held.pop(message.robot, None)
+    if isinstance(message, TxRecord):
+        if waiting is not None:
+            yield _pair(clock, waiting[0], waiting[1], None, None)
+        held[message.robot] = (message, log_time)
+    elif waiting is not None and waiting[0].seq == message.seq:
+        yield _pair(clock, waiting[0], waiting[1], message, log_time)
+    else:  # a reply without its frame in the log
+        if waiting is not None:
+            yield _pair(clock, waiting[0], waiting[1], None, None)
+        yield _pair(clock, None, None, message, log_time)
+
+
 def _pair(clock: ShowTimes, tx: TxRecord | None, tx_ns: int | None, rx: RxRecord | None,
           rx_ns: int | None) -> Exchange:
-    seq = (tx or rx).seq  # type: ignore[union-attr]
-    return Exchange(seq, tx, tx_ns, clock.seconds(tx_ns), rx, rx_ns, clock.seconds(rx_ns))
+    either = tx if tx is not None else rx
+    assert either is not None, "a pair holds a frame, its reply or both"
+    return Exchange(either.seq, tx, tx_ns, clock.seconds(tx_ns), rx, rx_ns, clock.seconds(rx_ns))
 
 
 def stale_note(rx: RxRecord) -> str:
@@ -102,9 +117,7 @@ def matches(exchange: Exchange, step: int | None, kind: str | None, robot: str |
         return False
     if robot is not None and exchange.robot != robot:
         return False
-    if kind is not None and kind not in (exchange.frame_kind, exchange.reply_kind):
-        return False
-    return True
+    return kind is None or kind in (exchange.frame_kind, exchange.reply_kind)
 
 
 def _time(seconds: float | None) -> str:
