@@ -1,4 +1,4 @@
-"""What the README and the example shows say about timing is what `choreo plan` (and so the run)
+"""What the README, docs/ and the example shows say about timing is what `choreo plan` (and so the run)
 does: the comments are read and checked against the compiled plan."""
 
 from __future__ import annotations
@@ -19,17 +19,18 @@ def plan_of(path: Path):  # type: ignore[no-untyped-def]
 
 
 def readme_block(containing: str) -> str:
-    blocks = re.findall(r"```yaml\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+    """The YAML block of README.md or docs/*.md that holds the text (a show, or an excerpt of one)."""
+    docs = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    blocks = [block for doc in docs for block in re.findall(r"```yaml[^\n]*\n(.*?)```", doc.read_text(), re.S)]
     return next(block for block in blocks if containing in block)
 
 
 def test_the_readme_go_example_says_when_the_timed_cue_plays(tmp_path):
-    """README: `at: 4` after a GO cue and a `wait: 2` plays N s after the GO, as the comment says.
+    """docs/live.md: `at: 4` after a GO cue and a `wait: 2` plays N s after the GO, as the comment says.
     The show clock holds at the GO cue's show time, so the cue plays (4 - that time) s after the GO."""
     block = readme_block("at: go              # waits for the operator's GO")
     said = float(re.search(r"at: 4 .*?: ([\d.]+) s after the GO", block).group(1))
-    body = "version: 1\nmotions:\n  bow: {number: 1}\n  wave: {number: 2}\n  clap: {number: 3}\n" + block
-    _, plan = plan_of(write_show(tmp_path, body))
+    _, plan = plan_of(write_show(tmp_path, block))
     go = next(step for step in plan.steps if step.go)
     cued = next(step for step in plan.steps if step.at == 4)
     assert cued.planned_s - go.planned_s == said
@@ -48,7 +49,7 @@ def test_the_dance_shows_comment_on_the_waves_is_true():
 
 
 def test_the_readme_shows_the_dance_as_it_is():
-    """The README's listing of shows/dance.yaml (with `...` for lines left out) is the file's."""
+    """docs/shows.md's listing of shows/dance.yaml (with `...` for lines left out) is the file's."""
     block = readme_block("name: Dance")
     lines = (ROOT / "shows/dance.yaml").read_text().splitlines()
     position = 0
