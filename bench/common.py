@@ -27,9 +27,11 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from choreo.board.link import RxEvent, TxEvent  # noqa: E402
-from choreo.run.runner import Runner, RunResult, StepEvent  # noqa: E402
-from choreo.run.session import RunRequest, Session  # noqa: E402
+from choreo.events import RxEvent, TxEvent  # noqa: E402
+from choreo.run.runner import Runner  # noqa: E402
+from choreo.events import RunResult, StepEvent  # noqa: E402
+from choreo.run.session import Session  # noqa: E402
+from choreo.run.settings import RunRequest  # noqa: E402
 
 
 def row(name: str, value: float | str | None, unit: str, goal: str | None, ok: bool | None) -> dict:
@@ -158,12 +160,13 @@ def run_show(show_path: Path, port: str, *, log_path: Path | None = None) -> Sho
     session = Session.prepare(request)
     capture = Capture()
     with session:
-        assert session.link is not None
-        session.link.listeners.append(capture)
-        capture.watch_writes(session.link.port)
+        assert session.stage is not None
+        link, settings = session.stage.links["robot"], session.settings
+        link.subscribe(capture)
+        capture.watch_writes(link.port)
         listeners = ([session.recorder] if session.recorder else []) + [capture]
-        runner = Runner(session.plan, session.link, clock=session.clock, listeners=listeners,
-                        start=session.start, on_abort=session.show.on_abort)
+        runner = Runner(settings.plans["robot"], link, clock=session.clock, listeners=listeners,
+                        start=settings.sections.starts["robot"], on_abort=settings.show.on_abort)
         began = time.perf_counter()
         session.result = runner.run()
         run_s = time.perf_counter() - began

@@ -32,8 +32,9 @@ from common import Capture, median, percentile, pty_sim, row, temp_dir, write_sh
 from choreo.live.controls import Live
 from choreo.limits import Limits, Rate
 from choreo.live.osc import OscServer
-from choreo.run.runner import StopRequest
-from choreo.run.session import RunRequest, Session
+from choreo.events import StopRequest
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
 
 GOAL_MS = 5.0
 FULL, QUICK = 30, 10  # GOs counted a transport
@@ -94,9 +95,9 @@ def measure(transport: str, gos: int) -> Timings:
         server = OscServer(live, 0, limits=NO_LIMITS)
         capture = Capture()
         with session:
-            capture.watch_writes(session.link.port)
+            capture.watch_writes(session.stage.links["robot"].port)
             server.start()
-            live.listeners.append(server)
+            live.subscribe(server)
             errors: list[BaseException] = []
             runner = threading.Thread(target=_run, args=(session, server, live, errors), daemon=True)
             runner.start()

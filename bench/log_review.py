@@ -52,10 +52,10 @@ def generate_log(path: Path, messages: int) -> int:
     apart, polls 50 ms apart), so durations and latencies in the summary look like a show's.
     """
     from choreo.wire import protocol
-    from choreo.board.link import RxEvent, Tag, TxEvent
+    from choreo.events import RxEvent, Tag, TxEvent
     from choreo.log.format import WARNING
     from choreo.log.recorder import Recorder, RunInfo
-    from choreo.run.runner import StepEvent
+    from choreo.events import StepEvent
     from choreo.show.model import PlannedStep, StepKind
 
     start_ns = 1_790_000_000_000_000_000
@@ -126,7 +126,7 @@ def generate_log(path: Path, messages: int) -> int:
         index += 1
         step(wait, lambda tag: t.__setitem__(0, t[0] + 250_000_000))
         cycle += 1
-    from choreo.run.runner import RunResult
+    from choreo.events import RunResult
 
     recorder.close(RunResult("done", index, 0, (t[0] - zero) / 1e9).metadata())
     return recorder.messages

@@ -22,8 +22,9 @@ from common import median, percentile, pty_sim, row, temp_dir, write_show
 
 from choreo.log.format import CLOCK_TOPIC, parse
 from choreo.log.reader import LogReader
-from choreo.run.runner import StopRequest
-from choreo.run.session import RunRequest, Session
+from choreo.events import StopRequest
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
 
 FULL_S, QUICK_S = 300.0, 8.0  # the song's length
 RATE = 22050

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import sys
 
-from choreo.board.link import TxEvent
+from choreo.events import TxEvent
 from choreo.wire.protocol import FrameKind
 from common import ShowRun, median, percentile, pty_sim, row, run_show, temp_dir, write_show
 

@@ -19,7 +19,9 @@ import sys
 import time
 from pathlib import Path
 
-from choreo.board.link import Link, RxEvent, Tag, TxEvent
+from choreo.board.link import Link
+
+from choreo.events import RxEvent, Tag, TxEvent
 from choreo.log.recorder import Recorder, RunInfo
 from common import Capture, median, percentile, row, run_show, temp_dir, write_show
 

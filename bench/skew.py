@@ -18,8 +18,9 @@ from contextlib import ExitStack
 from common import Capture, median, percentile, pty_sim, row, temp_dir, write_show
 
 from choreo.wire.protocol import FrameKind
-from choreo.run.runner import StopRequest
-from choreo.run.session import RunRequest, Session
+from choreo.events import StopRequest
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
 
 GOAL_P99_MS = 1.0
 FULL = (2, 4, 8), 40  # robot counts, plays a run
@@ -40,10 +41,10 @@ def skews_ms(robots: int, plays: int) -> list[float]:
         request = RunRequest(str(show), log_path=str(tmp / "skew.mcap"),
                              robot_ports={f"r{i}": path for i, path in enumerate(paths)})
         session = Session.prepare(request)
-        captures = {name: Capture() for name in session.links}
+        captures = {name: Capture() for name in session.settings.links}
         with session:
             for name, link in session.stage.links.items():
-                link.listeners.append(captures[name])
+                link.subscribe(captures[name])
                 captures[name].watch_writes(link.port)
             session.run(stop=StopRequest())
     starts: dict[int, list[int]] = {}

@@ -7,26 +7,27 @@ library, serial, mcap: tens of milliseconds):
 - Standard streams a caller closed (`choreo run show.yaml 2>&-`) are reopened onto /dev/null.
   Otherwise the next file opened (the run's log) would take descriptor 2, and whatever is
   written to "stderr" would land in the log.
-- Ctrl-C, SIGTERM and SIGHUP are caught from here on. While choreo loads, a signal is only
-  noted and acted on once it has loaded; from then on it interrupts the command (exit 130,
-  "interrupted"), until `choreo run` installs its own handlers for the show.
+- Ctrl-C, SIGTERM and SIGHUP are caught from here on (`choreo.signals.SignalGuard`). While
+  choreo loads, a signal is only noted and acted on once it has loaded; from then on it
+  interrupts the command (exit 130, "interrupted"), until `choreo run` installs its own
+  handlers for the show.
 
 - A traceback (a bug) is printed with control characters escaped, as all output is
   (`show_crashes_visibly`): the CLI's escaping streams are gone by the time Python prints it.
 
 What remains is the interpreter's own start-up, before this module runs (README, "Stopping").
+The entry imports the CLI; nothing imports the entry (the signals live in `choreo.signals`).
 """
 
 from __future__ import annotations
 
 import os
-import signal
 import sys
 import threading
 
+from choreo.signals import SignalGuard
+
 STANDARD_FDS = (0, 1, 2)
-# Ctrl-C, `kill`, and a closed terminal or SSH session: the same stop.
-STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 def main() -> int:
@@ -77,39 +78,6 @@ def _print_visibly(kind, value, trace, thread=None) -> None:  # type: ignore[no-
     where = f"Exception in thread {thread.name}:\n" if thread is not None else ""
     sys.stderr.write(visible(where + "".join(traceback.format_exception(kind, value, trace)), keep="\n"))
     sys.stderr.flush()
-
-
-class SignalGuard:
-    """The stop signals for a command that is not running a show.
-
-    Noted only (`armed` False) while choreo loads and once the command is over, so that neither
-    an import nor the last lines are cut short; armed, the first signal interrupts the command
-    with KeyboardInterrupt, which the CLI maps to exit 130, and later ones are only noted.
-    """
-
-    def __init__(self) -> None:
-        self.armed = False
-        self.signalled: int | None = None
-
-    def install(self) -> None:
-        for signum in STOP_SIGNALS:
-            signal.signal(signum, self._handle)
-
-    def _handle(self, signum: int, frame: object) -> None:
-        first = self.signalled is None
-        self.signalled = signum
-        if first and self.armed:
-            self.armed = False
-            raise KeyboardInterrupt
-
-    def arm(self) -> None:
-        """From now on a signal interrupts the command; one that came while loading does now."""
-        if self.signalled is not None:
-            raise KeyboardInterrupt
-        self.armed = True
-
-    def disarm(self) -> None:
-        self.armed = False
 
 
 if __name__ == "__main__":

@@ -181,8 +181,9 @@ class LiveRun:
         import threading
 
         from choreo.live.controls import Live
-        from choreo.run.runner import StopRequest
-        from choreo.run.session import RunRequest, Session
+        from choreo.events import StopRequest
+        from choreo.run.session import Session
+        from choreo.run.settings import RunRequest
 
         show = write_show(tmp_path, body)
         self.log_path = tmp_path / "run.mcap"
@@ -204,7 +205,7 @@ class LiveRun:
 
     def go(self, name: str = "go", **kwargs):  # type: ignore[no-untyped-def]
         """A command from the test, as from a key or an OSC message."""
-        from choreo.live.controls import Command
+        from choreo.events import Command
 
         return self.live.command(Command(name, "test", **kwargs))
 

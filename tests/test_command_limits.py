@@ -18,11 +18,12 @@ import pytest
 
 from choreo.clock import VirtualTime
 from choreo.limits import LIMITS, UNLOGGED, Budgets, Limits, Rate, ReportGate, SenderLimits
-from choreo.live.controls import Command, Live
+from choreo.live.controls import Live
+from choreo.events import Command
 from choreo.log.format import CommandRecord
 from choreo.log.recorder import Recorder, RunInfo
 from choreo.review.summary import render, summarize
-from choreo.run.runner import PANIC, StopRequest
+from choreo.events import PANIC, StopRequest
 from choreo.show.model import PlannedStep, StepKind
 
 SCHEMA = json.loads((Path(__file__).resolve().parent.parent / "schemas" / "log.command.schema.json").read_text())
@@ -45,7 +46,7 @@ class Heard:
 def live_on(time: VirtualTime, **options) -> tuple[Live, Heard]:  # type: ignore[no-untyped-def]
     live = Live(StopRequest(), now=time.now, **options)
     heard = Heard()
-    live.listeners.append(heard)
+    live.subscribe(heard)
     return live, heard
 
 
@@ -181,7 +182,7 @@ def test_the_log_carries_the_counts_and_the_review_adds_them_up(tmp_path):
     path = tmp_path / "flood.mcap"
     recorder = Recorder(path, RunInfo("show.yaml", "flood", b"version: 1\n", "sim://", 115200, time.wall_ns()))
     live = Live(StopRequest(), wait_start=True, now=time.now, lockout_s=0.5)
-    live.listeners.append(recorder)
+    live.subscribe(recorder)
     sent = 0
     for second in range(5):
         for _ in range(2000):
@@ -219,7 +220,7 @@ def test_the_log_carries_the_counts_and_the_review_adds_them_up(tmp_path):
 
 
 def test_a_summary_record_without_counts_is_counted_by_its_count(tmp_path):
-    from choreo.live.controls import Answer, CommandEvent
+    from choreo.events import Answer, CommandEvent
 
     time = VirtualTime()
     path = tmp_path / "short.mcap"
@@ -242,7 +243,7 @@ def test_a_log_whose_summary_record_does_not_add_up_is_refused_in_one_line(tmp_p
     """A log written by another program (or edited) must not make the review count wrong or
     raise a traceback."""
     from choreo.errors import ChoreoError
-    from choreo.live.controls import Answer, CommandEvent
+    from choreo.events import Answer, CommandEvent
 
     time = VirtualTime()
     path = tmp_path / "forged.mcap"

@@ -30,12 +30,14 @@ from hypothesis import strategies as st
 
 from choreo.cli.console import (LEGEND, Console, KeyParser, KeyReader, Note, Row, Screen, TerminalMode,
                                 _LinkWatch, render)
-from choreo.board.link import RxEvent, TxEvent
-from choreo.live.controls import Answer, Command, CommandEvent, Live
+from choreo.events import RxEvent, TxEvent
+from choreo.live.controls import Live
+from choreo.events import Answer, Command, CommandEvent
 from choreo.log.format import WARNING
 from choreo.wire.protocol import Reply, ReplyKind
-from choreo.run.runner import StepEvent, StopRequest
-from choreo.run.session import RunRequest, Session
+from choreo.events import StepEvent, StopRequest
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
 from runlog import REPO, read_log, write_show
 
 GO_SHOW = """\
@@ -95,7 +97,7 @@ def started(step, robot=None, at_s: float = 0.0) -> StepEvent:  # type: ignore[n
 @pytest.mark.parametrize("width", WIDTHS)
 def test_every_line_fits_the_width_and_the_key_parts_stay(tmp_path, width):
     console, session, live = prepared(tmp_path, TWO_ROBOTS)
-    steps = session.plans["alpha"].steps
+    steps = session.settings.plans["alpha"].steps
     console.on_step(started(steps[0], "alpha"))
     console.on_step(started(steps[0], "beta_with_a_long_name"))
     console.on_log(WARNING, "robot alpha: step 0: NAK (04 0c 15 25) to 'play 1' (play frame, seq 3), " * 3)
@@ -112,7 +114,7 @@ def test_every_line_fits_the_width_and_the_key_parts_stay(tmp_path, width):
 
 def test_the_screen_says_where_each_robot_is_and_what_comes(tmp_path):
     console, session, live = prepared(tmp_path, GO_SHOW)
-    steps = session.plan.steps
+    steps = session.settings.plans["robot"].steps
     console.on_step(started(steps[0]))
     screen = console.screen()
     (row,) = screen.rows
@@ -131,28 +133,28 @@ def test_the_screen_says_where_each_robot_is_and_what_comes(tmp_path):
 
 def test_the_countdown_runs_on_the_show_clock(tmp_path):
     console, session, live = prepared(tmp_path, GO_SHOW)
-    console.on_step(started(session.plan.steps[2], at_s=0.1))
-    live.show = MachineShowClock(session.clock.mono() - 0.2)  # 0.2 s into the show
+    console.on_step(started(session.settings.plans["robot"].steps[2], at_s=0.1))
+    live.use_clock(MachineShowClock(session.clock.mono() - 0.2))  # 0.2 s into the show
     screen = console.screen()
     assert screen.cue == "next cue in 0.3 s: step 3 'after' at 0.5 s" and screen.show_s == 0.2
-    live.show = MachineShowClock(session.clock.mono() - 0.7)  # the cue overrun
+    live.use_clock(MachineShowClock(session.clock.mono() - 0.7))  # the cue overrun
     assert console.screen().cue == "next cue due now: step 3 'after' at 0.5 s"
 
 
 def test_redraws_keep_clear_of_a_cue_and_of_a_go_and_draw_only_changes(tmp_path, monkeypatch):
     console, session, live = prepared(tmp_path, GO_SHOW)
-    console.on_step(started(session.plan.steps[2], at_s=0.1))  # the wait before the cue at 0.5 s
-    live.show = MachineShowClock(session.clock.mono() - 10.0)  # both long past: nothing in the way
+    console.on_step(started(session.settings.plans["robot"].steps[2], at_s=0.1))  # the wait before the cue at 0.5 s
+    live.use_clock(MachineShowClock(session.clock.mono() - 10.0))  # both long past: nothing in the way
     assert console._quiet_left() == 0.0
-    live.show = MachineShowClock(session.clock.mono() - 0.48)  # the cue 20 ms from now
+    live.use_clock(MachineShowClock(session.clock.mono() - 0.48))  # the cue 20 ms from now
     assert 0.04 < console._quiet_left() <= 0.05 + 1e-3
-    live.show = MachineShowClock(session.clock.mono() - 10.0)
+    live.use_clock(MachineShowClock(session.clock.mono() - 10.0))
     console.on_command(CommandEvent(Command("go", "key"), Answer("ok", "GO: applause"), 0, 10.0))
     assert 0.02 < console._quiet_left() <= 0.03  # the GO's frames go out now
 
     updates = []
     monkeypatch.setattr(console._rich, "update", lambda renderable, refresh: updates.append(renderable))
-    live.show = HeldAt(10.0)
+    live.use_clock(HeldAt(10.0))
     console._draw()
     console._draw()  # nothing changed: not drawn again
     console.on_log(WARNING, "something")
@@ -176,7 +178,7 @@ class HeldAt:
 def test_the_link_column_is_the_median_latency_and_the_retries(tmp_path):
     console, session, live = prepared(tmp_path, GO_SHOW)
     watch = _LinkWatch(console, "robot")
-    frame = session.plan.steps[0].frames[0]
+    frame = session.settings.plans["robot"].steps[0].frames[0]
     for ms in (1.0, 2.0, 9.0):
         watch.on_rx(RxEvent(1, frame, Reply(ReplyKind.ACK), 0, ms / 1e3, None))
     watch.on_tx(TxEvent(2, frame, 2, 0, None))
@@ -189,8 +191,8 @@ def test_the_link_column_is_the_median_latency_and_the_retries(tmp_path):
 
 def test_a_waiting_go_cue_is_highlighted_and_commands_are_answered_on_screen(tmp_path):
     console, session, live = prepared(tmp_path, GO_SHOW)
-    live.listeners.append(console)
-    live.await_go(session.plan.steps[1], "robot", reached_s=0.0, should_stop=lambda: True)  # reached, then gave up
+    live.subscribe(console)
+    live.await_go(session.settings.plans["robot"].steps[1], "robot", reached_s=0.0, should_stop=lambda: True)  # reached, then gave up
     screen = console.screen()
     assert screen.go_waiting and screen.go == "GO waits: 'applause': press Space or Enter"
     assert screen.rows[0].now == "waits for GO: 'applause'"

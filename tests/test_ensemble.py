@@ -10,8 +10,8 @@ from textwrap import dedent
 import pytest
 
 from choreo.errors import LinkError, UsageError
-from choreo.run.runner import StopRequest
-from choreo.run.session import RunRequest
+from choreo.events import StopRequest
+from choreo.run.settings import RunRequest
 from runlog import prepare, read_log, vmain
 
 UNISON = """
@@ -208,7 +208,7 @@ def test_cli_runs_a_show_for_several_robots_and_names_them(tmp_path, capsys):
 
 def test_from_a_label_in_tracks_starts_every_track_at_that_moment(tmp_path):
     session = prepare(RunRequest(str(write(tmp_path, CANON)), no_log=True, from_step="together"))
-    assert session.origin == 4.0 and session.starts == {"lead": 2, "follow": 2}
+    assert session.settings.sections.origin == 4.0 and session.settings.sections.starts == {"lead": 2, "follow": 2}
     with session:
         session.run()
     assert [m for m, _ in starts(boards(session)["lead"])] == [9]

@@ -14,8 +14,9 @@ import time
 import pytest
 
 from choreo.cli import main
-from choreo.run.runner import PANIC, StopRequest
-from choreo.run.session import RunRequest, Session
+from choreo.events import PANIC, StopRequest
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
 from runlog import LiveRun as Running, read_log, wait_for, write_show
 
 GO_SHOW = """\

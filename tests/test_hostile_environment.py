@@ -12,8 +12,9 @@ import pytest
 from choreo.cli.console import Console
 from choreo.cli.terminal import columns
 from choreo.live.controls import Live
-from choreo.run.runner import StopRequest
-from choreo.run.session import RunRequest, Session
+from choreo.events import StopRequest
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
 
 ROOT = Path(__file__).resolve().parent.parent
 HOSTILE = ["²", "١٢٠", "9" * 5000, "-80", "0", "80x", " ", "\x1b[2J"]

@@ -12,7 +12,8 @@ import pytest
 
 from choreo.wire import protocol as p
 from choreo.errors import LinkError
-from choreo.board.link import Link, Tag
+from choreo.board.link import Link
+from choreo.events import Tag
 
 ACK_MOV = p.ack(p.CMD_MOV)
 ACK_CALL = p.ack(p.CMD_CALL)

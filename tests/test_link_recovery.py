@@ -9,8 +9,9 @@ import pytest
 
 from choreo.wire import protocol as p
 from choreo.errors import Interrupted, LinkError
-from choreo.board.link import Link, Tag
-from choreo.run.runner import StopRequest
+from choreo.board.link import Link
+from choreo.events import Tag
+from choreo.events import StopRequest
 from test_link import ACK_CALL, ACK_MOV, IDLE, SYNC_ACK, Events, ScriptedPort, link_for
 
 SYNC_NAK = p.nak(p.CMD_ACK_CHECK)
@@ -41,8 +42,7 @@ def test_a_stop_request_ends_the_retries_after_the_exchange_in_flight(at_seq, se
     stop = StopRequest()
     events = StopAfter(stop, at_seq)
     link = Link(port, timeout=0.01, tries=10, listeners=[events])
-    link.should_stop = stop
-    with pytest.raises(Interrupted):
+    with link.stopping_on(stop), pytest.raises(Interrupted):
         link.play(3, Tag(0))
     assert [e.frame.kind.value for e in events.tx] == sent
 
@@ -52,8 +52,7 @@ def test_a_stop_request_between_nak_retries_sends_no_further_frame():
     stop = StopRequest()
     events = StopAfter(stop, 1)
     link = Link(port, timeout=0.01, tries=3, listeners=[events])
-    link.should_stop = stop
-    with pytest.raises(Interrupted):
+    with link.stopping_on(stop), pytest.raises(Interrupted):
         link.play(3)
     assert len(port.written) == 1
     assert link.moved  # the stop frame reached the board: the show did touch the robot
@@ -116,7 +115,7 @@ def test_a_retry_warning_says_no_reply_not_nothing(tmp_path):
             lines.append(message)
 
     link, _, _ = link_for(b"", SYNC_ACK, ACK_MOV, ACK_CALL, ACK_MOV)
-    link.listeners.append(_RetryReporter(Runner()))
+    link.subscribe(_RetryReporter(Runner()))
     link.play(1, Tag(0))
     assert lines and lines[0].startswith("step 0: no reply to 'stop' (stop frame, seq 1)")
     assert "nothing" not in lines[0]

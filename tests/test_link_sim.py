@@ -18,7 +18,8 @@ import pytest
 
 from choreo.errors import LinkError
 from choreo.clock import RunClock, VirtualTime
-from choreo.board.link import Link, RxEvent, TxEvent
+from choreo.board.link import Link
+from choreo.events import RxEvent, TxEvent
 from choreo.wire.protocol import FrameKind
 from choreo.wire.protocol import ReplyKind
 from choreo.sim.faults import FaultPlan

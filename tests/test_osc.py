@@ -27,7 +27,7 @@ from choreo.log.format import ERROR, WARNING
 from choreo.limits import Budget
 from choreo.live.oscwire import encode_message, slip_encode
 from choreo.live.osc import OscServer, command_for, parse_allow, sender_allowed
-from choreo.run.runner import PANIC, StopRequest
+from choreo.events import PANIC, StopRequest
 from runlog import LiveRun, ended_if_left, read_log, start_choreo, wait_for, write_show
 
 GO_SHOW = """\
@@ -67,7 +67,7 @@ class Commands:
 def serve(live: Live, **options) -> OscServer:  # type: ignore[no-untyped-def]
     server = OscServer(live, 0, **options)
     server.start()
-    live.listeners.append(server)
+    live.subscribe(server)
     return server
 
 
@@ -158,7 +158,7 @@ def server(live):  # type: ignore[no-untyped-def]
 @pytest.mark.parametrize("transport", ["udp", "tcp"])
 def test_every_command_is_answered_in_qlabs_manner(transport, live, server):
     commands = Commands()
-    live.listeners.append(commands)
+    live.subscribe(commands)
     with client(transport, server.port) as osc:
         address, go = ask(osc, "/choreo/go")
         assert address == "/reply/choreo/go"
@@ -185,7 +185,7 @@ def test_every_command_is_answered_in_qlabs_manner(transport, live, server):
 @pytest.mark.parametrize("transport", ["udp", "tcp"])
 def test_an_unknown_command_is_answered_with_an_error_and_logged(transport, live, server):
     commands = Commands()
-    live.listeners.append(commands)
+    live.subscribe(commands)
     with client(transport, server.port) as osc:
         _, typo = ask(osc, "/choreo/stpo")
         assert typo == {"address": "/choreo/stpo", "status": "error", "data": {},
@@ -208,7 +208,7 @@ def test_an_unknown_command_is_answered_with_an_error_and_logged(transport, live
 def test_a_buttons_release_is_not_a_second_command(live, server):
     """TouchOSC sends 1 on press and 0 on release: the release must not be a second GO."""
     commands = Commands()
-    live.listeners.append(commands)
+    live.subscribe(commands)
     with client("udp", server.port) as osc:
         assert ask(osc, "/choreo/start", 1.0)[1]["status"] == "ok"
         release = ask(osc, "/choreo/start", 0.0)[1]
@@ -351,7 +351,7 @@ def test_a_sender_from_elsewhere_is_refused_unless_allowed(transport, live):
     if host is None:
         pytest.skip("this machine has no address but loopback")
     commands = Commands()
-    live.listeners.append(commands)
+    live.subscribe(commands)
     server = serve(live, host="0.0.0.0")
     assert server.listening == (f"osc: listening on 0.0.0.0:{server.port} (udp and tcp), "
                                 "commands from this machine only")
@@ -395,7 +395,7 @@ def test_a_dual_stack_server_names_an_ipv4_sender_as_ipv4(live):
     if not socket.has_ipv6:
         pytest.skip("no IPv6")
     commands = Commands()
-    live.listeners.append(commands)
+    live.subscribe(commands)
     try:
         server = serve(live, host="::")
     except UsageError as exc:

@@ -23,9 +23,10 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 from choreo.clock import VirtualTime
 from choreo.errors import UsageError
 from choreo.limits import LIMITS, UNLOGGED, Limits, Rate
-from choreo.live.controls import Command, Live
+from choreo.live.controls import Live
+from choreo.events import Command
 from choreo.live.osc import OscServer
-from choreo.run.runner import StopRequest
+from choreo.events import StopRequest
 from runlog import choreo, ended_if_left, read_log, start_choreo, wait_for, write_show
 from test_osc import ONE_GO_SHOW, Receiver, free_port, outside_address
 
@@ -64,7 +65,7 @@ def heard() -> Heard:
 @pytest.fixture
 def live(clock, heard):  # type: ignore[no-untyped-def]
     live = Live(StopRequest(), wait_start=True, lockout_s=0.0, now=clock.now, limits=EVERY_EVENT)
-    live.listeners.append(heard)
+    live.subscribe(heard)
     return live
 
 
@@ -72,7 +73,7 @@ def live(clock, heard):  # type: ignore[no-untyped-def]
 def server(live, clock):  # type: ignore[no-untyped-def]
     server = OscServer(live, 0, now=clock.now)
     server.start()
-    live.listeners.append(server)
+    live.subscribe(server)
     yield server
     server.close()
 
@@ -220,7 +221,7 @@ def test_a_flood_from_a_sender_not_allowed_gets_few_replies_and_few_log_lines(cl
         pytest.skip("this machine has no address but loopback")
     live = Live(StopRequest(), wait_start=True, now=clock.now)
     heard = Heard()
-    live.listeners.append(heard)
+    live.subscribe(heard)
     server = OscServer(live, 0, host="0.0.0.0", now=clock.now)
     server.start()
     forged = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -255,7 +256,7 @@ def test_a_flood_reaches_the_log_and_terminal_as_counts(clock):
     reported budget; the rest come as one `unlogged` count."""
     live = Live(StopRequest(), wait_start=True, now=clock.now)
     heard = Heard()
-    live.listeners.append(heard)
+    live.subscribe(heard)
     server = OscServer(live, 0, now=clock.now)
     server.start()
     peer = Peer("udp", server.port)
@@ -310,7 +311,7 @@ def test_replies_and_notifications_sent_back_are_never_answered_nor_notified(liv
     receiver = receivers[0]
     server = OscServer(live, 0, now=clock.now, notify=[receiver.address])
     server.start()
-    live.listeners.append(server)
+    live.subscribe(server)
     peer = Peer("udp", server.port)
     try:
         for address in ("/reply/choreo/go", "/choreo/notify/command", "/choreo/notify/step"):
@@ -339,7 +340,7 @@ class OscReply:
 def test_every_notify_target_gets_the_notifications(live, clock, receivers):
     server = OscServer(live, 0, now=clock.now, notify=[r.address for r in receivers])
     server.start()
-    live.listeners.append(server)
+    live.subscribe(server)
     try:
         assert live.command(Command("start", "key")).ok
         assert wait_for(lambda: all(r.of("command") for r in receivers), TIMEOUT_S, every=0.005)
@@ -571,7 +572,7 @@ def test_a_flood_past_a_senders_rate_of_packets_is_counted_not_read(clock, monke
     decodes = _decodes(monkeypatch)
     live = Live(StopRequest(), wait_start=True, now=clock.now)
     heard = Heard()
-    live.listeners.append(heard)
+    live.subscribe(heard)
     server = OscServer(live, 0, now=clock.now)  # not listening: its packets are handed to it
     flood = 1000
     for n in range(flood):
@@ -591,7 +592,7 @@ def test_refused_senders_of_many_addresses_cannot_take_an_allowed_senders_packet
     decodes = _decodes(monkeypatch)
     live = Live(StopRequest(), wait_start=True, now=clock.now)
     heard = Heard()
-    live.listeners.append(heard)
+    live.subscribe(heard)
     server = OscServer(live, 0, host="0.0.0.0", now=clock.now)
     for n in range(300 * 20):
         server.packet("udp", (f"10.9.{n % 300 // 250}.{n % 300 % 250 + 1}", 5000), message("/choreo/panic"))
@@ -631,7 +632,7 @@ def test_a_udp_flood_in_a_senders_name_does_not_spend_its_tcp_budgets(clock):
     needed for its GO. Over TCP a sender has budgets of its own."""
     live = Live(StopRequest(), wait_start=True, now=clock.now)
     heard = Heard()
-    live.listeners.append(heard)
+    live.subscribe(heard)
     server = OscServer(live, 0, now=clock.now)
     for _ in range(500):
         server.packet("udp", ("127.0.0.2", 9), bundle("/choreo/go", 4))
@@ -647,7 +648,7 @@ def test_a_bundles_messages_are_read_within_the_senders_budget_of_packets(clock)
     came alone; the rest are counted, not read."""
     live = Live(StopRequest(), wait_start=True, now=clock.now, limits=EVERY_EVENT)
     heard = Heard()
-    live.listeners.append(heard)
+    live.subscribe(heard)
     server = OscServer(live, 0, now=clock.now)
     for _ in range(3):
         server.packet("udp", ("127.0.0.2", 9), bundle("/x", 200))

@@ -82,7 +82,7 @@ def test_a_bundle_with_a_bad_element_size_is_dropped_and_osc_goes_on(transport, 
     """A negative size sent python-osc's parser round for ever (-4: back to itself; OSC dead, a
     flood of warnings); one past the end had it carry out what followed (here a GO)."""
     commands = Commands()
-    live.listeners.append(commands)
+    live.subscribe(commands)
     with send(transport, server.port, bad_bundle(size)) as sock:
         source = f"osc {transport} 127.0.0.1:{sock.getsockname()[1]}"
         with client(transport, server.port) as osc:
@@ -98,7 +98,7 @@ def test_a_bundle_with_a_bad_element_size_is_dropped_and_osc_goes_on(transport, 
 def test_a_message_with_an_unknown_type_tag_is_refused_not_carried_out(transport, tag, live, server):
     """`/choreo/panic ,Q` ended a show: python-osc skipped the tag and ran the command."""
     commands = Commands()
-    live.listeners.append(commands)
+    live.subscribe(commands)
     packet = b"/choreo/panic\x00\x00\x00," + tag.encode() + b"\x00\x00"
     with send(transport, server.port, packet) as sock:
         if transport == "udp":
@@ -124,7 +124,7 @@ def test_a_refused_senders_packet_is_not_read(live, monkeypatch):
 
     monkeypatch.setattr(osc_module, "decode_packet", never)
     commands = Commands()
-    live.listeners.append(commands)
+    live.subscribe(commands)
     (reply,) = server.packet("udp", ("10.9.8.7", 5000), bad_bundle(0))
     assert reply_of(reply)[0] == "/reply" and reply_of(reply)[1]["status"] == "denied"
     assert not server.admit(("10.9.8.7", 5001))
@@ -213,7 +213,7 @@ def test_idle_connections_cannot_keep_a_go_out(live):
 
 def test_silent_and_trickling_connections_are_closed_in_time(live):
     commands = Commands()
-    live.listeners.append(commands)
+    live.subscribe(commands)
     server = serve(live, wire_limits=SMALL)
     try:
         with client("tcp", server.port) as talker:
@@ -378,13 +378,13 @@ def test_datagrams_the_system_dropped_are_counted():
     from choreo.clock import VirtualTime
     from choreo.limits import UNLOGGED, Limits, Rate
     from choreo.live.controls import Live
-    from choreo.run.runner import StopRequest
+    from choreo.events import StopRequest
 
     clock = VirtualTime()
     plenty = Rate(10**7, 1.0)
     live = Live(StopRequest(), wait_start=True, now=clock.now, limits=Limits(reported=plenty))
     heard = Commands()
-    live.listeners.append(heard)
+    live.subscribe(heard)
     server = OscServer(live, 0, now=clock.now, limits=Limits(packets_per_sender=plenty, replies_per_sender=Rate(0, 0.0)))
     server.bind()  # listening, not reading yet: the buffer fills, the rest is dropped
     flooder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

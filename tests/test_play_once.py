@@ -7,8 +7,10 @@ import pytest
 
 from choreo.wire import protocol as p
 from choreo.errors import LinkError
-from choreo.board.link import Link, Tag
-from choreo.run.runner import Runner, StopRequest
+from choreo.board.link import Link
+from choreo.events import Tag
+from choreo.run.runner import Runner
+from choreo.events import StopRequest
 from choreo.show.load import load_show
 from choreo.show.plan import compile_plan
 from runlog import write_show
@@ -162,7 +164,7 @@ SHORT_DURATIONS = "durations=1:0.05,2:0.1,3:0.15"  # every one over before the 5
 
 
 def run_short(tmp_path, layout: str, faults: str):
-    from choreo.run.session import RunRequest
+    from choreo.run.settings import RunRequest
     from runlog import prepare, read_log
 
     show = write_show(tmp_path, SHORT)
@@ -170,7 +172,7 @@ def run_short(tmp_path, layout: str, faults: str):
                                  log_path=str(tmp_path / "run.mcap")))
     with session:
         result = session.run()
-        board = session.link.port.board
+        board = session.stage.links["robot"].port.board
     return result, board, read_log(tmp_path / "run.mcap")
 
 

@@ -36,7 +36,7 @@ def test_probing_never_writes_ram_nor_calls():
 
     def open_with_spy(*args, **kwargs):
         link = original(*args, **kwargs)
-        link.listeners.append(Spy())
+        link.subscribe(Spy())
         return link
 
     Link.open = open_with_spy

@@ -304,7 +304,7 @@ def _log_with_stale_replies(path: Path) -> None:
     from dataclasses import replace
 
     from choreo.wire import protocol
-    from choreo.board.link import RxEvent, Tag, TxEvent
+    from choreo.events import RxEvent, Tag, TxEvent
     from choreo.log.recorder import Recorder, RunInfo
 
     start = 1_790_000_000_000_000_000
@@ -357,10 +357,10 @@ def _log_with_late_plays(path: Path) -> None:
     on time but delayed by its retries (late, as the runner counts it, with its warning line);
     on time with a slow first frame but no retry (not late); then one aborted by a second Ctrl-C."""
     from choreo.wire import protocol
-    from choreo.board.link import RxEvent, Tag, TxEvent
+    from choreo.events import RxEvent, Tag, TxEvent
     from choreo.log.format import WARNING
     from choreo.log.recorder import Recorder, RunInfo
-    from choreo.run.runner import StepEvent
+    from choreo.events import StepEvent
     from choreo.show.model import PlannedStep, StepKind
 
     start = 1_790_000_000_000_000_000

@@ -16,7 +16,8 @@ import serial
 
 from choreo.wire import protocol as p
 from choreo.cli import main
-from choreo.run.session import RunRequest, Session
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
 from runlog import (vmain, prepare, SimPty, choreo, log_has_steps, read_log, read_log_linear, start_choreo, wait_for,
                     write_show)
 
@@ -52,7 +53,7 @@ def test_exact_wire_sequence_matches_the_board_and_the_log(tmp_path):
     show = write_show(tmp_path, WIRE_SHOW)
     log_path = tmp_path / "wire.mcap"
     session, _ = run_session(show, log_path=str(log_path))
-    board_frames = [e.data.hex(" ") for e in session.link.port.board.journal if e.kind == "frame"]
+    board_frames = [e.data.hex(" ") for e in session.stage.links["robot"].port.board.journal if e.kind == "frame"]
     log = read_log(log_path)
 
     polls = log.tx_hex()[3:-6]
@@ -495,12 +496,12 @@ def test_live_progress_line_redraws_in_place(tmp_path):
     import io
 
     from choreo.cli.run import Progress
-    from choreo.run.runner import StepEvent
+    from choreo.events import StepEvent
 
     session = prepare(RunRequest(str(write_show(tmp_path, WIRE_SHOW)), no_log=True))
     out = io.StringIO()
     progress = Progress(session, out, live=True, quiet=False)
-    steps = session.plan.steps
+    steps = session.settings.plans["robot"].steps
     for step in steps:  # the writer draws the latest step (on virtual time they come at once)
         progress.on_step(StepEvent(step, "start", step.planned_s, step.planned_s, 0))
     assert wait_for(lambda: "step 4 'last' (5/5): play 7 (bow)" in out.getvalue())
@@ -521,7 +522,7 @@ def test_live_progress_line_redraws_in_place(tmp_path):
 ])
 def test_a_sim_port_given_on_the_command_line_keeps_the_shows_durations(tmp_path, given, expected):
     session = prepare(RunRequest(str(write_show(tmp_path, WIRE_SHOW)), port=given, no_log=True))
-    assert session.port == expected
+    assert session.settings.links["robot"].port == expected
 
 
 def test_recording_waits_for_idle_time_and_loses_nothing(tmp_path):

@@ -8,7 +8,8 @@ import pytest
 
 from choreo.wire import protocol as p
 from choreo.board.link import Link
-from choreo.run.runner import Runner, StopRequest
+from choreo.run.runner import Runner
+from choreo.events import StopRequest
 from choreo.show.load import load_show
 from choreo.show.plan import compile_plan
 from runlog import write_show
@@ -134,8 +135,7 @@ def test_a_show_stopped_before_its_first_play_does_not_play_the_abort_motion(tmp
           - play: 3
     """
     runner = runner_for(tmp_path, body, stop, frames)
-    runner.on_idle = lambda: stop.request("interrupted (test)")  # Ctrl-C during the wait
-    result = runner.run()
+    result = runner.run(on_idle=lambda: stop.request("interrupted (test)"))  # Ctrl-C during the wait
     assert result.outcome == "aborted" and result.steps_run == 1
     assert frames.sent == []  # the robot was never moved: it is left as it is
 

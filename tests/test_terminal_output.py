@@ -28,9 +28,9 @@ from rich.console import Console as RichConsole
 from choreo.cli.console import Note, Row, Screen, render
 from choreo.cli.run import Progress
 from choreo.cli.terminal import StatusWriter, VisibleStream, visible_output
-from choreo.live.controls import Answer, Command, CommandEvent
-from choreo.run.runner import StepEvent
-from choreo.run.session import RunRequest
+from choreo.events import Answer, Command, CommandEvent
+from choreo.events import StepEvent
+from choreo.run.settings import RunRequest
 from choreo.textfit import display_width, is_hidden
 from runlog import REPO, prepare, read_log, vmain, wait_for, write_show
 
@@ -83,7 +83,7 @@ def test_a_show_and_a_command_source_of_hostile_text_are_shown_escaped(tmp_path,
 
 def test_log_summary_of_a_log_with_hostile_commands_shows_them_escaped(tmp_path, capsys) -> None:
     from choreo.live.controls import Live
-    from choreo.run.runner import StopRequest
+    from choreo.events import StopRequest
 
     show = write_show(tmp_path, "version: 1\nname: plain\nsteps:\n  - play: 1\n  - wait: 0.5\n  - play: 2\n")
     log_path = tmp_path / "run.mcap"
@@ -160,7 +160,7 @@ def test_progress_never_waits_for_an_output_that_takes_nothing(tmp_path, live: b
     read, write = _full_pipe()
     with os.fdopen(write, "w", closefd=True) as out:
         progress = Progress(session, out, live=live, quiet=False)
-        step = session.plan.steps[0]
+        step = session.settings.plans["robot"].steps[0]
         count = StatusWriter.CAPACITY * 3
 
         def show_thread() -> None:
@@ -274,7 +274,7 @@ def test_what_reaches_stderr_under_the_console_is_shown_escaped(tmp_path, monkey
     warning): made visible on the way, and stderr is put back as it was after."""
     from choreo.cli.console import Console
     from choreo.live.controls import Live
-    from choreo.run.runner import StopRequest
+    from choreo.events import StopRequest
 
     session = prepare(RunRequest(str(write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n")), no_log=True))
     primary, secondary = _pty(80)

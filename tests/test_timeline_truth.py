@@ -11,8 +11,8 @@ from choreo.log.format import MotionTracker, RxRecord, TxRecord, parse
 from choreo.log.reader import LogReader
 from choreo.review.summary import summarize
 from choreo.review.timeline import build, render_text
-from choreo.run.runner import StopRequest
-from choreo.run.session import RunRequest
+from choreo.events import StopRequest
+from choreo.run.settings import RunRequest
 from runlog import prepare, vmain, write_show
 
 SHOW = """

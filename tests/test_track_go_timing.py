@@ -161,8 +161,9 @@ def test_a_go_between_reading_the_held_time_and_dozing_still_wakes_the_doze() ->
 def test_panic_or_stop_while_a_go_cue_holds_ends_every_other_tracks_doze_at_once() -> None:
     """Another track dozes towards a cue past the held time: a panic (or stop) given then ends
     its doze at that instant, not at the end of its 50 ms sleep slice."""
-    from choreo.live.controls import Command, Live
-    from choreo.run.runner import StopRequest
+    from choreo.live.controls import Live
+    from choreo.events import Command
+    from choreo.events import StopRequest
 
     for command in ("panic", "stop"):
         source = VirtualTime()
@@ -171,7 +172,7 @@ def test_panic_or_stop_while_a_go_cue_holds_ends_every_other_tracks_doze_at_once
         show = HoldingShowClock(zero, clock.mono, source.notify)
         stop = StopRequest()
         live = Live(stop, now=clock.mono)
-        live.show = show
+        live.use_clock(show)
         show.hold_at(0.5)
         ended: list[float] = []
 

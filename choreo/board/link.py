@@ -10,21 +10,21 @@ could push a second return address on the board.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
-from choreo.wire import protocol
-from choreo.clock import RunClock
-from choreo.wire.layouts import SEED, Layout, StartState
+from choreo.clock import RunClock, TimeSource
 from choreo.errors import Interrupted, LinkError
-from choreo.wire.protocol import Frame, FrameKind, Reply, ReplyKind
+from choreo.events import LinkListener, Listeners, RxEvent, Subscription, Tag, TxEvent, never
+from choreo.wire import protocol
+from choreo.wire.layouts import SEED, Layout, StartState
+from choreo.wire.protocol import DEFAULT_BAUD, Frame, FrameKind, Reply, ReplyKind
 
 if TYPE_CHECKING:
     import serial
 
-DEFAULT_BAUD = 115200
-BAUD_RATES = (115200, 625000, 1250000)
 DEFAULT_TIMEOUT_S = 0.2
 DEFAULT_TRIES = 3
 QUIET_S = 0.01  # after a bad reply, the line counts as settled once this long passes with no byte
@@ -46,42 +46,6 @@ PORT_ERRORS: tuple[type[Exception], ...] = (OSError, ValueError, *_TERMIOS_ERROR
 
 
 @dataclass(frozen=True)
-class Tag:
-    """Which show step a frame belongs to, carried into the log and into error messages."""
-
-    step: int | None = None
-    label: str | None = None
-
-    def __str__(self) -> str:
-        if self.step is None:
-            return ""
-        return f"step {self.step}" + (f" '{self.label}'" if self.label else "")
-
-
-@dataclass(frozen=True, slots=True)
-class TxEvent:
-    """A frame about to be written (timestamped just before the write)."""
-
-    seq: int
-    frame: Frame
-    attempt: int
-    time_ns: int
-    tag: Tag | None
-
-
-@dataclass(frozen=True, slots=True)
-class RxEvent:
-    """The verdict on what came back for frame `seq` (timestamped when the reply completed)."""
-
-    seq: int
-    frame: Frame
-    reply: Reply
-    time_ns: int
-    latency_s: float
-    tag: Tag | None
-
-
-@dataclass(frozen=True)
 class Played:
     """How a play sequence went: tries it took, and when the one that worked began (monotonic)."""
 
@@ -97,10 +61,13 @@ LEAD_WEIGHT = 0.25  # how much each measured play moves the running estimate of 
 REPLY_DELAY_GUESS_S = 0.0005  # a board's reply delay before any play has been measured
 
 
-class LinkListener(Protocol):
-    def on_tx(self, event: TxEvent) -> None: ...
+@runtime_checkable
+class KeepsTime(Protocol):
+    """A port that keeps time itself (the in-process simulator's): it is handed the run's time
+    source before it opens, so its board and the link agree on every instant. The board layer
+    names the capability, not the simulator that has it."""
 
-    def on_rx(self, event: RxEvent) -> None: ...
+    time_source: TimeSource
 
 
 class PortLost(Exception):
@@ -138,8 +105,8 @@ def open_port(url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TI
             stopbits=serial.STOPBITS_ONE, timeout=timeout, write_timeout=max(1.0, timeout),
             exclusive=exclusive, do_not_open=True,
         )
-        if hasattr(port, "time_source"):
-            port.time_source = (clock or RunClock()).source
+        if isinstance(port, KeepsTime):
+            port.time_source = (clock or RunClock()).source  # the port's own setting, given before it opens
         elif clock is not None and clock.virtual:
             raise ValueError("only the in-process simulator (sim://) runs on virtual time")
         port.open()
@@ -190,7 +157,7 @@ class Link:
     def __init__(self, port: serial.SerialBase, *, name: str | None = None,
                  timeout: float = DEFAULT_TIMEOUT_S, tries: int = DEFAULT_TRIES,
                  clock: RunClock | None = None, listeners: Iterable[LinkListener] = (),
-                 layout: Layout = SEED) -> None:
+                 layout: Layout = SEED, latency_note: str | None = None) -> None:
         if tries < 1:
             raise ValueError("a link needs at least one try per frame")
         self.port = port
@@ -198,12 +165,14 @@ class Link:
         self.timeout = timeout
         self.tries = tries
         self.clock = clock or RunClock()
-        self.listeners: list[LinkListener] = list(listeners)
+        # Who hears every frame and reply: those given here for the link's life (the log), and
+        # those a run attaches for itself (`subscribe`).
+        self.listeners: Listeners[LinkListener] = Listeners(tuple(listeners))
         self.layout = layout
         self.config: int | None = None  # the board's config word, read at open where the layout needs it
         # Checked before each frame: a stop request lets the frame in flight get its reply, then
-        # no further frame goes out (the runner sets it; Ctrl-C sets the runner's).
-        self.should_stop: Callable[[], bool] = lambda: False
+        # no further frame goes out (a run gives its own for its time: `stopping_on`).
+        self._should_stop: Callable[[], bool] = never
         self.last_tx_mono = 0.0  # monotonic time of the last write: polls are spaced from it
         self.last_write_end = 0.0  # when that write returned: the board has the frame by then
         self._last_status_mono = float("-inf")  # the last status query's write
@@ -217,7 +186,7 @@ class Link:
         # Bytes read while waiting for the line to go quiet: logged with the next frame's reply.
         self._set_aside = b""
         self._seq = 0
-        self.latency_note: str | None = None  # the adapter's latency timer, when it costs time
+        self.latency_note = latency_note  # the adapter's latency timer, when it costs time
         self._lead_s: float | None = None  # see `start_lead_s`
         self._lead_measured = False
         self._lost_write: PortLost | None = None  # a write that failed (see `_raise_lost_write`)
@@ -232,8 +201,7 @@ class Link:
         clock = clock or RunClock()
         port = open_port(url, baud, timeout=timeout, exclusive=exclusive, clock=clock)
         link = cls(port, name=url, timeout=timeout, tries=tries, clock=clock, listeners=listeners,
-                   layout=layout)
-        link.latency_note = usb_latency_note(port)
+                   layout=layout, latency_note=usb_latency_note(port))
         if layout.reads_config:
             try:
                 link.read_config()
@@ -246,7 +214,7 @@ class Link:
         """The ACK check, then the config word (2 bytes at RAM 0x0000): the word the hth4-2.2
         suspend and resume frames are made from."""
         self.exchange(protocol.sync_frame(), Tag(None, "open"))
-        reply = self.exchange(protocol.read_frame(protocol.CONFIG_ADDRESS, 2), Tag(None, "open"))
+        reply = self.exchange(protocol.read_frame(protocol.CONFIG_ADDRESS, protocol.CONFIG_BYTES), Tag(None, "open"))
         self.config = int.from_bytes(reply.data[2:4], "little")
         return self.config
 
@@ -262,6 +230,22 @@ class Link:
 
     def __enter__(self) -> Link:
         return self
+
+    def subscribe(self, listener: LinkListener) -> Subscription:
+        """Attach `listener` to every frame and reply from now until the subscription closes
+        (use it in a `with` block: whoever attaches a listener detaches it)."""
+        return self.listeners.subscribe(listener)
+
+    @contextmanager
+    def stopping_on(self, should_stop: Callable[[], bool]) -> Iterator[None]:
+        """For the block's time, `should_stop` is checked before each frame (a stop request lets
+        the frame in flight get its reply, then no further frame goes out); after it, what was
+        checked before is again. A run gives its stop request; its abort motion, `never`."""
+        before, self._should_stop = self._should_stop, should_stop
+        try:
+            yield
+        finally:
+            self._should_stop = before
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
@@ -369,7 +353,7 @@ class Link:
     def _check_stop(self, what: str) -> None:
         """A stop request is honoured between exchanges, never inside one: before a frame (or a
         play sequence's first frame), before each retry and before each ACK check."""
-        if self.should_stop():
+        if self._should_stop():
             raise Interrupted(f"stopped before '{what}'")
 
     # -- one try ---------------------------------------------------------------------------

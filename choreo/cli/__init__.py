@@ -20,8 +20,8 @@ from choreo.cli.output import OUTPUT_ERROR_EXIT, Output, drop_output
 from choreo.errors import ChoreoError, OutputError
 
 if TYPE_CHECKING:
-    from choreo.__main__ import SignalGuard
     from choreo.clock import TimeSource
+    from choreo.signals import SignalGuard
 
 # Command modules, in the order `choreo --help` lists them.
 COMMAND_MODULES = ("run", "show", "beats", "importer", "frames", "sim", "probe", "doctor", "log", "ports", "devices", "schema")
@@ -55,7 +55,7 @@ def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = Non
          time_source: TimeSource | None = None) -> int:
     """Run one command; every error and interruption becomes one message and an exit code here.
 
-    `signals` (from the process entry, `choreo.__main__`) interrupts the command on Ctrl-C,
+    `signals` (installed by the process entry, `choreo.__main__`) interrupts the command on Ctrl-C,
     SIGTERM or SIGHUP while it runs, and no longer once its outcome is being reported.
     `time_source`: the time a run or replay keeps (the machine's unless given; an embedding
     program or a test may pass `VirtualTime` to run shows on the in-process simulator at once).

@@ -40,10 +40,9 @@ from rich.table import Table
 from rich.text import Text
 
 from choreo.cli.terminal import raw_stream, visible_stream
-from choreo.board.link import Link, RxEvent, TxEvent
-from choreo.live.controls import Command, CommandEvent, HoldingShowClock, Live
+from choreo.events import Command, CommandEvent, RxEvent, StepEvent, Subscription, TxEvent
+from choreo.live.controls import HoldingShowClock, Live
 from choreo.log.format import ERROR, INFO, WARNING
-from choreo.run.runner import StepEvent
 from choreo.show.model import SOLO, PlannedStep, StepKind
 from choreo.textfit import visible
 
@@ -532,14 +531,15 @@ class Console:
         self.out = out
         self.keys = keys if keys is not None else sys.stdin
         self._lock = threading.Lock()
-        self._robots = {name: _Robot(name, tuple(s for s in plan.steps[session.starts[name]:] if s.is_for(name)))
-                        for name, plan in session.plans.items()}
+        starts = session.settings.sections.starts
+        self._robots = {name: _Robot(name, tuple(s for s in plan.steps[starts[name]:] if s.is_for(name)))
+                        for name, plan in session.settings.plans.items()}
         self._notes: deque[Note] = deque(maxlen=NOTES)
         self._asking = False
         self._closing = False
         self._quiet_until = 0.0  # monotonic time before which no redraw starts (a GO's frames)
         self._done = threading.Event()
-        self._watches: list[tuple[Link, _LinkWatch]] = []
+        self._watches: list[Subscription] = []  # its listeners on the links, detached at `close`
         self._mode: TerminalMode | None = None
         self._reader: KeyReader | None = None
         self._redraw: threading.Thread | None = None
@@ -594,9 +594,8 @@ class Console:
                 self._reader.close()
             if self._redraw is not None and self._redraw is not threading.current_thread():
                 self._redraw.join(1.0)
-            for link, watch in self._watches:
-                if watch in link.listeners:
-                    link.listeners.remove(watch)
+            for watch in self._watches:
+                watch.close()
             self._watches.clear()
             with self._lock:
                 self._closing = True
@@ -630,9 +629,7 @@ class Console:
     def _watch_links(self) -> None:
         stage = getattr(self.session, "stage", None)
         for name, link in (stage.links.items() if stage is not None else ()):
-            watch = _LinkWatch(self, name)
-            link.listeners.append(watch)
-            self._watches.append((link, watch))
+            self._watches.append(link.subscribe(_LinkWatch(self, name)))
 
     def _redraw_loop(self) -> None:
         """Redraw REFRESH_S apart, each put off past any moment a runner is about to send."""
@@ -799,13 +796,13 @@ class Console:
             rows = tuple(self._row(robot, waiting) for robot in self._robots.values())
             cue = "next cue: none, the show is stopping" if stopping else self._cue_line(show_s)
             go, go_waiting = self._go_line(waiting, stopping)
-            return Screen(self.session.show.name, None if show_s is None else round(show_s, 1),
+            return Screen(self.session.settings.show.name, None if show_s is None else round(show_s, 1),
                           self._clock_text(stopping), cue, go, go_waiting, rows, tuple(self._notes),
                           QUESTION if self._asking else None,
                           self._final_line() if self._closing else LEGEND)
 
     def _clock_text(self, stopping: bool) -> str:
-        clock = "music" if getattr(self.session, "song", None) is not None else "machine"
+        clock = "music" if self.session.settings.song is not None else "machine"
         show = self.live.show
         held = isinstance(show, HoldingShowClock) and show.held and not stopping
         return f"{clock} clock" + (", held for GO" if held else "")
@@ -817,7 +814,7 @@ class Console:
         if not ahead:
             return "next cue: none ahead"
         at, name, step = min(ahead, key=lambda c: (c[0], c[2].index))
-        who = f"{name}: " if self.session.show.tracks else ""  # shared steps: everyone's cue
+        who = f"{name}: " if self.session.settings.show.tracks else ""  # shared steps: everyone's cue
         label = f" '{step.label}'" if step.label else ""
         if show_s is None:
             return f"next cue: {who}step {step.index}{label} at {at:g} s"

@@ -16,71 +16,14 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Protocol
 
-from choreo.clock import MachineShowClock, ShowClock
+from choreo.clock import ShowClock
+from choreo.events import (PANIC, STOPPED, Answer, Command, CommandEvent, CommandListener, GoCue, Listeners,
+                           StopRequest, Subscription, WaitingListener)
 from choreo.limits import LIMITS, UNLOGGED, Held, Limits, ReportGate
-from choreo.run.runner import PANIC, StopRequest
 from choreo.show.model import PlannedStep
 
 LOCKOUT_S = 0.5  # a second GO this soon after one is taken for a double press, and refused
-
-
-@dataclass(frozen=True)
-class Command:
-    """An operator's command: what, from where (`key`, `osc udp 127.0.0.1:53001`), and for
-    `cue_go` which cue (its label)."""
-
-    name: str
-    source: str
-    label: str | None = None
-
-
-@dataclass(frozen=True)
-class Answer:
-    """What a command did: `ok`, or `error` with why; `data` says more (the cue released)."""
-
-    status: str  # ok | error
-    message: str = ""
-    data: dict = field(default_factory=dict)
-
-    @property
-    def ok(self) -> bool:
-        return self.status == "ok"
-
-
-@dataclass(frozen=True)
-class CommandEvent:
-    """A command and its answer, when it came (wall-clock ns and show time)."""
-
-    command: Command
-    answer: Answer
-    time_ns: int
-    show_s: float | None
-
-
-class CommandListener(Protocol):
-    """Hears every command and its answer; may also have `on_waiting(cue: GoCue)`, called once
-    when the show reaches a GO cue (from the runner's thread: be quick)."""
-
-    def on_command(self, event: CommandEvent) -> None: ...
-
-
-@dataclass
-class GoCue:
-    """A GO cue some robot is waiting at: its step (same index for every robot of a shared
-    step), who waits, and when the show reached it."""
-
-    step: PlannedStep
-    robots: set[str]
-    reached_s: float
-    released: bool = False
-    key: object = None
-
-    @property
-    def name(self) -> str:
-        return self.step.label or f"step {self.step.index}"
 
 
 class HoldingShowClock:
@@ -96,7 +39,7 @@ class HoldingShowClock:
         self._mono = mono
         self._wake = wake
         self._hold_s: float | None = None  # the show time the clock stops at
-        self.on_resume: list[Callable[[], None]] = []  # told when it goes on (the log's clock samples)
+        self._on_resume: Listeners[Callable[[], None]] = Listeners()  # told when it goes on
 
     @property
     def held(self) -> bool:
@@ -115,8 +58,13 @@ class HoldingShowClock:
                 self._zero += now - reached
             self._hold_s = None
             self._wake()
-            for listener in self.on_resume:
+            for listener in self._on_resume:
                 listener()
+
+    def on_resume(self, listener: Callable[[], None]) -> Subscription:
+        """Call `listener` each time the clock goes on after a hold (the log's clock sample
+        marks where show time goes on), until the subscription closes."""
+        return self._on_resume.subscribe(listener)
 
     def wake(self) -> None:
         """Every runner dozing towards a due time looks again now: a stop or a panic given
@@ -141,8 +89,8 @@ class Live:
                  limits: Limits = LIMITS) -> None:
         self.stop = stop
         self.lockout_s = lockout_s
-        self.listeners: list[CommandListener] = []
-        self.show: ShowClock | None = None  # set when the show starts
+        self.listeners: Listeners[CommandListener] = Listeners()  # attached through `subscribe`
+        self.show: ShowClock | None = None  # the pass's show clock (`use_clock`), once the show starts
         self._now = now
         self._wall_ns = wall_ns
         self._changed = threading.Condition()
@@ -154,10 +102,19 @@ class Live:
         self._summing = threading.RLock()  # a summary is told whole before `close` returns
         self._over = False  # the run is over (`close`): no command is taken any more
 
+    def subscribe(self, listener: CommandListener) -> Subscription:
+        """Tell `listener` every command and its answer (and, if it is a `WaitingListener`,
+        every GO cue reached) until the subscription closes; whoever subscribes closes it."""
+        return self.listeners.subscribe(listener)
+
+    def use_clock(self, show: ShowClock) -> None:
+        """The show clock of the pass now starting: GO cues hold it, commands are timed on it."""
+        self.show = show
+
     @property
     def panicked(self) -> bool:
         """The show was stopped by a panic (not by stop, Ctrl-C or a fault)."""
-        return self.stop() and self.stop.reason == PANIC
+        return self.stop.panicked
 
     @property
     def started(self) -> bool:
@@ -196,7 +153,7 @@ class Live:
             self._changed.notify_all()
         if new:
             for listener in self.listeners:
-                if hasattr(listener, "on_waiting"):  # optional: the console, OSC notify, progress lines
+                if isinstance(listener, WaitingListener):  # optional: the console, OSC notify, progress lines
                     listener.on_waiting(cue)
         with self._changed:
             while not cue.released:
@@ -269,7 +226,7 @@ class Live:
     def _tell(self, command: Command, answer: Answer) -> None:
         show = self.show
         event = CommandEvent(command, answer, self._wall_ns(), show.show_at(self._now()) if show is not None else None)
-        for listener in list(self.listeners):
+        for listener in self.listeners:
             listener.on_command(event)
 
     def close(self) -> None:
@@ -303,7 +260,7 @@ class Live:
 
     def _release(self, cue: GoCue) -> Answer:
         """The lock is held."""
-        cue.released = True
+        cue.release()
         del self._waiting[cue.key]
         self._released.add(cue.key)
         if isinstance(self.show, HoldingShowClock) and not self._waiting:
@@ -317,7 +274,7 @@ class Live:
         return Answer("ok", "panic: no more show frames; stop frames and every robot's abort motion")
 
     def _stop(self, command: Command) -> Answer:
-        self.stop.request("stopped")
+        self.stop.request(STOPPED)
         self._wake()
         return Answer("ok", "stopping: the exchange in flight, then the abort motion")
 

@@ -40,21 +40,19 @@ import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 
 from choreo.errors import UsageError, did_you_mean
+from choreo.events import Answer, Command, CommandEvent, GoCue, RunResult, StepEvent
 from choreo.limits import LIMITS, UNLOGGED, Limits, SenderLimits
-from choreo.live.controls import Answer, Command, CommandEvent, GoCue, Live
-from choreo.log.format import ERROR, WARNING
+from choreo.live.controls import Live
 from choreo.live.oscnet import ListenFailed, OscNet
 from choreo.live.osclimits import LIMITS as WIRE_LIMITS
 from choreo.live.osclimits import OscLimits
 from choreo.live.oscnotify import Notifier, Target, show_target
 from choreo.live.oscwire import Message, decode_packet, encode_message
-
-if TYPE_CHECKING:
-    from choreo.run.runner import RunResult, StepEvent
+from choreo.log.format import ERROR, WARNING
 
 # OSC addresses, not log topics (those are spelled in choreo.log.format), though both start /choreo
 ROOT = "/choreo"

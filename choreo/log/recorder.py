@@ -35,26 +35,23 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from importlib import resources
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any
+from typing import IO, Any
 
 from mcap.writer import CompressionType, Writer
 
 from choreo import __version__
 from choreo.errors import LogError
 from choreo.limits import UNLOGGED
-from choreo.log.format import (CLOCK_TOPIC, COMMAND_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC, STEP_TOPIC,
-                              TX_TOPIC, ClockRecord, CommandRecord, LogRecord, RxRecord, TxRecord, channels_for, layout_key,
-                              robot_topic)
-
-if TYPE_CHECKING:
-    from choreo.board.link import RxEvent, TxEvent
-    from choreo.live.controls import CommandEvent
-    from choreo.run.runner import StepEvent
+from choreo.events import CommandEvent, RxEvent, StepEvent, StopRequest, TxEvent
+from choreo.log.format import (CLOCK_TOPIC, COMMAND_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC,
+                               STEP_TOPIC, TX_TOPIC, ClockRecord, CommandRecord, LogRecord, RxRecord, StepRecord,
+                               TxRecord, channels_for, layout_key, robot_topic)
 
 FLUSH_EVERY_S = 0.5
 BATCH = 16  # messages the background flusher writes before it lets the runner have the GIL
@@ -178,8 +175,18 @@ def _rx_message(event: RxEvent, robot: str | None = None) -> dict:
                     reply.error, reply.stale.hex(" ") if reply.stale else None, robot).to_json()
 
 
+def step_record(event: StepEvent) -> StepRecord:
+    """A step event as the log keeps it (times rounded to the microsecond)."""
+    step = event.step
+    return StepRecord(step.index, step.kind.value, event.event, round(event.actual_s, 6),
+                      round(event.planned_s, 6), round(step.planned_s, 6), round(event.late_ms, 3),
+                      step.path, step.label, step.motion, step.at, event.outcome, event.robot,
+                      None if event.start_s is None else round(event.start_s, 6),
+                      round(event.lead_ms, 3) if event.lead_ms else None, True if step.go else None)
+
+
 def _step_message(event: StepEvent) -> dict:
-    return event.record().to_json()
+    return step_record(event).to_json()
 
 
 def _record_message(record: ClockRecord | CommandRecord) -> dict:
@@ -227,7 +234,7 @@ class Recorder:
         self.failure: str | None = None  # why the file could not be written, once it could not
         self.full: str | None = None  # why the reserve could not grow: the run must stop
         self.stopped_run = False  # the log asked the run to stop
-        self.on_stop: Callable[[str], None] | None = None  # how to ask (the run's stop request)
+        self._stop_request: StopRequest | None = None  # whom to ask, while a run goes (`stopping`)
         self._lock = threading.Lock()
         self._dirty = False
         self._closed = False
@@ -394,10 +401,21 @@ class Recorder:
         except OSError:
             self._reserve.extend_to(least)
 
+    @contextmanager
+    def stopping(self, stop: StopRequest) -> Iterator[None]:
+        """For the block's time (a run), a log that cannot take more asks `stop` to end the run
+        (the exchange in flight, then the abort motion); after it, nobody is asked."""
+        self._stop_request = stop
+        try:
+            yield
+        finally:
+            self._stop_request = None
+
     def _ask_to_stop(self, reason: str) -> None:
-        if not self.stopped_run and self.on_stop is not None:
+        stop = self._stop_request
+        if not self.stopped_run and stop is not None:
             self.stopped_run = True
-            self.on_stop(reason)
+            stop.request(reason)
 
     def check(self) -> None:
         """LogError if the log failed, or stopped the run: the run's outcome is this error."""

@@ -26,8 +26,9 @@ from dataclasses import dataclass, field
 
 from choreo.clock import MachineShowClock, RunClock, ShowClock, quick_thread_switches, sleep_until_show
 from choreo.errors import LinkError
+from choreo.events import STOPPED, RunResult, StopRequest
 from choreo.log.format import ERROR, WARNING
-from choreo.run.runner import Runner, RunResult, StopRequest
+from choreo.run.runner import Runner
 from choreo.show.model import PlannedStep
 
 SYNC_S = 0.002  # how far ahead a gate opened late releases the next step (see the docstring)
@@ -209,16 +210,16 @@ class Ensemble:
         thread to be up and spinning, and for a first play cued at the start to go out early."""
         return max(START_S, *(part.runner.preroll_s() for part in self.parts))
 
-    def run(self, show: ShowClock | None = None) -> EnsembleResult:
+    def run(self, show: ShowClock | None = None, on_idle: Callable[[], None] | None = None) -> EnsembleResult:
         """Every part in its thread; LinkError (naming the robot) when a fault stopped the show
         or a robot dropped out, else the combined result. `show`: the music's clock, else the
-        machine's, with show time 0 (or --from's step) `preroll_s` from now."""
+        machine's, with show time 0 (or --from's step) `preroll_s` from now. `on_idle`: each
+        runner's background work while it waits. Shared steps meet at this run's gates, handed
+        to each runner's run (nothing of a runner is set from here)."""
         self.show = show if show is not None else MachineShowClock(self.clock.mono() - self.origin + self.preroll_s())
         if self.unison:
             self._gates = Gates([p.robot for p in self.parts], self.clock, self.show, self.stop)
-            for part in self.parts:
-                part.runner.cues = self._gates
-        threads = [threading.Thread(target=self._play, args=(part,), name=f"choreo-{part.robot}", daemon=True)
+        threads = [threading.Thread(target=self._play, args=(part, on_idle), name=f"choreo-{part.robot}", daemon=True)
                    for part in self.parts]
         self.clock.source.admit(len(threads))
         with quick_thread_switches():
@@ -238,14 +239,14 @@ class Ensemble:
             while thread.is_alive():
                 thread.join(0.05)
 
-    def _play(self, part: Part) -> None:
+    def _play(self, part: Part, on_idle: Callable[[], None] | None = None) -> None:
         try:
-            self._results[part.robot] = part.runner.run(self.show)
+            self._results[part.robot] = part.runner.run(self.show, cues=self._gates, on_idle=on_idle)
         except LinkError as exc:
             self._fault(part, exc)
         except BaseException as exc:  # noqa: BLE001 - carried to the main thread, raised there
             self._errors[part.robot] = exc
-            self.stop.request("stopped")
+            self.stop.request(STOPPED)
         finally:
             if self._gates is not None:
                 self._gates.drop(part.robot)

@@ -9,85 +9,25 @@ listeners (the recorder, the progress display) and sends nothing the show did no
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
+from choreo.board.link import Link, Played
 from choreo.clock import MachineShowClock, RunClock, ShowClock, sleep_until_show
-from choreo.log.format import ABORT_LABEL, ERROR, INFO, LATE_MS, WARNING, StepRecord
 from choreo.errors import ChoreoError, Interrupted, LinkError
-from choreo.board.link import Link, Played, RxEvent, Tag, TxEvent
+from choreo.events import RunListener, RunResult, RxEvent, StepEvent, StopRequest, Tag, TxEvent, never
+from choreo.log.format import ABORT_LABEL, ERROR, INFO, LATE_MS, WARNING
 from choreo.show.model import SOLO, Plan, PlannedStep, StepKind
 
 if TYPE_CHECKING:
     from choreo.live.controls import Live
 
 POLL_S = 0.05  # the board refreshes its status every 50 ms: never poll faster
-PANIC = "panic"  # a stop request's reason for the operator's panic: stop frames, then every abort
-
-
-
-@dataclass(frozen=True)
-class StepEvent:
-    """A step starting or ending, on the show clock (seconds since the show started)."""
-
-    step: PlannedStep
-    event: str  # start | end
-    planned_s: float  # when it was due at run time
-    actual_s: float
-    time_ns: int
-    late_ms: float = 0.0
-    outcome: str | None = None  # end: ok | failed | aborted | timeout
-    robot: str | None = None  # whose step, in a show for several robots
-    start_s: float | None = None  # end of a play: when the frame that started the motion was written
-    lead_ms: float = 0.0  # end of a cued play: how far ahead of the cue its first frame was due
-
-    def record(self) -> StepRecord:
-        step = self.step
-        return StepRecord(step.index, step.kind.value, self.event, round(self.actual_s, 6),
-                          round(self.planned_s, 6), round(step.planned_s, 6), round(self.late_ms, 3),
-                          step.path, step.label, step.motion, step.at, self.outcome, self.robot,
-                          None if self.start_s is None else round(self.start_s, 6),
-                          round(self.lead_ms, 3) if self.lead_ms else None, True if step.go else None)
-
-
-class RunListener(Protocol):
-    def on_step(self, event: StepEvent) -> None: ...
-
-    def on_log(self, level: int, message: str, time_ns: int | None = None) -> None: ...
-
-
-@dataclass(frozen=True)
-class RunResult:
-    outcome: str  # done | aborted
-    steps_run: int
-    late_steps: int
-    show_s: float  # show clock at the end
-
-    def metadata(self) -> dict[str, str]:
-        return {"outcome": self.outcome, "steps_run": str(self.steps_run),
-                "late_steps": str(self.late_steps), "show_s": f"{self.show_s:.6f}"}
 
 
 def step_ref(step: PlannedStep) -> str:
     """How messages name a step: `step 4 'spin'` (the index `choreo plan` and `--from` use)."""
     return f"step {step.index}" + (f" '{step.label}'" if step.label else "")
-
-
-class StopRequest:
-    """Set from a signal handler: no more show frames after the one in flight."""
-
-    def __init__(self) -> None:
-        self._event = threading.Event()
-        self.reason = "stopped"
-
-    def request(self, reason: str = "stopped") -> None:
-        self.reason = reason
-        self._event.set()
-
-    def __call__(self) -> bool:
-        return self._event.is_set()
 
 
 class WaitTimeout(LinkError):
@@ -109,16 +49,15 @@ class Cues(Protocol):
 
 
 class Runner:
-    """Plays one robot's plan over its link on the show clock (one of several, with `robot`,
-    `zero` and `cues` given by `choreo.run.ensemble`)."""
+    """Plays one robot's plan over its link on the show clock (one of several, with `robot`;
+    `choreo.run.ensemble` hands each run its show clock and its `cues`)."""
 
     def __init__(self, plan: Plan, link: Link, *, clock: RunClock | None = None,
                  listeners: Iterable[RunListener] = (), start: int = 0, on_abort: int | None = None,
-                 stop: StopRequest | None = None, poll_s: float = POLL_S,
-                 on_idle: Callable[[], None] | None = None, robot: str | None = None,
-                 cues: Cues | None = None, live: Live | None = None, end: int | None = None) -> None:
+                 stop: StopRequest | None = None, poll_s: float = POLL_S, robot: str | None = None,
+                 live: Live | None = None, end: int | None = None) -> None:
         self.robot = robot
-        self.cues = cues
+        self.cues: Cues | None = None  # given by each run (see `run`)
         self.live = live  # where GO cues wait for the operator (None: a show without them)
         self.plan = plan
         self.link = link
@@ -129,7 +68,7 @@ class Runner:
         self.on_abort = on_abort
         self.stop = stop or StopRequest()
         self.poll_s = poll_s
-        self.on_idle = on_idle  # background work (the recorder's writes) done while waiting
+        self.on_idle: Callable[[], None] | None = None  # given by each run (see `run`)
         self.show: ShowClock = MachineShowClock(0.0)
         self._last_play_done: float | None = None  # monotonic time the last restore was answered
         self._last_motion: int | None = None
@@ -140,32 +79,42 @@ class Runner:
 
     # -- the show ----------------------------------------------------------------------------
 
-    def run(self, show: ShowClock | None = None) -> RunResult:
+    def run(self, show: ShowClock | None = None, *, cues: Cues | None = None,
+            on_idle: Callable[[], None] | None = None) -> RunResult:
         """Play the plan from `start`; LinkError on a fault, RunResult otherwise (done or aborted).
 
         `show`: the show clock, when several robots share it or the music keeps it (by default
-        the machine's, with the show starting now)."""
+        the machine's, with the show starting now). `cues`: where shared steps meet the other
+        robots' runners (the ensemble's gates). `on_idle`: background work done while waiting
+        (the log's writes, the clock samples). The run owns its wiring of the link: its retry
+        reporter and its stop request are attached for the run and detached when it ends,
+        however it ends, so a link run again (`--loop`) reports each failed try once."""
         steps = self.plan.steps[self.start:self.end]
         preroll = self.preroll_s()
         cursor = self._origin() - preroll  # a first play cued at the start may go out before it
         self.show = show if show is not None else MachineShowClock(self.clock.mono() - cursor)
-        self.link.listeners.append(_RetryReporter(self))
-        self.link.should_stop = self.stop
-        try:
-            for i, step in enumerate(steps):
-                mine = step.is_for(self.robot) if self.robot is not None else True
-                end = self._run_step(step, cursor, steps[i + 1] if i + 1 < len(steps) else None) if mine else None
-                if self.cues is not None:
-                    # a step for others takes, if none of them is left to do it, its planned time
-                    idle = None if mine else cursor + step.expected_s
-                    cursor = self.cues.through(step.index, self.robot, end, idle)  # type: ignore[arg-type]
-                    if cursor is None:
-                        raise Interrupted(self.stop.reason)
-                elif end is not None:
-                    cursor = end
-        except Interrupted:
-            return self._abort()
+        self.cues, self.on_idle = cues, on_idle
+        with self.link.subscribe(_RetryReporter(self)), self.link.stopping_on(self.stop):
+            try:
+                for i, step in enumerate(steps):
+                    cursor = self._next(step, cursor, steps[i + 1] if i + 1 < len(steps) else None)
+            except Interrupted:
+                return self._abort()
         return RunResult("done", self._run, self._late, self.show_time())
+
+    def _next(self, step: PlannedStep, cursor: float, following: PlannedStep | None) -> float:
+        """Run `step` if it is this robot's, meet the others after it (a shared step); the show
+        time the next step may start at."""
+        mine = step.is_for(self.robot) if self.robot is not None else True
+        end = self._run_step(step, cursor, following) if mine else None
+        if self.cues is not None and self.robot is not None:
+            # a step for others takes, if none of them is left to do it, its planned time
+            idle = None if mine else cursor + step.expected_s
+            through = self.cues.through(step.index, self.robot, end, idle)
+            if through is None:
+                raise Interrupted(self.stop.reason)
+            return through
+        return end if end is not None else cursor
 
     def _origin(self) -> float:
         """Where the show clock starts: 0 for a whole show, so that a cue on the first step
@@ -339,13 +288,13 @@ class Runner:
     def _abort(self) -> RunResult:
         """No more show frames; play the show's abort motion if it has one."""
         self._log(WARNING, f"show {self.stop.reason} at {self.show_time():.3f} s")
-        if self.stop.reason == PANIC and self.on_abort is None and self.link.moved:
+        if self.stop.panicked and self.on_abort is None and self.link.moved:
             self._halt()
         if self.on_abort is not None and self.link.moved:  # a robot the show never moved stays as it is
             self._log(INFO, f"playing abort motion {self.on_abort}")
-            self.link.should_stop = lambda: False
             try:
-                self._play(self.on_abort, Tag(None, ABORT_LABEL), ABORT_LABEL)
+                with self.link.stopping_on(never):  # the abort motion runs to its end
+                    self._play(self.on_abort, Tag(None, ABORT_LABEL), ABORT_LABEL)
             except LinkError as exc:
                 self._log(ERROR, f"abort motion {self.on_abort} failed: {exc}")
                 raise
@@ -354,9 +303,9 @@ class Runner:
     def _halt(self) -> None:
         """Panic on a robot without an abort motion: the stop frame halts the motion it plays."""
         self._log(INFO, "panic: stop frame")
-        self.link.should_stop = lambda: False
         try:
-            self.link.halt(Tag(None, ABORT_LABEL))
+            with self.link.stopping_on(never):  # the stop frame goes out whatever was asked
+                self.link.halt(Tag(None, ABORT_LABEL))
         except LinkError as exc:
             self._log(ERROR, f"panic stop frame failed: {exc}")
             raise
