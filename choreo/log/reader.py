@@ -27,7 +27,7 @@ from __future__ import annotations
 import os
 import struct
 import zlib
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Generator, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -307,7 +307,7 @@ class LogReader:
 
     # -- the messages ----------------------------------------------------------------------
 
-    def messages(self, topics: Collection[str] | None = None) -> Iterator[Message]:
+    def messages(self, topics: Collection[str] | None = None) -> Generator[Message, None, None]:
         """Every message in file order (the order the run wrote them) as (topic, log_time, data).
 
         `topics` limits it to those topics (the others are skipped without copying). Ends
@@ -345,37 +345,41 @@ class LogReader:
                     return
                 opcode, length = unpack_head(head)
                 if length > size - start - head_size:
-                    salvaged = self._truncated(opcode, start, length, read(size - start - head_size),
-                                               routes, wanted)
-                    for message in salvaged:
-                        count += 1
-                        yield message
-                    return
-                body = read(length)
-                if opcode == OP_CHUNK:
-                    try:
-                        records, first, last = self._chunk_records(body, start)
-                    except _Damaged as exc:
-                        self.cut = Cut(start, size, str(exc), damaged=True)
-                        return
-                    for message in self._in_chunk(records, first, last, routes, wanted):
-                        count += 1
-                        yield message
-                elif opcode == OP_MESSAGE:
-                    message = self._message(body, 0, length, routes, wanted)
-                    if message is not None:
-                        count += 1
-                        yield message
-                elif opcode == OP_DATA_END:
-                    self._check_footer(start + head_size + length)
-                    return
-                elif opcode == OP_FOOTER:
-                    self.footer = True
-                    return
+                    found: Iterable[Message] = self._truncated(opcode, start, length, read(size - start - head_size),
+                                                               routes, wanted)
+                    last = True
                 else:
-                    self._top_level(opcode, body, start)
+                    found, last = self._record(opcode, start, length, read(length), routes, wanted)
+                for message in found:
+                    count += 1
+                    yield message
+                if last:
+                    return
         finally:
             self.messages_read = count
+
+    def _record(self, opcode: int, start: int, length: int, body: bytes, routes: dict[int, str | None],
+                wanted: frozenset[str] | None) -> tuple[Iterable[Message], bool]:
+        """One whole top-level record: the messages it holds (read lazily from a chunk), and
+        whether it is the last record to read (the data's end, the footer, a damaged chunk)."""
+        if opcode == OP_CHUNK:
+            try:
+                records, first, last = self._chunk_records(body, start)
+            except _Damaged as exc:
+                self.cut = Cut(start, self._size, str(exc), damaged=True)
+                return (), True
+            return self._in_chunk(records, first, last, routes, wanted), False
+        if opcode == OP_MESSAGE:
+            message = self._message(body, 0, length, routes, wanted)
+            return ((message,) if message is not None else ()), False
+        if opcode == OP_DATA_END:
+            self._check_footer(start + RECORD_HEAD.size + length)
+            return (), True
+        if opcode == OP_FOOTER:
+            self.footer = True
+            return (), True
+        self._top_level(opcode, body, start)
+        return (), False
 
     def _route(self, channel_id: int, routes: dict[int, str | None],
                wanted: frozenset[str] | None) -> str | None:
@@ -503,7 +507,8 @@ class LogReader:
             pos = CHUNK_HEAD.size + name_length + 8
             compressed = partial[CHUNK_HEAD.size:CHUNK_HEAD.size + name_length]
             if compressed:
-                reason += f"; the cut chunk is {compressed.decode(errors='replace')}-compressed, so its messages are lost"
+                method = compressed.decode(errors="replace")
+                reason += f"; the cut chunk is {method}-compressed, so its messages are lost"
             elif have > pos:
                 salvaged = list(self._in_chunk(partial, pos, have, routes, wanted))
                 if salvaged:

@@ -11,22 +11,26 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from choreo.log.reader import LogReader
+
+if TYPE_CHECKING:  # for the types only: the show loader is imported when a log has a show attached
+    from choreo.show.model import Plan, Show
 
 
 @dataclass(frozen=True)
 class AttachedShow:
     """What a review takes from the attached show; empty when the log has none or it fails to load."""
 
-    show: object | None = None  # choreo.show.model.Show
-    plan: object | None = None  # choreo.show.model.Plan (with several robots, the first's)
+    show: Show | None = None
+    plan: Plan | None = None  # with several robots, the first's
     names: dict[int, str] = field(default_factory=dict)  # slot -> first name in `motions:`
     durations: dict[int, float] = field(default_factory=dict)  # slot -> expected seconds
     problem: str | None = None  # why the show could not be used, if it could not
-    plans: dict = field(default_factory=dict)  # robot -> Plan, in a show for several robots
+    plans: dict[str, Plan] = field(default_factory=dict)  # robot -> Plan, in a show for several robots
 
-    def plan_of(self, robot: str | None):  # type: ignore[no-untyped-def]
+    def plan_of(self, robot: str | None) -> Plan | None:
         """The robot's plan (None: the one robot's)."""
         return self.plan if robot is None else self.plans.get(robot)
 

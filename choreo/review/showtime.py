@@ -69,7 +69,7 @@ class ShowTimes:
                     record = parse(topic, data)
                     if isinstance(record, ClockRecord):
                         self.see_clock(log_time, record)
-                    else:
+                    elif isinstance(record, StepRecord):
                         self.see_step(log_time, record)
                 except (KeyError, TypeError, ValueError, AttributeError):
                     continue

@@ -16,9 +16,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from choreo.numtext import whole_number
-from choreo.log.format import (CHOREO_TOPICS, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING,
-                              ClockRecord, CommandRecord, LogLayouts, LogRecord, MotionPlay, MotionTracker, RxRecord, StepRecord, TxRecord,
-                              is_late, parse, slipped)
+from choreo.log.format import (CHOREO_TOPICS, ERROR, LATE_MS, WARNING, ClockRecord, CommandRecord, LogLayouts,
+                               LogRecord, MotionPlay, MotionTracker, Record, RxRecord, StepRecord, TxRecord, is_late,
+                               parse, slipped)
 from choreo.log.reader import Cut, LogReader
 from choreo.review.showtime import ShowTimes
 FRAME_KINDS = ("stop", "play", "restore", "status")
@@ -100,9 +100,8 @@ class MotionStats:
 
     def add(self, play: Play) -> None:
         self.plays += 1
-        if play.duration_s is not None:
-            if len(self.durations) < 10_000:
-                self.durations.append(play.duration_s)
+        if play.duration_s is not None and len(self.durations) < 10_000:
+            self.durations.append(play.duration_s)
 
     @property
     def measured(self) -> int:
@@ -199,6 +198,9 @@ class Summary:
         return self.run.get("show") or self.path.stem
 
 
+_SHARED_FIELDS = ("log", "state", "cut", "show", "result")  # a robot's record in a summary leaves out the whole log's
+
+
 def summary_record(summary: Summary) -> dict:
     """The summary as one JSON object (`choreo log summary --json`): the same figures as the
     text, in milliseconds and seconds, for scripts."""
@@ -238,7 +240,7 @@ def summary_record(summary: Summary) -> dict:
         "warnings": summary.warnings,
         "errors": summary.errors,
         **({"unison_skew": spread(summary.skew),
-            "robots": {name: {k: v for k, v in summary_record(robot).items() if k not in ("log", "state", "cut", "show", "result")}
+            "robots": {name: {k: v for k, v in summary_record(robot).items() if k not in _SHARED_FIELDS}
                        for name, robot in summary.robots.items()}} if summary.robots else {}),
     }
 
@@ -287,19 +289,13 @@ def summarize_reader(reader: LogReader) -> Summary:
             if topic not in CHOREO_TOPICS:
                 continue
             record = parse(topic, data)
-            if topic == LOG_TOPIC:
-                tally.log_line(record, log_time, summary)
-                continue
-            if topic == CLOCK_TOPIC:
-                _clock_sample(summary, record)
-                tally.times.see_clock(log_time, record)
-                continue
-            if topic == COMMAND_TOPIC:
-                _command(summary, record)
-                continue
-            robot = record.robot  # type: ignore[union-attr]
-            part = solo if robot is None else parts.get(robot) or parts.setdefault(robot, _Part.named(reader, robot, tally))
-            part.see(topic, record, log_time, tally)
+            if isinstance(record, (TxRecord, RxRecord, StepRecord)):
+                robot = record.robot
+                part = solo if robot is None else parts.get(robot) or parts.setdefault(
+                    robot, _Part.named(reader, robot, tally))
+                part.see(record, log_time, tally)
+            else:
+                _see_shared(summary, tally, record, log_time)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise reader.not_choreo(topic, count, exc) from None
     summary.messages = count
@@ -319,6 +315,17 @@ def summarize_reader(reader: LogReader) -> Summary:
     elif last_time is not None:
         summary.duration_s = tally.times.seconds(last_time)
     return summary
+
+
+def _see_shared(summary: Summary, tally: _Tally, record: Record, log_time: int) -> None:
+    """A record of the whole show, not of one robot: a log line, a clock sample, a command."""
+    if isinstance(record, LogRecord):
+        tally.log_line(record, log_time, summary)
+    elif isinstance(record, ClockRecord):
+        _clock_sample(summary, record)
+        tally.times.see_clock(log_time, record)
+    elif isinstance(record, CommandRecord):
+        _command(summary, record)
 
 
 def _clock_sample(summary: Summary, sample: ClockRecord) -> None:
@@ -346,13 +353,13 @@ class _Part:
         tracker = MotionTracker(layouts.layout(robot))
         return cls(Summary(reader.path, run, None, False, None), _Tally(whole.times), tracker)
 
-    def see(self, topic: str, record, log_time: int, whole: _Tally) -> None:  # type: ignore[no-untyped-def]
+    def see(self, record: TxRecord | RxRecord | StepRecord, log_time: int, whole: _Tally) -> None:
         tallies = (whole,) if self.tally is whole else (whole, self.tally)
-        if topic == RX_TOPIC:
+        if isinstance(record, RxRecord):
             for tally in tallies:
                 tally.reply(record, self.tally)
             self.tracker.rx(record, log_time)
-        elif topic == TX_TOPIC:
+        elif isinstance(record, TxRecord):
             for tally in tallies:
                 tally.frame(record, self.summary, self.tally)
             self.tracker.tx(record, log_time)
@@ -516,16 +523,32 @@ def _ms(value: float | None) -> str:
 
 def render(summary: Summary) -> Iterable[str]:
     """The summary as the lines `choreo log summary` prints."""
-    run = summary.run
+    yield from _render_run(summary)
+    yield from _render_outcome(summary)
+    yield from _render_wire(summary)
+    yield from _render_clock(summary)
+    yield from _render_motions(summary)
+    yield from _render_robots(summary)
+    yield from _render_commands(summary)
+    yield from _render_log_lines(summary)
+    yield f"messages  {summary.messages}"
+
+
+def _state(summary: Summary) -> str:
+    """Whether the log is whole, and if not, why."""
     if summary.complete:
-        state = "complete"
-    elif summary.cut is not None:
-        state = f"{summary.cut.state.upper()}: {summary.cut}"
-    elif summary.result is None:
-        state = "UNFINISHED: the run recorded no result (it did not close its log)"
-    else:
-        state = "UNFINISHED: no MCAP footer"
-    yield f"log       {summary.path}  ({state})"
+        return "complete"
+    if summary.cut is not None:
+        return f"{summary.cut.state.upper()}: {summary.cut}"
+    if summary.result is None:
+        return "UNFINISHED: the run recorded no result (it did not close its log)"
+    return "UNFINISHED: no MCAP footer"
+
+
+def _render_run(summary: Summary) -> Iterable[str]:
+    """Which log, which show, and the run that wrote it (where, when, with what)."""
+    run = summary.run
+    yield f"log       {summary.path}  ({_state(summary)})"
     sha = run.get("show_sha256", "")
     where = f" ({run['show_path']}" + (f", sha256 {sha[:12]}" if sha else "") + ")" if run.get("show_path") else ""
     yield f"show      {summary.show_name}{where}"
@@ -539,6 +562,10 @@ def render(summary: Summary) -> Iterable[str]:
                f"(choreo {run.get('version', '?')}, host {run.get('host', '?')})")
     else:
         yield "run       no `choreo` metadata: not a log written by choreo run"
+
+
+def _render_outcome(summary: Summary) -> Iterable[str]:
+    """How the run ended, and what its steps came to."""
     duration = f"{summary.duration_s:.3f} s" if summary.duration_s is not None else "-"
     if summary.result:
         outcome = summary.result.get("outcome", "?")
@@ -557,6 +584,10 @@ def render(summary: Summary) -> Iterable[str]:
     if summary.steps_unfinished:
         steps += f", {summary.steps_unfinished} unfinished"
     yield steps
+
+
+def _render_wire(summary: Summary) -> Iterable[str]:
+    """Frames and replies, and the timing figures: reply latency, cue lateness, motion starts."""
     kinds = ", ".join(f"{k} {n}" for k, n in summary.frames.items() if n or k in FRAME_KINDS)
     yield f"frames    {summary.frames_sent} sent ({kinds}); {summary.retries} retries"
     replies = ", ".join(f"{k.upper() if k in ('ack', 'nak') else k} {n}" for k, n in summary.replies.items())
@@ -572,17 +603,16 @@ def render(summary: Summary) -> Iterable[str]:
     if len(starts):
         yield (f"starts    motion start vs cue (start frame written): median {_ms(starts.median)}, p99 "
                f"{_ms(starts.p99)}, max {_ms(starts.max)} ({len(starts)} cued plays, sent early by their lead)")
-    yield from _render_clock(summary)
-    yield from _render_motions(summary)
-    yield from _render_robots(summary)
-    yield from _render_commands(summary)
+
+
+def _render_log_lines(summary: Summary) -> Iterable[str]:
+    """The warnings and errors the run logged: counted, the first few listed."""
     yield f"log lines {summary.warnings} warnings, {summary.errors} errors"
     for line in summary.log_lines:
         word = "error  " if line.level >= ERROR else "warning"
         yield f"  {line.show_s:9.3f} s  {word} {line.message}"
     if summary.warnings + summary.errors > len(summary.log_lines):
         yield f"  ... and {summary.warnings + summary.errors - len(summary.log_lines)} more (choreo log frames)"
-    yield f"messages  {summary.messages}"
 
 
 def _render_clock(summary: Summary) -> Iterable[str]:
@@ -596,7 +626,8 @@ def _render_clock(summary: Summary) -> Iterable[str]:
         kept = music + (f", on {backend})" if backend else ")")
     else:
         kept = "the machine's"
-    drift = f"; show clock minus machine clock {clock.drift_ms:+.3f} ms over {clock.span_s:.1f} s" if clock.samples > 1 else ""
+    drift = (f"; show clock minus machine clock {clock.drift_ms:+.3f} ms over {clock.span_s:.1f} s"
+             if clock.samples > 1 else "")
     yield f"clock     {kept}: {clock.samples} samples{drift}"
 
 
@@ -681,7 +712,8 @@ def _render_motions(summary: Summary) -> Iterable[str]:
         yield f"  motion {stats.motion:3d}  x{stats.plays:<5d} {spread}"
     if summary.plays_total <= LISTED_PLAYS:
         for play in summary.plays:
-            where = f"step {play.step}" + (f" '{play.label}'" if play.label else "") if play.step is not None else "abort"
+            label = f" '{play.label}'" if play.label else ""
+            where = f"step {play.step}{label}" if play.step is not None else "abort"
             took = (f"{play.duration_s:.3f} s" if play.duration_s is not None
                     else f"not measured (ended by {play.ended_by})")
             yield f"  {play.start_s:9.3f} s  motion {play.motion:3d}  {where}: {took}"
