@@ -265,13 +265,23 @@ def test_every_block_says_what_it_is(doc):
     assert unmarked == []
 
 
+def hidden(blocks: list[Block]) -> list[str]:
+    """Blocks marked text (or python) that hold what must be checked: a show file (`version:`
+    and `steps:` or `tracks:` at the left margin), or a line that runs choreo."""
+    found = []
+    for block in blocks:
+        if block.kind not in PLAIN_KINDS:
+            continue
+        if re.search(r"^version: ", block.text, re.M) and _SHOW_LINE.search(block.text.replace("version:", "")):
+            found.append(f"{block}: a show")
+        found += [f"{block}: {line}" for line in block.text.splitlines() if re.match(r"(\$ )?choreo ", line)]
+    return found
+
+
 @pytest.mark.parametrize("doc", DOCS, ids=lambda doc: str(doc.relative_to(ROOT)))
-def test_a_show_is_never_hidden_in_a_text_block(doc):
-    """A block that starts like a show file is marked yaml, so that it is loaded."""
-    hidden = [str(block) for block in blocks_of(doc)
-              if block.kind in PLAIN_KINDS and re.search(r"^version: ", block.text, re.M)
-              and _SHOW_LINE.search(block.text.replace("version:", ""))]
-    assert hidden == []
+def test_a_show_or_a_command_is_never_hidden_in_a_text_block(doc):
+    """A show is marked yaml and a command sh or console, so that they are checked."""
+    assert hidden(blocks_of(doc)) == []
 
 
 @pytest.mark.parametrize("block", blocks_of_kind({"python"}), ids=ids)
@@ -319,6 +329,14 @@ def test_an_unmarked_block_is_caught(tmp_path):
     doc = tmp_path / "doc.md"
     doc.write_text("text\n\n```\nchoreo run --what\n```\n\n  ```text\n  fine\n  ```\n")
     assert [block.info for block in blocks_of(doc)] == ["", "text"]
+
+
+def test_a_show_or_a_command_in_a_text_block_is_caught(tmp_path):
+    doc = tmp_path / "doc.md"
+    doc.write_text("```text\nversion: 1\nsteps:\n  - play: 1\n```\n```text\n$ choreo plan x.yaml\n```\n"
+                   "```text\nsteps: the word\nchoreo: the program\n```\n")
+    blocks = [Block(ROOT / "doc.md", block.line, block.info, block.text) for block in blocks_of(doc)]
+    assert hidden(blocks) == ["doc.md:1: a show", "doc.md:6: $ choreo plan x.yaml"]
 
 
 # --- links -------------------------------------------------------------------------------------
