@@ -18,7 +18,10 @@ from hypothesis import strategies as st
 import yaml
 
 from choreo.errors import Problem, ShowError
-from choreo.show.load import MAX_BYTES, MAX_DEPTH, MAX_PLAN_STEPS, load_schema, load_show, load_show_bytes
+from choreo.show.checks import MAX_PLAN_STEPS
+from choreo.show.load import load_schema, load_show, load_show_bytes
+from choreo.show.read import MAX_BYTES
+from choreo.show.yamlwalk import MAX_DEPTH
 from choreo.show.model import DEFAULT_DONE_TIMEOUT_S, Repeat, Step, StepKind
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -392,7 +395,7 @@ _DEEP = {
 @pytest.mark.parametrize("shape", sorted(_DEEP))
 def test_nesting_is_reported_in_choreos_words_whatever_the_parsers_limits(tmp_path, monkeypatch, parser, shape):
     """PyYAML 6.0.4's scanner stops `[[[[…` at its own limit before any event reaches choreo."""
-    monkeypatch.setattr("choreo.show.load._Parser", _PARSERS[parser])
+    monkeypatch.setattr("choreo.show.read._Parser", _PARSERS[parser])
     found = problems(tmp_path, _DEEP[shape])
     assert f"nested more than {MAX_DEPTH} levels deep" in [p.message for p in found]
     assert not any("YAML syntax error" in p.message for p in found)
@@ -409,7 +412,7 @@ def test_a_deep_key_at_a_block_scalars_column_is_said_in_choreos_words(tmp_path,
     never sees it; libyaml 0.2.5's scanner stops at its nesting limit, PyYAML 6.0's at a key
     longer than 1,024 characters. The text after `play: |` at the key's column is not the block
     scalar's (its text is deeper than the key), so the pre-scan counts its brackets."""
-    monkeypatch.setattr("choreo.show.load._Parser", _PARSERS[parser])
+    monkeypatch.setattr("choreo.show.read._Parser", _PARSERS[parser])
     found = problems(tmp_path, text)
     assert [p.message for p in found] == [f"nested more than {MAX_DEPTH} levels deep"]
 
@@ -429,7 +432,7 @@ def test_no_parser_limit_ever_decides_a_deep_files_message(context, parts, close
     text = context + "".join(opener + gap for opener, gap in parts) + ("1" + "]" * len(parts) if closed else "")
     for name, parser in _PARSERS.items():
         with pytest.MonkeyPatch.context() as patch:
-            patch.setattr("choreo.show.load._Parser", parser)
+            patch.setattr("choreo.show.read._Parser", parser)
             with pytest.raises(ShowError) as info:
                 load_show_bytes(text.encode())
         messages = [p.message for p in info.value.problems]
@@ -441,7 +444,7 @@ def test_no_parser_limit_ever_decides_a_deep_files_message(context, parts, close
 @pytest.mark.parametrize("parser", sorted(_PARSERS))
 def test_a_parsers_limit_past_a_syntax_error_leaves_the_syntax_error(tmp_path, monkeypatch, parser):
     """libyaml's scanner reads ahead to its nesting limit before its parser reaches `[a[b`."""
-    monkeypatch.setattr("choreo.show.load._Parser", _PARSERS[parser])
+    monkeypatch.setattr("choreo.show.read._Parser", _PARSERS[parser])
     found = problems(tmp_path, "version: 1\nsteps:\n  - play: [a[b, " + "[" * 5000)
     assert [(p.line, p.column) for p in found] == [(3, 13)]
     assert "nesting" not in found[0].message and "YAML syntax error" in found[0].message
@@ -456,7 +459,7 @@ def test_a_parsers_limit_past_a_syntax_error_leaves_the_syntax_error(tmp_path, m
     "# " + "[" * 200 + "\nversion: 1\nsteps: [{play: 1}, " + ", ".join(["{wait: 1}"] * 100) + "]\n",
 ], ids=["double-quoted", "single-quoted", "plain", "block scalar", "comment and many flat maps"])
 def test_brackets_that_are_text_or_flat_are_not_nesting(tmp_path, monkeypatch, parser, text):
-    monkeypatch.setattr("choreo.show.load._Parser", _PARSERS[parser])
+    monkeypatch.setattr("choreo.show.read._Parser", _PARSERS[parser])
     assert load_show(write(tmp_path, text)).steps
 
 

@@ -59,6 +59,7 @@ def _is_letter(ch: str) -> bool:
 
 SOLO = "robot"  # the name a one-robot show's robot goes by (`robot:`)
 ON_FAULT = ("stop", "continue")  # what the show does when one robot's link fails
+GO = "go"  # `at: go`: the cue that waits for the operator's GO, not a time
 
 
 @dataclass(frozen=True)

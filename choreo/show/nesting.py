@@ -37,6 +37,16 @@ class TooDeep:
     outermost: int  # the opening bracket of the flow collection it is inside, at depth 1
 
 
+@dataclass(frozen=True)
+class _LineEnd:
+    """The scan of a line's nodes is over (`found`: the bracket past the limit, if any)."""
+
+    found: int | None = None
+
+
+_LINE_END = _LineEnd()
+
+
 def too_deep_at(text: str, limit: int) -> TooDeep | None:
     """The first opening bracket that makes flow nesting deeper than `limit`, or None."""
     scan = _Scan(text, limit)
@@ -85,36 +95,35 @@ class _Scan:
             self._skip(_BLANKS)
             if self.i >= len(text):
                 return None
-            char = text[self.i]
             column = self.i - line_start
-            if parent is None:
-                parent = column
-            if char in "-?:" and self._blank_or_end(self.i + 1):
-                if char != ":":
-                    parent = column
-                self.i += 1
-            elif char in _NODE_PROPERTIES:
-                self._skip_word()
-            elif char in _OPEN:
-                found = self._flow()
-                if found is not None or not self._value_follows():
-                    return found
-                parent = column
-            elif char in "'\"":
-                self._quoted(char)
-                if not self._value_follows():
-                    return None
-                parent = column
-            elif char in "|>":
-                self._block_scalar(parent)
-                return None
-            elif char == "#" or char in _BREAKS:
-                self._to_next_line()
-                return None
-            elif not self._plain_in_block():
-                return None
-            else:
-                parent = column
+            after = self._node(column, column if parent is None else parent)
+            if isinstance(after, _LineEnd):
+                return after.found
+            parent = after
+
+    def _node(self, column: int, parent: int) -> int | _LineEnd:
+        """Past one token at `column`: the parent column for what follows on the line, or the
+        line's end (with the bracket past the limit, if the token was a flow that had one)."""
+        char = self.text[self.i]
+        if char in "-?:" and self._blank_or_end(self.i + 1):
+            self.i += 1
+            return parent if char == ":" else column
+        if char in _NODE_PROPERTIES:
+            self._skip_word()
+            return parent
+        if char in _OPEN:
+            found = self._flow()
+            return _LineEnd(found) if found is not None or not self._value_follows() else column
+        if char in "'\"":
+            self._quoted(char)
+            return column if self._value_follows() else _LINE_END
+        if char in "|>":
+            self._block_scalar(parent)
+            return _LINE_END
+        if char == "#" or char in _BREAKS:
+            self._to_next_line()
+            return _LINE_END
+        return column if self._plain_in_block() else _LINE_END
 
     def _plain_in_block(self) -> bool:
         """Past a key or plain scalar (brackets inside it are text): True if `: ` starts a value."""

@@ -77,45 +77,71 @@ def _compile(show: Show, flats: list[_Flat], links: dict[str, tuple[Layout, int]
     end being, for `wait: done`, the latest expected end of the motions of the robots it is for."""
     names = tuple(links)
     steps: dict[str, list[PlannedStep]] = {name: [] for name in names}
+    ends = _Ends(show, names)
+    frames = _Frames(links)
     clock = 0.0  # end of the step before, on the show clock
-    last_play: dict[str, tuple[float, int, float] | None] = dict.fromkeys(names)  # (start, motion, duration)
-    waited = dict.fromkeys(names, True)  # whether the last play's end has been waited for already
-    sequences: dict[tuple[str, int], tuple[protocol.Frame, ...]] = {}  # frames are immutable: build each once
     for index, flat in enumerate(flats):
         step = flat.step
         who = flat.robots or names
         start = max(clock, flat.at or 0.0)  # never rounded below its cue
-        motions: dict[str, int | None] = {}
-        if step.kind is StepKind.PLAY:
-            assert step.motion is not None, f"{flat.path}: a play step without a motion"
-            expected = 0.0
-            for name in who:
-                last_play[name], waited[name] = (start, step.motion, _duration(show, step.motion)), False
-        elif step.kind is StepKind.WAIT:
-            expected = float(step.seconds or 0.0)
-        else:
-            expected = max((_rest(last_play[name], start) for name in who if not waited[name]), default=0.0)
-            motions = {name: last_play[name][1] for name in who if last_play[name] is not None}  # type: ignore[index]
-            waited.update(dict.fromkeys(who, True))
+        expected, motions = ends.take(flat, who, start)
         for name in names:
-            layout, baud = links[name]
-            mine = name in who
             motion = step.motion if step.kind is StepKind.PLAY else motions.get(name)
-            if not mine or step.kind is StepKind.WAIT:
-                frames: tuple[protocol.Frame, ...] = ()
-            elif step.kind is StepKind.PLAY:
-                key = (name, step.motion)  # type: ignore[assignment]
-                frames = sequences.get(key) or sequences.setdefault(key, layout.play_sequence(step.motion, baud=baud))
-            else:
-                frames = (layout.status,)
             steps[name].append(PlannedStep(
                 index=index, path=flat.path, kind=step.kind, line=step.line, label=flat.label, motion=motion,
                 motion_name=step.motion_name if step.kind is StepKind.PLAY else _name_of(show, motion),
-                seconds=step.seconds, at=flat.at, at_beat=flat.at_beat, go=flat.go, planned_s=start, expected_s=expected,
-                frames=frames,
+                seconds=step.seconds, at=flat.at, at_beat=flat.at_beat, go=flat.go, planned_s=start,
+                expected_s=expected, frames=frames.of(name, step) if name in who else (),
                 robots=flat.robots if unison else None))
         clock = max(start, _round(start + expected))  # rounding never moves time backwards
     return {name: Plan(tuple(steps[name]), clock, links[name][0].name, name, unison) for name in names}
+
+
+class _Ends:
+    """Per robot, its last play and whether its end has been waited for: what `wait: done` takes."""
+
+    def __init__(self, show: Show, names: tuple[str, ...]) -> None:
+        self.show = show
+        self.last_play: dict[str, tuple[float, int, float] | None] = dict.fromkeys(names)  # (start, motion, duration)
+        self.waited = dict.fromkeys(names, True)
+
+    def take(self, flat: _Flat, who: tuple[str, ...], start: float) -> tuple[float, dict[str, int]]:
+        """The step's expected length from `start`, and for `wait: done` the motion each robot waits for."""
+        step = flat.step
+        if step.kind is StepKind.PLAY:
+            assert step.motion is not None, f"{flat.path}: a play step without a motion"
+            for name in who:
+                self.last_play[name] = (start, step.motion, _duration(self.show, step.motion))
+                self.waited[name] = False
+            return 0.0, {}
+        if step.kind is StepKind.WAIT:
+            return float(step.seconds or 0.0), {}
+        expected = max((_rest(self.last_play[name], start) for name in who if not self.waited[name]), default=0.0)
+        motions = {name: play[1] for name in who if (play := self.last_play[name]) is not None}
+        self.waited.update(dict.fromkeys(who, True))
+        return expected, motions
+
+
+class _Frames:
+    """The frames each robot's link sends for a step; a play's sequence is built once per robot
+    and motion (frames are immutable, and a show plays the same few motions again and again)."""
+
+    def __init__(self, links: dict[str, tuple[Layout, int]]) -> None:
+        self.links = links
+        self.sequences: dict[tuple[str, int], tuple[protocol.Frame, ...]] = {}
+
+    def of(self, name: str, step: Step) -> tuple[protocol.Frame, ...]:
+        layout, baud = self.links[name]
+        if step.kind is StepKind.WAIT:
+            return ()
+        if step.kind is StepKind.WAIT_DONE:
+            return (layout.status,)
+        assert step.motion is not None, f"{step.path}: a play step without a motion"
+        key = (name, step.motion)
+        found = self.sequences.get(key)
+        if found is None:
+            found = self.sequences[key] = layout.play_sequence(step.motion, baud=baud)
+        return found
 
 
 def _rest(play: tuple[float, int, float] | None, now: float) -> float:

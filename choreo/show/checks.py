@@ -1,0 +1,347 @@
+"""What a schema cannot say about a show: the checks of its meaning.
+
+Motion names exist, `wait: done` follows a play, cues do not go back in time, labels are
+unique, no two robots share a port, every declared robot has a track, the music can be played,
+the show does not expand to an absurd number of steps. The checks run after the schema's, on
+what it left standing: a value the schema (or the reading) has already found wrong is skipped
+(`_Walk.ok`), so that one mistake gets one message.
+"""
+
+from __future__ import annotations
+
+import unicodedata
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeGuard
+
+from choreo.show.build import tempo_of
+from choreo.show.model import GO, MUSIC_FORMATS, SOLO, hidden_character, same_port
+from choreo.show.report import Doc, JsonPath, Report, closest, format_path, value_text
+from choreo.userfile import problem as file_problem
+
+MAX_PLAN_STEPS = 100_000  # steps after repeats expand
+
+
+@dataclass
+class _Walk:
+    """What the semantic pass carries along the steps, in run order."""
+
+    doc: Doc
+    report: Report
+    motions: dict[str, Any] = field(default_factory=dict)  # name -> entry, the well-formed ones
+    labels: dict[str, JsonPath] = field(default_factory=dict)
+    last_cue: tuple[float, JsonPath] | None = None
+    played: set[str] = field(default_factory=set)  # robots that have played a motion so far
+    robots: tuple[str, ...] = (SOLO,)  # the robots of the step list being walked
+    declared: tuple[str, ...] = ()  # `robots:` (empty for a one-robot show)
+    in_track: bool = False
+
+    def ok(self, path: JsonPath) -> bool:
+        """Whether the value at `path` passed the schema (so it is the type it should be)."""
+        return all(path[:n] not in self.report.flagged for n in range(len(path) + 1))
+
+    def problem(self, path: JsonPath, message: str) -> None:
+        """A problem with the value at `path`."""
+        self.report.add(self.doc.mark(path), path, message)
+
+    def key_problem(self, path: JsonPath, message: str) -> None:
+        """A problem with the key at `path` (what it names), pointed at the key."""
+        self.report.add(self.doc.key_mark(path), path, message)
+
+
+def check_meaning(doc: Doc, report: Report, folder: Path | None = None) -> None:
+    """Report every meaning check the document fails. `folder`: where the show file is, to
+    look for its music there (None: not looked for)."""
+    data = doc.data
+    walk = _Walk(doc, report)
+    motions = data.get("motions") if isinstance(data.get("motions"), dict) else {}
+    walk.motions = {name: entry for name, entry in motions.items()
+                    if isinstance(entry, dict) and walk.ok(("motions", name))}
+    _check_motion_table(walk)
+    if isinstance(data.get("name"), str) and walk.ok(("name",)):
+        _check_visible(walk, ("name",), data["name"], "the show's name")
+    if "on_abort" in data and walk.ok(("on_abort",)):
+        _check_motion_ref(walk, ("on_abort",), data["on_abort"])
+    _check_robots(walk)
+    _check_music(walk, folder)
+    steps = data.get("steps")
+    if isinstance(steps, list) and walk.ok(("steps",)):
+        walk.robots = walk.declared or (SOLO,)
+        _check_total(walk, ("steps",), _check_steps(walk, steps, ("steps",), looping=False))
+    tracks = data.get("tracks")
+    if isinstance(tracks, dict) and walk.ok(("tracks",)) and walk.declared:
+        _check_tracks(walk, tracks)
+
+
+def _check_music(walk: _Walk, folder: Path | None) -> None:
+    """A sound file choreo can decode, which exists beside the show (when it has a folder)."""
+    music = walk.doc.data.get("music")
+    path = ("music", "file")
+    if not isinstance(music, dict) or not isinstance(music.get("file"), str) or not walk.ok(path):
+        return
+    file = music["file"]
+    if Path(file).suffix.lower() not in MUSIC_FORMATS:
+        walk.problem(path, f"{file}: choreo plays {', '.join(f[1:] for f in MUSIC_FORMATS)} "
+                           "files: convert it, or give one of those")
+    elif folder is not None:
+        where = folder / file
+        what = file_problem(where, "sound file")
+        if what is not None:
+            walk.problem(path, f"{file}: {what} ({where}; the path is relative to the show file)")
+
+
+def _check_total(walk: _Walk, path: JsonPath, total: int) -> None:
+    if total > MAX_PLAN_STEPS:
+        walk.key_problem(path, f"the show expands to {total:,} steps or more; the limit is {MAX_PLAN_STEPS:,}")
+
+
+# --------------------------------------------------------------------------- robots
+
+
+def _check_robots(walk: _Walk) -> None:
+    """Each robot's abort motion is a motion; no two robots share a port; `on_fault` is for
+    a robot among several."""
+    data = walk.doc.data
+    robot = data.get("robot")
+    if isinstance(robot, dict) and "on_fault" in robot and walk.ok(("robot", "on_fault")):
+        walk.key_problem(("robot", "on_fault"),
+                         "`on_fault` decides what the other robots do: it is for a robot in `robots:`")
+    if isinstance(robot, dict) and "on_abort" in robot and walk.ok(("robot", "on_abort")):
+        _check_motion_ref(walk, ("robot", "on_abort"), robot["on_abort"])
+    robots = data.get("robots")
+    if not isinstance(robots, dict) or not walk.ok(("robots",)):
+        return
+    walk.declared = tuple(robots)
+    ports: dict[str, str] = {}
+    for name, settings in robots.items():
+        here = ("robots", name)
+        if not isinstance(settings, dict) or not walk.ok(here):
+            continue
+        if "on_abort" in settings and walk.ok(here + ("on_abort",)):
+            _check_motion_ref(walk, here + ("on_abort",), settings["on_abort"])
+        port = settings.get("port")
+        if not isinstance(port, str) or port.strip().lower().startswith("sim://"):
+            continue  # every simulator is a board of its own
+        first = ports.setdefault(same_port(port), name)
+        if first != name:
+            walk.problem(here + ("port",), f"port {port} is already robot {first}'s: each robot needs its own port")
+
+
+def _check_tracks(walk: _Walk, tracks: dict[str, Any]) -> None:
+    """A track for each declared robot and for no other; each track is walked as a show of
+    its own (cues in order, `wait: done` after a play), labels unique across them all."""
+    total = 0
+    for name, steps in tracks.items():
+        here = ("tracks", name)
+        if name not in walk.declared:
+            walk.key_problem(here, _unknown_robot(name, walk.declared, "a track for"))
+            continue
+        if not isinstance(steps, list) or not walk.ok(here):
+            continue
+        walk.robots, walk.in_track, walk.last_cue, walk.played = (name,), True, None, set()
+        total += _check_steps(walk, steps, here, looping=False)
+    missing = [name for name in walk.declared if name not in tracks]
+    if missing:
+        walk.key_problem(("tracks",), f"robot {missing[0]!r} has no track: give it one (a robot that stands "
+                                      "still can `wait:` for the show's length), or leave it out of `robots:`")
+    _check_total(walk, ("tracks",), total)
+
+
+def _unknown_robot(name: str, declared: tuple[str, ...], what: str) -> str:
+    close = closest(name, declared)
+    hint = f"did you mean {close!r}? " if close else ""
+    return f"{what} robot {name!r}, which `robots:` does not name: {hint}the robots are {', '.join(declared)}"
+
+
+def _step_robots(walk: _Walk, step: dict[str, Any], here: JsonPath) -> tuple[str, ...]:
+    """The robots a step is for, after checking its `robots:`; unknown names are reported."""
+    given = step.get("robots")
+    path = here + ("robots",)
+    if given is None or not walk.ok(path):
+        return walk.robots
+    if not walk.declared:
+        walk.key_problem(path, "a step's `robots:` picks among the show's `robots:`; this show has one robot "
+                               "(`robot:`)")
+        return walk.robots
+    if walk.in_track:
+        walk.key_problem(path, "a step in a track is that robot's own: leave out `robots:` (or write the step "
+                               "in the shared `steps:`)")
+        return walk.robots
+    known = [name for name in given if isinstance(name, str) and name in walk.robots]
+    for index, name in enumerate(given):
+        if not isinstance(name, str):
+            continue  # the schema has said what is wrong with it
+        if name not in walk.declared:
+            walk.problem(path + (index,), _unknown_robot(name, walk.declared, "a step for"))
+        elif name not in walk.robots:
+            walk.problem(path + (index,), f"robot {name!r} is not among the repeat's robots ({', '.join(walk.robots)})")
+    return tuple(known) or walk.robots
+
+
+# --------------------------------------------------------------------------- motions
+
+
+def _check_motion_table(walk: _Walk) -> None:
+    """Two names for one slot are fine; two different durations for it are a contradiction."""
+    durations: dict[int, tuple[float, str]] = {}
+    for name, entry in walk.motions.items():
+        hth4 = ("motions", name, "hth4_name")
+        if isinstance(entry.get("hth4_name"), str) and walk.ok(hth4):
+            _check_visible(walk, hth4, entry["hth4_name"], "the Heart to Heart 4 name")
+        path = ("motions", name, "duration")
+        number, duration = entry.get("number"), entry.get("duration")
+        if not (walk.ok(path) and walk.ok(("motions", name, "number"))) or duration is None \
+                or not isinstance(number, (int, float)):
+            continue
+        first = durations.setdefault(int(number), (duration, name))
+        if first[0] != duration:
+            walk.problem(path, f"motion {int(number)} is also {first[1]!r} with duration {value_text(first[0])}: "
+                               "give one duration")
+
+
+def _check_motion_ref(walk: _Walk, path: JsonPath, ref: Any) -> None:
+    if isinstance(ref, str) and ref not in walk.motions:
+        walk.problem(path, _unknown_motion(ref, sorted(walk.motions)))
+
+
+def _unknown_motion(name: str, known: list[str]) -> str:
+    if not known:
+        return f"unknown motion {name!r}: name it in `motions:` with its slot number, or play the number"
+    close = closest(name, known)
+    hint = f"did you mean {close!r}? " if close else ""
+    return f"unknown motion {name!r}: {hint}the show's motions are {', '.join(known)}"
+
+
+# --------------------------------------------------------------------------- steps
+
+
+def _check_steps(walk: _Walk, steps: list[Any], path: JsonPath, looping: bool) -> int:
+    """Check a list of steps in run order; the number of plan steps it expands to."""
+    total = 0
+    for index, step in enumerate(steps):
+        here = path + (index,)
+        total = min(total + _check_step(walk, step, here, looping), MAX_PLAN_STEPS + 1)
+    return total
+
+
+def _check_step(walk: _Walk, step: Any, here: JsonPath, looping: bool) -> int:
+    """Check one step; the number of plan steps it expands to (capped past the limit)."""
+    if not isinstance(step, dict) or not walk.ok(here):
+        return 1
+    _check_cue(walk, step, here, looping)
+    _check_label(walk, step, here)
+    robots = _step_robots(walk, step, here)
+    if "play" in step:
+        if walk.ok(here + ("play",)):
+            _check_motion_ref(walk, here + ("play",), step["play"])
+        walk.played.update(robots)
+    elif step.get("wait") == "done" and not walk.played.issuperset(robots):
+        idle = [name for name in robots if name not in walk.played]
+        whose = f" (robot {idle[0]!r} has played nothing yet)" if walk.declared and not walk.in_track else ""
+        walk.problem(here + ("wait",), f"`wait: done` has no motion to wait for{whose}: play one before it")
+    elif "repeat" in step and isinstance(step.get("steps"), list) and walk.ok(here + ("steps",)):
+        return _check_repeat(walk, step, here, robots, looping)
+    return 1
+
+
+def _check_repeat(walk: _Walk, step: dict[str, Any], here: JsonPath, robots: tuple[str, ...], looping: bool) -> int:
+    """A repeat's steps, walked once for the robots it is for; the plan steps of every pass."""
+    repeat = step["repeat"]
+    count = int(repeat) if walk.ok(here + ("repeat",)) and isinstance(repeat, (int, float)) else 1
+    _check_repeat_label(walk, step, here)
+    outer, walk.robots = walk.robots, robots
+    inner = _check_steps(walk, step["steps"], here + ("steps",), looping or count > 1)
+    walk.robots = outer
+    return min(count * inner, MAX_PLAN_STEPS + 1)
+
+
+def _check_cue(walk: _Walk, step: dict[str, Any], here: JsonPath, looping: bool) -> None:
+    at = step.get("at")
+    path = here + ("at",)
+    if at is None or not walk.ok(path) or isinstance(at, bool) or at == GO:
+        return  # a GO cue may be anywhere: in a repeat, every pass waits for its GO
+    if isinstance(at, dict):
+        at = _beat_seconds(walk, at, path)
+        if at is None:
+            return
+    if looping:
+        walk.problem(path, "a cue inside a repeat would be late on every pass after the first: "
+                           "put `at:` on the repeat step")
+        return
+    if walk.last_cue is not None and at < walk.last_cue[0]:
+        prev, prev_path = walk.last_cue
+        line = walk.doc.mark(prev_path)[0]
+        walk.problem(path, f"cue at {at:g} s comes after the cue at {prev:g} s ({format_path(prev_path)}, "
+                           f"line {line}): cues must not go back in time")
+        return
+    walk.last_cue = (at, path)
+
+
+def _beat_seconds(walk: _Walk, at: dict[str, Any], path: JsonPath) -> float | None:
+    """A bar-and-beat cue in seconds; None (reported) without a usable tempo or past the bar."""
+    tempo = walk.doc.data.get("tempo")
+    if not isinstance(tempo, dict) or not walk.ok(("tempo",)):
+        if not isinstance(tempo, dict):
+            walk.problem(path, "a cue in bars and beats needs the music's `tempo:` "
+                               "(e.g. `tempo: {bpm: 120, offset: 0.5, meter: 4}`), or give seconds")
+        return None
+    bar, beat = at.get("bar"), at.get("beat", 1)
+    fields_ok = all(walk.ok(("tempo", key)) for key in tempo) and all(walk.ok(path + (key,)) for key in at)
+    if not fields_ok or not _number(bar) or not _number(beat):
+        return None  # the schema has said what is wrong with them
+    built = tempo_of(tempo)
+    if float(beat) >= built.meter + 1:
+        walk.problem(path + ("beat",), f"beat {value_text(at.get('beat'))}: a bar has {built.meter} beats "
+                                       f"(tempo.meter), so beats run from 1 to below {built.meter + 1}")
+        return None
+    return built.seconds(int(bar), float(beat))
+
+
+def _number(value: Any) -> TypeGuard[int | float]:
+    """A number as the schema means it (YAML's true and false are not 1 and 0)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+# --------------------------------------------------------------------------- text
+
+
+def _check_visible(walk: _Walk, path: JsonPath, text: str, what: str) -> bool:
+    """Text that choreo prints (names, labels) holds no control or invisible characters: they
+    would reach terminals and logs raw (an escape sequence, a right-to-left override)."""
+    hidden = hidden_character(text)
+    if hidden is None:
+        return True
+    name = unicodedata.name(hidden, "a control character")
+    walk.problem(path, f"{what} holds U+{ord(hidden):04X} ({name}), which is invisible or controls the "
+                       "terminal: remove it")
+    return False
+
+
+def _check_label(walk: _Walk, step: dict[str, Any], here: JsonPath) -> None:
+    label = step.get("label")
+    path = here + ("label",)
+    if not isinstance(label, str) or not walk.ok(path) or not _check_visible(walk, path, label, "the label"):
+        return
+    first = walk.labels.get(label)
+    if first is not None:
+        line = walk.doc.mark(first)[0]
+        walk.problem(path, f"label {label!r} is already used by {format_path(first[:-1])} (line {line}): "
+                           "labels must be unique")
+        return
+    walk.labels[label] = path
+
+
+def _check_repeat_label(walk: _Walk, step: dict[str, Any], here: JsonPath) -> None:
+    """A repeat's label names its first plan step, which cannot carry a second label."""
+    if not isinstance(step.get("label"), str):
+        return
+    inner, path = step, here
+    while isinstance(inner.get("steps"), list) and inner["steps"] and isinstance(inner["steps"][0], dict):
+        inner, path = inner["steps"][0], path + ("steps", 0)
+        if isinstance(inner.get("label"), str):
+            line = walk.doc.mark(here + ("label",))[0]
+            walk.problem(path + ("label",), f"this label and the repeat's label {step['label']!r} (line {line}) "
+                                            "would name the same step: keep one")
+            return
+        if "repeat" not in inner:
+            return
