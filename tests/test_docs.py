@@ -417,3 +417,52 @@ def test_the_readme_gives_the_test_command_ci_runs():
     readme = [line for block in blocks_of(README) if block.kind == "sh"
               for line, _ in command_lines(block) if "-m pytest" in line]
     assert readme and [line.split("&&")[-1].strip() for line in readme] == [ci] * len(readme)
+
+
+# --- the code's citations of the docs -------------------------------------------------------------
+
+_CITED = re.compile(r"(?P<file>\bREADME(?:\.md)?|\bdocs/\w+\.md|\b[A-Z][A-Z_]+\.md)(?=(?P<rest>.{0,120}))")
+
+
+def headings(path: Path) -> set[str]:
+    return {heading.strip().replace("`", "") for heading in re.findall(r"^#+ +(.+)$", without_blocks(path), re.M)}
+
+
+def citations(source: str) -> Iterator[tuple[str, str | None]]:
+    """(file, section or None) for each Markdown file the source names: `docs/x.md, "A: B"` is
+    section B under A; `docs/x.md: A)` section A; the README is always cited with its section."""
+    text = re.sub(r"\s*\n\s*(#\s*)?", " ", source)  # a citation may run over a comment's lines
+    for match in _CITED.finditer(text):
+        rest = match["rest"]
+        section = re.match(r'[,:]? *"([^"]+)"', rest) or re.match(r"[,:] *([^)\"]+)\)", rest)
+        yield match["file"], section[1].strip() if section else None
+
+
+def citation_problems(source: str) -> list[str]:
+    problems = []
+    for file, section in citations(source):
+        path = ROOT / ("README.md" if file.startswith("README") else file)
+        if not path.is_file():
+            problems.append(f"{file}: no such file in the repository")
+        elif section is None and path == README:
+            problems.append(f"{file}: name the section (the README is a page of links; the reference is in docs/)")
+        elif section and not set(section.split(": ")) <= headings(path):
+            problems.append(f"{file}, {section!r}: no such heading")
+    return problems
+
+
+def test_the_code_cites_docs_that_exist():
+    """choreo's modules say where a fact is explained: the file and the heading they name exist."""
+    problems = [f"{path.relative_to(ROOT)}: {problem}" for path in sorted((ROOT / "choreo").rglob("*.py"))
+                for problem in citation_problems(path.read_text(encoding="utf-8"))]
+    assert problems == []
+
+
+def test_a_citation_of_a_missing_doc_or_heading_is_caught():
+    source = '''"""As ERRATA.md says; (docs/hardware.md: Board layouts); see the README.
+    docs/hardware.md, "Errata: The config word"; docs/hardware.md, "Errata: The
+    # config word"; docs/live.md, "Nowhere"; README, "Exit codes"."""'''
+    assert citation_problems(source) == [
+        "ERRATA.md: no such file in the repository",
+        "README: name the section (the README is a page of links; the reference is in docs/)",
+        "docs/live.md, 'Nowhere': no such heading"]
