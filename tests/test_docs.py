@@ -434,7 +434,7 @@ def citations(source: str) -> Iterator[tuple[str, str | None]]:
     text = re.sub(r"\s*\n\s*(#\s*)?", " ", source)  # a citation may run over a comment's lines
     for match in _CITED.finditer(text):
         rest = match["rest"]
-        section = re.match(r'[,:]? *"([^"]+)"', rest) or re.match(r"[,:] *([^)\"]+)\)", rest)
+        section = re.match(r'[,:] *"([^"]+)"', rest) or re.match(r"[,:] *([^)\"]+)\)", rest)
         yield match["file"], section[1].strip() if section else None
 
 
@@ -461,7 +461,7 @@ def test_the_code_cites_docs_that_exist():
 def test_a_citation_of_a_missing_doc_or_heading_is_caught():
     source = '''"""As ERRATA.md says; (docs/hardware.md: Board layouts); see the README.
     docs/hardware.md, "Errata: The config word"; docs/hardware.md, "Errata: The
-    # config word"; docs/live.md, "Nowhere"; README, "Exit codes"."""'''
+    # config word"; docs/live.md, "Nowhere"; README, "Exit codes"; "docs/live.md") f("x")."""'''
     assert citation_problems(source) == [
         "ERRATA.md: no such file in the repository",
         "README: name the section (the README is a page of links; the reference is in docs/)",
