@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -36,8 +37,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_import(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from choreo.errors import one_line
     from choreo.show.hth4 import read_project
     from choreo.show.starter import schema_reference, starter_show
@@ -65,13 +64,14 @@ def _write_stdout(text: str) -> None:
     buffer.flush()
 
 
-def _write_new(path, text: str) -> None:  # type: ignore[no-untyped-def]  # Path: imported lazily
+def _write_new(path: Path, text: str) -> None:
     from choreo.errors import UsageError
 
     try:
         with open(path, "x", encoding="utf-8", newline="\n") as stream:
             stream.write(text)
     except FileExistsError:
-        raise UsageError(f"{path}: already exists; `choreo import` never overwrites a file: give another with -o") from None
+        raise UsageError(f"{path}: already exists; `choreo import` never overwrites a file: "
+                         "give another with -o") from None
     except OSError as exc:
         raise UsageError(f"{path}: cannot write the show: {exc.strerror or exc}") from None

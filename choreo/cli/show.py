@@ -10,6 +10,11 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # the model is imported by the handlers, not by `choreo --help`
+    from choreo.show.model import Plan, PlannedStep, Show
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -68,14 +73,14 @@ def run_validate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _show_record(show, plan) -> dict:  # type: ignore[no-untyped-def]
+def _show_record(show: Show, plan: Plan) -> dict[str, Any]:
     return {"name": show.name, "layout": plan.layout, "steps": len(plan.steps),
             "motions": plan.motions_used(), "estimated_s": plan.estimated_s, **_clock_record(show)}
 
 
-def _clock_record(show) -> dict:  # type: ignore[no-untyped-def]
+def _clock_record(show: Show) -> dict[str, Any]:
     """The show's music and tempo, where it has them."""
-    record: dict = {}
+    record: dict[str, Any] = {}
     if show.music is not None:
         record["music"] = {"file": show.music.file, "start": show.music.start}
     if show.tempo is not None:
@@ -83,7 +88,7 @@ def _clock_record(show) -> dict:  # type: ignore[no-untyped-def]
     return record
 
 
-def _clock_lines(show) -> list[str]:  # type: ignore[no-untyped-def]
+def _clock_lines(show: Show) -> list[str]:
     """What the start times are measured on: the music's position, and its bars."""
     lines = []
     if show.music is not None:
@@ -95,7 +100,7 @@ def _clock_lines(show) -> list[str]:  # type: ignore[no-untyped-def]
     return lines
 
 
-def _plan_record(show, plan) -> dict:  # type: ignore[no-untyped-def]
+def _plan_record(show: Show, plan: Plan) -> dict[str, Any]:
     steps = [{"index": step.index, "path": step.path, "label": step.label, "kind": step.kind.value,
               "start_s": step.planned_s, "cue": step.at,
               **({"cue_bar": step.at_beat[0], "cue_beat": step.at_beat[1]} if step.at_beat else {}),
@@ -105,7 +110,7 @@ def _plan_record(show, plan) -> dict:  # type: ignore[no-untyped-def]
     return {"path": show.path, **_show_record(show, plan), "plan": steps}
 
 
-def summary_line(show, plans) -> str:  # type: ignore[no-untyped-def]  # model types: imported lazily
+def summary_line(show: Show, plans: dict[str, Plan]) -> str:
     """`shows/x.yaml: ok, 26 steps, motions 0 home, 1 bow, estimated 22.0 s` (with several
     robots: `ok, 2 robots, 30 steps, ...`, steps counted per robot)."""
     names: dict[int, str] = {}
@@ -141,7 +146,7 @@ def run_plan(args: argparse.Namespace) -> int:
     return 0
 
 
-def _plans_record(show, plans) -> dict:  # type: ignore[no-untyped-def]
+def _plans_record(show: Show, plans: dict[str, Plan]) -> dict[str, Any]:
     """One robot: the plan as before; several: `robots`, each robot's plan by name."""
     if not show.ensemble:
         return _plan_record(show, *plans.values())
@@ -155,7 +160,7 @@ def _plans_record(show, plans) -> dict:  # type: ignore[no-untyped-def]
             "estimated_s": max(plan.estimated_s for plan in plans.values()), **_clock_record(show), "robots": robots}
 
 
-def ensemble_lines(show, plans) -> list[str]:  # type: ignore[no-untyped-def]
+def ensemble_lines(show: Show, plans: dict[str, Plan]) -> list[str]:
     """A section per robot: the steps it does (shared steps keep their index, so a gap is a step
     for other robots), then the show's total."""
     form = "tracks, one per robot" if show.tracks else "shared steps"
@@ -171,7 +176,7 @@ def ensemble_lines(show, plans) -> list[str]:  # type: ignore[no-untyped-def]
     return lines
 
 
-def plan_lines(show, plan) -> list[str]:  # type: ignore[no-untyped-def]
+def plan_lines(show: Show, plan: Plan) -> list[str]:
     """The plan as aligned text: a header, one line a step, the total."""
     lines = [f"{show.name} ({show.path}), layout {plan.layout}{_layout_note(plan)}", *_clock_lines(show)]
     lines.extend(_step_table(plan.steps))
@@ -179,7 +184,7 @@ def plan_lines(show, plan) -> list[str]:  # type: ignore[no-untyped-def]
     return lines
 
 
-def _step_table(steps, shared: bool = False) -> list[str]:  # type: ignore[no-untyped-def]
+def _step_table(steps: Sequence[PlannedStep], shared: bool = False) -> list[str]:
     """Header and one aligned line a step; `shared`: who else does each step."""
     digits = max((len(f"{step.planned_s:.3f}") for step in steps), default=1)
     rows = [
@@ -203,7 +208,7 @@ def _step_table(steps, shared: bool = False) -> list[str]:  # type: ignore[no-un
             for row in cells]
 
 
-def _layout_note(plan) -> str:  # type: ignore[no-untyped-def]
+def _layout_note(plan: Plan) -> str:
     if plan.layout == "seed":
         return ""
     from choreo.wire.layouts import EXAMPLE_CONFIG
@@ -212,7 +217,7 @@ def _layout_note(plan) -> str:  # type: ignore[no-untyped-def]
             "from the config word it reads from the board)")
 
 
-def _start(step, digits: int) -> str:  # type: ignore[no-untyped-def]
+def _start(step: PlannedStep, digits: int) -> str:
     """` 4.000 s`, with the cue when the step has one: `14.000 s (at 14)`, late ones flagged."""
     text = f"{step.planned_s:{digits}.3f} s"
     if step.go:
@@ -225,7 +230,7 @@ def _start(step, digits: int) -> str:  # type: ignore[no-untyped-def]
     return f"{text} (at {cue})"
 
 
-def _late_note(plan) -> str:  # type: ignore[no-untyped-def]
+def _late_note(plan: Plan) -> str:
     from choreo.show.plan import late_cues
 
     late = late_cues(plan)

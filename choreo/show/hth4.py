@@ -77,14 +77,16 @@ def parse_project(data: bytes, path: str = "<project>") -> Project:
     """A project from the file's bytes; `path` names it in messages."""
     root = _parse_xml(decode_project(data, path), path)
     if _local(root.tag) != "Rcb4":
-        raise ProjectError(f"{path}: not a Heart to Heart 4 project: the root element is <{_local(root.tag)}>, not <Rcb4>")
+        raise ProjectError(f"{path}: not a Heart to Heart 4 project: the root element is <{_local(root.tag)}>, "
+                           "not <Rcb4>")
     collection = _child(root, "MotionDataCollection")
     if collection is None:
         raise ProjectError(f"{path}: not a Heart to Heart 4 project: <Rcb4> has no <MotionDataCollection>")
     slots = _slots(collection, path)
     motions = tuple(sorted((s for s in slots if s.has_data), key=lambda s: s.number))
     if not motions:
-        raise ProjectError(f"{path}: no motions: every slot's MotionData is empty (write motions in Heart to Heart 4 and save the project)")
+        raise ProjectError(f"{path}: no motions: every slot's MotionData is empty (write motions in Heart to Heart 4 "
+                           "and save the project)")
     title = _text(_child(root, "ProjectTitle")).strip() or None
     return Project(path, title, layout_of(slots, path), motions)
 
@@ -93,7 +95,8 @@ def layout_of(slots: list[ProjectSlot], path: str = "<project>") -> str:
     """The layout every slot's address fits; `ProjectError` naming the addresses found if none does."""
     placed = sorted((s for s in slots if s.address is not None), key=lambda s: s.number)
     if not placed:
-        raise ProjectError(f"{path}: no slot gives its Address, so the board's layout is unknown: set `robot.layout` in the show by hand")
+        raise ProjectError(f"{path}: no slot gives its Address, so the board's layout is unknown: set `robot.layout` "
+                           "in the show by hand")
     first = placed[0]
     for layout, base in LAYOUT_FIRST_SLOT.items():
         if first.address != base + first.number * SLOT_SIZE:
@@ -131,7 +134,8 @@ def _parse_xml(text: str, path: str) -> ET.Element:
         parser.feed(text)  # text, not bytes: the parser ignores the declared encoding
         return parser.close()
     except _Refused:
-        raise ProjectError(f"{path}: the file declares a DOCTYPE, which Heart to Heart 4 never writes: refused (entities could expand without bound)") from None
+        raise ProjectError(f"{path}: the file declares a DOCTYPE, which Heart to Heart 4 never writes: refused "
+                           "(entities could expand without bound)") from None
     except ET.ParseError as exc:
         raise ProjectError(f"{path}: not a Heart to Heart 4 project (not XML: {exc})") from None
 
@@ -179,12 +183,12 @@ def _encoding_of(data: bytes, path: str) -> str:
         info = codecs.lookup(_WINDOWS_NAMES.get(name.lower(), name)) if name.isascii() and name.isprintable() else None
     except LookupError:
         info = None
-    if info is None or not info._is_text_encoding or info.name in _NOT_CHARSETS:  # type: ignore[attr-defined]
-        raise ProjectError(f"{path}: the file declares encoding {visible(repr(name))}, which choreo cannot read: save the project "
-                           "again in Heart to Heart 4, or as UTF-8")
+    if info is None or not info._is_text_encoding or info.name in _NOT_CHARSETS:
+        raise ProjectError(f"{path}: the file declares encoding {visible(repr(name))}, which choreo cannot read: "
+                           "save the project again in Heart to Heart 4, or as UTF-8")
     if info.name.startswith(("utf-16", "utf-32")):
-        raise ProjectError(f"{path}: the file declares encoding {visible(repr(name))} but has no byte order mark and does not "
-                           "start with '<' in it: save the project again in Heart to Heart 4, or as UTF-8")
+        raise ProjectError(f"{path}: the file declares encoding {visible(repr(name))} but has no byte order mark and "
+                           "does not start with '<' in it: save the project again in Heart to Heart 4, or as UTF-8")
     return info.name
 
 

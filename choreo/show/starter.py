@@ -12,10 +12,12 @@ from __future__ import annotations
 import os
 import unicodedata
 from dataclasses import dataclass
+from importlib.resources import files
 from pathlib import Path
 
 from choreo.show.hth4 import LAYOUT_FIRST_SLOT, Project, ProjectSlot
 from choreo.show.model import MOTION_NAME_MAX, hidden_character, is_motion_name
+from choreo.show.schema import SCHEMA_FILE
 
 NAME_MAX = 200  # characters of a show's `name` and of an `hth4_name` (the schema's maxLength)
 
@@ -67,7 +69,8 @@ def starter_show(project: Project, schema: str | None = None) -> str:
     lines = [f"# yaml-language-server: $schema={schema}", "#"] if schema else []
     lines += [
         f"# A starter show written by `choreo import` from the Heart to Heart 4 project {source}.",
-        f"# The project puts slot 0 at ROM 0x{LAYOUT_FIRST_SLOT[project.layout]:04X}, so the board's layout is {project.layout};"
+        f"# The project puts slot 0 at ROM 0x{LAYOUT_FIRST_SLOT[project.layout]:04X}, "
+        f"so the board's layout is {project.layout};"
         f" {len(motions)} slot{'s' if len(motions) != 1 else ''} hold{'' if len(motions) != 1 else 's'} a motion.",
         "# Add each motion's `duration:`, then the steps; `choreo plan` prints the timeline.",
         "version: 1",
@@ -85,9 +88,7 @@ def starter_show(project: Project, schema: str | None = None) -> str:
 
 def schema_reference(show: Path) -> str | None:
     """The installed show schema as a path relative to where `show` will be, if there is one."""
-    from importlib.resources import files
-
-    schema = files("choreo.schemas") / "show.schema.json"
+    schema = files("choreo.schemas") / SCHEMA_FILE
     if not isinstance(schema, Path) or not schema.is_file():
         return None  # inside a zip: no file an editor could open
     try:
