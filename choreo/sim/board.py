@@ -27,10 +27,11 @@ What it models, following the spec and its errata:
   call (counted in `stray_calls`) and plays nothing (the real board would jump into motion
   data). When a motion ends, the counter goes back to the return address and the return
   address and depth are cleared: Kondo's "still running" rule reads exactly that. At power-on
-  the counter is at the layout's main loop and the config word is `power_on_config`. Every CALL pushes a return address: a CALL
-  while one is already pushed (a second CALL with no stop frame between, as a client re-sending
-  a CALL alone would) is journalled as a `stack` event and counted in `stack_faults`. It is
-  still ACKed and arms its slot: the real board gives no sign either.
+  the counter is at the layout's main loop and the config word is `power_on_config`. Every CALL
+  pushes a return address: a CALL while one is already pushed (a second CALL with no stop frame
+  between, as a client re-sending a CALL alone would) is journalled as a `stack` event and
+  counted in `stack_faults`. It is still ACKed and arms its slot: the real board gives no sign
+  either.
 - A write that sets the config run bit (the restore frame, 0x8723) starts the armed motion, which
   runs for its slot's duration; while it runs, the status read shows the config low byte 0x23.
   When it ends, the board clears the run bit (0x8721: low byte 0x21).
@@ -83,8 +84,6 @@ RETURN_ADDRESS = range(p.RETURN_ADDRESS_ADDRESS, p.RETURN_ADDRESS_ADDRESS + p.AD
 CALL_DEPTH = p.CALL_DEPTH_ADDRESS
 STATUS_SPAN = p.PROGRAM_STATE_BYTES  # RAM the status refresh covers: the config word and the program state
 BITS_PER_BYTE = 11  # start + 8 data + even parity + stop
-BOARD_BAUDS = (115200, 625000, 1250000)
-DEFAULT_BAUD = 115200
 DEFAULT_REPLY_DELAY_S = 0.0002
 DEFAULT_MOTION_S = 1.0
 DEFAULT_REFRESH_S = 0.05  # the spec: the controller updates the execution status every 50 ms
@@ -163,7 +162,7 @@ class _Outcome:
 class SimBoard:
     """The board: RAM, an armed slot, a running motion, a reply line, faults and a journal."""
 
-    baud: int = DEFAULT_BAUD
+    baud: int = p.DEFAULT_BAUD
     reply_delay_s: float = DEFAULT_REPLY_DELAY_S
     motion_s: float = DEFAULT_MOTION_S
     durations: Mapping[int, float] = field(default_factory=dict)
@@ -180,8 +179,8 @@ class SimBoard:
     baud_switch: bool = False
 
     def __post_init__(self) -> None:
-        if self.baud not in BOARD_BAUDS:
-            raise ValueError(f"baud {self.baud}: an RCB-4 runs at {', '.join(map(str, BOARD_BAUDS))}")
+        if self.baud not in p.BAUDS:
+            raise ValueError(f"baud {self.baud}: an RCB-4 runs at {p.spell_bauds()}")
         if self.reply_delay_s < 0:
             raise ValueError(f"reply delay must be >= 0, not {self.reply_delay_s}")
         if not self.refresh_s >= 0:
@@ -324,18 +323,8 @@ class SimBoard:
             return None
         self.frames_received += 1
         number = self.frames_received
-        kinds = self._injector.decide(number, data)
-        events: tuple[JournalEntry, ...] = ()
-        if NOT_EXECUTED.isdisjoint(kinds):
-            outcome = self._execute(data, now)
-            reply, command, note, events = outcome.reply, outcome.command, outcome.note, outcome.events
-            if outcome.started:
-                self.starts += 1
-                if self._injector.start_lost(self.starts):
-                    kinds += ("lose_start",)
-                    reply, note = b"", f"{note}; its reply is lost (lose_start)"
-        else:  # the frame never reached the board, or the board refused it
-            reply, command, note = b"", _command_byte(data), _described(data, self.layout) + ": not executed"
+        kinds, outcome = self._answer(data, now, number)
+        reply, command, note, events = outcome.reply, outcome.command, outcome.note, outcome.events
         damage = self._injector.damage(kinds, command, reply)
         if damage.lost:
             self.lost = True
@@ -355,6 +344,20 @@ class SimBoard:
         for event in events:
             self._record(event)
         return sent
+
+    def _answer(self, data: bytes, now: float, number: int) -> tuple[tuple[str, ...], _Outcome]:
+        """The faults that hit frame `number`, and what the board makes of it before any damage
+        on the way back: carried out, or not (never reached the board, or refused)."""
+        kinds = self._injector.decide(number, data)
+        if not NOT_EXECUTED.isdisjoint(kinds):
+            return kinds, _Outcome(b"", _described(data, self.layout) + ": not executed", _command_byte(data))
+        outcome = self._execute(data, now)
+        if outcome.started:
+            self.starts += 1
+            if self._injector.start_lost(self.starts):
+                kinds += ("lose_start",)
+                outcome = replace(outcome, reply=b"", note=f"{outcome.note}; its reply is lost (lose_start)")
+        return kinds, outcome
 
     def note(self, kind: str, at: float, data: bytes, text: str) -> None:
         """Journal something the transport saw that never became a frame (partial, ignored)."""
@@ -457,7 +460,7 @@ class SimBoard:
         """The config's COM baud bits name another baud: from now on the board talks at that one,
         its answer to this very write included (garbage to a client at the old baud, so none)."""
         code = (self.ram[0] & p.COM_BAUD_MASK) >> p.COM_BAUD_SHIFT
-        baud = next((b for b, c in p.BAUD_CODES.items() if c == code), None)
+        baud = p.baud_of_code(code)
         if baud is None or baud == self.baud:
             return outcome
         old, self.baud = self.baud, baud
@@ -487,11 +490,11 @@ class SimBoard:
             return _Outcome(
                 p.nak(p.CMD_MOV), f"read of {count} bytes at 0x{address:04x} is not possible: NAK", p.CMD_MOV
             )
-        data = bytearray(self.ram[address : address + count])
+        ram = bytearray(self.ram[address : address + count])
         if self.refresh_s > 0:  # the config word and program state as of the last refresh tick
             for a in range(address, min(address + count, STATUS_SPAN)):
-                data[a - address] = self._shown[a]
-        data = bytes(data)
+                ram[a - address] = self._shown[a]
+        data = bytes(ram)
         what = f"RAM 0x{address:04x} x{count} -> {p.hexbytes(data)}"
         if address == 0 and count >= 1:
             state = "executing" if data[0] == p.EXECUTING_BYTE else "not executing"
@@ -500,7 +503,7 @@ class SimBoard:
         return _Outcome(p.ram_reply(data), what, p.CMD_MOV)
 
 
-def _returned(state: bytes) -> bytes:
+def _returned(state: bytes | bytearray) -> bytes:
     """The program state after a motion ends: run bit cleared, the program counter back at the
     return address, the return address and call depth cleared."""
     ram = bytearray(state)

@@ -236,5 +236,5 @@ class Line:
             return
         sent = self.board.receive(unit.data, unit.at, unit.first)
         if sent is not None:
-            arrivals = list(zip(sent.times, sent.data))
+            arrivals = list(zip(sent.times, sent.data, strict=True))  # a time for each byte
             self._out.extend(self.timer.release(arrivals) if self.timer is not None else arrivals)

@@ -6,7 +6,7 @@ with dashes on the command line (`--motion-s 0.5 --drop 5`), and both go through
 
 | option | meaning | default |
 |---|---|---|
-| baud | the board's baud: 115200, 625000 or 1250000 | 115200 |
+| baud | the board's baud: one the RCB-4 runs at (`protocol.BAUDS`) | `protocol.DEFAULT_BAUD` |
 | motion_s | how long every motion runs, seconds | 1.0 |
 | durations | per-slot durations, `SLOT:SECONDS,...` (`3:2.5,7:1.2`) | none |
 | reply_ms | the board's delay between a frame's last byte and its reply | 0.2 |
@@ -18,23 +18,26 @@ with dashes on the command line (`--motion-s 0.5 --drop 5`), and both go through
 | layout | the board's memory layout: `seed` or `hth4-2.2` (where its motion slots start) | seed |
 | config | the config word at power-on, e.g. `0x821b` (what an HTH4 2.2+ project saves) | 0x0002 |
 | baud_switch | 1: a config write whose COM baud bits name another baud switches the board to it | 0 |
-| latency_ms | an FTDI USB adapter's latency timer: reply bytes reach the client at its next tick (every MS ms), or at once when 62 are waiting; 0: no adapter | 0 |
+| latency_ms | an FTDI USB adapter's latency timer (below); 0: no adapter | 0 |
 | lose, drop, nak, badsum, short, junk, late | faults: K (every K-th frame) or P (probability) | none |
 | lose_start | no reply to the frame that starts a motion (it still starts): K-th start or P | none |
-| faults_on | the frame faults hit (and count) only frames of these kinds: `stop`, `counter`, `play`, `restore`, `read`, `sync`, `other`, comma-separated | every frame |
+| faults_on | the frame faults hit (and count) only frames of these kinds (below) | every frame |
+
+latency_ms: reply bytes reach the client at the adapter's next tick (every MS ms), or at once
+when 62 are waiting. faults_on: comma-separated, of `stop`, `counter`, `play`, `restore`,
+`read`, `sync`, `other`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
+from typing import TypeVar
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
 from choreo.wire.layouts import SEED, Layout, layout_named
-from choreo.wire.protocol import MOTION_SLOTS
+from choreo.wire.protocol import BAUDS, DEFAULT_BAUD, MOTION_SLOTS, spell_bauds
 from choreo.sim.board import (
-    BOARD_BAUDS,
-    DEFAULT_BAUD,
     DEFAULT_MOTION_S,
     DEFAULT_REFRESH_S,
     DEFAULT_REPLY_DELAY_S,
@@ -117,7 +120,7 @@ class SimUrl:
             raise ValueError(f"{url!r}: sim:// takes options only after '?', like sim://?motion_s=0.5")
         try:
             parsed = cls(_pairs(parts.query))
-            parsed.options
+            parse_options(dict(parsed.said))  # every value checked now, not when first used
         except ValueError as exc:
             raise ValueError(f"sim://: {exc}") from None
         return parsed
@@ -179,7 +182,7 @@ def parse_options(values: Mapping[str, str]) -> SimOptions:
     faults = {kind: values[kind] for kind in FAULT_KINDS if kind in values}
     seed = _parsed(values, "seed", _whole, 0)
     late_s = _parsed(values, "late_ms", _milliseconds, DEFAULT_LATE_S)
-    aimed = _parsed(values, "faults_on", parse_frame_kinds, frozenset())
+    aimed = _parsed(values, "faults_on", parse_frame_kinds, frozenset[str]())
     try:
         plan = FaultPlan.parse(faults, seed=seed, late_s=late_s, on=aimed)
     except ValueError as exc:
@@ -200,7 +203,10 @@ def parse_options(values: Mapping[str, str]) -> SimOptions:
     )
 
 
-def _parsed(values: Mapping[str, str], name: str, parse, default):  # type: ignore[no-untyped-def]
+T = TypeVar("T")
+
+
+def _parsed(values: Mapping[str, str], name: str, parse: Callable[[str], T], default: T) -> T:
     if name not in values:
         return default
     try:
@@ -214,8 +220,8 @@ def parse_baud(text: str) -> int:
         baud = int(text)
     except ValueError:
         baud = None
-    if baud not in BOARD_BAUDS:
-        raise ValueError(f"the board's baud is one of {', '.join(map(str, BOARD_BAUDS))}")
+    if baud not in BAUDS:
+        raise ValueError(f"the board's baud is one of {spell_bauds()}")
     return baud
 
 

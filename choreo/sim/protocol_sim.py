@@ -21,13 +21,18 @@ does. The board is on `port.board`, its line on `port.line`.
 from __future__ import annotations
 
 import numbers
+from typing import TYPE_CHECKING, Any
 
-from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
+from serial.serialutil import PortNotOpenError, SerialBase, SerialException
+from serial.serialutil import to_bytes  # type: ignore[attr-defined]  # pyserial's own; its stubs leave it out
 
 from choreo.clock import SystemTime, TimeSource
 from choreo.sim.board import SimBoard
 from choreo.sim.options import SimOptions, SimUrl
 from choreo.sim.line import REAL_GAP_S, Line, LineSettings
+
+if TYPE_CHECKING:
+    from _typeshed import ReadableBuffer
 
 _MAX_SLEEP_S = 0.05  # upper bound of one sleep while waiting, so a closed port is noticed
 
@@ -35,22 +40,22 @@ _MAX_SLEEP_S = 0.05  # upper bound of one sleep while waiting, so a closed port 
 class Serial(SerialBase):
     """A pyserial port whose other end is a `SimBoard`."""
 
-    def __init__(self, *args: object, **kwargs: object) -> None:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:  # SerialBase's arguments, passed on
         self.board: SimBoard | None = None
         self.line: Line | None = None
         self.options: SimOptions | None = None
         # The board's clock: the machine's, or the run's (virtual time in tests), set before open.
         self.time_source: TimeSource = SystemTime()
-        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        super().__init__(*args, **kwargs)
 
     # -- opening -----------------------------------------------------------------------------
 
     def open(self) -> None:
         if self.is_open:
             raise SerialException("Port is already open.")
-        if self._port is None:
+        if self.port is None:
             raise SerialException("Port must be configured before it can be used.")
-        self.options = self.from_url(self._port)
+        self.options = self.from_url(self.port)
         self.board = self.options.board(power_on=self.time_source.now())
         self.line = Line(self.board, self.options.gap_s or REAL_GAP_S, self.options.latency_s)
         self.is_open = True
@@ -63,12 +68,11 @@ class Serial(SerialBase):
 
     def _reconfigure_port(self) -> None:
         """Record the client's settings: the board ignores a line it cannot read."""
-        if not isinstance(self._baudrate, numbers.Integral) or not 0 < self._baudrate < 2**32:
-            raise ValueError(f"invalid baudrate: {self._baudrate!r}")
+        baud = self.baudrate
+        if not isinstance(baud, numbers.Integral) or not 0 < int(baud) < 2**32:
+            raise ValueError(f"invalid baudrate: {baud!r}")
         if self.line is not None:
-            self.line.settings = LineSettings(
-                int(self._baudrate), int(self._bytesize), str(self._parity), float(self._stopbits)
-            )
+            self.line.settings = LineSettings(int(baud), int(self.bytesize), str(self.parity), float(self.stopbits))
 
     def close(self) -> None:
         self.is_open = False
@@ -81,7 +85,7 @@ class Serial(SerialBase):
             raise PortNotOpenError()
         if self.line.board.lost:
             raise SerialException(
-                f"{self._port}: port lost (simulated unplug, fault 'lose' at frame "
+                f"{self.port}: port lost (simulated unplug, fault 'lose' at frame "
                 f"{self.line.board.lost_at_frame})"
             )
         return self.line
@@ -100,7 +104,8 @@ class Serial(SerialBase):
         """
         line = self._live()
         clock = self.time_source
-        deadline = None if self._timeout is None else clock.now() + self._timeout
+        timeout = self.timeout
+        deadline = None if timeout is None else clock.now() + timeout
         data = bytearray()
         while len(data) < size:
             now = clock.now()
@@ -116,13 +121,13 @@ class Serial(SerialBase):
             line = self._live()
         return bytes(data)
 
-    def write(self, data: bytes) -> int:
+    def write(self, data: ReadableBuffer, /) -> int:
         """Put the bytes on the wire to the board at once (write each frame in one call)."""
         line = self._live()
-        data = to_bytes(data)
-        line.send(data, self.time_source.now())
+        frame: bytes = to_bytes(data)
+        line.send(frame, self.time_source.now())
         self._live()  # a `lose` fault on this frame: the write itself fails, as on an unplug
-        return len(data)
+        return len(frame)
 
     def reset_input_buffer(self) -> None:
         """Drop the reply bytes already received; those still on the wire arrive later."""

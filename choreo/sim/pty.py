@@ -22,6 +22,7 @@ earlier client; the server keeps the pty "re-armed" so that never happens (see `
 from __future__ import annotations
 
 import array
+import contextlib
 import errno
 import os
 import select
@@ -93,18 +94,14 @@ class PtyServer:
     def stop(self) -> None:
         """Ask `serve` to return (async-signal-safe: one write to a pipe)."""
         if self._wake is not None:
-            try:
+            with contextlib.suppress(OSError):  # pipe full: a stop is already pending
                 os.write(self._wake[1], b"x")
-            except OSError:
-                pass  # pipe full: a stop is already pending
 
     def close(self) -> None:
         for fd in (self._master, self._slave, *(self._wake or ())):
             if fd is not None:
-                try:
+                with contextlib.suppress(OSError):  # already closed: nothing left to release
                     os.close(fd)
-                except OSError:
-                    pass
         self._master = self._slave = self._wake = None
 
     def client_settings(self) -> LineSettings | None:
