@@ -21,7 +21,6 @@ miniaudio is imported only here and only when music plays, so `choreo validate` 
 from __future__ import annotations
 
 import contextlib
-import os
 import time
 from collections import deque
 from collections.abc import Callable, Generator, Iterator
@@ -29,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from choreo.errors import ChoreoError, UsageError
+from choreo.music import alsa
 from choreo.numtext import whole_number
 from choreo.show.model import MUSIC_FORMATS_TEXT, Music
 
@@ -268,7 +268,7 @@ def outputs() -> list[Output]:
     import miniaudio
 
     found: list[Output] = []
-    with hushed_stderr():
+    with alsa.quiet():  # ALSA's own lines about cards it cannot open: see choreo.music.alsa
         try:
             devices = miniaudio.Devices()
             found = [Output(n, str(d["name"]), devices.backend, d["id"])
@@ -305,7 +305,7 @@ def open_device(output: Output | None, sample_rate: int) -> Any:
     import miniaudio
 
     null = output is not None and output.name == NULL_DEVICE
-    with hushed_stderr():
+    with alsa.quiet():
         return miniaudio.PlaybackDevice(output_format=miniaudio.SampleFormat.SIGNED16, nchannels=CHANNELS,
                                         sample_rate=sample_rate, buffersize_msec=PERIOD_MS, callback_periods=PERIODS,
                                         device_id=None if output is None or null else output.device_id,
@@ -325,24 +325,6 @@ def try_output(output: Output | None = None) -> str:
         return device.backend
     finally:
         device.close()
-
-
-@contextlib.contextmanager
-def hushed_stderr() -> Iterator[None]:
-    """ALSA's library writes its complaints (no sound card, unknown PCM) straight to file
-    descriptor 2; choreo reports what failed in its own words instead."""
-    try:
-        saved = os.dup(2)
-    except OSError:
-        yield
-        return
-    try:
-        with open(os.devnull, "wb") as devnull:
-            os.dup2(devnull.fileno(), 2)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
 
 
 # --------------------------------------------------------------------------- playing
