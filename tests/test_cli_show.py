@@ -17,7 +17,8 @@ SHOWS = sorted((ROOT / "shows").glob("*.yaml"))
 
 def choreo(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    return subprocess.run([sys.executable, "-m", "choreo", *args], capture_output=True, text=True, cwd=cwd, env=env, timeout=60)
+    return subprocess.run([sys.executable, "-m", "choreo", *args], capture_output=True, text=True, cwd=cwd, env=env,
+                          timeout=60)
 
 
 def test_validate_prints_one_line_a_valid_file(capsys):
@@ -65,11 +66,13 @@ def test_plan_prints_a_line_a_step_and_the_total(capsys):
     first = lines[2]
     assert first.split()[:5] == ["0", "steps[0]", "start", "0.000", "s"]
     assert "play 0 (home)" in first
-    assert first.endswith("13 00 02 00 00 00 21 87 fd 03 00 00 00 00 00 00 00 00 bd | 07 0c b8 0b 00 00 d6 | 09 00 02 00 00 00 23 87 b5")
+    assert first.endswith("13 00 02 00 00 00 21 87 fd 03 00 00 00 00 00 00 00 00 bd | 07 0c b8 0b 00 00 d6 | "
+                          "09 00 02 00 00 00 23 87 b5")
     groove = lines[2 + 8]
     assert groove.split()[:4] == ["8", "steps[8]#1.steps[0]", "groove", "6.200"]
     wait_done = lines[3]
-    assert "wait until motion 0 is done (timeout 60 s)" in wait_done and wait_done.endswith("0a 00 20 00 00 00 00 00 02 2c")
+    assert "wait until motion 0 is done (timeout 60 s)" in wait_done
+    assert wait_done.endswith("0a 00 20 00 00 00 00 00 02 2c")
     spin = next(line for line in lines if " spin " in line)
     assert "14.000 s (at 14)" in spin
     wait = next(line for line in lines if "wait 1.5 s" in line)
@@ -83,14 +86,16 @@ def test_plan_of_a_bad_show_exits_2(tmp_path, capsys):
     assert main(["plan", str(bad)]) == 2
     out, err = capsys.readouterr()
     assert out == ""
-    assert err == f"{bad}:3:11: steps[0].play: unknown motion 'wave': name it in `motions:` with its slot number, or play the number\n"
+    assert err == (f"{bad}:3:11: steps[0].play: unknown motion 'wave': name it in `motions:` with its slot number, "
+                   "or play the number\n")
 
 
 @pytest.mark.parametrize(
     "content,first",
     [
         (b"version: 1\nsteps:\n  - play: 140\n", "bad.yaml:3:11: steps[0].play: motion 140 is out of range 0..119"),
-        (b"version: 1\nsteps: [\n", "bad.yaml:3:1: YAML syntax error: did not find expected node content (while parsing a flow node)"),
+        (b"version: 1\nsteps: [\n",
+         "bad.yaml:3:1: YAML syntax error: did not find expected node content (while parsing a flow node)"),
         (b"version: 1\nname: \xff\n", "bad.yaml:2:7: not UTF-8 (byte 0xff): save the file as UTF-8"),
         (b"a: &a [1, 2]\nb: [*a, *a]\n", "bad.yaml:1:1: a: unknown key 'a'"),
         (b"[" * 10000, "bad.yaml:1:40: "),
@@ -109,7 +114,8 @@ def test_bad_files_exit_2_without_a_traceback(tmp_path, content, first):
 
 def test_a_missing_file_exits_2(tmp_path):
     done = choreo("validate", "nope.yaml", cwd=tmp_path)
-    assert (done.returncode, done.stdout, done.stderr) == (2, "", "nope.yaml: cannot read the show file: No such file or directory\n")
+    assert (done.returncode, done.stdout, done.stderr) == (
+        2, "", "nope.yaml: cannot read the show file: No such file or directory\n")
 
 
 def test_validate_needs_a_file():

@@ -121,7 +121,8 @@ def test_a_project_becomes_a_show_that_validates_with_its_layout_names_and_numbe
         "右手を振る2": 12,
         "最後": 119,
     }
-    assert [(s.kind.value, s.motion, s.motion_name) for s in show.steps] == [("play", 0, "ホームポジション"), ("wait_done", None, None)]
+    assert [(s.kind.value, s.motion, s.motion_name) for s in show.steps] == [
+        ("play", 0, "ホームポジション"), ("wait_done", None, None)]
 
 
 def test_a_name_that_cannot_be_a_key_is_kept_beside_the_derived_key(tmp_path, capsys):
@@ -140,23 +141,27 @@ def test_empty_slots_are_skipped(tmp_path, capsys):
 
 def test_a_namespaced_project_reads_like_a_plain_one(tmp_path, capsys):
     plain = imported(capsys, write_project(tmp_path, project_xml(JAPANESE), "plain.h4p"))
-    spaced = imported(capsys, write_project(tmp_path, project_xml(JAPANESE, namespace="http://kondo-robot.com/rcb4"), "ns.h4p"))
+    spaced = imported(capsys, write_project(tmp_path, project_xml(JAPANESE, namespace="http://kondo-robot.com/rcb4"),
+                                            "ns.h4p"))
     assert spaced.replace("ns.h4p", "plain.h4p") == plain
 
 
 def test_names_yaml_would_read_as_something_else_survive(tmp_path, capsys):
-    slots = [Slot(1, "yes"), Slot(2, "Null"), Slot(3, "on"), Slot(4, "1e3"), Slot(5, "a: b"), Slot(6, ' "q" \\ #x '), Slot(7, "tab\there"), Slot(8, "line\u2028break")]
+    slots = [Slot(1, "yes"), Slot(2, "Null"), Slot(3, "on"), Slot(4, "1e3"), Slot(5, "a: b"), Slot(6, ' "q" \\ #x '),
+             Slot(7, "tab\there"), Slot(8, "line\u2028break")]
     text = imported(capsys, write_project(tmp_path, project_xml(slots, title="0o17")))
     show = load_show_bytes(text.encode("utf-8"))
     assert show.name == "0o17"
-    assert {n: m.number for n, m in show.motions.items()} == {"yes": 1, "Null": 2, "on": 3, "motion_4": 4, "motion_5": 5, "motion_6": 6, "motion_7": 7, "motion_8": 8}
+    assert {n: m.number for n, m in show.motions.items()} == {
+        "yes": 1, "Null": 2, "on": 3, "motion_4": 4, "motion_5": 5, "motion_6": 6, "motion_7": 7, "motion_8": 8}
     assert show.steps[0].motion_name == "yes"
     kept = {m["number"]: m.get("hth4_name") for m in yaml.safe_load(text)["motions"].values()}
     assert kept == {1: None, 2: None, 3: None, 4: "1e3", 5: "a: b", 6: '"q" \\ #x', 7: "tab here", 8: "line break"}
 
 
 def test_keys_stay_unique_when_names_repeat_or_look_derived(tmp_path, capsys):
-    slots = [Slot(2, "wave"), Slot(3, "歩く（前）"), Slot(9, "wave"), Slot(10, "motion_3"), Slot(11, ""), Slot(12, "x" * 65)]
+    slots = [Slot(2, "wave"), Slot(3, "歩く（前）"), Slot(9, "wave"), Slot(10, "motion_3"), Slot(11, ""),
+             Slot(12, "x" * 65)]
     text = imported(capsys, write_project(tmp_path, project_xml(slots)))
     load_show_bytes(text.encode("utf-8"))
     motions = yaml.safe_load(text)["motions"]
@@ -185,7 +190,8 @@ def test_a_title_with_line_breaks_becomes_one_line(tmp_path, capsys):
 def test_output_is_utf8_whatever_the_console_encoding(tmp_path):
     path = write_project(tmp_path, project_xml(JAPANESE))
     env = dict(os.environ, PYTHONIOENCODING="ascii")
-    done = subprocess.run([sys.executable, "-m", "choreo", "import", str(path)], capture_output=True, env=env, timeout=60)
+    done = subprocess.run([sys.executable, "-m", "choreo", "import", str(path)], capture_output=True, env=env,
+                          timeout=60)
     assert done.returncode == 0, done.stderr
     assert load_show_bytes(done.stdout).motions["歩く"].number == 4
 
@@ -205,7 +211,8 @@ def test_output_file_is_written_and_validates_with_a_schema_line_that_points_at_
     first = show_path.read_text(encoding="utf-8").splitlines()[0]
     assert first.startswith("# yaml-language-server: $schema=")
     schema = first.split("=", 1)[1]
-    assert (show_path.parent / schema).resolve() == (Path(choreo.show.hth4.__file__).parent.parent / "schemas" / "show.schema.json").resolve()
+    installed = Path(choreo.show.hth4.__file__).parent.parent / "schemas" / "show.schema.json"
+    assert (show_path.parent / schema).resolve() == installed.resolve()
     assert main(["validate", str(show_path)]) == 0
 
 
@@ -251,21 +258,32 @@ BAD = {
     "not XML": (b"Number,Name,Address\n0,home,2944\n", "not a Heart to Heart 4 project (not XML: "),
     "binary": (bytes(range(256)), "not a Heart to Heart 4 project: byte 128 (0x80) is not utf-8 text"),
     "empty": (b"", "not a Heart to Heart 4 project (not XML: "),
-    "another root": (b"<?xml version='1.0'?><Project><MotionDataCollection/></Project>", "the root element is <Project>, not <Rcb4>"),
+    "another root": (b"<?xml version='1.0'?><Project><MotionDataCollection/></Project>",
+                     "the root element is <Project>, not <Rcb4>"),
     "no collection": (b"<Rcb4><ProjectTitle>x</ProjectTitle></Rcb4>", "<Rcb4> has no <MotionDataCollection>"),
     "no motions": (project_xml([]), "no motions: every slot's MotionData is empty"),
     "no slots": (b"<Rcb4><MotionDataCollection/></Rcb4>", "no motions"),
-    "unknown addresses": (_moved(0x0BC0), "slot addresses fit no layout choreo knows: slot 0 is at 3008 (0x0BC0), expected 3000 (0x0BB8, seed) or 2944 (0x0B80, hth4-2.2)"),
-    "one slot off": (project_xml([Slot(0, "home"), Slot(5, "bow", address=0x0B80 + 5 * SLOT_SIZE + 56)]), "slot 0 at 2944 (0x0B80) fits hth4-2.2, but slot 5 is at 13240 (0x33B8), not 13184 (0x3380)"),
-    "mixed layouts": (project_xml([Slot(0, "home"), Slot(2, "bow", address=0x0BB8 + 2 * SLOT_SIZE)]), "fits hth4-2.2, but slot 2 is at 7096 (0x1BB8)"),
-    "no addresses": (b"<Rcb4><MotionDataCollection><DictionaryEntry><Key>M001</Key><Value><Number>0</Number><Name>a</Name><MotionData><anyType>00</anyType></MotionData></Value></DictionaryEntry></MotionDataCollection></Rcb4>", "no slot gives its Address"),
-    "duplicate numbers": (project_xml([Slot(3, "a"), Slot(3, "b")], slots=0), "slot number 3 is given twice (X3 and X3)"),
-    "duplicate with a listed slot": (project_xml([Slot(3, "b")]).replace(b"<Number>4</Number>", b"<Number>3</Number>"), "slot number 3 is given twice (M004 and M005)"),
-    "number out of range": (project_xml([Slot(120, "extra")], slots=0), "slot X120 has Number 120, outside the board's slots 0..119"),
-    "number not whole": (project_xml([Slot(1, "a")]).replace(b"<Number>1</Number>", b"<Number>one</Number>"), "slot M002 has Number 'one', not a whole number"),
+    "unknown addresses": (_moved(0x0BC0), "slot addresses fit no layout choreo knows: slot 0 is at 3008 (0x0BC0), "
+                                          "expected 3000 (0x0BB8, seed) or 2944 (0x0B80, hth4-2.2)"),
+    "one slot off": (project_xml([Slot(0, "home"), Slot(5, "bow", address=0x0B80 + 5 * SLOT_SIZE + 56)]),
+                     "slot 0 at 2944 (0x0B80) fits hth4-2.2, but slot 5 is at 13240 (0x33B8), not 13184 (0x3380)"),
+    "mixed layouts": (project_xml([Slot(0, "home"), Slot(2, "bow", address=0x0BB8 + 2 * SLOT_SIZE)]),
+                      "fits hth4-2.2, but slot 2 is at 7096 (0x1BB8)"),
+    "no addresses": (b"<Rcb4><MotionDataCollection><DictionaryEntry><Key>M001</Key><Value><Number>0</Number>"
+                     b"<Name>a</Name><MotionData><anyType>00</anyType></MotionData></Value></DictionaryEntry>"
+                     b"</MotionDataCollection></Rcb4>", "no slot gives its Address"),
+    "duplicate numbers": (project_xml([Slot(3, "a"), Slot(3, "b")], slots=0),
+                          "slot number 3 is given twice (X3 and X3)"),
+    "duplicate with a listed slot": (project_xml([Slot(3, "b")]).replace(b"<Number>4</Number>", b"<Number>3</Number>"),
+                                     "slot number 3 is given twice (M004 and M005)"),
+    "number out of range": (project_xml([Slot(120, "extra")], slots=0),
+                            "slot X120 has Number 120, outside the board's slots 0..119"),
+    "number not whole": (project_xml([Slot(1, "a")]).replace(b"<Number>1</Number>", b"<Number>one</Number>"),
+                         "slot M002 has Number 'one', not a whole number"),
     "no number": (project_xml([Slot(1, "a")]).replace(b"<Number>1</Number>", b""), "slot M002 has no <Number>"),
     "billion laughs": (BILLION_LAUGHS, "declares a DOCTYPE, which Heart to Heart 4 never writes: refused"),
-    "external entity": (b'<?xml version="1.0"?><!DOCTYPE Rcb4 [<!ENTITY x SYSTEM "file:///etc/passwd">]><Rcb4>&x;</Rcb4>', "declares a DOCTYPE"),
+    "external entity": (b'<?xml version="1.0"?><!DOCTYPE Rcb4 [<!ENTITY x SYSTEM "file:///etc/passwd">]><Rcb4>&x;</Rcb4>',
+                        "declares a DOCTYPE"),
     "undeclared entity": (b"<Rcb4><ProjectTitle>&x;</ProjectTitle></Rcb4>", "not XML: undefined entity"),
 }
 
@@ -422,7 +440,8 @@ def test_links_to_devices_to_nothing_and_in_loops_are_one_line(tmp_path, capsys)
 def test_a_read_error_is_a_read_error(capsys):
     if not os.path.exists("/proc/self/mem"):
         pytest.skip("no /proc here")
-    assert_one_line_exit_2(capsys, ["import", "/proc/self/mem"], "/proc/self/mem: cannot read the Heart to Heart 4 project: ")
+    assert_one_line_exit_2(capsys, ["import", "/proc/self/mem"],
+                           "/proc/self/mem: cannot read the Heart to Heart 4 project: ")
 
 
 # ------------------------------------------------------------------ hostile names (items 4 and 7)
@@ -440,7 +459,8 @@ def test_a_bidi_override_in_a_name_is_cleaned_and_validate_refuses_it_raw(tmp_pa
     kept = {m["number"]: m.get("hth4_name") for m in yaml.safe_load(text)["motions"].values()}
     assert kept == {2: "右手 振る", 3: "ab"}
     raw = text.replace("右手 振る", "右\u202e手 振る")
-    with pytest.raises(ShowError, match=r"hth4_name: the Heart to Heart 4 name holds U\+202E \(RIGHT-TO-LEFT OVERRIDE\)"):
+    hidden = r"hth4_name: the Heart to Heart 4 name holds U\+202E \(RIGHT-TO-LEFT OVERRIDE\)"
+    with pytest.raises(ShowError, match=hidden):
         load_show_bytes(raw.encode("utf-8"))
 
 
@@ -450,7 +470,8 @@ def xml_text(text: str) -> str:
                    or ord(ch) >= 0x10000 else "?" for ch in text)
 
 
-hostile_text = st.text(st.one_of(st.sampled_from(HIDDEN + "\"'\\:#&*!|>%@`{}[],?- \t\n"), st.characters(blacklist_categories=("Cs",))),
+hostile_text = st.text(st.one_of(st.sampled_from(HIDDEN + "\"'\\:#&*!|>%@`{}[],?- \t\n"),
+                                 st.characters(blacklist_categories=("Cs",))),
                        max_size=300)
 
 
@@ -469,8 +490,10 @@ def test_any_names_import_as_a_show_that_validates(names, title):
 
 
 def test_a_slot_key_in_a_message_is_shown_escaped(tmp_path, capsys):
-    data = "<Rcb4><MotionDataCollection><DictionaryEntry><Key>M\u202e100</Key></DictionaryEntry></MotionDataCollection></Rcb4>"
-    err = assert_one_line_exit_2(capsys, ["import", str(write_project(tmp_path, data.encode()))], "slot M\\u202e100 has no <Value>")
+    data = ("<Rcb4><MotionDataCollection><DictionaryEntry><Key>M\u202e100</Key></DictionaryEntry>"
+            "</MotionDataCollection></Rcb4>")
+    err = assert_one_line_exit_2(capsys, ["import", str(write_project(tmp_path, data.encode()))],
+                                 "slot M\\u202e100 has no <Value>")
     assert "\u202e" not in err
 
 

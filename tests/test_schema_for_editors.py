@@ -29,7 +29,7 @@ def described(node, path=""):
 def test_every_default_and_example_is_a_value_the_schema_accepts():
     found = list(described(SCHEMA))
     assert len(found) >= 12
-    for path, node in found:
+    for _path, node in found:
         sub = {**node, "$defs": SCHEMA["$defs"]}
         for value in ([node["default"]] if "default" in node else []) + node.get("examples", []):
             jsonschema.validate(value, sub)

@@ -75,7 +75,8 @@ def test_yaml_like_noise(bits):
 
 
 @FUZZ
-@given(st.sampled_from(EXAMPLES), st.lists(st.tuples(st.integers(0, 10_000), st.integers(0, 3), YAML_BITS), min_size=1, max_size=6))
+@given(st.sampled_from(EXAMPLES),
+       st.lists(st.tuples(st.integers(0, 10_000), st.integers(0, 3), YAML_BITS), min_size=1, max_size=6))
 def test_mutated_examples(text, edits):
     for position, how, bit in edits:
         at = position % (len(text) + 1)
@@ -100,7 +101,10 @@ SCALARS = st.one_of(
     st.sampled_from(["done", "wave", "bow", "", "3", "x#1", "12"]),
     st.text(max_size=8),
 )
-DATA = st.recursive(SCALARS, lambda inner: st.one_of(st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=6), inner, max_size=4)), max_leaves=20)
+DATA = st.recursive(
+    SCALARS,
+    lambda inner: st.one_of(st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=6), inner, max_size=4)),
+    max_leaves=20)
 
 
 @FUZZ
@@ -147,7 +151,8 @@ SHOWS = st.fixed_dictionaries(
             max_size=3,
         ),
         "on_abort": STEP_VALUES["play"],
-        "robot": st.fixed_dictionaries({}, optional={"baud": st.sampled_from([115200, 9600]), "retries": st.integers(-1, 12)}),
+        "robot": st.fixed_dictionaries({}, optional={"baud": st.sampled_from([115200, 9600]),
+                                                      "retries": st.integers(-1, 12)}),
     },
 )
 
@@ -166,7 +171,9 @@ PLAIN_STEP = st.one_of(
 )
 BODY = st.recursive(
     st.lists(PLAIN_STEP, min_size=1, max_size=4),
-    lambda inner: st.lists(st.one_of(PLAIN_STEP, st.builds(lambda n, s: {"repeat": n, "steps": s}, st.integers(1, 3), inner)), min_size=1, max_size=4),
+    lambda inner: st.lists(
+        st.one_of(PLAIN_STEP, st.builds(lambda n, s: {"repeat": n, "steps": s}, st.integers(1, 3), inner)),
+        min_size=1, max_size=4),
     max_leaves=12,
 )
 

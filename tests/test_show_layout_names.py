@@ -67,7 +67,8 @@ def test_the_schema_lists_the_layouts_choreo_knows_with_seed_the_default():
 # ------------------------------------------------------------------ motion names
 
 
-@pytest.mark.parametrize("name", ["wave", "_x", "a-b", "歩く", "ウェーブ", "右手2", "々", "Ｗａｖｅ", "ｳｪｰﾌﾞ", "café", "नमस्ते", "𠮷野"])
+@pytest.mark.parametrize("name", ["wave", "_x", "a-b", "歩く", "ウェーブ", "右手2", "々", "Ｗａｖｅ", "ｳｪｰﾌﾞ", "café",
+                                  "नमस्ते", "𠮷野"])
 def test_a_name_in_any_script_names_a_motion_and_can_be_played(name):
     loaded = load_show_bytes(show(f"motions:\n  {name}: {{number: 3}}\nsteps:\n  - play: {name}\n  - wait: done\n"))
     assert loaded.motions[name].number == 3
@@ -76,7 +77,8 @@ def test_a_name_in_any_script_names_a_motion_and_can_be_played(name):
 
 @pytest.mark.parametrize(
     "name",
-    ["歩く（前）→", "歩く（前）", "右・左", "a b", "a\u3000b", "1a", "１a", "-a", "a.b", "wave→", "a‿b", "\u3099a", "a\u200bb", "a\tb"],
+    ["歩く（前）→", "歩く（前）", "右・左", "a b", "a\u3000b", "1a", "１a", "-a", "a.b", "wave→", "a‿b", "\u3099a",
+     "a\u200bb", "a\tb"],
 )
 def test_punctuation_symbols_spaces_and_a_leading_digit_are_refused_at_the_key(name):
     key = json.dumps(name, ensure_ascii=False)
@@ -111,7 +113,8 @@ def test_the_schema_pattern_never_refuses_a_name_choreo_accepts():
     assert [hex(ord(ch)) for ch in first if not pattern.fullmatch(ch)] == []
 
 
-SAMPLES = ["wave", "_x", "a-b", "歩く", "ウェーブ", "歩く（前）→", "a b", "1a", "-a", "a.b", "wave\n", "右・左", "𠮷野", "Ｗａｖｅ", "（"]
+SAMPLES = ["wave", "_x", "a-b", "歩く", "ウェーブ", "歩く（前）→", "a b", "1a", "-a", "a.b", "wave\n", "右・左", "𠮷野",
+           "Ｗａｖｅ", "（"]
 
 
 @pytest.mark.skipif(shutil.which("node") is None, reason="no node to run the pattern as an editor does")
@@ -121,7 +124,8 @@ def test_the_schema_pattern_means_the_same_in_an_editors_regex_engine():
         "const [pattern, names] = JSON.parse(process.argv[1]);"
         'console.log(JSON.stringify(["", "u"].map(f => names.map(n => new RegExp(pattern, f).test(n)))));'
     )
-    out = subprocess.run(["node", "-e", script, json.dumps([_pattern(), SAMPLES])], capture_output=True, text=True, timeout=30, check=True)
+    out = subprocess.run(["node", "-e", script, json.dumps([_pattern(), SAMPLES])], capture_output=True, text=True,
+                         timeout=30, check=True)
     # Whole-string matches: Python's `$` also matches before a final newline (`is_motion_name`
     # refuses such a name); ECMAScript's does not.
     python = [bool(re.fullmatch(_pattern(), name)) for name in SAMPLES]

@@ -126,7 +126,8 @@ def test_robot_settings_and_timeout_are_read(tmp_path):
             timeout: 4
           - wait: 1.5
     """))
-    assert (show.robot.port, show.robot.baud, show.robot.timeout, show.robot.retries) == ("/dev/ttyUSB0", 625000, 0.5, 0)
+    robot = show.robot
+    assert (robot.port, robot.baud, robot.timeout, robot.retries) == ("/dev/ttyUSB0", 625000, 0.5, 0)
     assert show.steps[1].seconds == 4.0
     assert show.steps[2].kind is StepKind.WAIT and show.steps[2].seconds == 1.5
 
@@ -350,7 +351,8 @@ class _StrictScanner(yaml.scanner.Scanner):
 
     def _check_level(self) -> None:
         if self.flow_level + len(self.indents) > 2 * MAX_DEPTH + 2:
-            raise yaml.scanner.ScannerError("while increasing level", None, "exceeded maximum nesting depth", self.get_mark())
+            raise yaml.scanner.ScannerError("while increasing level", None, "exceeded maximum nesting depth",
+                                            self.get_mark())
 
     def add_indent(self, column):
         added = super().add_indent(column)
@@ -373,7 +375,8 @@ class _StrictLoader(yaml.reader.Reader, _StrictScanner, yaml.parser.Parser, yaml
         yaml.resolver.Resolver.__init__(self)
 
 
-_PARSERS = {"libyaml": getattr(yaml, "CSafeLoader", yaml.SafeLoader), "python": yaml.SafeLoader, "strict": _StrictLoader}
+_PARSERS = {"libyaml": getattr(yaml, "CSafeLoader", yaml.SafeLoader), "python": yaml.SafeLoader,
+            "strict": _StrictLoader}
 _DEEP = {
     "flow lists": "[" * 5000,
     "flow maps": "{a: " * 5000,
@@ -470,7 +473,8 @@ def test_required_keys_point_at_the_mapping(tmp_path):
     found = problems(tmp_path, "# a show\nname: x\n")
     assert located(found) == [(2, 1, "version"), (2, 1, "steps")]
     assert found[0].message == "missing: add `version: 1` (the show format's version)"
-    assert found[1].message == "missing: a show needs `steps:`, the list of what it does (or, with `robots:`, `tracks:`)"
+    assert found[1].message == ("missing: a show needs `steps:`, the list of what it does "
+                                "(or, with `robots:`, `tracks:`)")
 
 
 def test_an_empty_value_points_at_its_key(tmp_path):
@@ -498,12 +502,14 @@ def test_unknown_keys_are_located_at_the_key_with_a_suggestion(tmp_path):
 @pytest.mark.parametrize(
     "text,where,message",
     [
-        ("version: 2\nsteps: [{play: 1}]\n", (1, 10, "version"), "unsupported format version 2: this choreo reads `version: 1`"),
+        ("version: 2\nsteps: [{play: 1}]\n", (1, 10, "version"),
+         "unsupported format version 2: this choreo reads `version: 1`"),
         ('version: "1"\nsteps: [{play: 1}]\n', (1, 10, "version"), "expected a whole number, not the text '1'"),
         ("version: 1\nname: 3\nsteps: [{play: 1}]\n", (2, 7, "name"), "expected text, not the number 3"),
         ("version: 1\nsteps: {play: 1}\n", (2, 8, "steps"), "expected a list (`- item` lines), not a mapping"),
         ("version: 1\nsteps: []\n", (2, 8, "steps"), "must not be empty: list at least one step"),
-        ("version: 1\nsteps:\n  - play 3\n", (3, 5, "steps[0]"), "expected a mapping (`key: value` lines), not the text 'play 3'"),
+        ("version: 1\nsteps:\n  - play 3\n", (3, 5, "steps[0]"),
+         "expected a mapping (`key: value` lines), not the text 'play 3'"),
         ("version: 1\nsteps:\n  - play: true\n", (3, 11, "steps[0].play"),
          "expected a motion number 0..119 or a name from `motions:`, not true (put the word in quotes to mean text)"),
         ("version: 1\nsteps:\n  - play: on\n", (3, 11, "steps[0].play"),  # YAML 1.2: `on` is text
@@ -511,7 +517,8 @@ def test_unknown_keys_are_located_at_the_key_with_a_suggestion(tmp_path):
         ("version: 1\nsteps:\n  - play: 3.5\n", (3, 11, "steps[0].play"),
          "expected a motion number 0..119 or a name from `motions:`, not the number 3.5"),
         ("version: 1\nsteps:\n  - play: ''\n", (3, 11, "steps[0].play"), "the motion name is empty"),
-        ("version: 1\nsteps:\n  - play: 1\n    label: 7\n", (4, 12, "steps[0].label"), "expected text, not the number 7"),
+        ("version: 1\nsteps:\n  - play: 1\n    label: 7\n", (4, 12, "steps[0].label"),
+         "expected text, not the number 7"),
     ],
 )
 def test_wrong_types_and_values(tmp_path, text, where, message):
@@ -522,7 +529,8 @@ def test_wrong_types_and_values(tmp_path, text, where, message):
 
 @pytest.mark.parametrize("value", ["140", "120", "-1"])
 def test_play_out_of_range(tmp_path, value):
-    path = write(tmp_path, f"version: 1\nmotions:\n  wave: {{number: 3}}\nsteps:\n  - play: wave\n  - wait: 1\n  - play: {value}\n")
+    path = write(tmp_path, f"version: 1\nmotions:\n  wave: {{number: 3}}\nsteps:\n  - play: wave\n  - wait: 1\n"
+                           f"  - play: {value}\n")
     with pytest.raises(ShowError) as info:
         load_show(path)
     assert info.value.lines() == [f"{path}:7:11: steps[2].play: motion {value} is out of range 0..119"]
@@ -783,7 +791,8 @@ def test_cues_must_not_go_back_in_time(tmp_path):
             at: 12
     """)
     assert (problem.line, problem.column, problem.path) == (8, 9, "steps[2].at")
-    assert problem.message == "cue at 9.5 s comes after the cue at 10 s (steps[1].at, line 6): cues must not go back in time"
+    assert problem.message == ("cue at 9.5 s comes after the cue at 10 s (steps[1].at, line 6): "
+                               "cues must not go back in time")
 
 
 def test_a_cue_earlier_than_the_repeat_it_is_in(tmp_path):
@@ -829,7 +838,8 @@ def test_cues_on_repeats_and_in_single_passes_are_fine(tmp_path):
 
 def test_cue_values(tmp_path):
     problem = only(tmp_path, "version: 1\nsteps:\n  - play: 1\n    at: -1\n")
-    assert (problem.line, problem.column, problem.path, problem.message) == (4, 9, "steps[0].at", "must be at least 0, not -1")
+    assert (problem.line, problem.column, problem.path, problem.message) == (
+        4, 9, "steps[0].at", "must be at least 0, not -1")
 
 
 def test_labels_are_unique(tmp_path):
@@ -873,7 +883,8 @@ def test_expansion_is_bounded(tmp_path):
     """)
     assert time.perf_counter() - started < 1
     assert (problem.line, problem.column, problem.path) == (2, 1, "steps")
-    assert problem.message == f"the show expands to {MAX_PLAN_STEPS + 1:,} steps or more; the limit is {MAX_PLAN_STEPS:,}"
+    assert problem.message == (f"the show expands to {MAX_PLAN_STEPS + 1:,} steps or more; "
+                               f"the limit is {MAX_PLAN_STEPS:,}")
 
 
 # ------------------------------------------------------------------ reporting
@@ -899,7 +910,8 @@ def test_every_problem_is_reported_in_file_order_each_once(tmp_path):
         f"{path}:7:5: steps[1].play: duplicate key 'play' (first given at line 6): keep one",
         f"{path}:8:11: steps[2].wait: wait takes more than 0 seconds, not -1",
         f"{path}:9:11: steps[3].play: unknown motion 'wav': did you mean 'wave'? the show's motions are wave",
-        f"{path}:10:5: steps[4].bogus: unknown key 'bogus': expected one of at, label, play, repeat, robots, steps, timeout, wait",
+        f"{path}:10:5: steps[4].bogus: unknown key 'bogus': "
+        "expected one of at, label, play, repeat, robots, steps, timeout, wait",
     ]
     assert info.value.exit_code == 2
 

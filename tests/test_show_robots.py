@@ -12,7 +12,7 @@ import pytest
 from choreo.cli import main
 from choreo.errors import ShowError
 from choreo.show.load import load_show
-from choreo.show.model import SOLO, StepKind
+from choreo.show.model import SOLO
 from choreo.show.plan import compile_plan, compile_plans
 
 UNISON = """
@@ -150,7 +150,8 @@ def test_tracks_are_plans_of_their_own_on_one_clock(tmp_path):
     ("version: 1\nrobots: {a: {}}\nsteps: [{play: 1}]\ntracks: {a: [{play: 1}]}\n", (4, 1, "tracks"),
      "a show has `steps:` (every robot together) or `tracks:` (one list per robot), not both"),
     ("version: 1\ntracks: {a: [{play: 1}]}\n", (2, 1, "tracks"), "name the robots in `robots:` first"),
-    ("version: 1\nrobots: {1a: {}}\nsteps: [{play: 1}]\n", (2, 10, 'robots["1a"]'), "robot name '1a' must start with a letter"),
+    ("version: 1\nrobots: {1a: {}}\nsteps: [{play: 1}]\n", (2, 10, 'robots["1a"]'),
+     "robot name '1a' must start with a letter"),
     ("version: 1\nrobots: {a: {}, b: {}}\nsteps:\n  - play: 1\n    robots: [a]\n  - wait: done\n",
      (6, 11, "steps[1].wait"), "(robot 'b' has played nothing yet)"),
     ("version: 1\nrobots: {a: {}}\ntracks:\n  a:\n    - play: 1\n      robots: [a]\n", (6, 7, "tracks.a[0].robots"),
@@ -175,11 +176,13 @@ def test_labels_are_unique_across_tracks_and_cues_are_per_track(tmp_path):
           a: [{play: 1, at: 5, label: x}]
           b: [{play: 1, at: 2, label: x}]
     """)
-    assert [(path, said.split(":")[0]) for _, _, path, said in found] == [("tracks.b[0].label", "label 'x' is already used by tracks.a[0] (line 4)")]
+    assert [(path, said.split(":")[0]) for _, _, path, said in found] == [
+        ("tracks.b[0].label", "label 'x' is already used by tracks.a[0] (line 4)")]
 
 
 def test_sim_ports_may_repeat_real_ones_may_not(tmp_path):
-    show = load_show(write(tmp_path, "version: 1\nrobots: {a: {port: 'sim://'}, b: {port: 'sim://'}}\nsteps: [{play: 1}]\n"))
+    show = load_show(write(tmp_path, "version: 1\nrobots: {a: {port: 'sim://'}, b: {port: 'sim://'}}\n"
+                                     "steps: [{play: 1}]\n"))
     assert [s.port for s in show.cast.values()] == ["sim://", "sim://"]
 
 
@@ -211,7 +214,8 @@ def test_one_device_spelt_two_ways_is_still_one_port(tmp_path):
 
 
 @pytest.mark.parametrize("body, where, message", [
-    ("robots: {a: {}}\nsteps:\n  - play: 1\n    robots: [1, a]\n", "steps[0].robots[0]", "expected text, not the number 1"),
+    ("robots: {a: {}}\nsteps:\n  - play: 1\n    robots: [1, a]\n", "steps[0].robots[0]",
+     "expected text, not the number 1"),
     ("robots: {}\nsteps: [{play: 1}]\n", "robots", "`robots:` is empty: name at least one robot"),
     ("robots: {a: {}}\nsteps:\n  - play: 1\n    robots: [a, a]\n", "steps[0].robots", "names a robot twice"),
     ("robots: {a: {}}\nsteps:\n  - play: 1\n    robots: ['1']\n", "steps[0].robots[0]", "robot name '1' must start"),
