@@ -231,6 +231,11 @@ class Link:
     def __enter__(self) -> Link:
         return self
 
+    def refresh_faster(self, speed: float) -> None:
+        """The board on the other end runs `speed` times faster (a replay at --speed X on the
+        simulator): its status refreshes, and so may be polled, that much more often."""
+        self.status_spacing_s = STATUS_SPACING_S / speed
+
     def subscribe(self, listener: LinkListener) -> Subscription:
         """Attach `listener` to every frame and reply from now until the subscription closes
         (use it in a `with` block: whoever attaches a listener detaches it)."""

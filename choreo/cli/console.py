@@ -200,6 +200,20 @@ class _Robot:
         self.ended = False
         self.started_s = show_s
 
+    def step_ended(self, step: PlannedStep) -> None:
+        """A step ended: its own current one (another robot's shared step is not its end)."""
+        if self.current is not None and self.current.index == step.index:
+            self.ended = True
+
+    def replied(self, latency_ms: float, ok: bool) -> None:
+        if ok:
+            self.latencies_ms.append(latency_ms)
+        else:
+            self.failed += 1
+
+    def retried(self) -> None:
+        self.retries += 1
+
     def dues_s(self) -> list[float]:
         """When, on the show clock, this robot's runner next wakes to send: the end of the wait
         it is in, and its next timed cue (a step after a play goes at once: no wake-up)."""
@@ -742,8 +756,8 @@ class Console:
         with self._lock:
             if event.event == "start":
                 robot.moved_to(event.step, event.actual_s)
-            elif robot.current is not None and robot.current.index == event.step.index:
-                robot.ended = True
+            else:
+                robot.step_ended(event.step)
 
     def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
         if level >= INFO:
@@ -764,15 +778,11 @@ class Console:
 
     def _note_retry(self, robot: str) -> None:
         with self._lock:
-            self._robots[robot].retries += 1
+            self._robots[robot].retried()
 
     def _note_reply(self, robot: str, latency_ms: float, ok: bool) -> None:
         with self._lock:
-            state = self._robots[robot]
-            if ok:
-                state.latencies_ms.append(latency_ms)
-            else:
-                state.failed += 1
+            self._robots[robot].replied(latency_ms, ok)
 
     def _add(self, note: Note) -> None:
         with self._lock:

@@ -1,0 +1,392 @@
+"""Wiring with an owner: whoever attaches a listener or a stop check detaches it, a stop request
+keeps the first reason but never loses a panic, and no module sets another object's attributes.
+
+Issue 22: `--loop` built new runners on the same link and each appended a retry reporter that
+was never removed (pass N logged each failed try N times); `StopRequest.reason` was written from
+four threads, last writer winning, so a link fault right after a panic turned the panic into a
+plain stop and the other robots never got their stop frames.
+"""
+
+from __future__ import annotations
+
+import ast
+import threading
+from pathlib import Path
+
+import pytest
+
+from choreo.board.link import Link
+from choreo.clock import RunClock, VirtualTime
+from choreo.errors import LinkError
+from choreo.events import PANIC, STOPPED, StepEvent, StopRequest, never
+from choreo.log.format import WARNING
+from choreo.run.runner import Runner
+from choreo.show.load import load_show
+from choreo.show.plan import compile_plan
+from runlog import prepare, read_log, write_show
+
+CHOREO = Path(__file__).resolve().parent.parent / "choreo"
+FAULT = "stopped: robot right's link failed"
+
+
+# -- the stop request ------------------------------------------------------------------------------
+
+
+def test_the_first_reason_wins_and_says_whether_it_took():
+    stop = StopRequest()
+    assert not stop() and stop.reason == STOPPED  # nothing asked yet
+    assert stop.request("interrupted (Ctrl-C)")
+    assert not stop.request(FAULT)  # a later reason does not replace the first
+    assert stop() and stop.reason == "interrupted (Ctrl-C)" and not stop.panicked
+
+
+@pytest.mark.parametrize("first", ["interrupted (Ctrl-C)", FAULT, STOPPED])
+def test_a_panic_replaces_any_reason_and_nothing_replaces_a_panic(first):
+    stop = StopRequest()
+    stop.request(first)
+    assert stop.request(PANIC)  # the panic after a fault (or a Ctrl-C) is still a panic
+    assert not stop.request(FAULT)  # the fault the panic's stop frames cause comes after it
+    assert not stop.request("interrupted (Ctrl-C)")
+    assert stop.reason == PANIC and stop.panicked
+
+
+def test_the_reason_is_read_only():
+    stop = StopRequest()
+    with pytest.raises(AttributeError):
+        stop.reason = PANIC  # type: ignore[misc]  # the point: nobody sets it from outside
+
+
+def test_a_fault_racing_a_panic_on_other_threads_still_ends_as_a_panic():
+    """Every thread released at once by a barrier: the runner threads' faults, the log's full
+    disk and a Ctrl-C against the operator's panic. Whatever the interleaving, a panic."""
+    reasons = [PANIC, FAULT, "stopped: robot left's link failed", "stopped: the log's disk is full (x)",
+               "interrupted (Ctrl-C)"]
+    for round_ in range(200):
+        stop = StopRequest()
+        order = reasons[round_ % len(reasons):] + reasons[:round_ % len(reasons)]  # who starts first varies
+        barrier = threading.Barrier(len(order))
+
+        def ask(reason: str, stop: StopRequest = stop, barrier: threading.Barrier = barrier) -> None:
+            barrier.wait()
+            stop.request(reason)
+
+        threads = [threading.Thread(target=ask, args=(reason,)) for reason in order]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+        assert stop.reason == PANIC, (round_, stop.reason)
+
+
+# -- a run's listeners and stop check --------------------------------------------------------------
+
+SHOW = """
+    version: 1
+    motions:
+      home: {number: 0, duration: 0.05}
+    on_abort: home
+    steps:
+      - play: 3
+      - wait: 0.2
+      - play: 4
+"""
+
+
+class Frames:
+    """A link listener for the whole life of the link (as the log is): given at its opening."""
+
+    def __init__(self, stop: StopRequest | None = None, stop_at: int | None = None) -> None:
+        self.stop = stop
+        self.stop_at = stop_at
+        self.sent = 0
+
+    def on_tx(self, event: object) -> None:
+        self.sent += 1
+        if self.stop is not None and self.sent == self.stop_at:
+            self.stop.request("interrupted (test)")
+
+    def on_rx(self, event: object) -> None:
+        pass
+
+
+def _runner(tmp_path: Path, url: str, stop: StopRequest, frames: Frames) -> Runner:
+    show = load_show(write_show(tmp_path, SHOW))
+    clock = RunClock(VirtualTime())
+    link = Link.open(url, listeners=[frames], clock=clock)
+    return Runner(compile_plan(show), link, clock=clock, on_abort=show.on_abort, stop=stop)
+
+
+@pytest.mark.parametrize("url, stop_at, outcome", [
+    ("sim://", None, "done"),
+    ("sim://", 2, "aborted"),  # interrupted mid-show: the abort motion under its own `never` check
+    ("sim://?nak=1&faults_on=play", None, LinkError),  # every CALL refused: the run fails
+])
+def test_after_a_run_only_the_links_own_listeners_remain(tmp_path, url, stop_at, outcome):
+    stop = StopRequest()
+    frames = Frames(stop, stop_at)
+    runner = _runner(tmp_path, url, stop, frames)
+    link = runner.link
+    assert list(link.listeners) == [frames]
+    if isinstance(outcome, type):
+        with pytest.raises(outcome):
+            runner.run()
+    else:
+        assert runner.run().outcome == outcome
+    assert list(link.listeners) == [frames]  # the run's retry reporter went with the run
+    assert link._should_stop is never  # and so did its stop check: the next user of the link starts clean
+
+
+def test_a_subscription_detaches_once_and_leaves_the_others(tmp_path):
+    frames, other = Frames(), Frames()
+    link = _runner(tmp_path, "sim://", StopRequest(), frames).link
+    with link.subscribe(other) as subscription:
+        assert list(link.listeners) == [frames, other]
+        link.query_status()
+        subscription.close()
+        subscription.close()  # once only: a second close removes nothing else
+    assert list(link.listeners) == [frames]
+    link.query_status()
+    assert (frames.sent, other.sent) == (2, 1)
+
+
+# -- whole runs on virtual time --------------------------------------------------------------------
+
+LOOP_SHOW = """
+    version: 1
+    steps:
+      - play: 1
+        label: intro
+      - play: 2
+        label: a
+      - wait: 0.1
+      - play: 3
+        label: b
+      - play: 4
+"""
+
+
+class StopAtPass:
+    """Stops the run as `--loop`'s pass `last + 1` begins (the operator's Ctrl-C, on virtual
+    time: the same passes on any machine)."""
+
+    def __init__(self, stop: StopRequest, last: int) -> None:
+        self.stop = stop
+        self.last = last
+
+    def on_step(self, event: StepEvent) -> None:
+        pass
+
+    def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
+        if message.startswith(f"loop: pass {self.last + 1} "):
+            self.stop.request("interrupted (test)")
+
+
+def test_loop_over_three_passes_logs_each_failed_try_once(tmp_path):
+    """Every 5th frame NAKed over three passes of a section: one warning line per NAK. Before,
+    pass N's link carried N retry reporters (23 lines for 11 NAKs)."""
+    from choreo.run.settings import RunRequest
+
+    show = write_show(tmp_path, LOOP_SHOW)
+    log_path = tmp_path / "run.mcap"
+    session = prepare(RunRequest(str(show), port="sim://?nak=5", log_path=str(log_path), loop="a..b"))
+    stop = StopRequest()
+    with session:
+        result = session.run([StopAtPass(stop, 3)], stop)
+    assert result.outcome == "aborted"
+    log = read_log(log_path)
+    passes = [m for m in log.logs if m["message"].startswith("loop: pass")]
+    assert [m["message"] for m in passes] == ["loop: pass 2 from 'a' to 'b'", "loop: pass 3 from 'a' to 'b'",
+                                              "loop: pass 4 from 'a' to 'b'"]
+    naks = [m for m in log.rx if m["kind"] == "nak"]
+    in_pass_3 = [m for m in naks if passes[1]["_log_time"] <= m["_log_time"] < passes[2]["_log_time"]]
+    assert len(naks) >= 4 and in_pass_3  # pass 3 met some: it would have logged each three times
+    warned = [m["message"] for m in log.logs if m["level"] == WARNING and "NAK" in m["message"]]
+    assert len(warned) == len(naks), warned
+    assert len(set(warned)) == len(warned)  # no line twice
+
+
+TWO_ROBOTS = """
+    version: 1
+    robots:
+      left: {}
+      right: {}
+    steps:
+      - play: 1
+      - wait: 5
+        label: hold
+      - play: 2
+"""
+
+
+class PanicAt:
+    """The operator's panic as robot `robot` starts step `label` (from that robot's thread, as a
+    panic from the console lands between two of its frames)."""
+
+    def __init__(self, stop: StopRequest, robot: str, label: str) -> None:
+        self.stop = stop
+        self.robot = robot
+        self.label = label
+
+    def on_step(self, event: StepEvent) -> None:
+        if event.event == "start" and event.robot == self.robot and event.step.label == self.label:
+            self.stop.request(PANIC)
+
+    def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
+        pass
+
+
+def test_a_link_fault_right_after_a_panic_still_ends_the_show_as_a_panic(tmp_path):
+    """Right panics, and its panic stop frame is lost with its port: its fault asks the show to
+    stop just after the panic. Left, woken later, still reads a panic and sends its stop frame
+    (it has no abort motion); before, the fault's reason replaced the panic and left sent nothing."""
+    from choreo.run.settings import RunRequest
+
+    show = write_show(tmp_path, TWO_ROBOTS)
+    log_path = tmp_path / "run.mcap"
+    ports = {"left": "sim://", "right": "sim://?lose=2&faults_on=stop"}  # right's 2nd stop frame: the panic's
+    session = prepare(RunRequest(str(show), robot_ports=ports, log_path=str(log_path)))
+    stop = StopRequest()
+    with session, pytest.raises(LinkError, match="robot right"):
+        session.run([PanicAt(stop, "right", "hold")], stop)
+    assert stop.reason == PANIC
+    log = read_log(log_path)
+    lines = [m["message"] for m in log.logs]
+    assert any(line.startswith("robot left: show panic at") for line in lines), lines
+    assert "robot left: panic: stop frame" in lines
+    assert not any("link failed at" in line and line.startswith("robot left") for line in lines)
+    left_stops = [m for m in log.topic("/rcb4/left/tx") if m["kind"] == "stop"]
+    assert len(left_stops) == 2  # the play's, then the panic's
+
+
+# -- nobody sets another object's attributes -------------------------------------------------------
+
+# Assignments `x.attr = ...` with x not `self`/`cls`, which are genuinely the assigner's to make.
+# Keyed by the target as written; each with its reason. Anything else is wiring from outside.
+ALLOWED = {
+    "port.time_source": "a pyserial port's setting, given by open_port before it opens the port it made",
+    "sys.stdout": "the process's standard streams, swapped by the CLI entry that owns the process",
+    "sys.stderr": "the process's standard streams, swapped by the CLI entry and the console it starts",
+    "sys.excepthook": "the process entry installs how a crash is printed",
+    "threading.excepthook": "the process entry installs how a crash in a thread is printed",
+    "subparsers.required": "argparse's documented way to require a subcommand, on a parser built here",
+    "commands.required": "argparse's documented way to require a subcommand, on a parser built here",
+    "function.argtypes": "ctypes: the prototype of a C function this module looked up",
+    "function.restype": "ctypes: the prototype of a C function this module looked up",
+    "library.snd_lib_error_set_handler.argtypes": "ctypes: the prototype of the C function it calls",
+    "library.snd_lib_error_set_handler.restype": "ctypes: the prototype of the C function it calls",
+    "args.time_source": "the argparse namespace the CLI just parsed: what the command's handler is given",
+    "live_render._shape": "rich keeps no public way to forget the drawn shape after a terminal resize",
+    "self._screen.size": "rich's Console.size setter, on the console this object made",
+    "self.line.settings": "the simulator's own line, held by the port that made it",
+    # A module's own private record, reached through its own table rather than a parameter the
+    # check can read the class of (the class is defined in the same module as the assignment):
+    "slot.proven": "oscnet: ConnectionTable's own _Slot records",
+    "slot.spoke": "oscnet: ConnectionTable's own _Slot records",
+    "slot.due": "oscnet: ConnectionTable's own _Slot records",
+    "slot.pending": "oscnet: ConnectionTable's own _Slot records",
+    "connection.resting_until": "oscnet: OscNet's own _Connection records",
+    "armed.restore_seq": "log.format: MotionTracker's own _Armed record",
+    "armed.start_ns": "log.format: MotionTracker's own _Armed record",
+    "timeline.end_s": "review.timeline: the Timeline the builder is filling in",
+    "timeline.unplayed": "review.timeline: the Timeline the builder is filling in",
+    "timeline.cut": "review.timeline: the Timeline the builder is filling in",
+    "timeline.outcome": "review.timeline: the Timeline the builder is filling in",
+    "known.late_ms": "review.timeline: the builder's own _Step record",
+    "report.log_path": "run.replay: the ReplayReport the replay is filling in",
+    "parts[name].cut": "run.replay: each robot's part of the ReplayReport the replay is filling in",
+    "self.report.unmatched": "run.replay: the ReplayReport the replay is filling in",
+    "self.report.max_lag_ms": "run.replay: the ReplayReport the replay is filling in",
+    "self.report.frames": "run.replay: the ReplayReport the replay is filling in",
+    "report.same": "run.replay: the ReplayReport the replay is filling in",
+    "report.different": "run.replay: the ReplayReport the replay is filling in",
+    "report.timing": "run.replay: the ReplayReport the replay is filling in",
+    "report.replay_late": "run.replay: the ReplayReport the replay is filling in",
+    "report.excused": "run.replay: the ReplayReport the replay is filling in",
+    "parent.expect_key": "show.yamlwalk: the walk's own _Frame records",
+}
+
+
+def _class_names(node: ast.AST | None) -> set[str]:
+    """The class names an annotation or an expression mentions (`_Gate | None`, `_Gate()`)."""
+    if node is None:
+        return set()
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        try:
+            node = ast.parse(node.value, mode="eval")
+        except SyntaxError:
+            return set()
+    return {n.id for n in ast.walk(node) if isinstance(n, ast.Name)}
+
+
+def _own_records(function: ast.FunctionDef | ast.AsyncFunctionDef, classes: set[str]) -> set[str]:
+    """Names in `function` that hold an instance of a class of the function's own module: a
+    parameter annotated with one, or a name bound to what such a class made. Filling in the
+    module's own record is its own business; an object of another module's class is not."""
+    args = function.args
+    own = {a.arg for a in (*args.posonlyargs, *args.args, *args.kwonlyargs)
+           if _class_names(a.annotation) & classes}
+    for node in ast.walk(function):
+        if isinstance(node, ast.Assign) and _called_classes(node.value) & classes:
+            own |= {n.id for target in node.targets for n in ast.walk(target) if isinstance(n, ast.Name)}
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and \
+                _class_names(node.annotation) & classes:
+            own.add(node.target.id)
+    return own
+
+
+def _called_classes(node: ast.AST) -> set[str]:
+    return {n.func.id for n in ast.walk(node) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
+
+
+def _outside_assignments(path: Path, root: Path = CHOREO.parent) -> list[str]:
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    classes = {n.name for n in ast.walk(tree) if isinstance(n, ast.ClassDef)}
+    found = []
+    for function in ast.walk(tree):
+        if not isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        own = _own_records(function, classes) | {"self", "cls"}
+        for node in ast.walk(function):
+            targets = node.targets if isinstance(node, ast.Assign) else \
+                [node.target] if isinstance(node, (ast.AugAssign, ast.AnnAssign)) else []
+            for attribute in (a for t in targets for a in ast.walk(t)):
+                if not isinstance(attribute, ast.Attribute) or not isinstance(attribute.ctx, ast.Store):
+                    continue
+                if isinstance(attribute.value, ast.Name) and attribute.value.id in own:
+                    continue
+                text = ast.unparse(attribute)
+                if text not in ALLOWED:
+                    found.append(f"{path.relative_to(root)}:{node.lineno}: {text}")
+    return found
+
+
+def test_no_module_sets_another_objects_attributes():
+    """`link.should_stop = ...`, `runner.cues = ...`, `recorder.on_stop = ...`, `live.show = ...`
+    were wiring from outside; each is now a constructor argument, a per-run argument, or a
+    scoped context of the object's own."""
+    found = sorted({line for path in sorted(CHOREO.rglob("*.py")) for line in _outside_assignments(path)})
+    assert found == [], "\n".join(found)
+
+
+def test_every_allowed_assignment_is_still_made():
+    """The allow-list shrinks with the code: an entry nothing needs any more is taken out."""
+    made = set()
+    for path in CHOREO.rglob("*.py"):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        made |= {ast.unparse(n) for n in ast.walk(tree)
+                 if isinstance(n, ast.Attribute) and isinstance(n.ctx, ast.Store)}
+    assert sorted(set(ALLOWED) - made) == []
+
+
+def test_the_attribute_check_sees_wiring_from_outside(tmp_path):
+    """The check itself: an object's attribute set by another, a parameter's, is found; a
+    record the function built, and `self`, are not."""
+    sample = tmp_path / "choreo" / "sample.py"
+    sample.parent.mkdir()
+    sample.write_text("from choreo.run.runner import Runner\n"
+                      "class Record:\n    total = 0\n"
+                      "def wire(runner, gates):\n    runner.cues = gates\n    self.x = 1\n"
+                      "def build(old: Record):\n    record = Record()\n    record.total = 3\n    old.total = 4\n"
+                      "def start(plan):\n    runner = Runner(plan)\n    runner.on_idle = print\n")
+    assert _outside_assignments(sample, tmp_path) == ["choreo/sample.py:5: runner.cues",
+                                                      "choreo/sample.py:13: runner.on_idle"]
