@@ -15,8 +15,9 @@ from __future__ import annotations
 
 from common import median, percentile, pty_sim, row, temp_dir, write_show
 
-from choreo.run.runner import StopRequest
-from choreo.run.session import RunRequest, Session
+from choreo.events import StopRequest
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
 
 GOAL_P99_MS = 1.0
 BAUDS = (115200, 625000, 1250000)
@@ -47,7 +48,7 @@ def starts_ms(baud: int, timer: int, compensate: bool, plays: int) -> list[float
 
         with session:
             if not compensate:
-                session.link.start_lead_s = lambda motion: 0.0  # the play's first frame on the cue
+                session.stage.links["robot"].start_lead_s = lambda motion: 0.0  # the play's first frame on the cue
             session.run([Ends()], StopRequest())
     return ends[1:]
 

@@ -11,7 +11,8 @@ from choreo.cli import main
 from choreo.wire.layouts import HTH4_22, SEED, layout_named
 from choreo.board.link import Link
 from choreo.board.probe import probe
-from choreo.run.session import RunRequest, Session
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
 from choreo.sim.board import SimBoard
 from choreo.sim.faults import FaultPlan
 from runlog import prepare, read_log, write_show
@@ -185,7 +186,7 @@ def run_show(tmp_path, port: str | None = None, **request):
                                          **request))
     with session:
         result = session.run()
-        board = session.link.port.board
+        board = session.stage.links["robot"].port.board
     return session, result, board, read_log(tmp_path / "run.mcap")
 
 
@@ -227,9 +228,9 @@ def test_a_run_with_a_mismatched_layout_shows_as_stray_calls(tmp_path, board_lay
 def test_the_show_names_the_layout(tmp_path):
     show = write_show(tmp_path, SHOW.replace("name: layouts", "name: layouts\n    robot: {layout: hth4-2.2}"))
     session = prepare(RunRequest(str(show), no_log=True))
-    assert session.layout is HTH4_22 and session.layout_source == "show"
-    assert "layout=hth4-2.2" in session.port
-    assert not session.assumes_layout  # a simulator, and the show said it anyway
+    assert session.settings.links["robot"].layout is HTH4_22 and session.settings.links["robot"].layout_source == "show"
+    assert "layout=hth4-2.2" in session.settings.links["robot"].port
+    assert not session.settings.links["robot"].assumes_layout  # a simulator, and the show said it anyway
 
 
 def test_a_real_port_without_a_layout_says_which_it_assumes(tmp_path, capsys):

@@ -21,7 +21,8 @@ import pytest
 from choreo.log import recorder as record
 from choreo.cli import main
 from choreo.errors import LogError
-from choreo.run.session import RunRequest, Session
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
 from runlog import vmain, prepare, REPO, _env, read_log, write_show
 
 MANY_PLAYS = """
@@ -80,7 +81,7 @@ class _LimitedFile:
 
 
 def board_frames(session: Session) -> list[str]:
-    return [e.data.hex(" ") for e in session.link.port.board.journal if e.kind == "frame"]
+    return [e.data.hex(" ") for e in session.stage.links["robot"].port.board.journal if e.kind == "frame"]
 
 
 def run_until_full(show: Path, log_path: Path, real_time: bool = False) -> tuple[Session, LogError]:

@@ -8,7 +8,9 @@ import pytest
 
 from choreo.cli import main
 from choreo.errors import UsageError
-from choreo.run.session import MIN_LOOP_S, RunRequest, Session
+from choreo.run.sections import MIN_LOOP_S
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
 from runlog import write_show
 from test_music import write_song
 
@@ -89,7 +91,7 @@ def test_a_short_loop_is_refused_as_the_library_is_called_too(tmp_path):
 def test_a_loop_that_takes_time_or_waits_for_go_is_taken(tmp_path, body, loop):
     """0.1 s of show time is enough; a GO cue paces a pass by hand, however short its plan."""
     session = Session.prepare(RunRequest(str(write_show(tmp_path, body)), loop=loop, no_log=True))
-    assert session.loop is not None
+    assert session.settings.sections.loop is not None
 
 
 MUSIC_SHOW = """\
@@ -133,8 +135,8 @@ def test_from_past_the_end_of_the_music_is_refused(tmp_path, capsys, start, opti
 def test_from_inside_the_music_or_without_it_is_taken(tmp_path):
     write_song(tmp_path / "song.wav", 1.4)
     show = str(write_show(tmp_path, MUSIC_SHOW.replace("START", "0")))
-    assert Session.prepare(RunRequest(show, from_step="edge", no_log=True, audio_device="null")).origin == 0.9
-    assert Session.prepare(RunRequest(show, from_step="late", no_log=True, no_music=True)).origin == 2.0
+    assert Session.prepare(RunRequest(show, from_step="edge", no_log=True, audio_device="null")).settings.sections.origin == 0.9
+    assert Session.prepare(RunRequest(show, from_step="late", no_log=True, no_music=True)).settings.sections.origin == 2.0
 
 
 @pytest.mark.parametrize("ref", ["9" * 5000, "9" * 20, "1" + "0" * 4400])

@@ -6,14 +6,14 @@ from __future__ import annotations
 
 import pytest
 
-from choreo.run.session import RunRequest
+from choreo.run.settings import RunRequest
 from runlog import prepare, read_log
 
 SHOW = "version: 1\nsteps:\n" + "".join(f"  - play: {1 + i % 3}\n    at: {0.5 * i:g}\n" for i in range(8))
 
 
 def motion_starts(session) -> list[float]:
-    board = session.link.port.board
+    board = session.stage.links["robot"].port.board
     return [entry.at - board.power_on for entry in board.journal
             if entry.kind == "frame" and " started, runs " in entry.note]
 

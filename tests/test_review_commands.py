@@ -482,7 +482,7 @@ def test_replay_of_a_clean_run_is_clean_at_any_speed(live_log, capsys, tmp_path,
 def test_speed_scales_a_sim_board_and_nothing_else():
     from urllib.parse import parse_qsl
 
-    from choreo.run.replay import at_speed
+    from choreo.run.settings import at_speed
     from choreo.sim.options import parse_query
 
     def options(url: str) -> dict[str, str]:

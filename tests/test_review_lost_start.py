@@ -14,7 +14,7 @@ from choreo.log.format import MotionTracker, RxRecord, TxRecord
 from choreo.log.reader import LogReader
 from choreo.review.summary import render, summarize
 from choreo.review.timeline import build
-from choreo.run.session import RunRequest
+from choreo.run.settings import RunRequest
 from runlog import prepare, vmain, write_show
 from test_play_once import NEVER, OVER, RUNNING, run_short
 

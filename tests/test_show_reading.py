@@ -15,7 +15,8 @@ from choreo.cli import main
 from choreo.errors import ShowError, UsageError
 from choreo.log.recorder import default_log_path
 from runlog import vmain, prepare
-from choreo.run.session import RunRequest, Session
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
 from choreo.show.load import load_show, load_show_bytes
 from choreo.show.plan import compile_plan
 
@@ -133,8 +134,8 @@ def test_a_sim_port_in_the_show_gets_the_runs_baud_and_the_shows_durations(tmp_p
     path.write_text("version: 1\nrobot: {port: 'sim://', baud: 625000}\nmotions:\n  m: {number: 3, duration: 0.3}\n"
                     "steps:\n  - play: m\n  - wait: done\n")
     session = prepare(RunRequest(str(path), no_log=True))
-    assert session.port_source == "show"
-    assert "baud=625000" in session.port and "durations=3:0.3" in session.port
+    assert session.settings.links["robot"].port_source == "show"
+    assert "baud=625000" in session.settings.links["robot"].port and "durations=3:0.3" in session.settings.links["robot"].port
     with session:
         assert session.run().outcome == "done"
 

@@ -338,15 +338,18 @@ def test_sim_url_refuses_what_the_simulator_refuses(url, message):
 
 def test_a_runs_port_gets_what_its_url_leaves_unsaid_and_keeps_what_it_says():
     from choreo.errors import UsageError
-    from choreo.wire.layouts import layout_named
-    from choreo.run.session import with_show_durations
+    from choreo.wire.layouts import SEED, Layout, layout_named
+    from choreo.run.settings import LinkSettings
     from choreo.sim.options import SimUrl
 
+    def port(given: str, baud: int = 115200, layout: Layout = SEED) -> str:
+        return LinkSettings("robot", given, "command line", baud, 0.2, 3, layout).port
+
     hth4 = layout_named("hth4-2.2")
-    url = with_show_durations("sim://?baud=625000&drop=5", None, None, 625000, hth4)
+    url = port("sim://?baud=625000&drop=5", 625000, hth4)
     assert url == "sim://?baud=625000&drop=5&layout=hth4-2.2"  # the user's baud once, layout added
-    assert with_show_durations("sim://?drop=5", None, None) == "sim://?drop=5"  # nothing to add
-    assert with_show_durations("/dev/ttyUSB0", None, None, 625000, hth4) == "/dev/ttyUSB0"
+    assert port("sim://?drop=5") == "sim://?drop=5"  # nothing to add
+    assert port("/dev/ttyUSB0", 625000, hth4) == "/dev/ttyUSB0"
     assert SimUrl.parse(url).options.layout is hth4
     with pytest.raises(UsageError, match=r"--port sim://\?drop=5&drop=6: sim://: option 'drop' is given twice"):
-        with_show_durations("sim://?drop=5&drop=6", None, None)
+        port("sim://?drop=5&drop=6")

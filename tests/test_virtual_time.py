@@ -10,7 +10,7 @@ import pytest
 from choreo.clock import RunClock, SystemTime, VirtualTime
 from choreo.errors import LinkError
 from choreo.board.link import Link
-from choreo.run.session import RunRequest
+from choreo.run.settings import RunRequest
 from runlog import prepare, read_log, write_show
 
 SHOW = """

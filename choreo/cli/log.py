@@ -20,6 +20,7 @@ from typing import IO
 
 from choreo.errors import UsageError
 from choreo.textfit import visible
+from choreo.wire.protocol import DEFAULT_BAUD, spell_bauds
 
 FRAME_AND_REPLY_KINDS = ("stop", "counter", "play", "restore", "status", "read", "sync",
                          "ack", "nak", "timeout", "invalid")
@@ -99,8 +100,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     replay.add_argument("--layout", choices=("seed", "hth4-2.2"),
                         help="the board layout the simulator models, for every robot of a show for several "
                         "(default: the one the log records for each robot)")
-    replay.add_argument("--baud", type=int, help="115200, 625000 or 1250000 (default: the recorded run's "
-                        "for --port, 115200 for the simulator)")
+    replay.add_argument("--baud", type=int, help=f"{spell_bauds('or')} (default: the recorded run's "
+                        f"for --port, {DEFAULT_BAUD} for the simulator)")
     replay.add_argument("--timeout", type=float, metavar="S",
                         help="seconds to wait for a reply, more than 0 and at most 10 (default 0.2)")
     replay.add_argument("--log", dest="new_log", metavar="PATH",
@@ -309,7 +310,7 @@ def _output(path: str, command: str, binary: bool = False) -> Iterator[IO]:
     not finish (the disk filled, the log turned out not to be choreo's) is removed, never left
     half written; anything that was there before (a device such as /dev/stdout) is left alone.
     """
-    from choreo.run.session import check_output_folder
+    from choreo.run.settings import check_output_folder
 
     target = Path(path)
     check_output_folder(target, command)

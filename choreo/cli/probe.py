@@ -5,13 +5,14 @@ from __future__ import annotations
 import argparse
 
 from choreo.errors import UsageError
+from choreo.wire.protocol import spell_bauds
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "probe",
         help="find the board's baud and read its version, config word and program counter",
-        description="Send the ACK check at 115200, 625000 and 1250000 baud (even parity) until the "
+        description=f"Send the ACK check at {spell_bauds('and')} baud (even parity) until the "
         "board answers, then read its version text, config word (decoded) and program counter, and "
         "say what they suggest about its memory layout (a hint, never a fact). It never writes RAM "
         "and never sends a CALL: the robot does not move. Exit 3 if nothing answers, or something "
@@ -28,7 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from choreo.board.probe import probe
-    from choreo.run.session import check_timeout
+    from choreo.run.settings import check_timeout
 
     check_timeout(args.timeout)
     port = args.port if args.port is not None else _kondo_adapter()

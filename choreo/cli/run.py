@@ -9,14 +9,20 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import closing, contextmanager, nullcontext
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
-from choreo.__main__ import STOP_SIGNALS
 from choreo.cli.terminal import StatusWriter
 from choreo.cli.terminal import columns as terminal_columns
 from choreo.errors import ChoreoError, Interrupted
+from choreo.signals import STOP_SIGNALS
 from choreo.wire.layouts import LAYOUT_NAMES
+from choreo.wire.protocol import spell_bauds
 from choreo.textfit import fit
+
+if TYPE_CHECKING:  # the run's modules load when a run starts: `choreo validate` and --help stay light
+    from choreo.events import RunResult
+    from choreo.run.session import Session
+    from choreo.run.settings import LinkSettings, RunSettings
 
 
 
@@ -32,7 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="pyserial URL or device: /dev/ttyUSB0, COM3, socket://, rfc2217://, loop://, "
                         "spy://, sim:// (default: the show's robot.port, else sim://); with several robots, "
                         "NAME=URL for one robot (repeatable)")
-    parser.add_argument("--baud", type=int, help="115200 (default), 625000 or 1250000")
+    parser.add_argument("--baud", type=int, help=spell_bauds("or", mark_default=True))
     parser.add_argument("--layout", choices=LAYOUT_NAMES, help="the board's memory layout: seed "
                         "(the document's frames, default) or hth4-2.2 (motions written by Heart to "
                         "Heart 4 2.2 or later); default: the show's robot.layout, else seed")
@@ -56,7 +62,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        "name from `choreo devices`, or null (silent, keeps the music's time); default: "
                        "the system's output")
     live = parser.add_argument_group("live control", "GO cues (`at: go`), the console and OSC; see "
-                                     "README, Running a show live")
+                                     "docs/live.md")
     live.add_argument("--osc", metavar="PORT", help="take OSC commands (go, panic, start, stop, "
                       "cue/LABEL/go under /choreo) on this UDP and TCP (SLIP) port, and answer each with /reply/... "
                       "(QLab itself listens on 53000: choose another, e.g. 53200)")
@@ -99,8 +105,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, report: "_RunReport") -> int:
-    from choreo.run.runner import StopRequest
-    from choreo.run.session import RunRequest, Session
+    from choreo.events import ResultListener, StopRequest
+    from choreo.run.session import Session
+    from choreo.run.settings import RunRequest
 
     port, robot_ports = port_arguments(args.port)
     osc_port, notify = _check_osc_options(args)
@@ -110,22 +117,15 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
                          no_music=args.no_music, audio_device=args.audio_device, loop=args.loop,
                          rehearse=args.rehearse)
     session = Session.prepare(request, args.time_source)
-    report.session = session
+    report.prepared(session)
     console = _wants_console(args)
-    _check_go_sources(session, console, args)
+    _check_go_sources(session.settings, console, args)
     stop = StopRequest()
     live = _live(args, stop, console)
     osc = _bound_osc(args, osc_port, notify, live)  # listening (not serving yet) before a line is said or anything opens
     say = _Say(sys.stderr, quiet=args.quiet)
-    if session.show.ensemble:
-        for line in _robot_lines(session):
-            say(line)
-    else:
-        say(_port_line(session))
-        say(_layout_line(session))
-    say(_show_line(session))
-    if session.show.music is not None:
-        say(_music_line(session))
+    for line in _opening_lines(session.settings):
+        say(line)
     progress = Progress(session, sys.stderr, live=sys.stderr.isatty() and not console, quiet=args.quiet or console)
     signals = _StopOnSignals(stop)
     try:
@@ -138,9 +138,9 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
             with closing(live) if live is not None else nullcontext(), _console(session, live, console, listeners):
                 result = session.run([progress, *listeners], stop, live)
                 for listener in listeners:
-                    if hasattr(listener, "on_result"):  # OSC notify: the run is over
+                    if isinstance(listener, ResultListener):  # OSC notify: the run is over
                         listener.on_result(result)
-        report.result = result
+        report.finished(result)
         progress.finish()
         say.quiet = args.quiet and result.outcome == "done"
         late = f", {result.late_steps} late" if result.late_steps else ""
@@ -148,10 +148,8 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
         if session.log_path:
             say(f"log: {session.log_path}")
         if result.outcome != "done":
-            from choreo.run.runner import PANIC
-
             raise Interrupted("show stopped by panic: stop frames, then the abort motions"
-                              if stop.reason == PANIC else f"show {stop.reason}")
+                              if stop.panicked else f"show {stop.reason}")
         return 0
     finally:
         progress.finish()
@@ -164,7 +162,7 @@ def _wants_console(args: argparse.Namespace) -> bool:
             and sys.stderr.isatty())
 
 
-def _check_go_sources(session, console: bool, args: argparse.Namespace) -> None:  # type: ignore[no-untyped-def]
+def _check_go_sources(settings: RunSettings, console: bool, args: argparse.Namespace) -> None:
     """A show with GO cues (or --wait-start) needs someone to give the GO: refused before any
     port opens, not a show that waits for ever."""
     from choreo.errors import UsageError
@@ -180,8 +178,8 @@ def _check_go_sources(session, console: bool, args: argparse.Namespace) -> None:
              else "run on a terminal (the console) or with --osc PORT")
     if args.wait_start:
         raise UsageError(f"--wait-start: nothing can start the show: {where}")
-    for plan in session.plans.values():
-        step = next((s for s in plan.steps[session.starts[plan.robot]:] if s.go), None)
+    for plan in settings.plans.values():
+        step = next((s for s in plan.steps[settings.sections.starts[plan.robot]:] if s.go), None)
         if step is not None:
             from choreo.run.runner import step_ref
 
@@ -239,13 +237,14 @@ def _controls(live, osc, say, progress):  # type: ignore[no-untyped-def]
         return
     from choreo.limits import LIMITS, Ticker
 
-    live.listeners.append(progress)  # off the console, the plain lines say what waits and what was pressed
+    # off the console, the plain lines say what waits and what was pressed: to the very end
+    heard = live.subscribe(progress)
     listeners: list = []
     opened: list = [osc] if osc is not None else []
     try:
         if osc is not None:
             osc.start()
-            live.listeners.append(osc)
+            opened.append(live.subscribe(osc))
             listeners.append(osc)
             say(osc.listening)
         opened.append(Ticker(live.flush_reports, LIMITS.summary_every_s).start())
@@ -255,6 +254,7 @@ def _controls(live, osc, say, progress):  # type: ignore[no-untyped-def]
         for control in reversed(opened):
             control.close()
         live.flush_reports(force=True)
+        heard.close()
 
 
 @contextmanager
@@ -268,10 +268,10 @@ def _console(session, live, console: bool, listeners: list):  # type: ignore[no-
 
     screen = Console(session, live)
     screen.start()
-    live.listeners.append(screen)
     listeners.append(screen)
     try:
-        yield
+        with live.subscribe(screen):
+            yield
     finally:
         screen.close()
 
@@ -279,7 +279,7 @@ def _console(session, live, console: bool, listeners: list):  # type: ignore[no-
 def port_arguments(values: list[str] | None) -> tuple[str | None, dict[str, str]]:
     """`--port URL` (one robot) and `--port NAME=URL` (repeatable, one robot of several)."""
     from choreo.errors import UsageError
-    from choreo.run.session import split_robot_port
+    from choreo.run.settings import split_robot_port
 
     plain: list[str] = []
     named: dict[str, str] = {}
@@ -328,10 +328,17 @@ class _RunReport:
 
     def __init__(self, show: str) -> None:
         self.show = show
-        self.session = None
-        self.result = None
+        self.session: Session | None = None
+        self.result: RunResult | None = None
         self.error: str | None = None
         self.exit_code = 0
+
+    def prepared(self, session: Session) -> None:
+        """The run's settings are settled: the record names its show, log and robots."""
+        self.session = session
+
+    def finished(self, result: RunResult) -> None:
+        self.result = result
 
     def failed(self, exc: ChoreoError) -> None:
         from choreo.cli.jsonout import error_record
@@ -341,23 +348,9 @@ class _RunReport:
 
     @property
     def record(self) -> dict:
-        session, result = self.session, self.result
         record: dict = {"show": self.show, "ok": self.exit_code == 0, "exit": self.exit_code}
-        if session is not None:
-            record.update(name=session.show.name,
-                          log=str(session.log_path) if session.log_path and session.recorder else None)
-            if not session.show.ensemble:  # with several robots, the first one's would pass for the show's
-                record.update(port=session.port, baud=session.baud, layout=session.layout.name)
-            record["robots"] = {link.robot: {"port": link.port, "baud": link.baud, "layout": link.layout.name}
-                                for link in session.links.values()}
-            if session.show.ensemble:
-                record["dropouts"] = [{"robot": d.robot, "show_s": round(d.show_s, 6), "error": str(d.error)}
-                                      for d in session.dropouts]
-            if session.song is not None:
-                record["music"] = {"file": session.song.music.file, "start": session.song.music.start,
-                                   "output": session.output.name if session.output is not None else None}
-        else:
-            record.update(log=None)
+        record.update(_session_record(self.session) if self.session is not None else {"log": None})
+        result = self.result
         if result is not None:
             record.update(outcome=result.outcome, steps_run=result.steps_run,
                           late_steps=result.late_steps, show_s=round(result.show_s, 6))
@@ -366,6 +359,25 @@ class _RunReport:
         if self.error is not None:
             record["error"] = self.error
         return record
+
+
+def _session_record(session: Session) -> dict:
+    """What `run --json` says of the run's settings: the show, the log, each robot's link."""
+    settings = session.settings
+    record: dict = {"name": settings.show.name,
+                    "log": str(session.log_path) if session.log_path and session.recorder else None}
+    if not settings.show.ensemble:  # with several robots, the first one's would pass for the show's
+        solo = _solo(settings)
+        record.update(port=solo.port, baud=solo.baud, layout=solo.layout.name)
+    record["robots"] = {link.robot: {"port": link.port, "baud": link.baud, "layout": link.layout.name}
+                        for link in settings.links.values()}
+    if settings.show.ensemble:
+        record["dropouts"] = [{"robot": d.robot, "show_s": round(d.show_s, 6), "error": str(d.error)}
+                              for d in session.dropouts]
+    if settings.song is not None:
+        record["music"] = {"file": settings.song.music.file, "start": settings.song.music.start,
+                           "output": settings.output.name if settings.output is not None else None}
+    return record
 
 
 @contextmanager
@@ -417,21 +429,39 @@ class _Say:
             self.quiet = True
 
 
-def _show_line(session) -> str:
-    first = f" from step {session.start}" if session.start and not session.show.tracks else ""
-    if session.show.tracks and session.origin:
-        first = f" from {session.origin:.3f} s"
-    estimated = max(plan.estimated_s for plan in session.plans.values())
-    if not session.show.ensemble:
-        return f"show: {session.show.name}: {len(session.plan.steps)} steps{first}, about {estimated:.1f} s"
-    form = "tracks" if session.show.tracks else "shared steps"
-    return f"show: {session.show.name}: {len(session.links)} robots, {form}{first}, about {estimated:.1f} s"
+def _solo(settings: RunSettings) -> LinkSettings:
+    """A one-robot show's robot."""
+    return next(iter(settings.links.values()))
 
 
-def _robot_lines(session) -> list[str]:
+def _opening_lines(settings: RunSettings) -> list[str]:
+    """What the run says before it opens anything: the ports and layouts, the show, the music."""
+    lines = _robot_lines(settings) if settings.show.ensemble else [
+        _port_line(_solo(settings)), _layout_line(_solo(settings))]
+    lines.append(_show_line(settings))
+    if settings.show.music is not None:
+        lines.append(_music_line(settings))
+    return lines
+
+
+def _show_line(settings: RunSettings) -> str:
+    show, sections = settings.show, settings.sections
+    start = next(iter(sections.starts.values()))
+    first = f" from step {start}" if start and not show.tracks else ""
+    if show.tracks and sections.origin:
+        first = f" from {sections.origin:.3f} s"
+    estimated = max(plan.estimated_s for plan in settings.plans.values())
+    if not show.ensemble:
+        steps = len(next(iter(settings.plans.values())).steps)
+        return f"show: {show.name}: {steps} steps{first}, about {estimated:.1f} s"
+    form = "tracks" if show.tracks else "shared steps"
+    return f"show: {show.name}: {len(settings.links)} robots, {form}{first}, about {estimated:.1f} s"
+
+
+def _robot_lines(settings: RunSettings) -> list[str]:
     """With several robots: a line per robot, its port and layout and where they came from."""
     lines = []
-    for link in session.links.values():
+    for link in settings.links.values():
         source = {"simulator": "built-in simulator", "show": "from the show",
                   "simulator (--rehearse)": "built-in simulator, --rehearse"}.get(link.port_source, "from --port")
         assumed = ", layout assumed" if link.assumes_layout else ""
@@ -440,37 +470,38 @@ def _robot_lines(session) -> list[str]:
     return lines
 
 
-def _music_line(session) -> str:  # type: ignore[no-untyped-def]
+def _music_line(settings: RunSettings) -> str:
     """What keeps the show clock: the music (which file, from where, on which output) or, with
     --no-music, the machine."""
-    if session.song is None:
-        return f"music: {session.show.music.file} not played (--no-music): the machine's clock keeps the show"
-    song = session.song
-    start = song.music.start + session.origin
+    song = settings.song
+    if song is None:
+        music = settings.show.music.file if settings.show.music is not None else ""
+        return f"music: {music} not played (--no-music): the machine's clock keeps the show"
+    start = song.music.start + settings.sections.origin
     from choreo.music.player import output_name
 
-    where = output_name(session.output)
+    where = output_name(settings.output)
     return f"music: {song.music.file} from {start:.1f} s of {song.duration_s:.1f} s, on {where}: the show clock"
 
 
-def _port_line(session) -> str:
+def _port_line(link: LinkSettings) -> str:
     where = {
         "simulator": "the built-in simulator (no --port given and the show names no robot.port)",
         "simulator (--rehearse)": "the built-in simulator (--rehearse: in real time, the show's ports left alone)",
         "show": "the show's robot.port",
-    }.get(session.port_source, "the command line")
-    return f"port: {session.port} at {session.baud} baud, from {where}"
+    }.get(link.port_source, "the command line")
+    return f"port: {link.port} at {link.baud} baud, from {where}"
 
 
-def _layout_line(session) -> str:
-    layout = session.layout
+def _layout_line(link: LinkSettings) -> str:
+    layout = link.layout
     line = f"layout: {layout.name} (motion 0 at 0x{layout.first_slot:04x})"
-    if session.assumes_layout:
+    if link.assumes_layout:
         other = "hth4-2.2" if layout.name == "seed" else "seed"
         return (f"{line}, assumed: the show names no robot.layout; a board whose motions were "
                 f"written by Heart to Heart 4 2.2 or later needs --layout {other} "
                 "(`choreo probe` hints which)")
-    return line + {"show": ", from the show", "command line": ", from --layout"}.get(session.layout_source, "")
+    return line + {"show": ", from the show", "command line": ", from --layout"}.get(link.layout_source, "")
 
 
 # Ctrl-\\ stops a show as Ctrl-C does: killed by it, no robot would get its abort motion and the
@@ -532,9 +563,10 @@ class Progress:
 
     def __init__(self, session, out: TextIO, *, live: bool, quiet: bool) -> None:
         # each robot's steps from where it starts (a robot's own, in shared steps), by robot
-        self.counts = {name if session.show.ensemble else None: _own_steps(plan, session.starts[name], name)
-                       for name, plan in session.plans.items()}
-        self.estimated = max(plan.estimated_s for plan in session.plans.values())
+        settings = session.settings
+        self.counts = {name if settings.show.ensemble else None: _own_steps(plan, settings.sections.starts[name], name)
+                       for name, plan in settings.plans.items()}
+        self.estimated = max(plan.estimated_s for plan in settings.plans.values())
         self.live = live and not quiet
         self.quiet = quiet
         self._lock = threading.Lock()

@@ -189,7 +189,7 @@ def _step_message(event: StepEvent) -> dict:
     return step_record(event).to_json()
 
 
-def _record_message(record: ClockRecord | CommandRecord) -> dict:
+def _record_message(record: ClockRecord | CommandRecord | StepRecord) -> dict:
     return record.to_json()
 
 
@@ -312,6 +312,11 @@ class Recorder:
     def on_step(self, event: StepEvent) -> None:
         """Queued only: a step's start comes just before its first frame."""
         self._queue((robot_topic(STEP_TOPIC, event.robot), event.time_ns, _step_message, event))
+
+    def on_step_record(self, record: StepRecord, time_ns: int) -> None:
+        """Queued only: a step as the log keeps it, given whole (a replay re-times the recorded
+        ones; it has no planned step to build one from)."""
+        self._queue((robot_topic(STEP_TOPIC, record.robot), time_ns, _record_message, record))
 
     def for_robot(self, robot: str) -> RobotTap:
         """The link listener of one robot of several: its frames on its own topics."""

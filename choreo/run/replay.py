@@ -21,20 +21,28 @@ it would, and the differences show it).
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from choreo.clock import TimeSource
-from choreo.numtext import whole_number
+from choreo.board.link import DEFAULT_TIMEOUT_S, Link
+from choreo.clock import RunClock, SystemTime, TimeSource
 from choreo.errors import UsageError
-from choreo.wire.protocol import Frame, FrameKind
+from choreo.events import Tag
+from choreo.log.format import (LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, LogLayouts, Record, RxRecord,
+                               StepRecord, TxRecord, parse, reply_meaning)
+from choreo.log.reader import Cut, LogReader
+from choreo.log.recorder import Recorder, RobotInfo, RunInfo, default_log_path
+from choreo.numtext import whole_number
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.showtime import ShowTimes
-from choreo.log.format import (LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, LogLayouts, RxRecord, StepRecord,
-                              TxRecord, parse, reply_meaning)
-from choreo.log.reader import Cut, LogReader
+from choreo.run.settings import LinkSettings, check_output_folder, check_timeout, show_durations
+from choreo.run.stage import Stage
+from choreo.show.model import SOLO
 from choreo.sim.options import is_simulator
+from choreo.wire.layouts import LAYOUT_NAMES, layout_named
+from choreo.wire.protocol import BAUDS, DEFAULT_BAUD, Frame, FrameKind, spell_bauds
 
 LISTED_DIFFERENCES = 200  # kept in the report; all are counted (and written to the new log)
 
@@ -128,63 +136,12 @@ class ReplayReport:
                 f"speed, not {self.speed:g}x: status polls near a motion's end may differ")
 
 
-def default_port(show: AttachedShow, baud: int | None = None, layout: str = "seed") -> str:
-    """`sim://` with the attached show's motion durations (and the run's baud and layout), or
-    plain `sim://`."""
-    return _with_durations("sim://", show, baud, layout)
-
-
-def _with_durations(url: str, show: AttachedShow, baud: int | None = None, layout: str = "seed") -> str:
-    """`--port sim://?drop=5`: still the show's durations and the replay's baud and layout (as
-    `choreo run` does: one rule, `session.with_show_durations`)."""
-    from choreo.wire.layouts import layout_named
-    from choreo.board.link import DEFAULT_BAUD
-    from choreo.run.session import with_show_durations
-
-    return with_show_durations(url, show.show, show.plan, baud or DEFAULT_BAUD, layout_named(layout))
-
-
-
-def at_speed(url: str, speed: float) -> str:
-    """A `sim://` URL whose board runs `speed` times faster: every slot's duration (`durations`),
-    the default for the others (`motion_s`), the board's reply delay (`reply_ms`) and its status
-    refresh (`refresh_ms`, where the simulator has one) divided by the speed, and, faster than 1,
-    bytes that take no wire time (`wire=0`).
-
-    Without it a replay at speed 10 polls a motion ten times sooner after its start than the run
-    did, finds it still executing where the run found it over, and `--strict` fails a clean log.
-    The wire cannot run 10 times faster (the board has three bauds), and a 19-byte frame's
-    1.7 ms at 115200 baud would be 17 ms of the run's time at speed 10: off is far closer to the
-    run's timing than on. A URL that sets `wire` itself keeps it; one the simulator would refuse
-    is left as it is, for the link to say what is wrong with it.
-    """
-    if speed == 1 or not is_simulator(url):
-        return url
-    from choreo.sim.options import SimUrl, durations_text, ms_text
-
-    try:
-        given = SimUrl.parse(url)
-    except ValueError:
-        return url
-    options = given.options
-    scaled = {"motion_s": f"{options.motion_s / speed:.9g}", "reply_ms": ms_text(options.reply_s / speed),
-              "refresh_ms": ms_text(options.refresh_s / speed)}
-    if options.durations:
-        scaled["durations"] = durations_text({slot: seconds / speed for slot, seconds in options.durations.items()})
-    faster = given.unless_given(wire="0") if speed > 1 else given
-    return str(faster.with_text(**scaled))
-
-
 MAX_SPEED = 1000.0
 MIN_SPEED = 0.01  # a 10-minute show replays in at most 1000 minutes: slower is never meant
 
 
 def check_options(speed: float, baud: int | None, timeout: float | None, layout: str | None = None) -> None:
     """Refuse what would make a meaningless replay, before anything is opened (UsageError, exit 2)."""
-    from choreo.wire.layouts import layout_named
-    from choreo.board.link import BAUD_RATES
-    from choreo.run.session import check_timeout
-
     if not (math.isfinite(speed) and MIN_SPEED <= speed <= MAX_SPEED):
         raise UsageError(f"--speed {speed:g}: give a speed from {MIN_SPEED:g} to {MAX_SPEED:g} "
                          "(1 is the recorded timing, 2 twice as fast, 0.5 half as fast)")
@@ -193,25 +150,40 @@ def check_options(speed: float, baud: int | None, timeout: float | None, layout:
             layout_named(layout)
         except ValueError as exc:
             raise UsageError(f"--layout: {exc}") from None
-    if baud is not None and baud not in BAUD_RATES:
-        raise UsageError(f"--baud {baud}: the RCB-4 runs at {', '.join(map(str, BAUD_RATES))} baud")
+    if baud is not None and baud not in BAUDS:
+        raise UsageError(f"--baud {baud}: the RCB-4 runs at {spell_bauds()} baud")
     if timeout is not None:
         check_timeout(timeout)
 
 
-@dataclass
-class _ReplayedStep:
-    """A recorded step event, re-timed for the new log (what Recorder.on_step needs of it)."""
+@dataclass(frozen=True)
+class ReplayRequest:
+    """What the user asked of a replay (None: not given): the replay's `RunRequest`."""
 
-    time_ns: int
-    step: StepRecord
+    port: str | None = None
+    speed: float = 1.0
+    baud: int | None = None
+    timeout: float | None = None
+    log_path: str | Path | None = None
+    log_dir: str | Path = "runs"
+    layout: str | None = None
+
+
+@dataclass(frozen=True)
+class ReplaySettings:
+    """A replay's settings, read off the log and the request before anything opens: a link's
+    settings a robot (the port each opens is built from them, as a run's is), the board layout
+    each simulator models, and what the new log records of the run."""
+
+    links: tuple[LinkSettings, ...]
+    boards: dict[str, str]  # robot -> the layout its simulator models (several robots only)
+    info: RunInfo
+    log_path: Path
+    unique_log: bool
 
     @property
-    def robot(self) -> str | None:
-        return self.step.robot
-
-    def record(self) -> StepRecord:
-        return self.step
+    def several(self) -> bool:
+        return bool(self.boards)
 
 
 def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, baud: int | None = None,
@@ -224,99 +196,118 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
     LinkError (exit 3) if the port fails; a LogError if `source` is not a log or the new log
     cannot be written. A cut log replays as far as it goes.
     """
+    request = ReplayRequest(port, speed, baud, timeout, log_path, log_dir, layout)
     check_options(speed, baud, timeout, layout)
     if log_path is not None:
-        from choreo.run.session import check_output_folder
-
         check_output_folder(Path(log_path), "--log")
-    from choreo.clock import RunClock, SystemTime
-    from choreo.board.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S
-    from choreo.log.recorder import RobotInfo, RunInfo, default_log_path
-    from choreo.run.session import RobotLink, Stage
-    from choreo.show.model import SOLO
-
+    clock = RunClock(time_source or SystemTime())
     with LogReader(source) as reader:
         show = attached_show(reader)
-        recorded_baud = reader.run_info.get("baud", "")
-        if baud is None:
-            recorded = whole_number(recorded_baud)
-            baud = recorded if port and recorded in BAUD_RATES else DEFAULT_BAUD
-        given_layout = layout
-        layout = layout or _recorded_layout(reader, None)  # logs before layouts: seed
-        check_options(speed, baud, timeout, layout)
-        url = at_speed(_with_durations(port or "sim://", show, baud, layout), speed)
-        name = reader.run_info.get("show") or reader.path.stem
-        clock = RunClock(time_source or SystemTime())
-        new_log = Path(log_path) if log_path else default_log_path(f"{name}-replay", log_dir)
-        attachment = reader.show_attachment()
-        show_source = reader.attachment_data(attachment) if attachment else b""
-        show_path = reader.run_info.get("show_path") or (attachment.name if attachment else "show.yaml")
-        report = ReplayReport(reader.path, url, speed, new_log,
-                              show_note=None if show.show is not None or port else show.problem)
-        robots = reader.robots
-        if robots and port:
-            raise UsageError(f"--port {port}: a replay of several robots ({', '.join(robots)}) runs each on "
-                             "its own simulator; leave out --port")
-        # Each robot's simulator models its recorded layout, or --layout's for every robot. The
-        # links send the recorded bytes only: no layout of their own (an HTH4 link would read the
-        # config word at open, a frame the recording does not have).
-        boards = {name: given_layout or _recorded_layout(reader, name) for name in robots}
-        links = ([_robot_link(reader, show, name, boards[name], speed, timeout) for name in robots] if robots else
-                 [RobotLink(SOLO, url, "command line", baud, timeout or DEFAULT_TIMEOUT_S, tries=1)])
-        robot_info = tuple(RobotInfo(link.robot, link.port, link.baud, boards[link.robot])
-                           for link in links) if robots else ()
-        info = RunInfo(show_path, name, show_source, url, baud, clock.wall_anchor_ns, layout, robot_info,
-                       reader.run_info.get("unison") == "yes")
-        stage = Stage(info, new_log, clock, links, unique_log=log_path is None, named=bool(robots),
-                      opening_note=f"replay of {reader.path} at speed {speed:g} on {url if not robots else 'simulators'}")
-        report.boards = tuple(link.port for link in links)
-        if robots:
-            each = ", ".join(f"{name}: {boards[name]}" for name in robots)
-            report.port = f"{len(robots)} simulators, one per robot and its layout ({each})"
-        with stage:
+        settings = _settle(reader, show, request, clock)
+        report = _report(reader, show, request, settings)
+        with _stage(reader, settings, request, clock) as stage:
             report.log_path = stage.log_path
-            if speed > 1:
-                for link in stage.links.values():
-                    if is_simulator(link.name):  # its motions and status refresh run `speed` times faster: so may the polls
-                        link.status_spacing_s /= speed
             if on_start is not None:
                 on_start(report)
-            if robots:
-                _replay_robots(source, stage, clock, speed, report, on_difference, _first_frame_s(reader))
-            else:
-                _replay_frames(reader, stage.link, stage.recorder, clock, speed, report, on_difference)
-            report.cut = reader.cut if not robots else report.cut
-            stage.outcome = {"outcome": "done", "replay_of": str(reader.path), "speed": f"{speed:g}",
-                             "frames": str(report.frames), "differences": str(report.different),
-                             "show_s": f"{_elapsed(clock):.6f}", "exit_code": "0"}
+            _replay_stage(source, reader, stage, clock, report, on_difference)
+            stage.finished({"outcome": "done", "replay_of": str(reader.path), "speed": f"{speed:g}",
+                            "frames": str(report.frames), "differences": str(report.different),
+                            "show_s": f"{_elapsed(clock):.6f}", "exit_code": "0"})
     return report
 
 
-def _robot_link(reader: LogReader, show: AttachedShow, robot: str, layout_name: str, speed: float,  # type: ignore[no-untyped-def]
-                timeout: float | None):
+def _settle(reader: LogReader, show: AttachedShow, request: ReplayRequest, clock: RunClock) -> ReplaySettings:
+    """The replay's settings. Each robot's simulator models its recorded layout, or --layout's
+    for every robot. The links send the recorded bytes only: no layout of their own (an HTH4
+    link would read the config word at open, a frame the recording does not have)."""
+    robots = reader.robots
+    if robots and request.port:
+        raise UsageError(f"--port {request.port}: a replay of several robots ({', '.join(robots)}) runs each on "
+                         "its own simulator; leave out --port")
+    layout = request.layout or _recorded_layout(reader, None)  # logs before layouts: seed
+    solo = _solo_link(reader, show, request, layout)  # with several robots, what the log's head names
+    boards = {name: request.layout or _recorded_layout(reader, name) for name in robots}
+    links = tuple(_robot_link(reader, show, name, boards[name], request) for name in robots) if robots else (solo,)
+    robot_info = tuple(RobotInfo(link.robot, link.port, link.baud, boards[link.robot]) for link in links) \
+        if robots else ()
+    name = reader.run_info.get("show") or reader.path.stem
+    attachment = reader.show_attachment()
+    show_source = reader.attachment_data(attachment) if attachment else b""
+    show_path = reader.run_info.get("show_path") or (attachment.name if attachment else "show.yaml")
+    info = RunInfo(show_path, name, show_source, solo.port, solo.baud, clock.wall_anchor_ns, layout, robot_info,
+                   reader.run_info.get("unison") == "yes")
+    new_log = Path(request.log_path) if request.log_path else default_log_path(f"{name}-replay", request.log_dir)
+    return ReplaySettings(links, boards, info, new_log, unique_log=request.log_path is None)
+
+
+def _solo_link(reader: LogReader, show: AttachedShow, request: ReplayRequest, layout: str) -> LinkSettings:
+    """A one-robot log's link: --port (default: the simulator, set up from the attached show),
+    at --baud, else the recorded baud on a port that was given, else the default."""
+    baud = request.baud
+    if baud is None:
+        recorded = whole_number(reader.run_info.get("baud", ""))
+        baud = recorded if request.port and recorded is not None and recorded in BAUDS else DEFAULT_BAUD
+    return LinkSettings(SOLO, request.port or "sim://", "command line", baud, request.timeout or DEFAULT_TIMEOUT_S,
+                        tries=1, durations=show_durations(show.show, show.plan), board_layout=layout_named(layout),
+                        speed=request.speed)
+
+
+def _robot_link(reader: LogReader, show: AttachedShow, robot: str, layout_name: str,
+                request: ReplayRequest) -> LinkSettings:
     """A recorded robot's replay link: its own simulator of `layout_name`, set up from its plan,
     at its baud."""
-    from choreo.wire.layouts import layout_named
-    from choreo.board.link import BAUD_RATES, DEFAULT_BAUD, DEFAULT_TIMEOUT_S
-    from choreo.run.session import RobotLink, with_show_durations
-
-    baud_text = reader.run_info.get(f"robot.{robot}.baud", "")
-    recorded = whole_number(baud_text)
-    baud = recorded if recorded in BAUD_RATES else DEFAULT_BAUD
-    layout = layout_named(layout_name)
+    recorded = whole_number(reader.run_info.get(f"robot.{robot}.baud", ""))
+    baud = recorded if recorded is not None and recorded in BAUDS else DEFAULT_BAUD
     plan = show.plan_of(robot)
     abort = show.show.abort_motion(robot) if show.show is not None and plan is not None else None
-    url = with_show_durations("sim://", show.show if plan is not None else None, plan, baud, layout, abort)
-    return RobotLink(robot, at_speed(url, speed), "simulator", baud, timeout or DEFAULT_TIMEOUT_S, tries=1)
+    return LinkSettings(robot, "sim://", "simulator", baud, request.timeout or DEFAULT_TIMEOUT_S, tries=1,
+                        durations=show_durations(show.show, plan, abort), board_layout=layout_named(layout_name),
+                        speed=request.speed)
 
 
-def _replay_robots(source: str | Path, stage, clock, speed: float, report: ReplayReport,  # type: ignore[no-untyped-def]
+def _report(reader: LogReader, show: AttachedShow, request: ReplayRequest, settings: ReplaySettings) -> ReplayReport:
+    """The report, before any frame: where the frames go, and why a simulator runs without the
+    show's durations."""
+    report = ReplayReport(reader.path, settings.info.port, request.speed, settings.log_path,
+                          show_note=None if show.show is not None or request.port else show.problem,
+                          boards=tuple(link.port for link in settings.links))
+    if settings.several:
+        each = ", ".join(f"{name}: {layout}" for name, layout in settings.boards.items())
+        report.port = f"{len(settings.boards)} simulators, one per robot and its layout ({each})"
+    return report
+
+
+def _stage(reader: LogReader, settings: ReplaySettings, request: ReplayRequest, clock: RunClock) -> Stage:
+    where = "simulators" if settings.several else settings.info.port
+    return Stage(settings.info, settings.log_path, clock, settings.links, unique_log=settings.unique_log,
+                 named=settings.several,
+                 opening_note=f"replay of {reader.path} at speed {request.speed:g} on {where}")
+
+
+def _replay_stage(source: str | Path, reader: LogReader, stage: Stage, clock: RunClock, report: ReplayReport,
+                  on_difference: Callable[[Difference], None] | None) -> None:
+    """The recorded frames through the open stage: each robot on its own thread, or the one."""
+    assert stage.recorder is not None, "a replay always writes its log"
+    if report.speed > 1:
+        for link in stage.links.values():
+            if is_simulator(link.name):  # its motions and status refresh run `speed` times faster: so may polls
+                link.refresh_faster(report.speed)
+    if stage.named:
+        _replay_robots(source, stage, clock, report, on_difference, _first_frame_s(reader))
+        return
+    link = next(iter(stage.links.values()))
+    _FrameReplay(reader, link, stage.recorder, clock, report, on_difference).run()
+    report.cut = reader.cut
+
+
+def _replay_robots(source: str | Path, stage: Stage, clock: RunClock, report: ReplayReport,
                    on_difference: Callable[[Difference], None] | None, first_s: float = 0.0) -> None:
     """Each robot's frames on its own thread and link, all on one start: a robot waiting for its
     reply never holds up another's frames. Each thread reads the log on its own (a reader is
     not shared between threads); the reports are added up at the end."""
-    import threading
-
+    recorder = stage.recorder
+    assert recorder is not None
+    speed = report.speed
     start = clock.mono() - min(first_s, 0.0) / speed  # recorded show time 0; frames sent at open come before it
     parts = {name: ReplayReport(report.source, link.name, speed, report.log_path) for name, link in stage.links.items()}
     errors: list[BaseException] = []
@@ -324,8 +315,8 @@ def _replay_robots(source: str | Path, stage, clock, speed: float, report: Repla
     def play(name: str) -> None:
         try:
             with LogReader(source) as reader:
-                _replay_frames(reader, stage.links[name], stage.recorder, clock, speed, parts[name], on_difference,
-                               robot=name, start=start)
+                _FrameReplay(reader, stage.links[name], recorder, clock, parts[name], on_difference,
+                             robot=name, start=start).run()
                 parts[name].cut = reader.cut
         except BaseException as exc:  # noqa: BLE001 - raised in the main thread
             errors.append(exc)
@@ -349,8 +340,6 @@ def _replay_robots(source: str | Path, stage, clock, speed: float, report: Repla
 def _recorded_layout(reader: LogReader, robot: str | None) -> str:
     """The layout the log records for the robot's frames (seed for a log from before layouts
     were recorded); UsageError for one this choreo does not know."""
-    from choreo.wire.layouts import LAYOUT_NAMES
-
     layouts = LogLayouts.of(reader.run_info)
     if layouts.layout(robot) is None:
         whose = f"robot {robot}'s" if robot is not None else "its"
@@ -375,107 +364,132 @@ def _add_up(report: ReplayReport, part: ReplayReport) -> None:
     report.cut = report.cut or part.cut
 
 
-def _elapsed(clock) -> float:
+def _elapsed(clock: RunClock) -> float:
     return (clock.mono_ns() - clock.mono_anchor_ns) / 1e9
 
 
-def _replay_frames(reader: LogReader, link, recorder, clock, speed: float, report: ReplayReport,
-                   on_difference: Callable[[Difference], None] | None, robot: str | None = None,
-                   start: float | None = None) -> None:
+@dataclass
+class _Sent:
+    """A frame sent again, waiting for its recorded reply to compare with the replay's."""
+
+    tx: TxRecord
+    replayed: RxRecord
+    show_s: float  # the frame's recorded show time
+    late_ms: float  # how late it left, on the run's clock
+
+
+class _FrameReplay:
     """The recorded frames, each at its show time / speed; replies compared as they come.
 
     `robot`: only that robot's frames and steps; `start`: the monotonic time of recorded show
     time 0, shared by every robot's thread (else the replay starts at its first event)."""
-    from choreo.board.link import Tag
 
-    at_end = _polls_at_motion_ends(reader, robot)
-    recorded_clock = ShowTimes.of(reader)
-    layouts = LogLayouts.of(reader.run_info)
-    zero_mono: float | None = start  # replay's monotonic time of recorded show time 0
-    first_s = 0.0
-    last: tuple[float, float] | None = None  # the last event: (recorded show s, replay monotonic)
-    restored: tuple[float, float] | None = None  # the last restore: (recorded show s, replay write)
-    # recorded seq -> (tx, replayed reply, show s, how late it left on the run's clock in ms)
-    pending: dict[int, tuple[TxRecord, RxRecord, float, float]] = {}
+    def __init__(self, reader: LogReader, link: Link, recorder: Recorder, clock: RunClock, report: ReplayReport,
+                 on_difference: Callable[[Difference], None] | None, robot: str | None = None,
+                 start: float | None = None) -> None:
+        self.reader, self.link, self.recorder, self.clock = reader, link, recorder, clock
+        self.report, self.speed, self.on_difference, self.robot = report, report.speed, on_difference, robot
+        self.at_end = _polls_at_motion_ends(reader, robot)
+        self.recorded_clock = ShowTimes.of(reader)
+        self.layouts = LogLayouts.of(reader.run_info)
+        self.zero_mono: float | None = start  # replay's monotonic time of recorded show time 0
+        self.first_s = 0.0
+        self.last: tuple[float, float] | None = None  # the last event: (recorded show s, replay monotonic)
+        self.restored: tuple[float, float] | None = None  # the last restore: (recorded show s, replay write)
+        self.pending: dict[int, _Sent] = {}  # by recorded seq
 
-    def due(show_s: float) -> float:
+    def run(self) -> None:
+        topic, number = None, 0
+        try:
+            for topic, log_time, data in self.reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC)):
+                number += 1
+                self._event(parse(topic, data), log_time)
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise self.reader.not_choreo(topic, number, exc) from None
+        self.report.unmatched += len(self.pending)
+
+    def _event(self, record: Record, log_time: int) -> None:
+        if not isinstance(record, (TxRecord, RxRecord, StepRecord)):
+            return  # only frames, replies and steps are read
+        if isinstance(record, StepRecord):
+            self.recorded_clock.see_step(log_time, record)
+        if self.robot is not None and record.robot != self.robot:
+            return
+        if isinstance(record, StepRecord):
+            self._step(record, log_time)
+        elif isinstance(record, TxRecord):
+            self._send(record, log_time)
+        else:
+            self._compare(record)
+
+    def _due(self, show_s: float) -> float:
         """Wait for an event's time: its recorded show time, and never closer to the event before
         it than it was recorded. The replay's own exchanges can put it a few ms behind (a play
         sequence is three frames, each waiting for its reply); keeping the recorded gaps then keeps
         a status poll as far from the restore that started the motion as it was, so the board
         answers it the same way."""
-        nonlocal zero_mono, first_s, last
-        if zero_mono is None:
-            first_s = show_s  # start at once, whatever show time the recording starts at
-            zero_mono = clock.mono()
-        target = zero_mono + (show_s - first_s) / speed
-        if last is not None:
-            target = max(target, last[1] + (show_s - last[0]) / speed)
-        clock.sleep_until(target)
-        now = clock.mono()
-        last = (show_s, now)
-        lag_ms = (now - (zero_mono + (show_s - first_s) / speed)) * 1e3
-        if lag_ms > report.max_lag_ms:
-            report.max_lag_ms = lag_ms
+        if self.zero_mono is None:
+            self.first_s = show_s  # start at once, whatever show time the recording starts at
+            self.zero_mono = self.clock.mono()
+        on_time = self.zero_mono + (show_s - self.first_s) / self.speed
+        target = on_time if self.last is None else max(on_time, self.last[1] + (show_s - self.last[0]) / self.speed)
+        self.clock.sleep_until(target)
+        now = self.clock.mono()
+        self.last = (show_s, now)
+        self.report.max_lag_ms = max(self.report.max_lag_ms, (now - on_time) * 1e3)
         return target
 
-    topic, number = None, 0
-    try:
-        for topic, log_time, data in reader.messages((TX_TOPIC, RX_TOPIC, STEP_TOPIC)):
-            number += 1
-            record = parse(topic, data)
-            if isinstance(record, StepRecord):
-                recorded_clock.see_step(log_time, record)
-            if robot is not None and record.robot != robot:
-                continue
-            if isinstance(record, StepRecord):
-                due(recorded_clock.seconds(log_time) or 0.0)
-                # the replay's show clock is the run's, from its first event if the run's started
-                # later than zero: frames the run sent before zero (at open) stay before it
-                origin = max(first_s, 0.0)
-                retimed = _retimed(record, origin, speed, clock.mono() - zero_mono + (first_s - origin) / speed)
-                recorder.on_step(_ReplayedStep(clock.wall_ns(), retimed))
-            elif isinstance(record, TxRecord):
-                show_s = recorded_clock.seconds(log_time) or 0.0
-                frame = _frame(reader, record)
-                if record.seq in pending:  # its recorded reply never came: nothing to compare
-                    pending.pop(record.seq)
-                    report.unmatched += 1
-                target = due(show_s)
-                reply = link.send(frame, record.attempt, Tag(record.step, record.label))
-                report.frames += 1
-                replayed = RxRecord(record.seq, reply.kind.value, reply.hex, executing=reply.executing,
-                                    error=reply.error, robot=record.robot)
-                written = getattr(link, "last_tx_mono", target)  # after any wait in the link
-                if frame.kind is FrameKind.RESTORE:
-                    restored = (show_s, written)
-                late_ms = _late_ms(show_s, written, target, restored, speed)
-                pending[record.seq] = (record, replayed, show_s, late_ms)
-                if len(pending) > 64:  # replies missing from the recording: do not hold them forever
-                    pending.pop(next(iter(pending)))
-                    report.unmatched += 1
-            else:
-                held = pending.pop(record.seq, None)
-                if held is None:
-                    continue
-                tx, replayed, show_s, late_ms = held
-                if _same(record, replayed):
-                    report.same += 1
-                    continue
-                difference = Difference(record.seq, tx.step, tx.kind, show_s, record, replayed,
-                                        round(late_ms, 3), record.seq in at_end, tx, layouts)
-                report.different += 1
-                report.timing += difference.timing
-                report.replay_late += difference.replay_late
-                report.excused += difference.excused
-                if len(report.differences) < LISTED_DIFFERENCES:
-                    report.differences.append(difference)
-                recorder.on_log(WARNING, f"replay differs: {difference}", clock.wall_ns())
-                if on_difference is not None:
-                    on_difference(difference)
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise reader.not_choreo(topic, number, exc) from None
-    report.unmatched += len(pending)
+    def _step(self, record: StepRecord, log_time: int) -> None:
+        """A recorded step event, re-timed into the new log: the replay's show clock is the
+        run's, from its first event if the run's started later than zero (frames the run sent
+        before zero, at open, stay before it)."""
+        self._due(self.recorded_clock.seconds(log_time) or 0.0)
+        assert self.zero_mono is not None  # set by the first _due
+        origin = max(self.first_s, 0.0)
+        elapsed = self.clock.mono() - self.zero_mono + (self.first_s - origin) / self.speed
+        self.recorder.on_step_record(_retimed(record, origin, self.speed, elapsed), self.clock.wall_ns())
+
+    def _send(self, record: TxRecord, log_time: int) -> None:
+        """The recorded frame sent again on time; its reply held until the recorded one comes."""
+        show_s = self.recorded_clock.seconds(log_time) or 0.0
+        frame = _frame(self.reader, record)
+        if self.pending.pop(record.seq, None) is not None:  # its recorded reply never came: nothing to compare
+            self.report.unmatched += 1
+        target = self._due(show_s)
+        reply = self.link.send(frame, record.attempt, Tag(record.step, record.label))
+        self.report.frames += 1
+        replayed = RxRecord(record.seq, reply.kind.value, reply.hex, executing=reply.executing,
+                            error=reply.error, robot=record.robot)
+        written = self.link.last_tx_mono  # after any wait in the link
+        if frame.kind is FrameKind.RESTORE:
+            self.restored = (show_s, written)
+        late_ms = _late_ms(show_s, written, target, self.restored, self.speed)
+        self.pending[record.seq] = _Sent(record, replayed, show_s, late_ms)
+        if len(self.pending) > 64:  # replies missing from the recording: do not hold them forever
+            self.pending.pop(next(iter(self.pending)))
+            self.report.unmatched += 1
+
+    def _compare(self, record: RxRecord) -> None:
+        """A recorded reply against the replay's to the same frame; a difference is counted,
+        listed (up to LISTED_DIFFERENCES), logged and told."""
+        sent = self.pending.pop(record.seq, None)
+        if sent is None:
+            return
+        report = self.report
+        if _same(record, sent.replayed):
+            report.same += 1
+            return
+        difference = Difference(record.seq, sent.tx.step, sent.tx.kind, sent.show_s, record, sent.replayed,
+                                round(sent.late_ms, 3), record.seq in self.at_end, sent.tx, self.layouts)
+        report.different += 1
+        report.timing += difference.timing
+        report.replay_late += difference.replay_late
+        report.excused += difference.excused
+        if len(report.differences) < LISTED_DIFFERENCES:
+            report.differences.append(difference)
+        self.recorder.on_log(WARNING, f"replay differs: {difference}", self.clock.wall_ns())
+        if self.on_difference is not None:
+            self.on_difference(difference)
 
 
 def _frame(reader: LogReader, tx: TxRecord) -> Frame:
@@ -495,7 +509,7 @@ def _polls_at_motion_ends(reader: LogReader, robot: str | None = None) -> set[in
     previous: tuple[int, bool] | None = None
     for topic, _, data in reader.messages((TX_TOPIC, RX_TOPIC)):
         record = parse(topic, data)
-        if record.robot != robot:
+        if not isinstance(record, (TxRecord, RxRecord)) or record.robot != robot:
             continue
         if isinstance(record, TxRecord):
             if record.kind == "status":
@@ -519,10 +533,7 @@ def _late_ms(show_s: float, written: float, target: float, restored: tuple[float
     late moves the poll's due time with it, and the poll then looks on time while it fell later
     in the motion than the run's did.
     """
-    if restored is not None:
-        behind = (written - restored[1]) - (show_s - restored[0]) / speed
-    else:
-        behind = written - target
+    behind = (written - restored[1]) - (show_s - restored[0]) / speed if restored is not None else written - target
     return max(0.0, behind * 1e3 * speed)
 
 
