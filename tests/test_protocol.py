@@ -87,6 +87,18 @@ def test_the_bauds_are_spelt_from_the_one_list():
     assert p.spell_bauds(mark_default=True) == "115200 (default), 625000, 1250000"
 
 
+def test_the_show_schema_offers_the_protocols_bauds():
+    """The schema is data for editors, so it spells the list itself: this keeps it the same fact."""
+    import json
+    from importlib.resources import files
+
+    schema = json.loads(files("choreo").joinpath("schemas/show.schema.json").read_text(encoding="utf-8"))
+    baud = schema["$defs"]["robot"]["properties"]["baud"]
+    assert tuple(baud["enum"]) == p.BAUDS and baud["default"] == p.DEFAULT_BAUD
+    assert p.spell_bauds("or").replace(f"{p.DEFAULT_BAUD}", f"{p.DEFAULT_BAUD} (the RCB-4's default)") \
+        in baud["description"]
+
+
 def test_a_baud_code_names_its_baud_and_a_config_word_takes_one():
     assert [p.baud_of_code(code) for code in range(4)] == [115200, 625000, 1250000, None]
     assert p.with_baud(0x8721, 625000) == 0x8761 and p.with_baud(0x87E1, 115200) == 0x8721

@@ -16,9 +16,11 @@ from pathlib import Path
 
 from choreo.errors import ChoreoError, UsageError, one_line
 from choreo.board.probe import BoardInfo
-from choreo.board.usb import KONDO_USB, NEW_ID_FIX, SYSFS, latency_fix, latency_timer_ms, usb_devices
+from choreo.board.usb import KONDO_USB, KONDO_USB_ID, NEW_ID_FIX, SYSFS, latency_fix, latency_timer_ms, usb_devices
+from choreo.wire.protocol import play_sequence
 
 OK, PROBLEM, NOTE = "ok", "problem", "note"
+PLAY_FRAMES = len(play_sequence(0))  # the replies a play waits for (the document's sequence)
 
 
 @dataclass(frozen=True)
@@ -79,15 +81,15 @@ def _adapters(ports: Sequence[SerialPort], sysfs: Path) -> list[Finding]:
     kondo = [p for p in ports if p.is_kondo]
     listed = ", ".join(sorted(p.device for p in ports)) or "none"
     if kondo:
-        return [Finding(OK, "adapter", f"Kondo's USB adapter (165C:0008) on {', '.join(p.device for p in kondo)}")]
+        return [Finding(OK, "adapter", f"Kondo's USB adapter ({KONDO_USB_ID}) on {', '.join(p.device for p in kondo)}")]
     unbound = [d for d in usb_devices(sysfs) if d.is_kondo]
     if unbound:
-        return [Finding(PROBLEM, "adapter", "Kondo's USB adapter (165C:0008) is plugged in but no driver "
+        return [Finding(PROBLEM, "adapter", f"Kondo's USB adapter ({KONDO_USB_ID}) is plugged in but no driver "
                         "gives it a serial port (ftdi_sio does not know Kondo's id)", NEW_ID_FIX)]
     if ports:
-        return [Finding(NOTE, "adapter", f"no Kondo adapter (165C:0008) found; serial ports: {listed}",
+        return [Finding(NOTE, "adapter", f"no Kondo adapter ({KONDO_USB_ID}) found; serial ports: {listed}",
                         "plug in Kondo's adapter, or give --port for another one")]
-    return [Finding(PROBLEM, "adapter", "no serial ports and no Kondo adapter (165C:0008) found",
+    return [Finding(PROBLEM, "adapter", f"no serial ports and no Kondo adapter ({KONDO_USB_ID}) found",
                     "plug in the adapter (and check `lsusb`); sim:// runs shows without one")]
 
 
@@ -108,7 +110,7 @@ def _device(device: str, sysfs: Path) -> list[Finding]:
                                 "adapter, or not Linux)"))
     elif timer > 1:
         findings.append(Finding(PROBLEM, "latency", f"{device}'s FTDI latency timer is {timer} ms: each reply "
-                                f"may wait up to {timer} ms, a play up to {3 * timer} ms more",
+                                f"may wait up to {timer} ms, a play up to {PLAY_FRAMES * timer} ms more",
                                 latency_fix(device, sysfs)))
     else:
         findings.append(Finding(OK, "latency", f"{device}'s FTDI latency timer is {timer} ms"))

@@ -11,11 +11,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol, runtime_checkable
 
 KONDO_USB = (0x165C, 0x0008)  # Kondo Dual USB Adapter HS (an FTDI chip)
+KONDO_USB_ID = f"{KONDO_USB[0]:04X}:{KONDO_USB[1]:04X}"  # `165C:0008`, as lsusb and messages show it
 SYSFS = Path("/sys")
 FTDI_DRIVER = "bus/usb-serial/drivers/ftdi_sio"
-NEW_ID_FIX = f"echo 165C 0008 | sudo tee /sys/{FTDI_DRIVER}/new_id   (after: sudo modprobe ftdi_sio)"
+NEW_ID = f"{KONDO_USB[0]:04X} {KONDO_USB[1]:04X}"  # what ftdi_sio's new_id file takes: `165C 0008`
+NEW_ID_FIX = f"echo {NEW_ID} | sudo tee /sys/{FTDI_DRIVER}/new_id   (after: sudo modprobe ftdi_sio)"
 LOW_LATENCY_MS = 1
 
 
@@ -65,14 +68,21 @@ def latency_fix(device: str, sysfs: Path = SYSFS) -> str:
     return f"echo {LOW_LATENCY_MS} | sudo tee {latency_timer_path(device, sysfs)}"
 
 
+@runtime_checkable
+class LowLatencyPort(Protocol):
+    """A port whose driver can be asked for low latency: pyserial's on Linux (`serial.Serial`
+    there); not its URL ports, nor other platforms'."""
+
+    def set_low_latency_mode(self, low_latency_settings: bool) -> None: ...
+
+
 def ask_low_latency(port: object) -> bool:
     """Ask the driver for low latency (pyserial, Linux only); False where it cannot be had
     (another platform, a pty, a URL port): nothing is lost by asking."""
-    setter = getattr(port, "set_low_latency_mode", None)
-    if setter is None:
+    if not isinstance(port, LowLatencyPort):
         return False
     try:
-        setter(True)
+        port.set_low_latency_mode(True)
     except (OSError, ValueError, NotImplementedError, AttributeError):
         return False
     return True

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 
+from choreo.board.usb import KONDO_USB_ID
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "doctor",
         help="check what stands between you and a working show, with the fix for each problem",
-        description="Check the serial ports and Kondo's USB adapter (165C:0008), whether a driver "
+        description=f"Check the serial ports and Kondo's USB adapter ({KONDO_USB_ID}), whether a driver "
         "serves it, permission on the device, its FTDI latency timer, whether a board answers "
         "(a read-only probe: the robot does not move), and whether the music's audio output opens. "
         "One line a check; a problem comes with the command that fixes it. Exit 1 if there is a problem.",

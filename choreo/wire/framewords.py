@@ -104,11 +104,12 @@ def describe_reply(data: bytes, frame: bytes | None, layout: Layout | None, moti
         command = p.parse_command(frame) if frame is not None else None
     except ValueError:
         command = None
-    if command is None or command.move_type != p.MOV_RAM_TO_COM or len(data) != (command.count or 0) + 3:
+    if command is None or command.move_type != p.MOV_RAM_TO_COM or len(data) != (command.count or 0) + p.FRAME_OVERHEAD:
         return f"{len(data)}-byte reply: {p.hexbytes(data)}"
     if layout is not None and frame == layout.status.data:
         return _status_words(data, frame, layout)
-    words = _ram_words(command.address or 0, data[2:-1], layout) or f"{len(data) - 3} bytes: {p.hexbytes(data[2:-1])}"
+    ram = data[2:-1]
+    words = _ram_words(command.address or 0, ram, layout) or f"{len(ram)} bytes: {p.hexbytes(ram)}"
     if layout is not None and frame == layout.start_read.data and is_slot(motion):
         return f"{words}: motion {motion} {layout.start_state(motion, data).value}"
     return words

@@ -44,7 +44,7 @@ class Layout:
     """One memory layout (see the module's docstring)."""
 
     name: str
-    source: str  # where its bytes come from, for `choreo plan` and the README
+    source: str  # where its bytes come from, for `choreo plan` and docs/hardware.md, "Board layouts"
     first_slot: int
     main_loop: int
     reads_config: bool  # the play sequence is built from the config word read from the board

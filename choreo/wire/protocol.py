@@ -17,6 +17,7 @@ MOTION_SLOTS = 120
 FIRST_SLOT_ADDRESS = 0x0BB8  # Heart to Heart 4 2.0/2.1 layout, which the document's frames match
 SLOT_SIZE = 0x0800
 MAX_FRAME_SIZE = 128
+FRAME_OVERHEAD = 3  # SIZE, CMD and SUM around a frame's (or a reply's) arguments
 
 CMD_MOV = 0x00
 CMD_CALL = 0x0C
@@ -89,7 +90,7 @@ def checksum(data: bytes) -> int:
 
 def build_frame(command: int, args: bytes) -> bytes:
     """`[SIZE][CMD][args][SUM]`, refusing what the board could not take in one frame."""
-    size = len(args) + 3
+    size = len(args) + FRAME_OVERHEAD
     if size > MAX_FRAME_SIZE:
         raise ValueError(f"frame of {size} bytes exceeds the board's {MAX_FRAME_SIZE}-byte limit")
     body = bytes((size, command)) + args
@@ -147,7 +148,7 @@ class Frame:
     def reply_sizes(self) -> tuple[int, ...]:
         """Reply sizes the board may answer with: a bad frame gets a 4-byte NAK whatever it asked."""
         if self.kind in (FrameKind.STATUS, FrameKind.READ):
-            return (TYPE1_REPLY_SIZE, self.data[8] + 3)  # MOV RAM->COM: the bytes asked, framed
+            return (TYPE1_REPLY_SIZE, self.data[8] + FRAME_OVERHEAD)  # MOV RAM->COM: the bytes asked, framed
         if self.kind is FrameKind.VERSION:
             return tuple(range(TYPE1_REPLY_SIZE, MAX_FRAME_SIZE + 1))
         return (TYPE1_REPLY_SIZE,)
@@ -344,7 +345,7 @@ def _status(frame: Frame, data: bytes) -> Reply:
     inside the slots and the return address and call depth after it are not all zero.
     """
     command = parse_command(frame.data)
-    if command.address == PROGRAM_COUNTER_ADDRESS and len(data) >= 3 + _CALL_STATE_BYTES:
+    if command.address == PROGRAM_COUNTER_ADDRESS and len(data) >= FRAME_OVERHEAD + _CALL_STATE_BYTES:
         ram = data[2:-1]
         counter = int.from_bytes(ram[:ADDRESS_BYTES], "little")
         return Reply(ReplyKind.STATUS, data, executing=in_called_motion(ram), status=counter)
