@@ -38,7 +38,7 @@ class _Walk:
 
     def ok(self, path: JsonPath) -> bool:
         """Whether the value at `path` passed the schema (so it is the type it should be)."""
-        return all(path[:n] not in self.report.flagged for n in range(len(path) + 1))
+        return self.report.passed(path)
 
     def problem(self, path: JsonPath, message: str) -> None:
         """A problem with the value at `path`."""

@@ -33,8 +33,8 @@ class Report:
         self.file = file
         self._problems: list[Problem] = []
         self._seen: set[tuple[int, int, str]] = set()
-        self.flagged: set[JsonPath] = set()  # paths that already have a problem
-        self.silenced: set[JsonPath] = set()  # values replaced by a placeholder: no schema reports below
+        self._flagged: set[JsonPath] = set()  # paths that already have a problem
+        self._silenced: set[JsonPath] = set()  # values replaced by a placeholder: no schema reports below
 
     def add(self, mark: Mark, path: JsonPath | str, message: str) -> None:
         text = path if isinstance(path, str) else format_path(path)
@@ -43,8 +43,23 @@ class Report:
             return
         self._seen.add(key)
         if not isinstance(path, str):
-            self.flagged.add(path)
+            self._flagged.add(path)
         self._problems.append(Problem(self.file, mark[0], mark[1], text, message))
+
+    def silence(self, path: JsonPath) -> None:
+        """The value at `path` was refused and read as nothing (an alias): what is said of the
+        placeholder or below it would be noise; the refusal is reported on its own."""
+        self._silenced.add(path)
+        self._flagged.add(path)
+
+    def passed(self, path: JsonPath) -> bool:
+        """Whether nothing has been reported at `path` or above it (so the value is the type
+        the schema says, and a check can read it)."""
+        return all(path[:n] not in self._flagged for n in range(len(path) + 1))
+
+    def silenced(self, path: JsonPath) -> bool:
+        """Whether the value at `path`, or one it is inside, was refused and read as nothing."""
+        return any(path[:n] in self._silenced for n in range(len(path) + 1))
 
     def any(self) -> bool:
         return bool(self._problems)

@@ -108,8 +108,7 @@ class YamlWalk:
 
     def _alias(self, event: yaml.AliasEvent, mark: Mark, path: JsonPath) -> None:
         """Refused: reported once at the first, counted after it (a bomb holds thousands)."""
-        self.report.silenced.add(path)
-        self.report.flagged.add(path)
+        self.report.silence(path)
         if self.first_alias is None:
             self.first_alias = (mark, path, event.anchor or "")
         else:
