@@ -230,7 +230,7 @@ class Feed:
         if not chunk:
             self.ended_at = self.handed
             return
-        self._pending += chunk.tobytes() if hasattr(chunk, "tobytes") else bytes(chunk)
+        self._pending += memoryview(chunk).cast("B")  # miniaudio's array of samples, as its bytes
 
     def _open(self) -> Iterator[Any]:
         import miniaudio
