@@ -142,10 +142,12 @@ def test_two_replays_in_the_same_second_get_two_logs(run_log, tmp_path, monkeypa
     from datetime import datetime, timezone
 
     import choreo.log.recorder as record
+    import choreo.run.replay as replaying
 
     fixed = datetime(2026, 11, 23, 6, 0, 0, tzinfo=timezone.utc)
     real = record.default_log_path
-    monkeypatch.setattr(record, "default_log_path", lambda name, directory="runs", now=None: real(name, directory, fixed))
+    monkeypatch.setattr(replaying, "default_log_path",  # the name replay reads (imported at module level)
+                        lambda name, directory="runs", now=None: real(name, directory, fixed))
     first = replay(run_log, speed=20)
     second = replay(run_log, speed=20)
     assert first.log_path != second.log_path

@@ -14,13 +14,17 @@ import os
 import stat
 import sys
 from collections.abc import Iterable, Iterator
-from contextlib import ExitStack, contextmanager
+from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
-from typing import IO
+from typing import IO, TYPE_CHECKING, BinaryIO, TextIO, cast
 
 from choreo.errors import UsageError
 from choreo.textfit import visible
 from choreo.wire.protocol import DEFAULT_BAUD, spell_bauds
+
+if TYPE_CHECKING:  # loaded by the commands that read logs: --help stays light
+    from choreo.log.reader import LogReader
+    from choreo.run.replay import ReplayReport
 
 FRAME_AND_REPLY_KINDS = ("stop", "counter", "play", "restore", "status", "read", "sync",
                          "ack", "nak", "timeout", "invalid")
@@ -34,7 +38,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     commands = parser.add_subparsers(dest="log_command", metavar="COMMAND")
     commands.required = True
+    _summary_parser(commands)
+    _latest_parser(commands)
+    _frames_parser(commands)
+    _timeline_parser(commands)
+    _export_parser(commands)
+    _replay_parser(subparsers)
 
+
+def _summary_parser(commands: argparse._SubParsersAction) -> None:
+    """`log summary LOG...`: did the show run as planned."""
     summary = commands.add_parser(
         "summary", help="did the show run as planned: steps, frames, replies, latency, lateness, motions",
         description="Summarise a run: show, port, duration; steps done, late and failed; frames and "
@@ -45,6 +58,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     summary.add_argument("--json", action="store_true", help="one JSON object a log, one a line (JSON Lines)")
     summary.set_defaults(handler=run_summary)
 
+
+def _latest_parser(commands: argparse._SubParsersAction) -> None:
+    """`log latest [DIR]`: the newest log's path, for scripts."""
     latest = commands.add_parser(
         "latest", help="print the newest log's path",
         description="Print the path of the newest .mcap log in DIR (default runs/, where `choreo run` "
@@ -52,6 +68,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     latest.add_argument("dir", nargs="?", default="runs", help="the folder (default runs)")
     latest.set_defaults(handler=run_latest)
 
+
+def _frames_parser(commands: argparse._SubParsersAction) -> None:
+    """`log frames LOG`: every frame and reply, one line each."""
     frames = commands.add_parser(
         "frames", help="every frame and reply, one line each, with what it means",
         description="One line a frame or reply: show time, direction, seq, kind, bytes, meaning.")
@@ -66,6 +85,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "`log export`], cut: null or {state, reason}}; a failure is {ok: false, exit, error}")
     frames.set_defaults(handler=run_frames)
 
+
+def _timeline_parser(commands: argparse._SubParsersAction) -> None:
+    """`log timeline LOG`: each motion on the show clock, planned against actual."""
     timeline = commands.add_parser(
         "timeline", help="each motion on the show clock, planned against actual",
         description="Each motion as a bar on the show clock, planned against actual (the plan stays "
@@ -76,6 +98,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     timeline.add_argument("--png", metavar="FILE", help="write a PNG picture to FILE instead of text")
     timeline.set_defaults(handler=run_timeline)
 
+
+def _export_parser(commands: argparse._SubParsersAction) -> None:
+    """`log export LOG`: one row a frame, as CSV or JSON."""
     export = commands.add_parser(
         "export", help="one row a frame with all its fields, as CSV or JSON",
         description="Write one row a frame (the frame's and its reply's fields, times as wall-clock ns "
@@ -86,6 +111,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     export.add_argument("--jsonl", metavar="FILE", help="write JSON Lines (one object a row) to FILE")
     export.set_defaults(handler=run_export)
 
+
+def _replay_parser(subparsers: argparse._SubParsersAction) -> None:
+    """`replay LOG` (a command of its own, beside `log`): send a run's frames again and compare."""
     replay = subparsers.add_parser(
         "replay", help="send a recorded run's frames again and compare the replies",
         description="Send every frame of a run's log again with its recorded timing (to the built-in "
@@ -224,7 +252,7 @@ def run_frames(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_frames_json(reader, args: argparse.Namespace) -> None:  # type: ignore[no-untyped-def]
+def _print_frames_json(reader: LogReader, args: argparse.Namespace) -> None:
     """One object, printed once the whole log is read: a log that turns out not to be choreo's
     half-way is the failure object alone, never half an object and then another."""
     from choreo.log.format import TX_TOPIC, LogLayouts
@@ -269,7 +297,7 @@ def _timeline_png(log: str, png: str) -> int:
         require_matplotlib()
         with _output(png, "timeline --png", binary=True) as out:
             timeline = build(reader)
-            render_png(timeline, out)
+            render_png(timeline, cast(BinaryIO, out))  # _output(binary=True) opens it in binary mode
     cut = f" (log {timeline.cut.state}: {timeline.cut.reason})" if timeline.cut else ""
     _print_all([f"timeline: {png}: {counted(len(timeline.runs), 'motion')}, "
                 f"{counted(len(timeline.late), 'late play')}, {counted(len(timeline.faults), 'fault')}{cut}"])
@@ -286,11 +314,13 @@ def run_export(args: argparse.Namespace) -> int:
         raise UsageError("log export: say where: --csv, --json and/or --jsonl FILE ('-' for stdout)")
     if sum(1 for _, value in targets if value == "-") > 1:
         raise UsageError("log export: only one of --csv, --json and --jsonl can go to stdout ('-')")
-    sink_of = {"csv": CsvSink, "json": JsonSink, "jsonl": JsonLinesSink}
+    sink_of: dict[str, type[CsvSink | JsonSink | JsonLinesSink]] = {"csv": CsvSink, "json": JsonSink,
+                                                                     "jsonl": JsonLinesSink}
     with LogReader(args.log) as reader, ExitStack() as files:
-        sinks = []
+        sinks: list[CsvSink | JsonSink | JsonLinesSink] = []
         for name, value in targets:
-            out = sys.stdout if value == "-" else files.enter_context(_output(value, f"log export --{name}"))
+            out = sys.stdout if value == "-" else cast(TextIO, files.enter_context(  # opened in text mode
+                _output(value, f"log export --{name}")))
             sinks.append(sink_of[name](out))
         count = export(reader, sinks)
         cut = reader.cut
@@ -340,15 +370,11 @@ _WRITE_FLAGS = (os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NONBLOCK"
 
 def _discard(file: IO, created: Path | None) -> None:
     """Close an output that failed; remove it if this command made it as a regular file."""
-    try:
+    with suppress(OSError):
         file.close()
-    except OSError:
-        pass
-    try:
+    with suppress(OSError):
         if created is not None and stat.S_ISREG(os.lstat(created).st_mode):
             created.unlink()
-    except OSError:
-        pass
 
 
 def run_replay(args: argparse.Namespace) -> int:
@@ -389,7 +415,7 @@ def run_replay(args: argparse.Namespace) -> int:
     return code
 
 
-def _replay_record(report, code: int) -> dict:  # type: ignore[no-untyped-def]  # ReplayReport: imported lazily
+def _replay_record(report: ReplayReport, code: int) -> dict:
     """`replay --json`: the result line's figures, both logs and every difference in words."""
     cut = {"state": report.cut.state, "reason": report.cut.reason} if report.cut else None
     return {"ok": code == 0, "exit": code, "log": str(report.source), "replay_log": str(report.log_path),

@@ -8,8 +8,15 @@ import signal
 import sys
 import threading
 import time
+from typing import TYPE_CHECKING
 
 from choreo.errors import LinkError, UsageError
+from choreo.wire.protocol import spell_bauds
+
+if TYPE_CHECKING:  # the simulator loads when `choreo sim` runs: --help stays light
+    from choreo.sim.board import JournalEntry
+    from choreo.sim.options import SimOptions
+    from choreo.sim.pty import PtyServer, ServeEnd
 
 FAULT_HELP = (
     "K (a whole number >= 1): every K-th frame (K, 2K, 3K...; for --lose only frame K); "
@@ -44,8 +51,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    _board_options(parser)
+    _fault_options(parser)
+    parser.add_argument("--boards", type=int, default=1, metavar="N",
+                        help=f"serve N boards (1..{MAX_BOARDS}), each on its own pseudo-terminal, one path "
+                        "a line on stdout: one for each robot of a show for several (same options for all)")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log every frame and reply to stderr")
+    parser.set_defaults(handler=run)
+
+
+def _board_options(parser: argparse.ArgumentParser) -> None:
+    """The board and its line: what a `sim://` URL's settings say."""
     board = parser.add_argument_group("board")
-    board.add_argument("--baud", metavar="N", help="the board's baud: 115200 (default), 625000, 1250000")
+    board.add_argument("--baud", metavar="N", help=f"the board's baud: {spell_bauds(mark_default=True)}")
     board.add_argument("--layout", metavar="L", help="the board's memory layout: seed (default: slots "
                        "at 0x0BB8) or hth4-2.2 (slots at 0x0B80); a CALL elsewhere is a stray call")
     board.add_argument("--config", metavar="WORD", help="the config word at power-on, e.g. 0x821b "
@@ -75,6 +93,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     board.add_argument(
         "--no-settings-check", action="store_true", help="answer whatever baud/parity the client set"
     )
+
+
+def _fault_options(parser: argparse.ArgumentParser) -> None:
+    """The faults, each K (every K-th frame) or P (a probability): what a `sim://` URL's faults say."""
     faults = parser.add_argument_group("faults", FAULT_HELP)
     for kind, what in (
         ("lose", "lose the port (close the pty, exit 3)"),
@@ -93,11 +115,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="the frame faults hit (and count) only frames of these kinds, comma-separated: "
                              "stop, counter, play, restore, read, sync, other (default: every frame)")
     faults.add_argument("--seed", metavar="N", help="seed for faults given as a probability (default 0)")
-    parser.add_argument("--boards", type=int, default=1, metavar="N",
-                        help=f"serve N boards (1..{MAX_BOARDS}), each on its own pseudo-terminal, one path "
-                        "a line on stdout: one for each robot of a show for several (same options for all)")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log every frame and reply to stderr")
-    parser.set_defaults(handler=run)
 
 
 MAX_BOARDS = 16
@@ -129,48 +146,49 @@ def run(args: argparse.Namespace) -> int:
         for server in servers:
             stack.enter_context(server)
         # Handlers first: whoever reads the paths may signal us at once, and must get exit 0.
-        stop_all = lambda *_: [server.stop() for server in servers]  # noqa: E731
+        def stop_all(*_: object) -> None:
+            for server in servers:
+                server.stop()
+
         previous = {sig: signal.signal(sig, stop_all) for sig in (signal.SIGINT, signal.SIGTERM)}
         try:
             for server in servers:
                 print(server.path, flush=True)
-            paths = ", ".join(server.path for server in servers)
+            paths = ", ".join(str(server.path) for server in servers)  # set once the pty is open
             print(f"choreo sim: simulated RCB-4 on {paths}, {options.describe()}; Ctrl-C to stop", file=sys.stderr)
             ends = _serve_all(servers)
         finally:
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
     lost = [f"fault 'lose' at frame {server.board.lost_at_frame}: closed {server.path}"
-            for server, end in zip(servers, ends) if end is ServeEnd.LOST]
+            for server, end in zip(servers, ends, strict=True) if end is ServeEnd.LOST]
     if lost:
         raise LinkError(f"choreo sim: {'; '.join(lost)} as if the adapter was unplugged")
     return 0
 
 
-def _server(options, args: argparse.Namespace, start: float, number: int | None):  # type: ignore[no-untyped-def]
+def _server(options: SimOptions, args: argparse.Namespace, start: float, number: int | None) -> PtyServer:
     from choreo.sim.pty import PtyServer
     from choreo.sim.line import PTY_GAP_S
 
-    on_entry = None
-    if args.verbose:
-        prefix = f"[board {number + 1}] " if number is not None else ""
+    prefix = f"[board {number + 1}] " if number is not None else ""
 
-        def on_entry(entry):  # type: ignore[no-untyped-def]
-            print(prefix + entry.line(start), file=sys.stderr, flush=True)
+    def said(entry: JournalEntry) -> None:
+        print(prefix + entry.line(start), file=sys.stderr, flush=True)
 
-    board = options.board(on_entry=on_entry, power_on=start)
+    board = options.board(on_entry=said if args.verbose else None, power_on=start)
     return PtyServer(board, gap_s=options.gap_s or PTY_GAP_S, check_settings=not args.no_settings_check,
                      latency_s=options.latency_s)
 
 
-def _serve_all(servers: list) -> list:  # type: ignore[type-arg]
+def _serve_all(servers: list[PtyServer]) -> list[ServeEnd | None]:
     """Each board on its own thread (one stuck client never holds up another board's replies);
     the main thread keeps the signals. A lost board ends alone: the others go on serving."""
     from choreo.sim.pty import ServeEnd
 
     if len(servers) == 1:
         return [servers[0].serve()]
-    ends: list = [None] * len(servers)
+    ends: list[ServeEnd | None] = [None] * len(servers)
 
     def serve(index: int) -> None:
         ends[index] = servers[index].serve()
