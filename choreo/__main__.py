@@ -15,7 +15,7 @@ library, serial, mcap: tens of milliseconds):
 - A traceback (a bug) is printed with control characters escaped, as all output is
   (`show_crashes_visibly`): the CLI's escaping streams are gone by the time Python prints it.
 
-What remains is the interpreter's own start-up, before this module runs (README, "Stopping").
+What remains is the interpreter's own start-up, before this module runs (docs/running.md, "Stopping").
 The entry imports the CLI; nothing imports the entry (the signals live in `choreo.signals`).
 """
 
@@ -24,6 +24,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
+from types import TracebackType
 
 from choreo.signals import SignalGuard
 
@@ -54,8 +55,9 @@ def reopen_closed_standard_fds() -> None:
     for name, fd in (("stdin", 0), ("stdout", 1), ("stderr", 2)):
         if getattr(sys, name) is None:  # Python found the descriptor closed at start-up
             mode = "r" if fd == 0 else "w"
-            setattr(sys, name, open(fd, mode, buffering=1 if fd else -1, closefd=False,
-                                    errors="backslashreplace"))
+            stream = open(fd, mode, buffering=1 if fd else -1, closefd=False,  # noqa: SIM115 - the process's own stream, open for its life
+                          errors="backslashreplace")
+            setattr(sys, name, stream)
 
 
 def show_crashes_visibly() -> None:
@@ -68,7 +70,8 @@ def show_crashes_visibly() -> None:
                                                        hook.thread)
 
 
-def _print_visibly(kind, value, trace, thread=None) -> None:  # type: ignore[no-untyped-def]
+def _print_visibly(kind: type[BaseException] | None, value: BaseException | None, trace: TracebackType | None,
+                   thread: threading.Thread | None = None) -> None:
     import traceback
 
     from choreo.textfit import visible

@@ -11,7 +11,7 @@ could push a second return address on the board.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
@@ -223,10 +223,8 @@ class Link:
         return int(self.port.baudrate)
 
     def close(self) -> None:
-        try:
+        with suppress(Exception):  # closing a lost port may fail again; there is nothing left to save
             self.port.close()
-        except Exception:  # closing a lost port may fail again; there is nothing left to save
-            pass
 
     def __enter__(self) -> Link:
         return self
@@ -380,8 +378,32 @@ class Link:
             self.clock.sleep_until(self._last_status_mono + self.status_spacing_s)
         self._seq += 1
         seq = self._seq
-        lost: PortLost | None = None
+        sent, lost = self._put(frame, write)
+        # Listeners hear of the frame once it is out: their work never delays a cue's first byte.
+        event = TxEvent(seq, frame, attempt, self.clock.wall_ns(sent), tag)
+        for listener in self.listeners:
+            listener.on_tx(event)
+        try:
+            if lost is not None:
+                raise lost
+            reply = self._read_reply(frame)
+        except PortLost as exc:
+            self._report(seq, frame, protocol.timeout(), sent, tag, error=f"port lost: {exc}")
+            raise self._lost(exc, frame, tag, what) from None
+        if stray:
+            reply = replace(reply, stale=stray + reply.stale)
+        if reply.stale:
+            self._late_replies += 1
+        self._report(seq, frame, reply, sent, tag)
+        return reply
+
+    def _put(self, frame: Frame,
+             write: Callable[[Callable[[], None]], int | None] | None) -> tuple[int, PortLost | None]:
+        """Write the frame here, or hand its write to `write` (another thread writes it, with
+        other robots'); when it went (monotonic ns, taken just before the write) and the port's
+        failure if the write failed (raised once the listeners have heard of the frame)."""
         written = write(self._write_for(frame.data)) if write is not None else None
+        lost: PortLost | None = None
         try:
             if written is None:
                 sent = self.clock.mono_ns()  # the frame's time: just before the write
@@ -391,30 +413,13 @@ class Link:
                 self._raise_lost_write()
         except PortLost as exc:
             lost = exc
-        # Listeners hear of the frame once it is out: their work never delays a cue's first byte.
         self.last_tx_mono = sent / 1e9
         # Spacing is measured from when the write returned, not from the time taken before it:
         # a write delayed by a busy machine must not bring the next query closer on the wire.
         self.last_write_end = self.clock.mono()
         if frame.kind is FrameKind.STATUS:
             self._last_status_mono = self.last_write_end
-        event = TxEvent(seq, frame, attempt, self.clock.wall_ns(sent), tag)
-        for listener in self.listeners:
-            listener.on_tx(event)
-        if lost is None:
-            try:
-                reply = self._read_reply(frame)
-            except PortLost as exc:
-                lost = exc
-        if lost is not None:
-            self._report(seq, frame, protocol.timeout(), sent, tag, error=f"port lost: {lost}")
-            raise self._lost(lost, frame, tag, what) from None
-        if stray:
-            reply = replace(reply, stale=stray + reply.stale)
-        if reply.stale:
-            self._late_replies += 1
-        self._report(seq, frame, reply, sent, tag)
-        return reply
+        return sent, lost
 
     def _report(self, seq: int, frame: Frame, reply: Reply, sent_ns: int, tag: Tag | None,
                 error: str | None = None) -> None:
@@ -454,10 +459,14 @@ class Link:
         """Bytes already waiting before a frame goes out cannot be its reply: read them to the
         end (the board must finish a reply before it takes the next frame) and set them aside."""
         try:
-            waiting = self.port.in_waiting
+            waiting = self._waiting()
         except PORT_ERRORS as exc:
             raise PortLost(_reason(exc)) from None
         return self._drain(QUIET_S) if waiting else b""
+
+    def _waiting(self) -> int:
+        """Bytes the port holds unread (a PORT_ERRORS exception if the device failed)."""
+        return int(self.port.in_waiting)  # type: ignore[attr-defined]  # pyserial's stub declares it on each platform's class, not on SerialBase
 
     def _write(self, data: bytes) -> None:
         """One write call for the whole frame: the board drops a frame with gaps in it."""
@@ -499,7 +508,7 @@ class Link:
             if now - last >= quiet_s or now >= limit:
                 return bytes(got)
             try:
-                waiting = self.port.in_waiting
+                waiting = self._waiting()
             except PORT_ERRORS as exc:
                 raise PortLost(_reason(exc)) from None
             if waiting:

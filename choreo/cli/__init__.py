@@ -10,8 +10,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from contextlib import suppress
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 from choreo import __version__
 from choreo.cli.parser import ChoreoParser
@@ -24,7 +25,8 @@ if TYPE_CHECKING:
     from choreo.signals import SignalGuard
 
 # Command modules, in the order `choreo --help` lists them.
-COMMAND_MODULES = ("run", "show", "beats", "importer", "frames", "sim", "probe", "doctor", "log", "ports", "devices", "schema")
+COMMAND_MODULES = ("run", "show", "beats", "importer", "frames", "sim", "probe", "doctor", "log", "ports", "devices",
+                   "schema")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -62,7 +64,7 @@ def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = Non
     """
     with visible_output():  # every line printed, a show's names and error messages too, made visible
         output = Output(sys.stdout)  # every command's output: a failed write is known and reported
-        sys.stdout = output  # type: ignore[assignment]
+        sys.stdout = output
         try:
             code = _outcome(argv, signals, time_source, output)
         finally:
@@ -125,17 +127,19 @@ def _command(argv: Sequence[str] | None, signals: SignalGuard | None,
         parser = build_parser()
         args, extra = parser.parse_known_args(argv)
         if extra:
-            getattr(args, "parser", parser).unknown_arguments(extra)
+            # the subcommand's own parser (see `_remember_leaf_parsers`): argparse makes it of its parent's class
+            leaf = cast(ChoreoParser, getattr(args, "parser", parser))
+            leaf.unknown_arguments(extra)
         args.time_source = time_source
         try:
             code = int(args.handler(args) or 0)
         except (ChoreoError, KeyboardInterrupt) as exc:
             from choreo.cli.jsonout import report_failure
 
-            try:
-                report_failure(args, exc)  # --json: the failure as JSON on stdout too
-            except OutputError:
-                pass  # main says so; the failure itself is still told on stderr, with its exit status
+            # --json: the failure as JSON on stdout too; an output that fails is said by `main`,
+            # and the failure itself is still told on stderr, with its exit status
+            with suppress(OutputError):
+                report_failure(args, exc)
             raise
         return code
     finally:

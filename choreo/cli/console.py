@@ -26,9 +26,10 @@ import sys
 import termios
 import threading
 from collections import deque
+from contextlib import suppress
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TextIO
+from typing import TextIO, cast
 
 from rich.console import Console as RichConsole
 from rich.console import Group, RenderableType
@@ -40,7 +41,7 @@ from rich.table import Table
 from rich.text import Text
 
 from choreo.cli.terminal import raw_stream, visible_stream
-from choreo.events import Command, CommandEvent, RxEvent, StepEvent, Subscription, TxEvent
+from choreo.events import Command, CommandEvent, GoCue, RxEvent, StepEvent, Subscription, TxEvent
 from choreo.live.controls import HoldingShowClock, Live
 from choreo.log.format import ERROR, INFO, WARNING
 from choreo.show.model import SOLO, PlannedStep, StepKind
@@ -535,7 +536,7 @@ class Console:
     """The live console; see the module's docstring. Created by `choreo run` when stdin and
     stderr are terminals, started once the ports are open, closed when the run is over."""
 
-    def __init__(self, session, live: Live, *, out: TextIO | None = None,  # type: ignore[no-untyped-def]
+    def __init__(self, session, live: Live, *, out: TextIO | None = None,
                  keys: TextIO | None = None, width: int | None = None) -> None:
         """`out`: where it draws (default stderr); `keys`: the terminal it reads (default
         stdin; one that is not a terminal gives no keys); `width`: fixed, for tests."""
@@ -578,7 +579,7 @@ class Console:
             # rich now prints what is written to stderr above the screen (its own print, which
             # leaves escape sequences raw): made visible first, until rich puts stderr back
             if isinstance(sys.stderr, FileProxy):
-                sys.stderr = visible_stream(sys.stderr)
+                sys.stderr = visible_stream(cast(TextIO, sys.stderr))  # rich's FileProxy is a text stream
             self._draw()
             self._redraw = threading.Thread(target=self._redraw_loop, name="choreo-console", daemon=True)
             self._redraw.start()
@@ -615,10 +616,8 @@ class Console:
                 self._closing = True
                 self._asking = False
             for last in (self._draw, self._rich.stop):  # stop also shows the cursor again
-                try:
+                with suppress(OSError, ValueError):  # the terminal went away: nothing left to draw on
                     last()
-                except (OSError, ValueError):
-                    pass  # the terminal went away: nothing left to draw on
         finally:
             self._restore_terminal()
 
@@ -635,10 +634,8 @@ class Console:
         mode, self._mode = self._mode, None
         if mode is not None:
             self._bracket_pastes(False)
-            try:
+            with suppress(termios.error, OSError):  # the terminal is gone (hung up): no mode left to restore
                 mode.restore()
-            except (termios.error, OSError):
-                pass  # the terminal is gone (hung up): no mode left to restore
 
     def _watch_links(self) -> None:
         stage = getattr(self.session, "stage", None)
@@ -831,7 +828,7 @@ class Console:
         left = f"in {at - show_s:.1f} s" if at >= show_s else "due now"
         return f"next cue {left}: {who}step {step.index}{label} at {at:g} s"
 
-    def _go_line(self, waiting: list, stopping: bool) -> tuple[str, bool]:  # type: ignore[type-arg]
+    def _go_line(self, waiting: list[GoCue], stopping: bool) -> tuple[str, bool]:
         """The lock is held. The GO cue waiting now, else the next one coming; before a show
         run with --wait-start, the start it waits for."""
         if not self.live.started and not stopping:
@@ -845,7 +842,7 @@ class Console:
         step = min(coming, key=lambda s: (s.planned_s, s.index))
         return f"next GO: '{step.name}' (step {step.index})", False
 
-    def _row(self, robot: _Robot, waiting: list) -> Row:  # type: ignore[type-arg]
+    def _row(self, robot: _Robot, waiting: list[GoCue]) -> Row:
         cue = next((c for c in waiting if robot.name in c.robots), None)
         step = robot.current
         if cue is not None:

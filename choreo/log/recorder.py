@@ -36,7 +36,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from importlib import resources
@@ -280,15 +280,11 @@ class Recorder:
 
     def _discard(self) -> None:
         """A file that could not take the run's start is no log: remove it."""
-        try:
+        with suppress(OSError):  # the buffered start could not be written either
             self._file.close()
-        except OSError:
-            pass  # the buffered start could not be written either
         self._reserve.release()
-        try:
+        with suppress(OSError):  # gone already, or not ours to remove: nothing more to do
             self.path.unlink()
-        except OSError:
-            pass
 
     def _register(self, topic: str, schema_name: str, schema: bytes) -> int:
         schema_id = self._writer.register_schema(name=schema_name, encoding="jsonschema", data=schema)
@@ -561,7 +557,7 @@ class DiskReserve:
 
     def extend_to(self, end: int) -> None:
         """Hold the disk space up to `end`; OSError (ENOSPC, EDQUOT) if the disk has not got it."""
-        if not self.supported or end <= self.end:
+        if not self.supported or self._fallocate is None or end <= self.end:
             return
         if self._fallocate(self._fd, self.KEEP_SIZE, self.end, end - self.end) != 0:
             import ctypes

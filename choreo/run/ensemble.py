@@ -8,9 +8,10 @@ the other.
 
 Shared `steps:` stay in step through `Gates`: a step starts when every robot it is for is
 through the one before, and a unison play's start frames (the frame that starts the motion,
-after each robot's own exchanges before it) wait for each other and leave at one instant. When the gate opens late (the last robot's `wait: done` saw its motion
-end just now), the next step is released a little ahead (`SYNC_S`), so that every thread, woken
-at slightly different moments, still sends at one due time.
+after each robot's own exchanges before it) wait for each other and leave at one instant. When
+the gate opens late (the last robot's `wait: done` saw its motion end just now), the next step
+is released a little ahead (`SYNC_S`), so that every thread, woken at slightly different
+moments, still sends at one due time.
 
 Faults: a robot whose link fails either stops the show (`on_fault: stop`, the default: the
 others play their abort motions, the run fails naming the robot) or drops out
@@ -58,7 +59,7 @@ class Gates:
         self.clock = clock
         self.show = show
         self.stop = stop
-        self._gates: dict[int, _Gate] = {}
+        self._gates: dict[int | tuple[str, int], _Gate] = {}  # by step index, and (ARMED, index)
         self._lock = threading.Lock()
 
     def through(self, index: int, robot: str, end: float | None, idle: float | None = None) -> float | None:
@@ -101,7 +102,8 @@ class Gates:
         return gate.written.get(robot) if gate.written is not None else None
 
     def _write_all(self, gate: _Gate) -> None:
-        sleep_until_show(self.clock, self.show, gate.release)  # type: ignore[arg-type]
+        assert gate.release is not None, "written only once the gate is open"
+        sleep_until_show(self.clock, self.show, gate.release)
         written = {}
         with self._lock:
             gate.taking = True

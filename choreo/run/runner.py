@@ -129,7 +129,7 @@ class Runner:
         to go out early by its lead: a cue at the very start still lands on its time."""
         steps = self.plan.steps[self.start:]
         first = next((s for s in steps if self.robot is None or s.is_for(self.robot)), None)
-        if first is None or first.kind is not StepKind.PLAY or first.at is None:
+        if first is None or first.kind is not StepKind.PLAY or first.at is None or first.motion is None:
             return 0.0
         return max(0.0, self.link.start_lead_s(first.motion) - (first.at - self._origin()))
 
@@ -142,7 +142,7 @@ class Runner:
     def _lead(self, step: PlannedStep | None) -> float:
         """How early a step's first frame goes out: a cued play's lead, so that the frame that
         starts its motion is written on the cue; 0 for anything else."""
-        if step is None or step.kind is not StepKind.PLAY or step.at is None:
+        if step is None or step.kind is not StepKind.PLAY or step.at is None or step.motion is None:
             return 0.0
         if self.robot is not None and not step.is_for(self.robot):
             return 0.0
