@@ -86,7 +86,7 @@ class YamlWalk:
                                         f"write the value out{more}")
 
     def _node(self, event: yaml.NodeEvent) -> None:
-        parent = self.stack[-1] if self.stack else None
+        parent: _Frame | None = self.stack[-1] if self.stack else None
         if parent is not None and isinstance(parent.container, dict) and parent.expect_key:
             self._key(parent, event)
             return
@@ -156,7 +156,7 @@ class YamlWalk:
 
     def _close(self) -> None:
         frame = self.stack.pop()
-        parent = self.stack[-1] if self.stack else None
+        parent: _Frame | None = self.stack[-1] if self.stack else None
         if frame.is_key:
             return
         if frame.container is None:
@@ -173,7 +173,7 @@ class YamlWalk:
             parent.container.append(frame.container)
 
     def _attach(self, path: JsonPath, value: Any, mark: Mark, empty: bool) -> None:
-        parent = self.stack[-1] if self.stack else None
+        parent: _Frame | None = self.stack[-1] if self.stack else None
         if parent is None:
             self.root, self.root_mark = value, mark
             self.where[path] = Where(mark)
