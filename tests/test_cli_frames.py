@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 
@@ -32,3 +33,27 @@ def test_bad_frame_arguments_exit_2_with_one_line(argv):
     assert done.stdout == ""
     assert len(done.stderr.strip().splitlines()) == 1
     assert "Traceback" not in done.stderr
+
+
+def test_every_commands_baud_help_is_spelt_from_the_protocols_list():
+    """The bauds were typed in four help texts; now each is built from protocol.BAUDS."""
+    import argparse
+
+    from choreo.cli import build_parser
+    from choreo.wire import protocol
+
+    def subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+        found = {}
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    found[name] = sub
+                    found.update({f"{name} {n}": s for n, s in subparsers(sub).items()})
+        return found
+
+    helps = {name: action.help for name, sub in subparsers(build_parser()).items()
+             for action in sub._actions if "--baud" in action.option_strings}
+    assert {"run", "frames", "sim", "replay"} <= set(helps)
+    for name, text in [*helps.items(), ("probe", subparsers(build_parser())["probe"].description)]:
+        assert {int(n) for n in re.findall(r"\d{5,}", text)} == set(protocol.BAUDS), (name, text)
+        assert re.findall(r"(\d+) \(default\)", text) in ([], [str(protocol.DEFAULT_BAUD)]), (name, text)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from choreo.errors import UsageError
-from choreo.wire.layouts import LAYOUT_NAMES
+from choreo.wire.layouts import DEFAULT_LAYOUT, LAYOUT_NAMES
 from choreo.wire.protocol import BAUD_CODES, DEFAULT_BAUD, MOTION_SLOTS, spell_bauds
 
 KINDS = ("play", "stop", "counter", "restore", "status")
@@ -22,8 +22,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("kind", choices=KINDS, help="which frame")
     parser.add_argument("motion", nargs="?", help=f"motion slot 0..{MOTION_SLOTS - 1} (play only)")
-    parser.add_argument("--layout", default="seed", choices=LAYOUT_NAMES,
-                        help="the board's memory layout (default seed)")
+    parser.add_argument("--layout", default=DEFAULT_LAYOUT, choices=LAYOUT_NAMES,
+                        help=f"the board's memory layout (default {DEFAULT_LAYOUT})")
     parser.add_argument("--baud", type=int, default=DEFAULT_BAUD, help=spell_bauds("or", mark_default=True))
     parser.add_argument("--config", metavar="WORD", help="hth4-2.2: the board's config word, e.g. "
                         "0x821b (default: that one, what an HTH4 2.2+ project saves)")
