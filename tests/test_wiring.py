@@ -258,6 +258,112 @@ def test_a_link_fault_right_after_a_panic_still_ends_the_show_as_a_panic(tmp_pat
     assert len(left_stops) == 2  # the play's, then the panic's
 
 
+class Heard:
+    """A command listener, with the optional GO-cue hook or without it."""
+
+    def __init__(self) -> None:
+        self.commands: list[str] = []
+
+    def on_command(self, event) -> None:  # type: ignore[no-untyped-def]
+        self.commands.append(event.command.name)
+
+
+class HeardWithCues(Heard):
+    def __init__(self) -> None:
+        super().__init__()
+        self.cues: list[str] = []
+
+    def on_waiting(self, cue) -> None:  # type: ignore[no-untyped-def]
+        self.cues.append(cue.name)
+
+
+def test_live_tells_the_go_cue_hook_only_to_those_declaring_it_and_subscriptions_end(tmp_path):
+    from choreo.events import Command, WaitingListener
+    from choreo.live.controls import Live
+    from choreo.show.model import SOLO
+
+    show = load_show(write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n    at: go\n    label: bow\n"))
+    step = compile_plan(show).steps[0]
+    time = VirtualTime()
+    live = Live(StopRequest(), now=time.now, lockout_s=0.0)
+    plain, cued = Heard(), HeardWithCues()
+    assert isinstance(cued, WaitingListener) and not isinstance(plain, WaitingListener)
+    with live.subscribe(plain), live.subscribe(cued):
+        waiter = threading.Thread(target=live.await_go, args=(step, SOLO, 0.0, never))
+        waiter.start()
+        while not live.waiting:
+            time.advance(0.01)
+        assert live.command(Command("go", "test")).ok
+        waiter.join(5)
+    assert live.command(Command("stop", "test")).ok  # after the subscriptions: nobody hears it
+    assert cued.cues == ["bow"] and plain.commands == cued.commands == ["go"]
+    assert len(live.listeners) == 0
+
+
+def test_the_log_hears_the_live_controls_for_the_run_only(tmp_path):
+    """The session subscribes its log to the live controls for the run, and sums up what the
+    limits held back into it before it unsubscribes: nothing of it is left on the controls."""
+    from choreo.events import Command
+    from choreo.live.controls import Live
+    from choreo.run.settings import RunRequest
+
+    show = write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n  - wait: 0.5\n")
+    log_path = tmp_path / "run.mcap"
+    session = prepare(RunRequest(str(show), log_path=str(log_path)))
+    live = Live(StopRequest(), now=session.clock.mono, wall_ns=session.clock.wall_ns)
+    with session:
+        result = session.run([], live=live)
+        assert result.outcome == "done"
+        assert len(live.listeners) == 0  # the log no longer hears the controls
+        live.command(Command("go", "test"))  # after the run: not the log's any more
+    commands = read_log(log_path).topic("/choreo/command")
+    assert commands == []
+
+
+def test_a_port_that_keeps_time_is_given_the_runs_clock_whatever_its_class(monkeypatch):
+    """The board layer asks for a capability (KeepsTime), not for the simulator: any port with a
+    time source gets the run's; one without is refused on virtual time."""
+    import serial
+
+    from choreo.board.link import KeepsTime, open_port
+
+    class Timed:
+        port = "test://"
+
+        def __init__(self) -> None:
+            self.time_source = None
+            self.opened = False
+
+        def open(self) -> None:
+            self.opened = True
+
+    class Plain:
+        port = "test://"
+
+        def open(self) -> None:
+            raise AssertionError("a port that keeps no time is not opened on virtual time")
+
+    clock = RunClock(VirtualTime())
+    monkeypatch.setattr(serial, "serial_for_url", lambda url, **settings: Timed())
+    port = open_port("test://", clock=clock)
+    assert isinstance(port, KeepsTime) and port.time_source is clock.source and port.opened
+    monkeypatch.setattr(serial, "serial_for_url", lambda url, **settings: Plain())
+    with pytest.raises(LinkError, match="only the in-process simulator"):
+        open_port("test://", clock=clock)
+
+
+def test_nothing_imports_the_process_entry():
+    """`choreo.__main__` imports the CLI; the CLI and everything else read the signals from
+    `choreo.signals`: the dependency runs one way."""
+    importers = []
+    for path in sorted(CHOREO.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module == "choreo.__main__" or \
+                    isinstance(node, ast.Import) and any(a.name == "choreo.__main__" for a in node.names):
+                importers.append(str(path.relative_to(CHOREO.parent)))
+    assert importers == []
+
+
 # -- nobody sets another object's attributes -------------------------------------------------------
 
 # Assignments `x.attr = ...` with x not `self`/`cls`, which are genuinely the assigner's to make.
