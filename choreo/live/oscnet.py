@@ -30,6 +30,7 @@ memory, descriptors and time, and the operator's GO still gets through:
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import platform
 import selectors
@@ -41,9 +42,10 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from collections.abc import Hashable
+from typing import Generic, Protocol, TypeVar
 
-from choreo.live.oscwire import FrameReader
+from choreo.live.oscwire import Fed, FrameReader
 from choreo.live.osclimits import LIMITS, OscLimits
 
 Sender = tuple  # (host, port) or, over IPv6, (host, port, flowinfo, scope)
@@ -106,34 +108,38 @@ class _Slot:
     pending: bool = False  # a message begun
 
 
-class ConnectionTable:
+K = TypeVar("K", bound=Hashable)  # what the table's user knows a connection by
+
+
+class ConnectionTable(Generic[K]):
     """Which TCP connections are open, whose, and when each must have spoken: the caps and
     timeouts as decisions, kept apart from the sockets so they can be tested on a given clock."""
 
     def __init__(self, limits: OscLimits = LIMITS) -> None:
         self.limits = limits
-        self._slots: dict[object, _Slot] = {}
+        self._slots: dict[K, _Slot] = {}
 
     def __len__(self) -> int:
         return len(self._slots)
 
-    def admit(self, key: object, host: str, now: float) -> tuple[bool, list[object]]:
+    def admit(self, key: K, host: str, now: float) -> tuple[bool, list[K]]:
         """Take a new connection? And the connections to close to make room for it."""
-        evict: list[object] = []
+        evict: list[K] = []
         same = [k for k, slot in self._slots.items() if slot.host == host]
         if len(same) >= self.limits.max_per_sender:
-            evict.append(self._silent(same))
-        if None not in evict and len(self._slots) - len(evict) >= self.limits.max_connections:
+            silent = self._silent(same)
+            if silent is None:  # the address's places are all taken by connections that speak
+                return False, []
+            evict.append(silent)
+        if len(self._slots) - len(evict) >= self.limits.max_connections:
             others = [k for k in self._slots if k not in evict]
             evict.append(self._silent(others) or self._crowded(others))
-        if None in evict:
-            return False, []
         for old in evict:
             del self._slots[old]
         self._slots[key] = _Slot(host, now + self.limits.message_timeout_s, now)
         return True, evict
 
-    def make_room(self) -> object | None:
+    def make_room(self) -> K | None:
         """The oldest connection that has not sent a whole message, removed (to be closed: the
         process is out of descriptors), or None."""
         key = self._silent(list(self._slots))
@@ -141,12 +147,12 @@ class ConnectionTable:
             del self._slots[key]
         return key
 
-    def _silent(self, keys: list[object]) -> object | None:
+    def _silent(self, keys: list[K]) -> K | None:
         """The oldest of `keys` that has not sent a whole message, if any."""
         silent = [k for k in keys if not self._slots[k].proven]
         return min(silent, key=lambda k: self._slots[k].opened, default=None)
 
-    def _crowded(self, keys: list[object]) -> object:
+    def _crowded(self, keys: list[K]) -> K:
         """Of `keys` (all speaking), the one that spoke least lately of the address holding
         the most: when every place is taken by connections that speak, a new address still
         gets in (else a few allowed addresses, each with its share of connections sending
@@ -155,10 +161,10 @@ class ConnectionTable:
         held = Counter(self._slots[k].host for k in keys)
         return min(keys, key=lambda k: (-held[self._slots[k].host], self._slots[k].spoke))
 
-    def heard(self, key: object, now: float, *, messages: int, pending: bool) -> None:
+    def heard(self, key: K, now: float, *, messages: int, pending: bool) -> None:
         """Bytes came: `messages` whole ones, and a message is `pending` (begun) after them. A
         message begun must end within the timeout; only whole messages earn more time."""
-        slot = self._slots.get(key)
+        slot: _Slot | None = self._slots.get(key)  # the table's own record of the connection
         if slot is None:
             return
         if messages:
@@ -172,13 +178,13 @@ class ConnectionTable:
             slot.due = now + self.limits.idle_timeout_s
         slot.pending = pending
 
-    def remove(self, key: object) -> None:
+    def remove(self, key: K) -> None:
         self._slots.pop(key, None)
 
     def next_due(self) -> float | None:
         return min((slot.due for slot in self._slots.values()), default=None)
 
-    def expired(self, now: float) -> list[tuple[object, str]]:
+    def expired(self, now: float) -> list[tuple[K, str]]:
         """The connections past their time, removed, with why."""
         late = [(key, slot) for key, slot in self._slots.items() if slot.due <= now]
         for key, _ in late:
@@ -216,7 +222,7 @@ class OscNet:
         self.requested_port = port
         self.limits = limits
         self._now = now
-        self._table = ConnectionTable(limits)
+        self._table: ConnectionTable[_Connection] = ConnectionTable(limits)
         self._connections: set[_Connection] = set()
         self._selector: selectors.BaseSelector | None = None
         self._udp: socket.socket | None = None
@@ -252,10 +258,11 @@ class OscNet:
             return
         self._wake = socket.socketpair()
         self._wake[0].setblocking(False)
-        self._selector = selectors.DefaultSelector()
-        self._selector.register(self._udp, selectors.EVENT_READ, "udp")
-        self._selector.register(self._tcp, selectors.EVENT_READ, "accept")
-        self._selector.register(self._wake[0], selectors.EVENT_READ, "wake")
+        self._selector = selector = selectors.DefaultSelector()
+        assert self._tcp is not None  # bound with the UDP socket, always
+        selector.register(self._udp, selectors.EVENT_READ, "udp")
+        selector.register(self._tcp, selectors.EVENT_READ, "accept")
+        selector.register(self._wake[0], selectors.EVENT_READ, "wake")
         self._thread = threading.Thread(target=self._serve, name="choreo-osc", daemon=True)
         self._thread.start()
 
@@ -263,10 +270,9 @@ class OscNet:
         """Stop serving; the peers see their connections end. Twice is harmless."""
         if self._thread is not None:
             self._closing.set()
-            try:
-                self._wake[1].send(b"x")  # type: ignore[index]
-            except OSError:
-                pass
+            if self._wake is not None:
+                with contextlib.suppress(OSError):  # its buffer full: the thread is woken already
+                    self._wake[1].send(b"x")
             self._thread.join(2.0)
             self._thread = None
         for connection in list(self._connections):
@@ -299,10 +305,11 @@ class OscNet:
             self._accept()
         elif what == "wake":
             self._drain_wake()
-        elif mask & selectors.EVENT_WRITE:
-            self._flush(what)  # type: ignore[arg-type]
-        else:
-            self._read(what)  # type: ignore[arg-type]
+        elif isinstance(what, _Connection):  # a TCP connection, registered with itself as its data
+            if mask & selectors.EVENT_WRITE:
+                self._flush(what)
+            else:
+                self._read(what)
 
     def _timeout(self) -> float | None:
         resting = (c.resting_until for c in self._connections if c.resting_until is not None)
@@ -311,28 +318,33 @@ class OscNet:
         return max(0.0, min(dues) - self._now()) if dues else None
 
     def _drain_wake(self) -> None:
-        try:
-            self._wake[0].recv(64)  # type: ignore[index]
-        except OSError:
-            pass
+        if self._wake is not None:
+            with contextlib.suppress(OSError):  # nothing left to read: woken all the same
+                self._wake[0].recv(64)
 
     def _expire(self) -> None:
         now = self._now()
         if self._accept_paused_until is not None and now >= self._accept_paused_until:
             self._accept_paused_until = None
-            self._selector.register(self._tcp, selectors.EVENT_READ, "accept")  # type: ignore[union-attr]
+            assert self._selector is not None and self._tcp is not None  # serving: both exist
+            self._selector.register(self._tcp, selectors.EVENT_READ, "accept")
         for connection, why in self._table.expired(now):
-            self._drop(connection, why)  # type: ignore[arg-type]
-        for connection in [c for c in self._connections if c.resting_until is not None and c.resting_until <= now]:
-            connection.resting_until = None
-            self._watch(connection)
+            self._drop(connection, why)
+        rested: list[_Connection] = [c for c in self._connections
+                                     if c.resting_until is not None and c.resting_until <= now]
+        rester: _Connection  # this server's own record of a connection
+        for rester in rested:
+            rester.resting_until = None
+            self._watch(rester)
 
     # -- UDP --------------------------------------------------------------------------------
 
     def _read_datagrams(self) -> None:
+        udp = self._udp
+        assert udp is not None  # serving: bound
         for _ in range(UDP_BATCH):
             try:
-                data, ancillary, _, sender = self._udp.recvmsg(UDP_BUFFER, DROPS_DATA)  # type: ignore[union-attr]
+                data, ancillary, _, sender = udp.recvmsg(UDP_BUFFER, DROPS_DATA)
             except BlockingIOError:
                 return
             except OSError:  # e.g. an ICMP error about an earlier reply: not this datagram's fault
@@ -344,10 +356,8 @@ class OscNet:
                                                     f"(the limit is {self.limits.max_datagram})")
                 continue
             for reply in self.handler.packet("udp", sender, data):
-                try:
-                    self._udp.sendto(reply, sender)  # type: ignore[union-attr]
-                except OSError:
-                    pass  # a full buffer or an unreachable sender: the reply is not worth a wait
+                with contextlib.suppress(OSError):  # a full buffer, an unreachable sender: not worth a wait
+                    udp.sendto(reply, sender)
 
     def _count_drops(self, ancillary: list[tuple[int, int, bytes]]) -> None:
         for level, kind, value in ancillary:
@@ -360,9 +370,11 @@ class OscNet:
     # -- TCP --------------------------------------------------------------------------------
 
     def _accept(self) -> None:
+        tcp = self._tcp
+        assert tcp is not None  # serving: bound
         for _ in range(ACCEPT_BATCH):
             try:
-                sock, sender = self._tcp.accept()  # type: ignore[union-attr]
+                sock, sender = tcp.accept()
             except BlockingIOError:
                 return
             except OSError as exc:
@@ -373,13 +385,14 @@ class OscNet:
                     self._pause_accepting(exc)
                     return
                 why = "closed to make room: out of file descriptors, and it had sent no message"
-                self._drop(silent, why)  # type: ignore[arg-type]
+                self._drop(silent, why)
                 continue
             self._admit(sock, sender)
 
     def _pause_accepting(self, exc: OSError) -> None:
         self._accept_paused_until = self._now() + ACCEPT_PAUSE_S
-        self._selector.unregister(self._tcp)  # type: ignore[union-attr]
+        assert self._selector is not None and self._tcp is not None  # serving: both exist
+        self._selector.unregister(self._tcp)
         self.handler.dropped("tcp", (self.host, self.port), f"cannot accept connections now: {exc.strerror}")
 
     def _admit(self, sock: socket.socket, sender: Sender) -> None:
@@ -389,7 +402,7 @@ class OscNet:
         connection = _Connection(sock, sender, FrameReader(self.limits.max_message))
         taken, evicted = self._table.admit(connection, sender[0], self._now())
         for old in evicted:
-            self._drop(old, "closed to make room: it had sent no message")  # type: ignore[arg-type]
+            self._drop(old, "closed to make room: it had sent no message")
         if not taken:
             sock.close()
             limits = self.limits
@@ -397,10 +410,8 @@ class OscNet:
                                                 f"{limits.max_per_sender} from one address, each sending)")
             return
         sock.setblocking(False)
-        try:
+        with contextlib.suppress(OSError):  # replies go out all the same, only later
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # a reply is one small write: now
-        except OSError:
-            pass
         self._connections.add(connection)
         self._watch(connection)
         self._read(connection)  # a message sent with the connection (QLab's GO) proves it at once
@@ -426,17 +437,23 @@ class OscNet:
         if fed.fatal is not None:
             self._drop(connection, f"closed: {fed.fatal}")
             return
-        rest = self.handler.rest_s(connection.sender) if fed.packets else 0.0
-        if fed.filler >= FILLER_REST[0]:
-            rest = max(rest, FILLER_REST[1])
-            self.handler.dropped("tcp", connection.sender, f"{fed.filler} bytes that frame nothing: not read for "
-                                                           f"{FILLER_REST[1]:g} s")
+        rest = self._rest_s(connection, fed)
         if rest > 0:
             connection.resting_until = self._now() + rest
         if connection.unsent:
             self._flush(connection)
         else:
             self._watch(connection)
+
+    def _rest_s(self, connection: _Connection, fed: Fed) -> float:
+        """How long the connection is not read after this: over its sender's rate, or sending
+        bytes that frame nothing."""
+        rest = self.handler.rest_s(connection.sender) if fed.packets else 0.0
+        if fed.filler >= FILLER_REST[0]:
+            rest = max(rest, FILLER_REST[1])
+            self.handler.dropped("tcp", connection.sender, f"{fed.filler} bytes that frame nothing: not read for "
+                                                           f"{FILLER_REST[1]:g} s")
+        return rest
 
     def _flush(self, connection: _Connection) -> None:
         try:
@@ -477,16 +494,12 @@ class OscNet:
         self._table.remove(connection)
         if connection in self._connections:
             self._connections.discard(connection)
-            if connection.watched:
-                try:
-                    self._selector.unregister(connection.sock)  # type: ignore[union-attr]
-                except (KeyError, ValueError):
-                    pass
+            if connection.watched and self._selector is not None:
+                with contextlib.suppress(KeyError, ValueError):  # the selector no longer knew it
+                    self._selector.unregister(connection.sock)
                 connection.watched = 0
-        try:
+        with contextlib.suppress(OSError):  # the peer went first
             connection.sock.shutdown(socket.SHUT_RDWR)
-        except OSError:
-            pass
         connection.sock.close()
 
 
@@ -534,7 +547,6 @@ def _listen(host: str, port: int, kind: int, limits: OscLimits) -> socket.socket
 
 
 def _set(sock: socket.socket, level: int, option: int, value: int) -> None:
-    try:
+    """An option this system may not have: the socket works without it."""
+    with contextlib.suppress(OSError):
         sock.setsockopt(level, option, value)
-    except OSError:
-        pass

@@ -9,6 +9,7 @@ loopback, the unspecified address, and every address of this machine's interface
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
 import queue
 import socket
@@ -107,7 +108,7 @@ class Notifier:
                 self.close()
                 raise UsageError(f"--osc-notify {show_target(target)}: {getattr(exc, 'strerror', None) or exc}") \
                     from None
-            if port == own_port and any(is_this_machine(info[4][0], info[0]) for info in found):
+            if port == own_port and any(is_this_machine(str(info[4][0]), info[0]) for info in found):
                 self.close()
                 raise UsageError(f"--osc-notify {show_target(target)}: that is choreo's own --osc port on this "
                                  "machine: each notification would come back as a command (give the port "
@@ -127,17 +128,13 @@ class Notifier:
         self._thread.start()
 
     def put(self, address: str, *args: Any) -> None:
-        try:
+        with contextlib.suppress(queue.Full):  # progress is not worth holding the show, nor memory
             self._queue.put_nowait((address, args))
-        except queue.Full:
-            pass  # progress is not worth holding the show, nor memory
 
     def close(self) -> None:
         if self._thread is not None:
-            try:
+            with contextlib.suppress(queue.Full):  # a stuck sender: the join below gives up too
                 self._queue.put((None), timeout=1.0)
-            except queue.Full:
-                pass
             self._thread.join(1.0)
             self._thread = None
         for sock in self._sockets.values():
@@ -157,7 +154,6 @@ class Notifier:
         except (ValueError, TypeError):
             return
         for family, target in self._addresses:
-            try:
+            # nobody listening, a full buffer, closed: progress is not worth holding the show
+            with contextlib.suppress(OSError, KeyError):
                 self._sockets[family].sendto(data, target)
-            except (OSError, KeyError):
-                pass  # nobody listening, a full buffer, closed: progress is not worth holding the show

@@ -397,15 +397,15 @@ class MotionTracker:
         self._sent[record.seq] = (record, time_ns)
         if len(self._sent) > 64:
             self._sent.pop(next(iter(self._sent)))
+        armed: _Armed | None = self._armed  # this tracker's own record of the play it armed
         if record.kind == "play":
-            armed = self._armed
             if armed is None or (armed.step, armed.motion) != (record.step, record.motion):
                 self._not_started()
                 self._armed = _Armed(record.motion, record.step, record.label)
             else:
                 armed.start_ns = armed.restore_seq = None  # the sequence tried again
-        elif record.kind == "restore" and self._armed is not None:
-            self._armed.start_ns, self._armed.restore_seq = time_ns, record.seq
+        elif record.kind == "restore" and armed is not None:
+            armed.start_ns, armed.restore_seq = time_ns, record.seq
         elif record.kind == "stop":
             lost = self._lost_start
             if lost is not None and self._asked and record.step != lost.step:

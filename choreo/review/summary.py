@@ -370,8 +370,9 @@ class _Part:
             self._plays()
 
     def finish(self) -> None:
+        summary: Summary = self.summary  # this module's record, filled in by this pass
         if self.tally.pending_seq != -1:
-            self.summary.unanswered += 1
+            summary.unanswered += 1
         self.tracker.finish(None)
         self._plays()
         self.tally.fill(self.summary)

@@ -198,7 +198,8 @@ class _Pass:
 
     def finish(self, reader: LogReader, show: AttachedShow) -> None:
         """The runs in robot then time order, the marks in time order, what was never played."""
-        timeline, clock = self.timeline, self.clock
+        timeline: Timeline = self.timeline  # this module's record, filled in by this pass
+        clock = self.clock
         timeline.end_s = (clock.seconds(self.last_ns) or 0.0) if self.last_ns is not None else 0.0
         order: dict[str | None, int] = {name: i for i, name in enumerate(reader.robots)}
         for robot, tracker in self.trackers.items():
@@ -229,7 +230,7 @@ def _see_step(timeline: Timeline, steps: dict[tuple[str | None, int], _Step], st
                 timeline.marks.append(Mark(now, "late", f"{whose}{step.ref} started {step.late_ms:.1f} ms late "
                                                         f"(due {step.planned_s:.3f} s)"))
         return
-    known = steps.get((step.robot, step.index))
+    known: _Step | None = steps.get((step.robot, step.index))
     if known is not None and slipped(step, late_at_start=known.late_ms > 0):
         known.late_ms = step.late_ms
         timeline.marks.append(Mark(now, "late", f"{whose}{step.ref}: motion {step.motion} started "
