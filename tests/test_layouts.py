@@ -4,14 +4,14 @@ that never start a motion twice."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from choreo.wire import protocol as p
 from choreo.cli import main
 from choreo.wire.layouts import HTH4_22, SEED, layout_named
-from choreo.board.link import Link
 from choreo.board.probe import probe
-from choreo.run.session import Session
 from choreo.run.settings import RunRequest
 from choreo.sim.board import SimBoard
 from choreo.sim.faults import FaultPlan
@@ -53,7 +53,7 @@ def test_hth4_frames_for_every_slot_and_config_word(config):
 
 def test_seed_frames_stay_the_documents_at_115200():
     rows = {}
-    for line in open(SPEC_ROWS):
+    for line in Path(SPEC_ROWS).read_text().splitlines():
         if line.strip() and not line.startswith("#"):
             number, hex_text = line.split(None, 1)
             rows[int(number)] = hex_text.strip()

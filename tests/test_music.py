@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import array
 import json
-import math
 import random
 import struct
 import wave
@@ -138,7 +137,8 @@ def music_show(tmp_path: Path, music: str, steps: str = "  - play: 1\n") -> Path
 def test_the_music_file_is_checked_where_the_show_is(tmp_path):
     with pytest.raises(ShowError, match=r"show.yaml:2:15: music.file: song.mid: choreo plays wav, mp3, flac, ogg"):
         load_show(music_show(tmp_path, "{file: song.mid}"))
-    with pytest.raises(ShowError, match=r"music.file: song.mp3: cannot read the sound file: No such file or directory \(.*song.mp3; the path is relative"):
+    with pytest.raises(ShowError, match=r"music.file: song.mp3: cannot read the sound file: "
+                       r"No such file or directory \(.*song.mp3; the path is relative"):
         load_show(music_show(tmp_path, "{file: song.mp3}"))
     (tmp_path / "dir.wav").mkdir()
     with pytest.raises(ShowError, match=r"dir.wav: not a regular file \(a folder\): give a sound file"):
