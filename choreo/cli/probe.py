@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from choreo.errors import UsageError
 from choreo.wire.protocol import spell_bauds
+
+if TYPE_CHECKING:  # the board layer loads when the probe runs: --help stays light
+    from choreo.board.probe import BoardInfo
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -46,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def board_record(info) -> dict:  # type: ignore[no-untyped-def]  # BoardInfo: imported lazily
+def board_record(info: BoardInfo) -> dict:
     """What `probe --json` prints: the readings as numbers, None where the board did not answer."""
     config = info.config
     counter = info.counter
@@ -65,13 +69,13 @@ def _kondo_adapter() -> str:
     """The one Kondo adapter plugged in; otherwise the user must say which port."""
     from serial.tools import list_ports
 
-    from choreo.board.usb import KONDO_USB
+    from choreo.board.usb import KONDO_USB, KONDO_USB_ID
 
     ports = list_ports.comports()
     kondo = [p.device for p in ports if (p.vid, p.pid) == KONDO_USB]
     if len(kondo) == 1:
         return kondo[0]
     found = ", ".join(sorted(p.device for p in ports)) or "none"
-    why = "several Kondo adapters are plugged in" if kondo else "no Kondo adapter (USB 165C:0008) found"
+    why = "several Kondo adapters are plugged in" if kondo else f"no Kondo adapter (USB {KONDO_USB_ID}) found"
     raise UsageError(f"probe: {why}: give --port (serial ports: {found}; `choreo ports` lists them, "
                      "sim:// probes the simulator)")

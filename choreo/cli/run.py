@@ -20,10 +20,12 @@ from choreo.wire.protocol import spell_bauds
 from choreo.textfit import fit
 
 if TYPE_CHECKING:  # the run's modules load when a run starts: `choreo validate` and --help stay light
-    from choreo.events import RunResult
+    from choreo.events import CommandEvent, GoCue, RunResult, StopRequest
+    from choreo.live.controls import Live
+    from choreo.live.osc import OscServer
     from choreo.run.session import Session
+    from choreo.show.model import Plan
     from choreo.run.settings import LinkSettings, RunSettings
-
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -52,7 +54,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(labels or indices) again and again until stopped")
     parser.add_argument("--rehearse", action="store_true", help="every robot on the built-in simulator, in real "
                         "time (the show's ports are left alone), with the console on a terminal")
-    parser.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for a reply, 0 < S <= 10 (default 0.2)")
+    parser.add_argument("--timeout", type=float, metavar="S",
+                        help="seconds to wait for a reply, 0 < S <= 10 (default 0.2)")
     parser.add_argument("--retries", type=int, metavar="N",
                         help="retries of a failed frame or play sequence, 0..10 (default 2: 3 tries)")
     music = parser.add_mutually_exclusive_group()
@@ -61,6 +64,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     music.add_argument("--audio-device", metavar="OUTPUT", help="where the music plays: a number or "
                        "name from `choreo devices`, or null (silent, keeps the music's time); default: "
                        "the system's output")
+    _live_options(parser)
+    parser.add_argument("--quiet", "-q", action="store_true", help="no progress output")
+    parser.add_argument("--json", action="store_true", help="at the end, the run's result and log "
+                        "path as one JSON object on stdout (also when it fails; stderr as without)")
+    parser.set_defaults(handler=run, own_json_failure=True)  # its result record says the failure
+
+
+def _live_options(parser: argparse.ArgumentParser) -> None:
+    """GO cues, the console and OSC: the operator's controls of a run."""
     live = parser.add_argument_group("live control", "GO cues (`at: go`), the console and OSC; see "
                                      "docs/live.md")
     live.add_argument("--osc", metavar="PORT", help="take OSC commands (go, panic, start, stop, "
@@ -78,10 +90,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                       "the OSC start command (or the console's GO) before the show starts")
     live.add_argument("--no-console", action="store_true", help="on a terminal, the plain progress "
                       "line instead of the console (GO then comes only over OSC)")
-    parser.add_argument("--quiet", "-q", action="store_true", help="no progress output")
-    parser.add_argument("--json", action="store_true", help="at the end, the run's result and log "
-                        "path as one JSON object on stdout (also when it fails; stderr as without)")
-    parser.set_defaults(handler=run, own_json_failure=True)  # its result record says the failure
 
 
 def run(args: argparse.Namespace) -> int:
@@ -122,7 +130,8 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     _check_go_sources(session.settings, console, args)
     stop = StopRequest()
     live = _live(args, stop, console)
-    osc = _bound_osc(args, osc_port, notify, live)  # listening (not serving yet) before a line is said or anything opens
+    # listening (not serving yet) before a line is said or anything opens
+    osc = _bound_osc(args, osc_port, notify, live)
     say = _Say(sys.stderr, quiet=args.quiet)
     for line in _opening_lines(session.settings):
         say(line)
@@ -131,7 +140,7 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     try:
         with signals, _controls(live, osc, say, progress) as listeners, _log_named_on_failure(session, say), session:
             say(f"log: {session.log_path}" if session.log_path else "log: off (--no-log)")
-            for note in session.stage.notes:
+            for note in session.stage.notes if session.stage is not None else ():
                 say(f"warning: {note}")
             # the Live closed however the run ends, while the log is open: later commands are
             # refused, and those held back by the limits summed up into it
@@ -203,7 +212,7 @@ def _check_osc_options(args: argparse.Namespace) -> tuple[int | None, tuple]:
     return port, parse_targets(args.osc_notify)
 
 
-def _live(args: argparse.Namespace, stop, console: bool):  # type: ignore[no-untyped-def]
+def _live(args: argparse.Namespace, stop: StopRequest, console: bool) -> Live | None:
     """The Live that GO cues wait on, when someone can command the show (the console, OSC);
     None for a show run as before."""
     if not console and args.osc is None:
@@ -213,11 +222,11 @@ def _live(args: argparse.Namespace, stop, console: bool):  # type: ignore[no-unt
     return Live(stop, wait_start=args.wait_start)
 
 
-def _bound_osc(args: argparse.Namespace, port: int | None, notify: tuple, live):  # type: ignore[no-untyped-def]
+def _bound_osc(args: argparse.Namespace, port: int | None, notify: tuple, live: Live | None) -> OscServer | None:
     """With --osc, the OSC server listening and its notify targets looked up, serving nothing
     yet (`_controls` starts it): a port in use, a host it cannot listen on, a notify target that
     is this very port, end the run with one line before anything is said or opened."""
-    if args.osc is None:
+    if port is None or live is None:  # no --osc (with it, _live made a Live and the port is checked)
         return None
     from choreo.live.osc import OscServer
 
@@ -227,7 +236,7 @@ def _bound_osc(args: argparse.Namespace, port: int | None, notify: tuple, live):
 
 
 @contextmanager
-def _controls(live, osc, say, progress):  # type: ignore[no-untyped-def]
+def _controls(live: Live | None, osc: OscServer | None, say: _Say, progress: Progress) -> Iterator[list]:
     """The operator's controls for the run (none without a Live): the OSC server, bound
     already, serving before the session opens, which commands the Live and listens to the show
     (its notifications); the listeners the run should tell. The commands held back by the
@@ -258,10 +267,10 @@ def _controls(live, osc, say, progress):  # type: ignore[no-untyped-def]
 
 
 @contextmanager
-def _console(session, live, console: bool, listeners: list):  # type: ignore[no-untyped-def]
+def _console(session: Session, live: Live | None, console: bool, listeners: list) -> Iterator[None]:
     """The console, on a terminal, for the time of the show (it draws on the terminal and reads
     its keys: only once the session is open)."""
-    if not console:
+    if not console or live is None:  # a console always has its Live (_live)
         yield
         return
     from choreo.cli.console import Console
@@ -381,13 +390,13 @@ def _session_record(session: Session) -> dict:
 
 
 @contextmanager
-def _log_named_on_failure(session, say) -> Iterator[None]:  # type: ignore[no-untyped-def]
+def _log_named_on_failure(session: Session, say: _Say) -> Iterator[None]:
     """A run that failed before it said where its log is (the port would not open) still has
     a log, with the error in it: say where, before the error line."""
     try:
         yield
     except BaseException:
-        if session.recorder is not None and not session.stage.opened:
+        if session.recorder is not None and session.stage is not None and not session.stage.opened:
             say(f"log: {session.log_path}")
         raise
 
@@ -517,7 +526,7 @@ class _StopOnSignals:
     close the log. Second: leave at once (the log is still closed on the way out). Ctrl-Z does
     not suspend the show (`_HELD`)."""
 
-    def __init__(self, stop) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, stop: StopRequest) -> None:
         self.stop = stop
         self._previous: dict = {}
         self._signalled = False  # a stop the log asked for is not a first Ctrl-C
@@ -547,7 +556,7 @@ class _StopOnSignals:
             signal.signal(signum, handler)
 
 
-def _own_steps(plan, start: int, robot: str) -> list[int]:  # type: ignore[no-untyped-def]
+def _own_steps(plan: Plan, start: int, robot: str) -> list[int]:
     """The indices of the steps a robot plays from `start`: the progress line counts those."""
     return [step.index for step in plan.steps[start:] if step.is_for(robot)]
 
@@ -590,7 +599,8 @@ class Progress:
         with self._lock:
             self._zero = time.monotonic() - event.actual_s
             self._current = f"{where}: {step.describe()}"
-        self.writer.redraw()  # type: ignore[union-attr]
+        if self.writer is not None:  # always, live (quiet has no writer and returned above)
+            self.writer.redraw()
 
     def _live_line(self, columns: int) -> str:
         """The live line now (the writer's thread asks, at each draw)."""
@@ -606,11 +616,11 @@ class Progress:
             return  # errors reach the user once, as the command's final line
         self._say_line(f"warning: {message}")
 
-    def on_waiting(self, cue) -> None:  # type: ignore[no-untyped-def]
+    def on_waiting(self, cue: GoCue) -> None:
         """A GO cue is reached (live control): say so, it is what the operator waits for."""
         self._say_line(f"[{cue.reached_s:8.3f} s] waiting for GO: {cue.name}")
 
-    def on_command(self, event) -> None:  # type: ignore[no-untyped-def]
+    def on_command(self, event: CommandEvent) -> None:
         """An operator's command (live control): its answer, with who gave it."""
         answer = event.answer
         verdict = "" if answer.ok or answer.message.startswith("refused") else "refused: "
