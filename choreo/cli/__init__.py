@@ -125,12 +125,12 @@ def _command(argv: Sequence[str] | None, signals: SignalGuard | None,
         signals.arm()  # a signal that came while choreo loaded interrupts here
     try:
         parser = build_parser()
-        args, extra = parser.parse_known_args(argv)
+        # the time a run keeps travels with the arguments: every handler is given only those
+        args, extra = parser.parse_known_args(argv, namespace=argparse.Namespace(time_source=time_source))
         if extra:
             # the subcommand's own parser (see `_remember_leaf_parsers`): argparse makes it of its parent's class
             leaf = cast(ChoreoParser, getattr(args, "parser", parser))
             leaf.unknown_arguments(extra)
-        args.time_source = time_source
         try:
             code = int(args.handler(args) or 0)
         except (ChoreoError, KeyboardInterrupt) as exc:
