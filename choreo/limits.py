@@ -1,5 +1,5 @@
 """What the outside may cost a running show: the limits on commands, replies, log lines and
-printed lines, in one place (the README's OSC section, "Limits", lists them), and the token
+printed lines, in one place (docs/live.md, "Limits", lists them), and the token
 buckets that keep them. (The network's own limits, connections, sizes and timeouts, are
 `choreo.live.osclimits`.)
 
@@ -50,7 +50,7 @@ class Rate:
 
 @dataclass(frozen=True)
 class Limits:
-    """Every limit on what commands from outside may cost (the README lists them)."""
+    """Every limit on what commands from outside may cost (docs/live.md, "Limits", lists them)."""
 
     packets_per_sender: Rate = Rate(256, 128.0)  # packets (a bundle's messages) read for one sender; the rest counted
     commands_per_sender: Rate = Rate(10, 5.0)  # commands carried out for one sender (its host)

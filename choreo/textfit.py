@@ -84,10 +84,12 @@ def fit(line: str, width: int | None) -> str:
     if width <= 0:
         return ""
     room = width - 1  # the ellipsis takes one column
-    used = end = 0
-    for end, char in enumerate(line):
+    used = 0
+    end = len(line) - 1  # as if the last character overflowed: the line is wider than `width`
+    for index, char in enumerate(line):
         used += char_width(char)
         if used > room:
+            end = index
             break
     return line[:end] + ELLIPSIS
 

@@ -74,7 +74,7 @@ def open_input(path: str | os.PathLike[str], what: str, limit: int | None = None
         if limit is not None and info.st_size > limit:
             raise InputError(name, f"the file is over {size_text(limit)}, too big for a {what}")
         os.set_blocking(fd, True)
-        return open(fd, "rb", buffering=256 * 1024)
+        return io.BufferedReader(io.FileIO(fd, "rb"), buffer_size=256 * 1024)  # what open(fd, "rb", ...) builds
     except BaseException:
         os.close(fd)
         raise

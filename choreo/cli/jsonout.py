@@ -11,8 +11,8 @@ unless the command's parser sets `own_json_failure` (it prints its own record, a
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
-import sys
 
 from choreo.errors import ChoreoError, Interrupted, Problem, ShowError
 
@@ -33,10 +33,8 @@ def error_record(exc: ChoreoError) -> dict:
 
 def print_json(record: dict) -> None:
     """One object, one line, flushed: a reader that went away is not an error of ours."""
-    try:
+    with contextlib.suppress(BrokenPipeError):
         print(json.dumps(record, ensure_ascii=False), flush=True)
-    except BrokenPipeError:
-        pass
 
 
 def report_failure(args: argparse.Namespace, exc: BaseException) -> None:

@@ -19,7 +19,7 @@ class ChoreoParser(argparse.ArgumentParser):
 
     _given: Sequence[str] = ()
 
-    def parse_known_args(self, args=None, namespace=None):  # type: ignore[no-untyped-def, override]
+    def parse_known_args(self, args=None, namespace=None):  # argparse's own arguments, passed on
         """Remembered, so that a bad argument of a command asked for JSON is answered in JSON."""
         self._given = list(args) if args is not None else []
         return super().parse_known_args(args, namespace)

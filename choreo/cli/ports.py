@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import argparse
 
-from choreo.board.usb import KONDO_USB
+from choreo.board.usb import FTDI_DRIVER, KONDO_USB, KONDO_USB_ID, NEW_ID
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("ports", help="list serial ports, marking Kondo adapters",
                                    description="List the serial ports found; Kondo's USB adapter "
-                                   "(USB 165C:0008) is marked.")
+                                   f"(USB {KONDO_USB_ID}) is marked.")
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout: ports, each with "
                         "device, description, vid, pid (null when not USB) and kondo")
     parser.set_defaults(handler=run)
@@ -29,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not ports:
         print("no serial ports found (is the adapter plugged in? on Linux, Kondo's adapter may "
-              "need: modprobe ftdi_sio && echo 165C 0008 > /sys/bus/usb-serial/drivers/ftdi_sio/new_id)")
+              f"need: modprobe ftdi_sio && echo {NEW_ID} > /sys/{FTDI_DRIVER}/new_id)")
         return 0
     for port in ports:
         print(describe_port(port))

@@ -1,5 +1,5 @@
 """What OSC control takes from the network at most: the one place these limits are set (the
-README's table of OSC limits says the same).
+table in docs/live.md, "Limits", says the same).
 
 A stage network is shared and may be hostile; each limit bounds what one sender can make choreo
 hold (file descriptors, memory) or do (work a packet), so that the operator's own GO still gets
