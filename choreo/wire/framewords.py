@@ -82,11 +82,13 @@ def _read_name(data: bytes, layout: Layout | None) -> str:
     return "read"
 
 
-_CONFIG_READ = p.read_frame(p.CONFIG_ADDRESS, 2).data  # the hth4-2.2 link reads it at open
+_CONFIG_READ = p.read_frame(p.CONFIG_ADDRESS, p.CONFIG_BYTES).data  # the hth4-2.2 link reads it at open
 # What the RAM a frame can read holds (address, bytes, name): the config word, then the program
 # counter, the return address a CALL pushed, and the call depth.
-_RAM_FIELDS = ((p.CONFIG_ADDRESS, 2, "config"), (p.PROGRAM_COUNTER_ADDRESS, p.ADDRESS_BYTES, "program counter"),
-               (p.RETURN_ADDRESS_ADDRESS, p.ADDRESS_BYTES, "return address"), (p.CALL_DEPTH_ADDRESS, 1, "depth"))
+_RAM_FIELDS = ((p.CONFIG_ADDRESS, p.CONFIG_BYTES, "config"),
+               (p.PROGRAM_COUNTER_ADDRESS, p.ADDRESS_BYTES, "program counter"),
+               (p.RETURN_ADDRESS_ADDRESS, p.ADDRESS_BYTES, "return address"),
+               (p.CALL_DEPTH_ADDRESS, 1, "depth"))
 
 
 def describe_reply(data: bytes, frame: bytes | None, layout: Layout | None, motion: int | None = None) -> str:
