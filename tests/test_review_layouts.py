@@ -245,16 +245,6 @@ def test_bytes_that_are_not_hex_are_said_so():
 # -- a log whose show clock is damaged ----------------------------------------------------------
 
 
-class _StepEvent:
-    """What the recorder takes for a step event: its record, time and robot."""
-
-    def __init__(self, record: StepRecord, time_ns: int) -> None:
-        self.step, self.time_ns, self.robot = record, time_ns, None
-
-    def record(self) -> StepRecord:
-        return self.step
-
-
 def _hostile_log(path: Path, show_s: object) -> Path:
     """A log whose first clock sample and first step start carry `show_s`, then a good step."""
     from choreo.log.recorder import Recorder, RunInfo
@@ -262,8 +252,8 @@ def _hostile_log(path: Path, show_s: object) -> Path:
     recorder = Recorder(path, RunInfo("show.yaml", "x", b"version: 1\n", "sim://", 115200, 10**18, "hth4-2.2"))
     recorder.on_tx(_TxEvent(1, 10**18 + 1_000_000))
     recorder.on_clock(ClockRecord(show_s, 5), 10**18 + 2_000_000)  # type: ignore[arg-type]
-    recorder.on_step(_StepEvent(StepRecord(0, "play", "start", show_s), 10**18 + 3_000_000))  # type: ignore[arg-type]
-    recorder.on_step(_StepEvent(StepRecord(1, "play", "start", 1.0), 10**18 + 4_000_000))
+    recorder.on_step_record(StepRecord(0, "play", "start", show_s), 10**18 + 3_000_000)  # type: ignore[arg-type]
+    recorder.on_step_record(StepRecord(1, "play", "start", 1.0), 10**18 + 4_000_000)
     recorder.close({"outcome": "done"})
     return path
 
