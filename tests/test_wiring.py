@@ -385,16 +385,6 @@ ALLOWED = {
     "self.line.settings": "the simulator's own line, held by the port that made it",
     # A module's own private record, reached through its own table rather than a parameter the
     # check can read the class of (the class is defined in the same module as the assignment):
-    "report.log_path": "run.replay: the ReplayReport the replay is filling in",
-    "parts[name].cut": "run.replay: each robot's part of the ReplayReport the replay is filling in",
-    "self.report.unmatched": "run.replay: the ReplayReport the replay is filling in",
-    "self.report.max_lag_ms": "run.replay: the ReplayReport the replay is filling in",
-    "self.report.frames": "run.replay: the ReplayReport the replay is filling in",
-    "report.same": "run.replay: the ReplayReport the replay is filling in",
-    "report.different": "run.replay: the ReplayReport the replay is filling in",
-    "report.timing": "run.replay: the ReplayReport the replay is filling in",
-    "report.replay_late": "run.replay: the ReplayReport the replay is filling in",
-    "report.excused": "run.replay: the ReplayReport the replay is filling in",
 }
 
 

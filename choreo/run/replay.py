@@ -204,7 +204,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
     with LogReader(source) as reader:
         show = attached_show(reader)
         settings = _settle(reader, show, request, clock)
-        report = _report(reader, show, request, settings)
+        report: ReplayReport = _report(reader, show, request, settings)
         with _stage(reader, settings, request, clock) as stage:
             report.log_path = stage.log_path
             if on_start is not None:
@@ -315,9 +315,10 @@ def _replay_robots(source: str | Path, stage: Stage, clock: RunClock, report: Re
     def play(name: str) -> None:
         try:
             with LogReader(source) as reader:
-                _FrameReplay(reader, stage.links[name], recorder, clock, parts[name], on_difference,
-                             robot=name, start=start).run()
-                parts[name].cut = reader.cut
+                part: ReplayReport = parts[name]
+                _FrameReplay(reader, stage.links[name], recorder, clock, part, on_difference, robot=name,
+                             start=start).run()
+                part.cut = reader.cut
         except BaseException as exc:  # noqa: BLE001 - raised in the main thread
             errors.append(exc)
         finally:
@@ -406,7 +407,8 @@ class _FrameReplay:
                 self._event(parse(topic, data), log_time)
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise self.reader.not_choreo(topic, number, exc) from None
-        self.report.unmatched += len(self.pending)
+        report: ReplayReport = self.report
+        report.unmatched += len(self.pending)
 
     def _event(self, record: Record, log_time: int) -> None:
         if not isinstance(record, (TxRecord, RxRecord, StepRecord)):
@@ -436,7 +438,8 @@ class _FrameReplay:
         self.clock.sleep_until(target)
         now = self.clock.mono()
         self.last = (show_s, now)
-        self.report.max_lag_ms = max(self.report.max_lag_ms, (now - on_time) * 1e3)
+        report: ReplayReport = self.report
+        report.max_lag_ms = max(report.max_lag_ms, (now - on_time) * 1e3)
         return target
 
     def _step(self, record: StepRecord, log_time: int) -> None:
@@ -451,13 +454,14 @@ class _FrameReplay:
 
     def _send(self, record: TxRecord, log_time: int) -> None:
         """The recorded frame sent again on time; its reply held until the recorded one comes."""
+        report: ReplayReport = self.report
         show_s = self.recorded_clock.seconds(log_time) or 0.0
         frame = _frame(self.reader, record)
         if self.pending.pop(record.seq, None) is not None:  # its recorded reply never came: nothing to compare
-            self.report.unmatched += 1
+            report.unmatched += 1
         target = self._due(show_s)
         reply = self.link.send(frame, record.attempt, Tag(record.step, record.label))
-        self.report.frames += 1
+        report.frames += 1
         replayed = RxRecord(record.seq, reply.kind.value, reply.hex, executing=reply.executing,
                             error=reply.error, robot=record.robot)
         written = self.link.last_tx_mono  # after any wait in the link
@@ -467,7 +471,7 @@ class _FrameReplay:
         self.pending[record.seq] = _Sent(record, replayed, show_s, late_ms)
         if len(self.pending) > 64:  # replies missing from the recording: do not hold them forever
             self.pending.pop(next(iter(self.pending)))
-            self.report.unmatched += 1
+            report.unmatched += 1
 
     def _compare(self, record: RxRecord) -> None:
         """A recorded reply against the replay's to the same frame; a difference is counted,
@@ -475,7 +479,7 @@ class _FrameReplay:
         sent = self.pending.pop(record.seq, None)
         if sent is None:
             return
-        report = self.report
+        report: ReplayReport = self.report
         if _same(record, sent.replayed):
             report.same += 1
             return
