@@ -7,8 +7,9 @@ A show of many plays, each on its own `at:` cue, runs against `choreo sim` on a 
 with the log on (as on stage). A cue's lateness is the moment its first frame (the stop frame)
 is handed to the port's write call, minus its due time on the show clock. The link's own tx
 timestamp (what the log records, taken before the listeners run) is reported beside it: the
-difference is the work done between the two, which is on the cue's critical path. Cue spacing varies (80 to 139 ms, a fixed pseudo-random sequence) so the
-cues do not fall in step with the timer tick or the simulator's own loop.
+difference is the work done between the two, which is on the cue's critical path. Cue spacing
+varies (80 to 139 ms, a fixed pseudo-random sequence) so the cues do not fall in step with the
+timer tick or the simulator's own loop.
 
 Goal (PRODUCT.md): p99 under 1 ms.
 """

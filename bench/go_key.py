@@ -126,7 +126,7 @@ def first_frames_mono_ns(log_path: Path) -> dict[int, int]:
         reader = make_reader(f)
         result = next(dict(m.metadata) for m in reader.iter_metadata() if m.name == "choreo.result")
         wall_minus_mono = int(result["show_zero_wall_ns"]) - int(result["show_zero_monotonic_ns"])
-        for _, channel, message in reader.iter_messages(topics=["/rcb4/tx"]):
+        for _, _channel, message in reader.iter_messages(topics=["/rcb4/tx"]):
             step = json.loads(message.data).get("step")
             if step is not None:
                 first[step] = min(first.get(step, message.log_time), message.log_time)

@@ -71,6 +71,6 @@ def run(quick: bool = False) -> list[dict]:
                 how = "sent early by its lead" if compensate else "first frame on the cue (before)"
                 goal = f"p99 < {GOAL_P99_MS:g}" if _has_goal(compensate, timer) else None
                 ok = (p99 < GOAL_P99_MS) if goal else None
-                rows.append(row(f"motion start - cue, {baud} baud, latency timer {timer} ms, {how}: median / p99 of |x|",
-                                f"{median(values):.3f} / {p99:.3f}", "ms", goal, ok))
+                title = f"motion start - cue, {baud} baud, latency timer {timer} ms, {how}: median / p99 of |x|"
+                rows.append(row(title, f"{median(values):.3f} / {p99:.3f}", "ms", goal, ok))
     return rows

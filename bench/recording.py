@@ -37,7 +37,7 @@ def sample_events() -> list[tuple[TxEvent, RxEvent]]:
     with Link.open("sim://?wire=0", listeners=[capture]) as link:
         link.play(3, Tag(4, "spin"))
         link.query_status(Tag(5, None))
-    return list(zip(capture.tx, capture.rx))
+    return list(zip(capture.tx, capture.rx, strict=True))  # no faults: a reply to every frame
 
 
 def frame_costs_us(path: Path, frames: int) -> tuple[list[float], list[float]]:
@@ -83,7 +83,7 @@ def run(quick: bool = False) -> list[dict]:
         gc.collect()
         reporting, writing = frame_costs_us(tmp / "frames.mcap", frames)
         with_log, without = run_costs_s(tmp, runs, plays)
-    total = [a + b for a, b in zip(reporting, writing)]
+    total = [a + b for a, b in zip(reporting, writing, strict=True)]
     p50, p99, mean = median(total), percentile(total, 99), sum(total) / len(total)
     per_frame_us = (median(with_log) - median(without)) / (plays * 3) * 1e6
     return [

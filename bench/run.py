@@ -87,7 +87,7 @@ def table_lines(sections: list[tuple[str, list[dict]]], markdown: bool = False) 
         [c[0].ljust(widths[0]), c[1].rjust(widths[1]), c[2].ljust(widths[2]), c[3].ljust(widths[3]), c[4]])
     lines = [fmt(header), "  ".join("-" * w for w in widths)]
     previous = None
-    for (title, _), cell in zip(rows, cells):
+    for (title, _), cell in zip(rows, cells, strict=True):
         if title != previous and title:
             lines.append(f"[{title}]")
             previous = title

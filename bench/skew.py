@@ -49,7 +49,7 @@ def skews_ms(robots: int, plays: int) -> list[float]:
             session.run(stop=StopRequest())
     starts: dict[int, list[int]] = {}
     for capture in captures.values():
-        for event, written in zip(capture.tx, capture.writes):
+        for event, written in zip(capture.tx, capture.writes, strict=True):  # one write a frame
             if event.frame.kind is FrameKind.RESTORE and event.tag is not None and event.tag.step is not None:
                 starts.setdefault(event.tag.step, []).append(written)
     return [(max(t) - min(t)) / 1e6 for t in starts.values() if len(t) == robots]

@@ -83,7 +83,7 @@ def read_log_linear(path: Path) -> tuple[RunLog, str | None]:
     error = None
     with open(path, "rb") as f:
         try:
-            for schema, channel, message in NonSeekingReader(f).iter_messages(log_time_order=False):
+            for _schema, channel, message in NonSeekingReader(f).iter_messages(log_time_order=False):
                 decoded = json.loads(message.data)
                 decoded["_log_time"] = message.log_time
                 log.messages.setdefault(channel.topic, []).append(decoded)

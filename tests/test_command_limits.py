@@ -184,7 +184,7 @@ def test_the_log_carries_the_counts_and_the_review_adds_them_up(tmp_path):
     live = Live(StopRequest(), wait_start=True, now=time.now, lockout_s=0.5)
     live.subscribe(recorder)
     sent = 0
-    for second in range(5):
+    for _second in range(5):
         for _ in range(2000):
             live.command(Command("go", "osc udp 127.0.0.1:9000"))
             sent += 1
@@ -225,7 +225,8 @@ def test_a_summary_record_without_counts_is_counted_by_its_count(tmp_path):
     time = VirtualTime()
     path = tmp_path / "short.mcap"
     recorder = Recorder(path, RunInfo("show.yaml", "short", b"version: 1\n", "sim://", 115200, time.wall_ns()))
-    recorder.on_command(CommandEvent(Command(UNLOGGED, "osc"), Answer("error", "x", {"count": 7}), time.wall_ns(), None))
+    unlogged = Command(UNLOGGED, "osc")
+    recorder.on_command(CommandEvent(unlogged, Answer("error", "x", {"count": 7}), time.wall_ns(), None))
     recorder.close()
     summary = summarize(path)
     assert (summary.commands_total, summary.commands_refused, summary.commands_by) == (7, 7, {UNLOGGED: 7})
@@ -234,7 +235,7 @@ def test_a_summary_record_without_counts_is_counted_by_its_count(tmp_path):
 @pytest.mark.parametrize("count", ["12", -3, 0, 1.5, True])
 def test_a_summary_record_whose_count_is_no_count_is_refused(count):
     with pytest.raises(ValueError):
-        CommandRecord(UNLOGGED, "osc", "error", "", count=count, counts={"go": 1}).commands
+        _ = CommandRecord(UNLOGGED, "osc", "error", "", count=count, counts={"go": 1}).commands
 
 
 @pytest.mark.parametrize("data", [{"count": "12", "counts": {"go": 12}}, {"count": 5, "counts": {"go": 4}},

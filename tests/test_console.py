@@ -192,7 +192,8 @@ def test_the_link_column_is_the_median_latency_and_the_retries(tmp_path):
 def test_a_waiting_go_cue_is_highlighted_and_commands_are_answered_on_screen(tmp_path):
     console, session, live = prepared(tmp_path, GO_SHOW)
     live.subscribe(console)
-    live.await_go(session.settings.plans["robot"].steps[1], "robot", reached_s=0.0, should_stop=lambda: True)  # reached, then gave up
+    # reached, then gave up
+    live.await_go(session.settings.plans["robot"].steps[1], "robot", reached_s=0.0, should_stop=lambda: True)
     screen = console.screen()
     assert screen.go_waiting and screen.go == "GO waits: 'applause': press Space or Enter"
     assert screen.rows[0].now == "waits for GO: 'applause'"
@@ -322,8 +323,8 @@ _final = st.integers(0x40, 0x7E).map(lambda b: bytes([b]))
 _params = st.binary(max_size=12).map(lambda raw: bytes(0x30 + b % 16 for b in raw))
 _csi = st.builds(lambda p, f: b"\x1b[" + p + f, _params, _final.filter(lambda f: f not in (b"M", b"[")))
 _ss3 = st.builds(lambda p, f: b"\x1bO" + p + f, _params, _final)
-_alt = st.integers(0x20, 0x7E).map(lambda b: b"\x1b" + bytes([b])).filter(lambda s: s[1:] not in (b"[", b"O", b"]",
-                                                                                                   b"P", b"X", b"^", b"_"))
+_alt = st.integers(0x20, 0x7E).map(lambda b: b"\x1b" + bytes([b])).filter(
+    lambda s: s[1:] not in (b"[", b"O", b"]", b"P", b"X", b"^", b"_"))
 _osc = st.builds(lambda text, end: b"\x1b]" + text + end, st.binary(max_size=20).map(
     lambda raw: bytes(0x20 + b % 0x5F for b in raw)), st.sampled_from([b"\x07", b"\x1b\\"]))
 _sequence = st.one_of(_csi, _ss3, _alt, _osc, st.sampled_from(NOT_ESC))
@@ -413,7 +414,8 @@ class Pane:
         choreo = shlex.join([sys.executable, "-m", "choreo", "run", *args])
         script = (f"cd {shlex.quote(str(REPO))} && {choreo}; echo $? > {self.exit_file}.tmp; "
                   f"stty -a > {self.stty_file}; mv {self.exit_file}.tmp {self.exit_file}; sleep 60")
-        self._tmux("new-session", "-d", "-x", str(width), "-y", str(height), "-s", "run", f"sh -c {shlex.quote(script)}")
+        self._tmux("new-session", "-d", "-x", str(width), "-y", str(height), "-s", "run",
+                   f"sh -c {shlex.quote(script)}")
 
     def _tmux(self, *args: str) -> str:
         return subprocess.run(["tmux", "-L", self.socket, "-f", "/dev/null", *args], check=True,

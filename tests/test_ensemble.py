@@ -131,8 +131,9 @@ def test_each_board_gets_exactly_its_own_frames_and_unison_starts_land_together(
 def test_the_log_names_every_robot_and_the_review_reads_it(tmp_path, capsys):
     session, error = run_session(tmp_path, UNISON)
     log = read_log(tmp_path / "run.mcap")
+    per_robot = (("rcb4", "tx"), ("rcb4", "rx"), ("choreo", "step"))
     assert set(log.messages) == {f"/{kind}/{name}/{topic}" for name in "abc"
-                                 for kind, topic in (("rcb4", "tx"), ("rcb4", "rx"), ("choreo", "step"))} | {"/choreo/clock"}
+                                 for kind, topic in per_robot} | {"/choreo/clock"}
     meta = log.metadata["choreo"]
     assert meta["robots"] == "a,b,c" and meta["unison"] == "yes" and meta["robot.b.port"].startswith("sim://")
     assert all(m["robot"] == "b" for m in log.topic("/choreo/b/step"))
@@ -140,7 +141,8 @@ def test_the_log_names_every_robot_and_the_review_reads_it(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "unison    motion starts apart: median 0.000 ms, p99 0.000 ms, max 0.000 ms (4 plays" in out
     assert ", 3 robots (a, b, c; ports below)" in out
-    assert [line.split(":")[0] for line in out.splitlines() if line.startswith("robot ")] == ["robot a", "robot b", "robot c"]
+    robots = [line.split(":")[0] for line in out.splitlines() if line.startswith("robot ")]
+    assert robots == ["robot a", "robot b", "robot c"]
     assert "0 unanswered" not in out and "unanswered" not in out
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+from itertools import pairwise
 
 import pytest
 
@@ -268,7 +269,7 @@ def test_loop_in_a_music_show_restarts_the_music_with_each_pass(tmp_path):
     # each pass starts the music again from a's moment: the motions start on its cues every time
     assert all(abs(m["start_s"] - m["cue"]) < 0.02 for m in ends if m["outcome"] == "ok")
     shows = [m["show_s"] for m in log.topic("/choreo/clock")]
-    assert any(later < earlier for earlier, later in zip(shows, shows[1:]))  # the clock went back to a
+    assert any(later < earlier for earlier, later in pairwise(shows))  # the clock went back to a
 
 
 def test_a_loops_go_cue_waits_on_every_pass(tmp_path):

@@ -166,7 +166,8 @@ def test_probe_json_is_the_readings(capsys):
     record = json.loads(capsys.readouterr().out)
     assert record["ok"] is True and record["port"] == "sim://?baud=625000" and record["baud"] == 625000
     assert record["version"] == "RCB-4 simulator (choreo)"
-    assert record["config"]["word"] == 2 and record["config"]["rom_run"] is True and record["config"]["com_baud"] == 115200
+    config = record["config"]
+    assert config["word"] == 2 and config["rom_run"] is True and config["com_baud"] == 115200
     assert len(record["counter"]["hex"].split()) == 10 and record["hints"]
 
 
@@ -187,7 +188,8 @@ def test_doctor_json_lists_each_finding(capsys):
     board = next(f for f in record["findings"] if f["check"] == "board")
     assert board == {"level": "ok", "check": "board", "fix": None,
                      "text": "a board answers on sim:// at 115200 baud, version 'RCB-4 simulator (choreo)'"}
-    assert record["ok"] is (record["exit"] == 0) and all(f["level"] in ("ok", "problem", "note") for f in record["findings"])
+    assert record["ok"] is (record["exit"] == 0)
+    assert all(f["level"] in ("ok", "problem", "note") for f in record["findings"])
 
 
 def test_ports_json_marks_kondo_adapters(capsys, monkeypatch):
@@ -218,7 +220,8 @@ def test_bad_arguments_of_a_json_command_are_a_json_failure_too(capsys, argv):
     assert ended.value.code == 2
     captured = capsys.readouterr()
     record = json.loads(captured.out)
-    assert record == {"ok": False, "exit": 2, "error": record["error"]} and record["error"].startswith(f"choreo {argv[0]}: ")
+    assert record == {"ok": False, "exit": 2, "error": record["error"]}
+    assert record["error"].startswith(f"choreo {argv[0]}: ")
     assert "usage:" in captured.err
 
 

@@ -7,6 +7,7 @@ from a script pins down the reading rules byte for byte, without timing.
 from __future__ import annotations
 
 from collections import deque
+from itertools import pairwise
 
 import pytest
 
@@ -184,4 +185,4 @@ def test_status_queries_are_never_closer_than_50_ms_even_when_retried():
     link.query_status()
     times = [e.time_ns for e in events.tx]
     assert len(times) == 3
-    assert min(b - a for a, b in zip(times, times[1:])) >= 50_000_000
+    assert min(b - a for a, b in pairwise(times)) >= 50_000_000

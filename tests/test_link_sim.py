@@ -46,7 +46,7 @@ class Recorder:
     def check_paired(self) -> None:
         """One reply event for every frame written, in order, for the same frame."""
         assert [e.seq for e in self.tx] == [e.seq for e in self.rx] == list(range(1, len(self.tx) + 1))
-        assert all(t.frame == r.frame for t, r in zip(self.tx, self.rx))
+        assert all(t.frame == r.frame for t, r in zip(self.tx, self.rx, strict=True))
 
     def failed(self) -> list[int]:
         return [e.seq for e in self.rx if not e.reply.ok]
@@ -337,10 +337,10 @@ def test_pty_fault_at_random_is_retried_or_the_right_error(kind):
 
 def test_pty_port_lost_at_random():
     rec = Recorder()
-    with pty_in_process("lose", "0.2", seed=6) as (board, path):
-        with open_pty(path, rec) as link, pytest.raises(LinkError, match="lost"):
-            for _ in range(10):
-                workload(link)
+    with (pty_in_process("lose", "0.2", seed=6) as (board, path), open_pty(path, rec) as link,
+          pytest.raises(LinkError, match="lost")):
+        for _ in range(10):
+            workload(link)
     rec.check_paired()
     assert board.lost and len(rec.tx) == board.lost_at_frame == board.frames_received
 

@@ -23,7 +23,7 @@ from choreo.cli import main
 from choreo.errors import LogError
 from choreo.run.session import Session
 from choreo.run.settings import RunRequest
-from runlog import vmain, prepare, REPO, _env, read_log, write_show
+from runlog import prepare, REPO, _env, read_log, write_show
 
 MANY_PLAYS = """
     version: 1
@@ -89,9 +89,8 @@ def run_until_full(show: Path, log_path: Path, real_time: bool = False) -> tuple
     the machine's time) to happen while the show still runs."""
     request = RunRequest(str(show), port=PORT, log_path=str(log_path))
     session = Session.prepare(request) if real_time else prepare(request)
-    with pytest.raises(LogError) as stopped:
-        with session:
-            session.run()
+    with pytest.raises(LogError) as stopped, session:
+        session.run()
     return session, stopped.value
 
 

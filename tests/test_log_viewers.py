@@ -11,7 +11,6 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from choreo.cli import main
 from runlog import vmain, read_log, write_show
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -135,8 +135,10 @@ def test_from_past_the_end_of_the_music_is_refused(tmp_path, capsys, start, opti
 def test_from_inside_the_music_or_without_it_is_taken(tmp_path):
     write_song(tmp_path / "song.wav", 1.4)
     show = str(write_show(tmp_path, MUSIC_SHOW.replace("START", "0")))
-    assert Session.prepare(RunRequest(show, from_step="edge", no_log=True, audio_device="null")).settings.sections.origin == 0.9
-    assert Session.prepare(RunRequest(show, from_step="late", no_log=True, no_music=True)).settings.sections.origin == 2.0
+    edge = Session.prepare(RunRequest(show, from_step="edge", no_log=True, audio_device="null"))
+    assert edge.settings.sections.origin == 0.9
+    late = Session.prepare(RunRequest(show, from_step="late", no_log=True, no_music=True))
+    assert late.settings.sections.origin == 2.0
 
 
 @pytest.mark.parametrize("ref", ["9" * 5000, "9" * 20, "1" + "0" * 4400])

@@ -19,7 +19,8 @@ TWO = "version: 1\nrobots:\n  left: {}\n  right: {}\nsteps:\n  - play: 1\n"
 def test_the_open_error_is_logged_on_the_run_clock(tmp_path, body, ports):
     log = tmp_path / "run.mcap"
     missing = str(tmp_path / "no-such-adapter")
-    argv = ["run", str(write_show(tmp_path, body)), *[a.format(missing=missing) for a in ports], "--log", str(log), "-q"]
+    argv = ["run", str(write_show(tmp_path, body)), *[a.format(missing=missing) for a in ports],
+            "--log", str(log), "-q"]
     assert vmain(argv) == 3
     (error,) = [m for m in read_log(log).logs if m["level"] == 4]
     assert "no-such-adapter" in error["message"]

@@ -14,7 +14,6 @@ import json
 import socket
 import threading
 import time
-from pathlib import Path
 
 import pytest
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
@@ -194,7 +193,8 @@ def test_a_desks_other_messages_spend_no_command(server, heard):
     assert len(replies) == LIMITS.replies_per_sender.burst
 
 
-@pytest.mark.parametrize("address", ["/" + "x" * 60_000, "/reply/" + "y" * 60_000, "/choreo/cue/" + "z" * 60_000 + "/go"])
+@pytest.mark.parametrize("address", ["/" + "x" * 60_000, "/reply/" + "y" * 60_000,
+                                     "/choreo/cue/" + "z" * 60_000 + "/go"])
 def test_a_long_address_costs_neither_a_long_log_line_nor_a_long_reply(server, heard, address):
     """A 60 KB address once cost a 60 KB log line (10 at once, 2 a second: a disk filled
     fast) and a reply three times the bytes received (the address, in the reply's address,
@@ -435,7 +435,8 @@ BAD_OPTIONS = {
     "port with an underscore": (["--osc", "1_000"], "--osc 1_000: give a port number"),
     "port in another script": (["--osc", "\u0665"], "--osc \u0665: give a port number"),
     "port of a thousand digits": (["--osc", "9" * 5000], "--osc 999"),
-    "notify port superscript": (["--osc", "0", "--osc-notify", "127.0.0.1:\u00b2"], "--osc-notify 127.0.0.1:\u00b2: give HOST:PORT"),
+    "notify port superscript": (["--osc", "0", "--osc-notify", "127.0.0.1:\u00b2"],
+                                "--osc-notify 127.0.0.1:\u00b2: give HOST:PORT"),
     "notify port in another script": (["--osc", "0", "--osc-notify", "127.0.0.1:\u0665"],
                                       "--osc-notify 127.0.0.1:\u0665: give HOST:PORT"),
     "port in use": (["--osc", "{taken}"], "--osc {taken}: cannot listen on 127.0.0.1:{taken}"),
@@ -448,7 +449,8 @@ BAD_OPTIONS = {
                      "--osc-notify 127.0.0.1:9: given twice"),
     "notify twice, spelt two ways": (["--osc", "0", "--osc-notify", "localhost:9", "--osc-notify", "127.0.0.1:9"],
                                      "--osc-notify 127.0.0.1:9: given twice"),
-    "notify nowhere": (["--osc", "0", "--osc-notify", "no-such-host.invalid:9"], "--osc-notify no-such-host.invalid:9: "),
+    "notify nowhere": (["--osc", "0", "--osc-notify", "no-such-host.invalid:9"],
+                       "--osc-notify no-such-host.invalid:9: "),
     "notify itself": (["--osc", "{free}", "--osc-notify", "localhost:{free}"], "--osc-notify localhost:{free}: that is "
                       "choreo's own --osc port"),
     "bad timeout": (["--timeout", "nan"], "--timeout nan: "),
@@ -484,7 +486,8 @@ def test_a_bad_option_ends_the_run_before_a_log_or_a_board_is_touched(tmp_path, 
 def test_a_flood_over_osc_neither_fills_the_log_nor_the_terminal_and_the_review_counts_it(tmp_path):
     """80,000 GOs in 5 s once wrote a 14 MB log and 4.5 MB of stderr, and `log summary` said
     "38201 commands, 19 refused" where 38,188 were."""
-    show = write_show(tmp_path, ONE_GO_SHOW.rstrip(" ") + "      - wait: 60\n")  # after the GO, the show goes on till stopped
+    # after the GO, the show goes on till stopped
+    show = write_show(tmp_path, ONE_GO_SHOW.rstrip(" ") + "      - wait: 60\n")
     log_path = tmp_path / "run.mcap"
     port = free_port()
     process = start_choreo("run", str(show), "--osc", str(port), "--no-console", "--log", str(log_path))

@@ -370,7 +370,8 @@ def test_fuzz_packets_through_the_server(live, packet):
         assert decode_packet(reply).messages[0].address.startswith("/reply")
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the system says how many datagrams it dropped on Linux only")
+@pytest.mark.skipif(not sys.platform.startswith("linux"),
+                    reason="the system says how many datagrams it dropped on Linux only")
 def test_datagrams_the_system_dropped_are_counted():
     """A flood faster than choreo reads fills the socket's buffer and the system drops the rest
     before choreo sees them: `log summary` said fewer commands than were sent (620,000 sent,
@@ -385,7 +386,8 @@ def test_datagrams_the_system_dropped_are_counted():
     live = Live(StopRequest(), wait_start=True, now=clock.now, limits=Limits(reported=plenty))
     heard = Commands()
     live.subscribe(heard)
-    server = OscServer(live, 0, now=clock.now, limits=Limits(packets_per_sender=plenty, replies_per_sender=Rate(0, 0.0)))
+    limits = Limits(packets_per_sender=plenty, replies_per_sender=Rate(0, 0.0))
+    server = OscServer(live, 0, now=clock.now, limits=limits)
     server.bind()  # listening, not reading yet: the buffer fills, the rest is dropped
     flooder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     flooder.bind(("127.0.0.2", 0))

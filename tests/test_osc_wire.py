@@ -17,8 +17,8 @@ from pythonosc.osc_message_builder import OscMessageBuilder, build_msg
 
 from choreo.live.oscnet import ConnectionTable
 from choreo.live.osclimits import LIMITS, OscLimits
-from choreo.live.oscwire import (BUNDLE, END, Decoded, FrameReader, Message, decode_packet, encode_bundle, encode_message,
-                            slip_decode, slip_encode)
+from choreo.live.oscwire import (BUNDLE, END, Decoded, FrameReader, Message, decode_packet, encode_bundle,
+                                 encode_message, slip_decode, slip_encode)
 
 GO = build_msg("/choreo/go", []).dgram
 TAG = BUNDLE + struct.pack(">Q", 1)
@@ -66,8 +66,8 @@ def test_an_old_senders_message_without_type_tags_has_no_arguments():
 def test_what_choreo_sends_reads_back():
     args = ("a reply", 3, -2**31, 2**40, 0.5, True, False, None, b"\x00\xff")
     assert decode_packet(encode_message("/reply/choreo/go", args)).messages == (Message("/reply/choreo/go", args),)
-    assert decode_packet(encode_bundle([encode_message("/a"), encode_bundle([encode_message("/b", [1])])])).messages == (
-        Message("/a"), Message("/b", (1,)))
+    nested = encode_bundle([encode_message("/a"), encode_bundle([encode_message("/b", [1])])])
+    assert decode_packet(nested).messages == (Message("/a"), Message("/b", (1,)))
     assert decode_packet(encode_message("/a\x00b", ["c\x00"])).messages == (Message("/a\ufffdb", ("c\ufffd",)),)
     with pytest.raises(TypeError):
         encode_message("/a", [object()])  # type: ignore[list-item]
@@ -92,7 +92,8 @@ def test_a_bundle_elements_size_out_of_bounds_is_refused(size):
 @pytest.mark.parametrize("tag", ["x", "Q", "[", "]", "\x01", "é"])
 def test_an_unknown_type_tag_refuses_the_message(tag):
     """`/choreo/panic ,Q` was carried out (python-osc skipped the tag it did not know)."""
-    packet = b"/choreo/panic\x00\x00\x00" + (f",{tag}".encode() + b"\x00\x00\x00\x00")[:4 if len(tag.encode()) < 3 else 8]
+    tags = (f",{tag}".encode() + b"\x00\x00\x00\x00")[:4 if len(tag.encode()) < 3 else 8]
+    packet = b"/choreo/panic\x00\x00\x00" + tags
     decoded = decode_packet(packet)
     assert decoded.messages == () and decoded.address == "/choreo/panic"
     assert "which choreo does not take" in decoded.error

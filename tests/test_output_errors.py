@@ -5,6 +5,7 @@ that are not logs; `--json` fails as JSON (issue 21, item 6)."""
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import io
 import json
@@ -106,10 +107,8 @@ def test_a_write_failure_a_command_swallowed_is_still_reported(monkeypatch, caps
     import choreo.cli.schema
 
     def swallowing(args) -> int:
-        try:
+        with contextlib.suppress(Exception):  # what a careless command might do
             print("the schema")
-        except Exception:  # noqa: BLE001 - what a careless command might do
-            pass
         return 0
 
     monkeypatch.setattr(choreo.cli.schema, "run", swallowing, raising=False)
@@ -198,7 +197,8 @@ def test_a_folder_that_cannot_be_listed_says_so(argv, tmp_path, monkeypatch, cap
 
 def test_log_latest_of_a_folder_that_is_not_there_or_not_a_folder(tmp_path, capsys):
     assert main(["log", "latest", str(tmp_path / "nowhere")]) == 2
-    assert capsys.readouterr().err == f"{tmp_path / 'nowhere'}: no such folder (`choreo run` writes its logs to runs/)\n"
+    said = capsys.readouterr().err
+    assert said == f"{tmp_path / 'nowhere'}: no such folder (`choreo run` writes its logs to runs/)\n"
     (tmp_path / "file").write_text("x")
     assert main(["log", "latest", str(tmp_path / "file")]) == 2
     assert capsys.readouterr().err == f"{tmp_path / 'file'}: not a folder (a file): give a log folder\n"
@@ -250,7 +250,8 @@ def test_a_folder_of_things_named_mcap_that_are_not_logs_says_so(hostile_folder,
     others = len([p for p in folder.iterdir() if p.name.endswith(".mcap")])
     for argv in (["log", "latest"], ["log", "summary"]):
         assert main([*argv, str(folder)]) == 2
-        assert capsys.readouterr().err == f"{folder}: no .mcap logs in this folder ({others} named *.mcap are not regular files)\n"
+        said = capsys.readouterr().err
+        assert said == f"{folder}: no .mcap logs in this folder ({others} named *.mcap are not regular files)\n"
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full here")

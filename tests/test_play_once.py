@@ -59,7 +59,8 @@ def test_a_lost_start_reply_with_the_motion_not_running_is_retried_from_the_stop
     assert kinds(events) == ["stop", "play", "restore", "read", "stop", "play", "restore"]
 
 
-@pytest.mark.parametrize("answer", [OVER, state(0x8721, MAIN_LOOP + 6, 0, 0)], ids=["at-the-return", "on-in-the-main-loop"])
+@pytest.mark.parametrize("answer", [OVER, state(0x8721, MAIN_LOOP + 6, 0, 0)],
+                         ids=["at-the-return", "on-in-the-main-loop"])
 def test_a_lost_start_reply_of_a_motion_already_over_is_a_play_done(answer):
     link, port, events = link_for(ACK_MOV, ACK_CALL, b"", answer)
     played = link.play(3, Tag(0))

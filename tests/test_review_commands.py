@@ -24,7 +24,6 @@ from pathlib import Path
 import pytest
 from mcap.reader import NonSeekingReader
 
-from choreo.cli import main
 from runlog import vmain
 from choreo.log.reader import LogReader
 
@@ -161,13 +160,14 @@ def test_summary_of_a_complete_run(logs, capsys):
         list(reader.messages())
         run_late = int(reader.result["late_steps"])
     assert run_late >= 1 and f"6 run: 6 done, {run_late} late, 0 failed" in field(out, "steps")
-    assert f"{sum(tx.values())} sent (stop 3, play 3, restore 3, status {tx['status']}); 0 retries" in field(out, "frames")
+    frames = f"{sum(tx.values())} sent (stop 3, play 3, restore 3, status {tx['status']}); 0 retries"
+    assert frames in field(out, "frames")
     assert f"ACK 9, NAK 0, status {tx['status']}, timeout 0, invalid 0" in field(out, "replies")
     assert "median" in field(out, "latency") and f"({sum(tx.values())} replies)" in field(out, "latency")
     assert "(3 plays, 1 over 1 ms)" in field(out, "cues")
     plays = [line for line in out.splitlines() if " motion " in line and " step " in line]
     assert len(plays) == 3
-    for line, expected in zip(plays, (0.33, 0.22, 0.33)):
+    for line, expected in zip(plays, (0.33, 0.22, 0.33), strict=True):
         measured = float(line.rsplit(":", 1)[1].strip().split()[0])
         # To the status poll that saw it end: up to one 50 ms poll period, plus up to one 50 ms
         # status refresh of the board (the simulator's too), plus scheduling.
@@ -368,7 +368,7 @@ def test_export_csv_and_json_one_row_a_frame(logs, capsys, tmp_path):
     rows = list(csv.DictReader(io.StringIO(csv_path.read_text())))
     records = json.loads(json_path.read_text())
     assert len(rows) == len(records) == len(topics["/rcb4/tx"])
-    for row, record, tx, rx in zip(rows, records, topics["/rcb4/tx"], topics["/rcb4/rx"]):
+    for row, record, tx, rx in zip(rows, records, topics["/rcb4/tx"], topics["/rcb4/rx"], strict=True):
         assert record["seq"] == tx["seq"] == rx["seq"] == int(row["seq"])
         assert (record["frame"], record["attempt"], record["tx_hex"], record["step"]) == (
             tx["kind"], tx["attempt"], tx["hex"], tx.get("step"))

@@ -62,7 +62,7 @@ def review_all(path: Path, capsys) -> list[tuple[list[str], int, str]]:
 
 def mutations(data: bytes):
     records = head_records(data)
-    for offset, opcode, length in records:
+    for offset, opcode, _length in records:
         for value in (0, 1, 2**40):
             mutated = bytearray(data)
             struct.pack_into("<Q", mutated, offset + 1, value)
@@ -132,7 +132,7 @@ def test_an_mcap_of_another_tool_is_not_a_choreo_log(tmp_path, capsys):
 def test_a_named_pipe_given_as_a_log_is_refused_at_once(tmp_path, capsys):
     fifo = tmp_path / "run.mcap"
     os.mkfifo(fifo)
-    for command, code, err in review_all(fifo, capsys):
+    for _command, code, err in review_all(fifo, capsys):
         assert code == 2 and "not a regular file" in err
     assert vmain(["replay", str(fifo)]) == 2
 
@@ -167,7 +167,7 @@ def test_polls_next_to_a_motions_end_are_known_from_the_recording(run_log):
     with LogReader(run_log) as reader:
         edges = _polls_at_motion_ends(reader)
         statuses = []
-        for topic, _, data in reader.messages(("/rcb4/rx",)):
+        for _topic, _, data in reader.messages(("/rcb4/rx",)):
             message = __import__("json").loads(data)
             if isinstance(message.get("executing"), bool):
                 statuses.append((message["seq"], message.get("executing")))

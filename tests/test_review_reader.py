@@ -208,7 +208,8 @@ def test_a_damaged_chunk_ends_the_read_there_and_says_which(synthetic, tmp_path)
     data, at = _damage(synthetic.read_bytes())
     path = tmp_path / "damaged.mcap"
     path.write_bytes(data)
-    with open(path, "rb") as f, pytest.raises(Exception, match="(?i)crc validation failed"):  # mcap's own reader refuses it
+    # mcap's own reader refuses it
+    with open(path, "rb") as f, pytest.raises(Exception, match="(?i)crc validation failed"):
         list(NonSeekingReader(f, validate_crcs=True).iter_messages())
     full = mcap_messages(synthetic)
     messages, reader = read_all(path)

@@ -12,7 +12,9 @@ from contextlib import nullcontext
 from pathlib import Path
 
 import pytest
+from mcap.exceptions import McapError
 import serial
+from itertools import pairwise
 
 from choreo.wire import protocol as p
 from choreo.cli import main
@@ -75,7 +77,7 @@ def test_wait_done_polls_50_ms_apart_until_not_executing(tmp_path):
     assert len(polls) >= 3  # a 0.2 s motion is seen executing at least twice
     first_gap = polls[0]["_log_time"] - rx_by_seq[restore["seq"]]["_log_time"]
     assert first_gap >= 50_000_000
-    gaps = [b["_log_time"] - a["_log_time"] for a, b in zip(polls, polls[1:])]
+    gaps = [b["_log_time"] - a["_log_time"] for a, b in pairwise(polls)]
     assert min(gaps) >= 50_000_000  # never faster than the board refreshes its status
     verdicts = [rx_by_seq[m["seq"]]["executing"] for m in polls]
     assert verdicts[-1] is False and all(verdicts[:-1])
@@ -417,7 +419,7 @@ def test_sigkilled_run_leaves_a_log_a_linear_reader_reads(tmp_path):
     assert log.tx_hex()[:3] == [STOP, p.play_frame(1).hex, RESTORE]
     assert len(log.rx) == len(log.tx)
     assert [m["event"] for m in log.steps[:2]] == ["start", "end"]
-    with pytest.raises(Exception):
+    with pytest.raises(McapError):
         read_log(log_path)  # no footer: only a linear reader gets at it
 
 
@@ -584,7 +586,7 @@ def test_polls_stay_50_ms_apart_through_faults_and_retries(tmp_path, query):
     log = read_log(log_path)
     polls = [m["_log_time"] for m in log.tx if m["kind"] == "status"]
     assert any(m["attempt"] > 1 for m in log.tx if m["kind"] == "status")
-    assert min(b - a for a, b in zip(polls, polls[1:])) >= 50_000_000
+    assert min(b - a for a, b in pairwise(polls)) >= 50_000_000
 
 
 def test_a_play_delayed_by_retries_is_reported_late(tmp_path):
@@ -732,7 +734,7 @@ def test_polls_and_cues_over_a_pty(tmp_path):
         assert main(["run", str(show), "--port", path, "--log", str(log_path), "-q"]) == 0
     log = read_log(log_path)
     polls = [m["_log_time"] for m in log.tx if m["kind"] == "status"]
-    assert len(polls) >= 4 and min(b - a for a, b in zip(polls, polls[1:])) >= 50_000_000
+    assert len(polls) >= 4 and min(b - a for a, b in pairwise(polls)) >= 50_000_000
     zero = log.steps[0]["_log_time"]
     cue = next(m for m in log.tx if m.get("label") == "cue")
     start = next(m for m in log.tx if m.get("label") == "cue" and m["kind"] == "restore")

@@ -11,11 +11,9 @@ from datetime import datetime, timezone
 
 import pytest
 
-from choreo.cli import main
 from choreo.errors import ShowError, UsageError
 from choreo.log.recorder import default_log_path
 from runlog import vmain, prepare
-from choreo.run.session import Session
 from choreo.run.settings import RunRequest
 from choreo.show.load import load_show, load_show_bytes
 from choreo.show.plan import compile_plan
@@ -135,7 +133,8 @@ def test_a_sim_port_in_the_show_gets_the_runs_baud_and_the_shows_durations(tmp_p
                     "steps:\n  - play: m\n  - wait: done\n")
     session = prepare(RunRequest(str(path), no_log=True))
     assert session.settings.links["robot"].port_source == "show"
-    assert "baud=625000" in session.settings.links["robot"].port and "durations=3:0.3" in session.settings.links["robot"].port
+    port = session.settings.links["robot"].port
+    assert "baud=625000" in port and "durations=3:0.3" in port
     with session:
         assert session.run().outcome == "done"
 

@@ -364,7 +364,8 @@ def test_several_faults_on_one_frame_combine_in_the_documented_order():
 
 @pytest.mark.parametrize(
     "text,expected",
-    [("5", Trigger(every=5)), ("1", Trigger(every=1)), ("0.2", Trigger(probability=0.2)), (".5", Trigger(probability=0.5))],
+    [("5", Trigger(every=5)), ("1", Trigger(every=1)), ("0.2", Trigger(probability=0.2)),
+     (".5", Trigger(probability=0.5))],
 )
 def test_trigger_spelling(text, expected):
     assert Trigger.parse(text) == expected
@@ -511,7 +512,8 @@ def test_line_partial_frame_and_noise():
 
 @pytest.mark.parametrize(
     "settings",
-    [LineSettings(9600), LineSettings(115200, parity="N"), LineSettings(115200, bytesize=7), LineSettings(115200, stopbits=2)],
+    [LineSettings(9600), LineSettings(115200, parity="N"), LineSettings(115200, bytesize=7),
+     LineSettings(115200, stopbits=2)],
 )
 def test_line_with_wrong_settings_gets_no_reply(settings):
     b = board()

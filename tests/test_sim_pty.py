@@ -183,11 +183,11 @@ def test_lose_closes_the_pty_and_exits_3():
 
 
 def test_reply_bytes_are_written_at_their_wire_time():
-    with in_process(SimBoard(reply_delay_s=0.03)) as (server, path, _):
-        with serial.Serial(path, 115200, parity="E", timeout=1) as port:
-            start = time.monotonic()
-            assert exchange(port, STATUS) == IDLE
-            assert time.monotonic() - start >= 0.029
+    with (in_process(SimBoard(reply_delay_s=0.03)) as (server, path, _),
+          serial.Serial(path, 115200, parity="E", timeout=1) as port):
+        start = time.monotonic()
+        assert exchange(port, STATUS) == IDLE
+        assert time.monotonic() - start >= 0.029
 
 
 def _whole_reply(board: SimBoard, port: serial.Serial, number: int, faulted_size: int) -> bytes:
@@ -219,9 +219,8 @@ def _whole_reply(board: SimBoard, port: serial.Serial, number: int, faulted_size
 @pytest.mark.parametrize("spelled", ["2", "0.5"])
 def test_every_fault_kind_on_the_pty(kind, expected, spelled):
     board = SimBoard(faults=FaultPlan.parse({kind: spelled}, seed=9))
-    with in_process(board) as (server, path, _):
-        with serial.Serial(path, 115200, parity="E", timeout=1) as port:
-            got = [_whole_reply(board, port, number, len(expected)) for number in range(1, 7)]
+    with in_process(board) as (server, path, _), serial.Serial(path, 115200, parity="E", timeout=1) as port:
+        got = [_whole_reply(board, port, number, len(expected)) for number in range(1, 7)]
     hits = [e.number - 1 for e in board.journal if e.kind == "frame" and e.faults]
     assert hits and (spelled == "0.5" or hits == [1, 3, 5])
     assert got == [expected if i in hits else IDLE for i in range(6)]
@@ -229,11 +228,10 @@ def test_every_fault_kind_on_the_pty(kind, expected, spelled):
 
 def test_a_frame_sent_before_the_last_reply_was_read_gets_no_reply_on_the_pty():
     board = SimBoard()
-    with in_process(board) as (server, path, _):
-        with serial.Serial(path, 115200, parity="E", timeout=0.3) as port:
-            port.write(STATUS.data + STATUS.data)  # one write: the server reads both at once
-            assert port.read(10) == IDLE  # one reply; the read ends at its timeout
-            assert exchange(port, STATUS) == IDLE  # written after the reply was read: answered
+    with in_process(board) as (server, path, _), serial.Serial(path, 115200, parity="E", timeout=0.3) as port:
+        port.write(STATUS.data + STATUS.data)  # one write: the server reads both at once
+        assert port.read(10) == IDLE  # one reply; the read ends at its timeout
+        assert exchange(port, STATUS) == IDLE  # written after the reply was read: answered
     assert board.frames_received == 2 and board.ignored == 1
     assert [e.kind for e in board.journal] == ["frame", "ignored", "frame"]
     assert "arrived while the board was still replying" in board.journal[1].note
@@ -241,21 +239,19 @@ def test_a_frame_sent_before_the_last_reply_was_read_gets_no_reply_on_the_pty():
 
 def test_late_on_the_pty():
     board = SimBoard(faults=FaultPlan.parse({"late": "1"}, late_s=0.1))
-    with in_process(board) as (server, path, _):
-        with serial.Serial(path, 115200, parity="E", timeout=0.03) as port:
-            port.write(STATUS.data)
-            assert port.read(5) == b""
-            port.timeout = 1
-            assert port.read(5) == IDLE
+    with in_process(board) as (server, path, _), serial.Serial(path, 115200, parity="E", timeout=0.03) as port:
+        port.write(STATUS.data)
+        assert port.read(5) == b""
+        port.timeout = 1
+        assert port.read(5) == IDLE
 
 
 def test_lose_in_process_ends_serving_with_lost():
     board = SimBoard(faults=FaultPlan.parse({"lose": "0.5"}, seed=4))
     with in_process(board) as (server, path, result):
-        with serial.Serial(path, 115200, parity="E", timeout=0.5) as port:
-            with pytest.raises(serial.SerialException):
-                for _ in range(50):
-                    exchange(port, STATUS)
+        with serial.Serial(path, 115200, parity="E", timeout=0.5) as port, pytest.raises(serial.SerialException):
+            for _ in range(50):
+                exchange(port, STATUS)
         deadline = time.monotonic() + 5
         while not result and time.monotonic() < deadline:
             time.sleep(0.01)
@@ -264,11 +260,11 @@ def test_lose_in_process_ends_serving_with_lost():
 
 def test_a_partial_frame_is_dropped_after_the_gap():
     board = SimBoard()
-    with in_process(board, gap_s=0.01) as (server, path, _):
-        with serial.Serial(path, 115200, parity="E", timeout=0.1) as port:
-            port.write(STATUS.data[:4])
-            time.sleep(0.05)
-            assert exchange(port, STATUS) == IDLE
+    with (in_process(board, gap_s=0.01) as (server, path, _),
+          serial.Serial(path, 115200, parity="E", timeout=0.1) as port):
+        port.write(STATUS.data[:4])
+        time.sleep(0.05)
+        assert exchange(port, STATUS) == IDLE
     assert [e.kind for e in board.journal] == ["partial", "frame"]
 
 
@@ -300,7 +296,8 @@ def test_command_line_options_mirror_the_url_query():
 
     args = build_parser().parse_args(
         ["sim", "--motion-s", "0.5", "--durations", "3:2.5,7:1.2", "--baud", "625000", "--reply-ms", "0.3",
-         "--refresh-ms", "20", "--drop", "5", "--late", "0.1", "--late-ms", "250", "--seed", "4", "--no-wire", "--gap-ms", "30"]
+         "--refresh-ms", "20", "--drop", "5", "--late", "0.1", "--late-ms", "250", "--seed", "4", "--no-wire",
+         "--gap-ms", "30"]
     )
     from_cli = parse_options(options_from_args(args))
     from_url = parse_query(

@@ -69,7 +69,7 @@ def test_another_tracks_cue_just_after_the_hold_is_on_time_when_the_go_comes() -
     cues = [0.3, 0.51, 0.7]
     woke, zero, go = _track_cues(hold_s, go_s, cues)
     assert abs(go - (zero + go_s)) < 1e-6
-    for cue, at in zip(cues, woke):
+    for cue, at in zip(cues, woke, strict=True):
         assert abs(at - _due(cue, hold_s, zero, go)) <= TOLERANCE_S, (cue, at - _due(cue, hold_s, zero, go))
 
 
@@ -81,7 +81,7 @@ def test_another_tracks_cues_keep_their_times_while_a_go_waits_and_when_it_comes
     hold_s = round(hold_s, 3)  # show times in milliseconds, as a show file writes them
     cues = sorted(max(0.0, round(hold_s + offset, 4)) for offset in offsets)
     woke, zero, go = _track_cues(hold_s, hold_s + held_s, cues)
-    for cue, at in zip(cues, woke):
+    for cue, at in zip(cues, woke, strict=True):
         due = _due(cue, hold_s, zero, go)
         assert abs(at - due) <= TOLERANCE_S, (cue, at - due)
         if cue > hold_s:
@@ -161,30 +161,36 @@ def test_a_go_between_reading_the_held_time_and_dozing_still_wakes_the_doze() ->
 def test_panic_or_stop_while_a_go_cue_holds_ends_every_other_tracks_doze_at_once() -> None:
     """Another track dozes towards a cue past the held time: a panic (or stop) given then ends
     its doze at that instant, not at the end of its 50 ms sleep slice."""
+    for command in ("panic", "stop"):
+        ended, given = _doze_ended_by(command)
+        assert ended and ended[0] - given <= TOLERANCE_S, (command, ended[0] - given)
+
+
+def _doze_ended_by(command: str) -> tuple[list[float], float]:
+    """When another track's doze ended (its monotonic times), and when `command` was given."""
     from choreo.live.controls import Live
     from choreo.events import Command
     from choreo.events import StopRequest
 
-    for command in ("panic", "stop"):
-        source = VirtualTime()
-        clock = RunClock(source)
-        zero = clock.mono()
-        show = HoldingShowClock(zero, clock.mono, source.notify)
-        stop = StopRequest()
-        live = Live(stop, now=clock.mono)
-        live.use_clock(show)
-        show.hold_at(0.5)
-        ended: list[float] = []
+    source = VirtualTime()
+    clock = RunClock(source)
+    zero = clock.mono()
+    show = HoldingShowClock(zero, clock.mono, source.notify)
+    stop = StopRequest()
+    live = Live(stop, now=clock.mono)
+    live.use_clock(show)
+    show.hold_at(0.5)
+    ended: list[float] = []
 
-        def track_b() -> None:
-            assert not sleep_until_show(clock, show, 0.8, stop)
-            ended.append(clock.mono())
-            source.leave()
+    def track_b() -> None:
+        assert not sleep_until_show(clock, show, 0.8, stop)
+        ended.append(clock.mono())
+        source.leave()
 
-        def operator() -> None:
-            source.sleep(0.6123)  # the GO cue has waited 0.1123 s
-            assert live.command(Command(command, "test")).ok
-            source.leave()
+    def operator() -> None:
+        source.sleep(0.6123)  # the GO cue has waited 0.1123 s
+        assert live.command(Command(command, "test")).ok
+        source.leave()
 
-        _share(source, track_b, operator)
-        assert ended and ended[0] - (zero + 0.6123) <= TOLERANCE_S, (command, ended[0] - (zero + 0.6123))
+    _share(source, track_b, operator)
+    return ended, zero + 0.6123

@@ -107,10 +107,10 @@ def test_a_file_that_grows_past_the_limit_after_it_was_looked_at_is_still_refuse
 @pytest.mark.skipif(not os.path.exists("/proc/self/mem"), reason="no /proc here")
 def test_a_failed_read_is_an_input_error_that_says_read():
     """/proc/self/mem is a regular file whose first bytes cannot be read (EIO)."""
-    with open_input("/proc/self/mem", "show file") as stream:
-        with pytest.raises(InputError, match=r"^/proc/self/mem: cannot read the show file: Input/output error$"):
-            with reading("/proc/self/mem", "show file"):
-                stream.read(10)
+    with (open_input("/proc/self/mem", "show file") as stream,
+          pytest.raises(InputError, match=r"^/proc/self/mem: cannot read the show file: Input/output error$"),
+          reading("/proc/self/mem", "show file")):
+        stream.read(10)
     with pytest.raises(InputError, match=r"^/proc/self/mem: cannot read the show file: Input/output error$"):
         read_input("/proc/self/mem", "show file", 1024)
 
@@ -135,7 +135,8 @@ def test_a_folder_that_cannot_be_listed_is_an_error_not_an_empty_folder(tmp_path
 
 def test_a_name_no_file_can_have_is_one_line(tmp_path):
     """A show can spell a NUL (`"a\\0b.wav"`): os.stat raises ValueError, not OSError."""
-    says = "cannot read the sound file: no file can have this name (it holds a NUL or a character the system cannot encode)"
+    says = ("cannot read the sound file: no file can have this name (it holds a NUL or a character the system "
+            "cannot encode)")
     assert problem(tmp_path / "a\0b.wav", "sound file") == says
     show = tmp_path / "show.yaml"
     show.write_text('version: 1\nmusic: {file: "a\\0b.wav"}\nsteps:\n  - play: 1\n', encoding="utf-8")
