@@ -13,13 +13,14 @@ import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import TracebackType
 
 from choreo.clock import (MachineShowClock, RunClock, ShowClock, SystemTime, TimeSource, quick_thread_switches,
                           sleep_until_show)
 from choreo.events import PlayOutListener, RunListener, RunResult, StopRequest
 from choreo.live.controls import HoldingShowClock, Live
 from choreo.log.format import CLOCK_EVERY_S, INFO, WARNING, ClockRecord
-from choreo.log.recorder import Recorder, RobotInfo, RunInfo
+from choreo.log.recorder import Recorder
 from choreo.music.player import LEAD_IN_S, Player
 from choreo.run.ensemble import Ensemble, Part
 from choreo.run.runner import Runner
@@ -57,21 +58,18 @@ class Session:
 
     @property
     def recorder(self) -> Recorder | None:
+        """The run's log while the session is open (None: --no-log, or not open)."""
         return self.stage.recorder if self.stage is not None else None
 
     def __enter__(self) -> Session:
-        settings, show = self.settings, self.settings.show
-        first = next(iter(settings.links.values()))  # a one-robot show's robot; with several, the log names each
-        robots = tuple(RobotInfo(n, link.port, link.baud, link.layout.name) for n, link in settings.links.items()) \
-            if show.ensemble else ()
-        info = RunInfo(show.path, show.name, show.source, first.port, first.baud, self.clock.wall_anchor_ns,
-                       first.layout.name, robots, settings.plans[first.robot].unison)
-        self.stage = Stage(info, settings.log_path, self.clock, list(settings.links.values()),
-                           unique_log=settings.unique_log, named=show.ensemble)
+        settings = self.settings
+        self.stage = Stage(settings.run_info(self.clock.wall_anchor_ns), settings.log_path, self.clock,
+                           list(settings.links.values()), unique_log=settings.unique_log, named=settings.show.ensemble)
         self.stage.__enter__()
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
         if self.stage is not None:
             self.stage.__exit__(exc_type, exc, tb)
 

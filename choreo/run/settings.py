@@ -23,7 +23,7 @@ from typing import TypeVar
 from choreo.board.link import DEFAULT_TIMEOUT_S, DEFAULT_TRIES
 from choreo.clock import TimeSource
 from choreo.errors import UsageError, did_you_mean
-from choreo.log.recorder import default_log_path
+from choreo.log.recorder import RobotInfo, RunInfo, default_log_path
 from choreo.music.player import Output, Song, pick_output
 from choreo.run.sections import Sections, select
 from choreo.show.load import load_show
@@ -127,6 +127,15 @@ class RunSettings:
             _check_in_song(song, sections.origin, given)
         return cls(show, plans, links, sections, _log_path(show, request), unique_log=request.log_path is None,
                    song=song, output=output)
+
+    def run_info(self, start_ns: int) -> RunInfo:
+        """What the log's metadata says of the run: the show, the first robot's link (a one-robot
+        show's only one) and, with several robots, each robot's."""
+        show, first = self.show, next(iter(self.links.values()))
+        robots = tuple(RobotInfo(name, link.port, link.baud, link.layout.name) for name, link in self.links.items()) \
+            if show.ensemble else ()
+        return RunInfo(show.path, show.name, show.source, first.port, first.baud, start_ns, first.layout.name, robots,
+                       self.plans[first.robot].unison)
 
 
 def _log_path(show: Show, request: RunRequest) -> Path | None:
