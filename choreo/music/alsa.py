@@ -71,8 +71,9 @@ class Alsa:
 
 @functools.lru_cache(maxsize=1)
 def alsa() -> Alsa | None:
-    """The process's libasound, or None where there is none (loaded once: it is the same library
-    miniaudio loads, so the handler set here is the one its calls report through)."""
+    """The process's libasound, or None where there is none. Loaded once; it is the library
+    miniaudio opens (its build dlopens `libasound.so.2`, else `libasound.so`: one library in the
+    process, one handler), so the handler set here is the one miniaudio's calls report through."""
     name = ctypes.util.find_library("asound")
     if name is None:
         return None
