@@ -383,8 +383,6 @@ ALLOWED = {
     "live_render._shape": "rich keeps no public way to forget the drawn shape after a terminal resize",
     "self._screen.size": "rich's Console.size setter, on the console this object made",
     "self.line.settings": "the simulator's own line, held by the port that made it",
-    # A module's own private record, reached through its own table rather than a parameter the
-    # check can read the class of (the class is defined in the same module as the assignment):
 }
 
 
