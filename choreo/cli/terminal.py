@@ -58,7 +58,7 @@ class VisibleStream:
 
 def visible_stream(stream: TextIO) -> TextIO:
     """`stream`, writing visible text (as it is if it does already)."""
-    return stream if isinstance(stream, VisibleStream) else VisibleStream(stream)  # type: ignore[return-value]
+    return stream if isinstance(stream, VisibleStream) else VisibleStream(stream)  # type: ignore[return-value]  # a TextIO by duck typing: the rest passes through
 
 
 def raw_stream(stream: TextIO) -> TextIO:

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import TypeVar
+from typing import Any, TypeVar
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
 from choreo.wire.layouts import SEED, Layout, layout_named
@@ -68,7 +68,7 @@ class SimOptions:
     baud_switch: bool = False
     latency_s: float = 0.0  # an FTDI adapter's latency timer between the board and the client (0: none)
 
-    def board(self, **kwargs: object) -> SimBoard:
+    def board(self, **kwargs: Any) -> SimBoard:  # SimBoard's own keywords, checked by SimBoard
         """A fresh board with these options (kwargs: `on_entry`, `journal_size`, `power_on`)."""
         return SimBoard(
             baud=self.baud,
@@ -81,7 +81,7 @@ class SimOptions:
             layout=self.layout,
             power_on_config=self.config,
             baud_switch=self.baud_switch,
-            **kwargs,  # type: ignore[arg-type]
+            **kwargs,
         )
 
     def describe(self) -> str:
