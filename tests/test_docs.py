@@ -466,3 +466,29 @@ def test_a_citation_of_a_missing_doc_or_heading_is_caught():
         "ERRATA.md: no such file in the repository",
         "README: name the section (the README is a page of links; the reference is in docs/)",
         "docs/live.md, 'Nowhere': no such heading"]
+
+
+# --- the architecture page draws the layers the contract enforces ---------------------------------
+
+
+def drawn_layers(text: str) -> dict[int, set[str]]:
+    """The numbered lines of docs/architecture.md's layer picture: layer -> the modules and
+    packages on it (layer 0 names `choreo` and its base modules after a colon)."""
+    drawn: dict[int, set[str]] = {}
+    for number, names in re.findall(r"^ *(\d+) +(choreo.*)$", text, re.M):
+        if ":" in names.split("  ")[0]:
+            base = names.split(":", 1)[1]
+            drawn[int(number)] = {"choreo"} | {f"choreo.{name.strip()}" for name in base.split(",")}
+        else:
+            drawn[int(number)] = set(re.findall(r"choreo\.[\w.]+", names.split("  ")[0]))
+    return drawn
+
+
+def test_the_architecture_page_draws_the_layers_the_contract_enforces():
+    from test_layers import LAYERS
+
+    (picture,) = [block for block in blocks_of(ROOT / "docs/architecture.md")
+                  if block.kind == "text" and "choreo.wire" in block.text]
+    enforced = {number: set(names) for number, names in enumerate(LAYERS)}
+    assert drawn_layers(picture.text) == enforced
+    assert drawn_layers(picture.text.replace(" | choreo.sim", "")) != enforced  # the reading sees a package gone
