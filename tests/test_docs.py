@@ -492,3 +492,14 @@ def test_the_architecture_page_draws_the_layers_the_contract_enforces():
     enforced = {number: set(names) for number, names in enumerate(LAYERS)}
     assert drawn_layers(picture.text) == enforced
     assert drawn_layers(picture.text.replace(" | choreo.sim", "")) != enforced  # the reading sees a package gone
+
+
+def test_the_architecture_page_names_every_module():
+    """What each package holds: every module of the package is named there (a new one too)."""
+    text = (ROOT / "docs/architecture.md").read_text(encoding="utf-8")
+    start = text.index("## What each package holds")
+    section = text[start:text.index("\n## ", start + 1)]
+    named = set(re.findall(r"`([\w.]+)`", section))
+    unnamed = [str(path.relative_to(ROOT)) for path in sorted((ROOT / "choreo").rglob("*.py"))
+               if "__pycache__" not in path.parts and path.name != "__init__.py" and path.stem not in named]
+    assert unnamed == []
