@@ -320,6 +320,26 @@ def test_the_log_hears_the_live_controls_for_the_run_only(tmp_path):
     assert commands == []
 
 
+def test_the_console_watches_the_links_from_its_start_to_its_close(tmp_path):
+    import io
+
+    from choreo.cli.console import Console
+    from choreo.live.controls import Live
+    from choreo.run.settings import RunRequest
+
+    session = prepare(RunRequest(str(write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n")), no_log=True))
+    with session:
+        link = next(iter(session.stage.links.values()))
+        assert len(link.listeners) == 0  # no log: nobody listens to the link of its own
+        console = Console(session, Live(StopRequest()), out=io.StringIO(), keys=io.StringIO(), width=80)
+        console.start()
+        try:
+            assert len(link.listeners) == 1
+        finally:
+            console.close()
+        assert len(link.listeners) == 0
+
+
 def test_a_port_that_keeps_time_is_given_the_runs_clock_whatever_its_class(monkeypatch):
     """The board layer asks for a capability (KeepsTime), not for the simulator: any port with a
     time source gets the run's; one without is refused on virtual time."""
