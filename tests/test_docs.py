@@ -30,6 +30,7 @@ import pytest
 
 from choreo.cli import build_parser
 from choreo.errors import ChoreoError
+from choreo.log.format import RESULT_METADATA_NAME
 from choreo.show.load import load_show_bytes
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -503,3 +504,55 @@ def test_the_architecture_page_names_every_module():
     unnamed = [str(path.relative_to(ROOT)) for path in sorted((ROOT / "choreo").rglob("*.py"))
                if "__pycache__" not in path.parts and path.name != "__init__.py" and path.stem not in named]
     assert unnamed == []
+
+
+# --- the files and names the prose points at --------------------------------------------------------
+
+_PATH = re.compile(r"(?<![/\w.])((?:choreo|tests|bench|shows|schemas|foxglove|docs)/[\w./-]*)")
+_DOTTED = re.compile(r"(?<![/\w.])choreo(?:\.\w+)+")
+_LOG_NAMES = {RESULT_METADATA_NAME}  # what a log's records are called, not modules (the schemas' are capitalised)
+
+
+def pointed_at(doc: Path) -> tuple[set[str], set[str]]:
+    """The repository paths and choreo's dotted names in a doc's inline code (not in its blocks,
+    where a command's output may name a file it just wrote)."""
+    spans = re.findall(r"`([^`\n]+)`", without_blocks(doc))
+    paths = {path.rstrip(".") for span in spans for path in _PATH.findall(span)}
+    names = {name for span in spans for name in _DOTTED.findall(span)
+             if name.split(".")[1].islower() and name not in _LOG_NAMES}
+    return paths, names
+
+
+def missing_name(dotted: str) -> str | None:
+    """The dotted name, if no module of that name exists and no attribute of its module either."""
+    parts = dotted.split(".")
+    for cut in range(len(parts), 0, -1):
+        try:
+            target: object = importlib.import_module(".".join(parts[:cut]))
+        except ModuleNotFoundError:
+            continue
+        for attribute in parts[cut:]:
+            if not hasattr(target, attribute):
+                return dotted
+            target = getattr(target, attribute)
+        return None
+    return dotted
+
+
+@pytest.mark.parametrize("doc", DOCS, ids=lambda doc: str(doc.relative_to(ROOT)))
+def test_the_files_and_names_a_doc_points_at_exist(doc):
+    """`choreo/wire/protocol.py`, `choreo.clock.VirtualTime`: modules move; the docs follow."""
+    paths, names = pointed_at(doc)
+    missing = sorted(path for path in paths if not (ROOT / path).exists())
+    missing += sorted(name for name in names if missing_name(name))
+    assert missing == []
+
+
+def test_a_path_or_name_that_moved_is_caught(tmp_path):
+    doc = tmp_path / "doc.md"
+    doc.write_text("`choreo/protocol.py`, `choreo/wire/protocol.py`, `/choreo/go`, `choreo.urlhandler.register()`,"
+                   " `choreo.clock.VirtualTime`, `choreo.clock.Nothing`, `choreo.Tx`\n```text\nchoreo/gone.py\n```\n")
+    paths, names = pointed_at(doc)
+    assert paths == {"choreo/protocol.py", "choreo/wire/protocol.py"}
+    gone = [name for name in sorted(names) if missing_name(name)]
+    assert gone == ["choreo.clock.Nothing", "choreo.urlhandler.register"]
