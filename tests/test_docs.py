@@ -11,7 +11,14 @@ How a block is read, by its info string (the word after the opening fence):
   what they print (what `$ cat X.yaml` prints is a show, and must load). Each `choreo` in a
   command (after `&&`, `|`, `;`, inside `$(...)`) must parse; `python X.py` must name a file
   that exists.
-- `python`: compiled, not run, and every name it imports must exist; `text`: not checked.
+- `python`: compiled, not run, and every name it imports must exist; `text`: not checked, but
+  it may hold neither a show nor a line that runs choreo.
+
+Beyond the blocks: the repository paths and choreo's dotted names in the docs' inline code exist;
+the code's own citations of the docs (`docs/hardware.md, "Errata: The config word"`) name a file
+and headings that exist; the architecture page draws the layers tests/test_layers.py enforces and
+names every module; the README fits on a page, lists every command and every doc, and gives the
+test command CI runs.
 """
 
 from __future__ import annotations
