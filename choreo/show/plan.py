@@ -22,6 +22,7 @@ from pathlib import Path
 
 from choreo.wire import protocol
 from choreo.wire.layouts import Layout, layout_named
+from choreo.show.load import load_show
 from choreo.show.model import DEFAULT_MOTION_S, Plan, PlannedStep, Repeat, Show, Step, StepKind
 
 _DIGITS = 9  # sums are rounded to the nanosecond so that 0.1 + 0.2 plans as 0.3
@@ -153,8 +154,6 @@ def _rest(play: tuple[float, int, float] | None, now: float) -> float:
 
 def load_plan(path: str | Path) -> tuple[Show, Plan]:
     """Load, check and compile a show file in one call (`ShowError` if it cannot be run)."""
-    from choreo.show.load import load_show
-
     show = load_show(path)
     return show, compile_plan(show)
 
