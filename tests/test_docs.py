@@ -52,6 +52,7 @@ _FENCE = re.compile(r"^(?P<indent> *)(?P<fence>```+)(?P<info>.*)$")
 _SHOW_LINE = re.compile(r"^(version|steps|tracks):", re.M)
 _SUBSTITUTION = re.compile(r"\$\(([^()]*)\)")
 _SKIP_LINES = {"...", "# ..."}
+_INLINE_CODE = re.compile(r"`([^`]+)`")  # it may run over a line break, as Markdown allows
 
 
 @dataclass(frozen=True)
@@ -358,7 +359,7 @@ def without_blocks(path: Path) -> str:
 
 def prose(path: Path) -> str:
     """The file without its code: fenced blocks and inline code hold no links."""
-    return re.sub(r"`[^`\n]*`", "", without_blocks(path))
+    return re.sub(_INLINE_CODE, "", without_blocks(path))
 
 
 def anchors(path: Path) -> set[str]:
@@ -393,7 +394,7 @@ def test_a_broken_link_is_caught(tmp_path):
     doc = tmp_path / "doc.md"
     (tmp_path / "there.md").write_text("# There\n\n## Some `code`: here\n")
     doc.write_text("[a](there.md) [b](there.md#some-code-here) [c](gone.md) [d](there.md#nowhere) "
-                   "[e](https://example.com/x) `[f](ignored.md)`\n")
+                   "[e](https://example.com/x) `[f](ignored.md)` `code over\n[g](two lines.md)`\n")
     assert broken_links(doc) == ["gone.md: no such file",
                                  f"there.md#nowhere: no heading 'nowhere' in {doc.parent.name}/there.md"]
 
@@ -523,7 +524,7 @@ _LOG_NAMES = {RESULT_METADATA_NAME}  # what a log's records are called, not modu
 def pointed_at(doc: Path) -> tuple[set[str], set[str]]:
     """The repository paths and choreo's dotted names in a doc's inline code (not in its blocks,
     where a command's output may name a file it just wrote)."""
-    spans = re.findall(r"`([^`\n]+)`", without_blocks(doc))
+    spans = [re.sub(r"\s+", " ", span) for span in re.findall(_INLINE_CODE, without_blocks(doc))]
     paths = {path.rstrip(".") for span in spans for path in _PATH.findall(span)}
     names = {name for span in spans for name in _DOTTED.findall(span)
              if name.split(".")[1].islower() and name not in _LOG_NAMES}
