@@ -394,7 +394,7 @@ def test_a_broken_link_is_caught(tmp_path):
     doc = tmp_path / "doc.md"
     (tmp_path / "there.md").write_text("# There\n\n## Some `code`: here\n")
     doc.write_text("[a](there.md) [b](there.md#some-code-here) [c](gone.md) [d](there.md#nowhere) "
-                   "[e](https://example.com/x) `[f](ignored.md)` `code over\n[g](two lines.md)`\n")
+                   "[e](https://example.com/x) `[f](ignored.md)` `code over\n[g](gone2.md)`\n")
     assert broken_links(doc) == ["gone.md: no such file",
                                  f"there.md#nowhere: no heading 'nowhere' in {doc.parent.name}/there.md"]
 
