@@ -31,6 +31,7 @@ from choreo.wire.layouts import LAYOUTS
 from choreo.numtext import whole_number
 from choreo.wire.protocol import MOTION_SLOTS, SLOT_SIZE
 from choreo.textfit import visible
+from choreo.userfile import read_input
 
 # Where each layout puts slot 0 (choreo.wire.layouts is the one place the layouts are defined; the
 # show schema's `robot.layout` enum lists their names too, and a test holds them equal).
@@ -67,8 +68,6 @@ class Project:
 
 def read_project(path: str | Path) -> Project:
     """The project at `path`; `ProjectError` (or `InputError`) with one line if it cannot be imported."""
-    from choreo.userfile import read_input
-
     data = read_input(path, "Heart to Heart 4 project", MAX_PROJECT_BYTES)
     return parse_project(data, visible(str(path)))
 
