@@ -1,8 +1,8 @@
 """`choreo validate SHOW...` and `choreo plan SHOW`: check show files, print the compiled timeline.
 
 Both exit 2 with one located line a problem when a file is bad (the CLI's `main` prints
-`ShowError`'s lines). The library is imported inside the handlers: `choreo --help` must not pay
-for YAML or jsonschema.
+`ShowError`'s lines). The show loader and planner are imported inside the handlers: `choreo
+--help` must not pay for YAML or jsonschema.
 """
 
 from __future__ import annotations
@@ -11,7 +11,14 @@ import argparse
 import json
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
+
+from choreo.cli.jsonout import problem_record
+from choreo.cli.terminal import columns
+from choreo.errors import ShowError, one_line
+from choreo.textfit import display_width, fit, pad, visible
+from choreo.wire.layouts import EXAMPLE_CONFIG
 
 if TYPE_CHECKING:  # the model is imported by the handlers, not by `choreo --help`
     from choreo.show.model import Plan, PlannedStep, Show
@@ -43,8 +50,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_validate(args: argparse.Namespace) -> int:
-    from choreo.cli.jsonout import problem_record
-    from choreo.errors import ShowError, one_line
     from choreo.show.load import load_show
     from choreo.show.plan import compile_plans
 
@@ -136,9 +141,6 @@ def run_plan(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(_plans_record(show, plans), ensure_ascii=False))
         return 0
-    from choreo.cli.terminal import columns
-    from choreo.textfit import fit
-
     width = columns()
     lines = plan_lines(show, *plans.values()) if not show.ensemble else ensemble_lines(show, plans)
     for line in lines:
@@ -150,8 +152,6 @@ def _plans_record(show: Show, plans: dict[str, Plan]) -> dict[str, Any]:
     """One robot: the plan as before; several: `robots`, each robot's plan by name."""
     if not show.ensemble:
         return _plan_record(show, *plans.values())
-    from dataclasses import replace
-
     robots = {}
     for name, plan in plans.items():
         mine = replace(plan, steps=tuple(step for step in plan.steps if step.is_for(name)))
@@ -198,8 +198,6 @@ def _step_table(steps: Sequence[PlannedStep], shared: bool = False) -> list[str]
         )
         for step in steps
     ]
-    from choreo.textfit import display_width, pad, visible
-
     header = ("#", "path", "label", "start", "step", "frames")
     # by the columns a terminal gives each cell (a Japanese name takes two a character), as shown
     cells = [tuple(visible(cell) for cell in row) for row in [header, *rows]]
@@ -211,8 +209,6 @@ def _step_table(steps: Sequence[PlannedStep], shared: bool = False) -> list[str]
 def _layout_note(plan: Plan) -> str:
     if plan.layout == "seed":
         return ""
-    from choreo.wire.layouts import EXAMPLE_CONFIG
-
     return (f" (suspend and resume shown for config 0x{EXAMPLE_CONFIG:04x}: the run makes them "
             "from the config word it reads from the board)")
 
