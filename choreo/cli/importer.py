@@ -10,6 +10,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from choreo.errors import UsageError, one_line
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     command = subparsers.add_parser(
@@ -37,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_import(args: argparse.Namespace) -> int:
-    from choreo.errors import one_line
+    # the project reader (XML, codecs) when the command runs: `choreo --help` does not pay for it
     from choreo.show.hth4 import read_project
     from choreo.show.starter import schema_reference, starter_show
 
@@ -65,8 +67,6 @@ def _write_stdout(text: str) -> None:
 
 
 def _write_new(path: Path, text: str) -> None:
-    from choreo.errors import UsageError
-
     try:
         with open(path, "x", encoding="utf-8", newline="\n") as stream:
             stream.write(text)
