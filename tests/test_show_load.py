@@ -588,6 +588,20 @@ def test_a_whole_number_too_long_for_any_value_is_a_located_problem(tmp_path, va
     assert "characters long" in problem.message and len(problem.message) < 120
 
 
+@pytest.mark.parametrize(("value", "message"), [
+    ("0x" + "F" * 28, "motion 5192296858534827628530496329220095 is out of range 0..119"),  # 112 bits, 30 characters
+    ("1" * 30, "motion 111111111111111111111111111111 is out of range 0..119"),
+    ("!!int " + "1" * 30, "motion 111111111111111111111111111111 is out of range 0..119"),  # 97 bits
+    ("!!int 0x" + "F" * 28, "a whole number 30 characters long (0xFFFFFFFFFF…): no value in a show needs more than 30"),
+    ("1" * 31, "a whole number 31 characters long (111111111111…): no value in a show needs more than 30"),
+])
+def test_a_plain_whole_number_is_bounded_by_its_length_a_tagged_one_by_its_value(tmp_path, value, message):
+    """Plain numbers are refused past 30 characters before they are converted; a tagged `!!int`
+    is converted by PyYAML (any base, underscores), so its value is what is bounded (100 bits)."""
+    problem = only(tmp_path, f"version: 1\nsteps:\n  - play: {value}\n")
+    assert (problem.line, problem.column, problem.path, problem.message) == (3, 11, "steps[0].play", message)
+
+
 def test_a_long_value_a_tag_cannot_read_is_shown_cut(tmp_path):
     problem = only(tmp_path, "version: 1\nsteps:\n  - play: !!int 1" + "0" * 5000 + "\n")
     assert problem.message.startswith("cannot read '1000") and len(problem.message) < 80
