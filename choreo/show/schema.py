@@ -14,7 +14,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Optional
+from typing import TYPE_CHECKING, Any
 
 from choreo.show.model import MOTION_NAME_FORMAT, is_motion_name
 from choreo.show.report import Doc, JsonPath, Report, closest, kind_text, value_text
@@ -189,7 +189,7 @@ def _one_of_forms(error: _Error, data: Any) -> list[_Said] | None:
 
 
 # In this order: the first that knows the error says it.
-_RULES: tuple[Callable[[_Error, Any], Optional[list[_Said]]], ...] = (
+_RULES: tuple[Callable[[_Error, Any], list[_Said] | None], ...] = (
     _dependent_schema, _whole_show, _robot_settings, _property_name, _unknown_keys, _missing_keys,
     _step_kind, _repeat_parts, _one_of_forms,
 )
