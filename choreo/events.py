@@ -121,9 +121,6 @@ class Listeners(Generic[L]):
     def __len__(self) -> int:
         return len(self._now)
 
-    def __contains__(self, listener: object) -> bool:
-        return any(known is listener for known in self._now)
-
 
 # -- the link: frames and replies --------------------------------------------------------------
 
