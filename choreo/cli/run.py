@@ -455,13 +455,13 @@ def _opening_lines(settings: RunSettings) -> list[str]:
 
 def _show_line(settings: RunSettings) -> str:
     show, sections = settings.show, settings.sections
-    start = next(iter(sections.starts.values()))
+    start = sections.starts[_solo(settings).robot]  # shared steps: every robot starts at this step
     first = f" from step {start}" if start and not show.tracks else ""
     if show.tracks and sections.origin:
         first = f" from {sections.origin:.3f} s"
     estimated = max(plan.estimated_s for plan in settings.plans.values())
     if not show.ensemble:
-        steps = len(next(iter(settings.plans.values())).steps)
+        steps = len(settings.plans[_solo(settings).robot].steps)
         return f"show: {show.name}: {steps} steps{first}, about {estimated:.1f} s"
     form = "tracks" if show.tracks else "shared steps"
     return f"show: {show.name}: {len(settings.links)} robots, {form}{first}, about {estimated:.1f} s"

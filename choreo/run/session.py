@@ -154,7 +154,8 @@ class Session:
 
     def _ensemble(self, runners: dict[str, Runner], stop: StopRequest, listeners: list[RunListener]) -> Ensemble:
         parts = [Part(name, runner, self.settings.links[name].on_fault) for name, runner in runners.items()]
-        unison = next(iter(self.settings.plans.values())).unison  # shared steps: every plan says the same
+        first = next(iter(self.settings.links))  # shared steps: every robot's plan says the same
+        unison = self.settings.plans[first].unison
         return Ensemble(parts, self.clock, stop, unison=unison, origin=self.settings.sections.origin,
                         log=lambda level, message: self._tell(listeners, level, message))
 
