@@ -37,7 +37,7 @@ from choreo.log.recorder import Recorder, RobotInfo, RunInfo, default_log_path
 from choreo.numtext import whole_number
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.showtime import ShowTimes
-from choreo.run.settings import LinkSettings, check_output_folder, check_timeout, show_durations
+from choreo.run.settings import LinkSettings, check_output_folder, check_timeout, given_layout, show_durations
 from choreo.run.stage import Stage
 from choreo.show.model import SOLO
 from choreo.sim.options import is_simulator
@@ -146,10 +146,7 @@ def check_options(speed: float, baud: int | None, timeout: float | None, layout:
         raise UsageError(f"--speed {speed:g}: give a speed from {MIN_SPEED:g} to {MAX_SPEED:g} "
                          "(1 is the recorded timing, 2 twice as fast, 0.5 half as fast)")
     if layout is not None:
-        try:
-            layout_named(layout)
-        except ValueError as exc:
-            raise UsageError(f"--layout: {exc}") from None
+        given_layout(layout)
     if baud is not None and baud not in BAUDS:
         raise UsageError(f"--baud {baud}: the RCB-4 runs at {spell_bauds()} baud")
     if timeout is not None:

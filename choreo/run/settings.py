@@ -349,13 +349,18 @@ def _check_in_song(song: Song, origin: float, given: str) -> None:
                          "step, or --no-music to run on the machine's clock")
 
 
+def given_layout(name: str) -> Layout:
+    """The layout `--layout` names (UsageError, exit 2, for one this choreo does not know)."""
+    try:
+        return layout_named(name)
+    except ValueError as exc:
+        raise UsageError(f"--layout: {exc}") from None
+
+
 def _layout(given: str | None, in_show: str | None) -> tuple[Layout, str]:
     """The run's layout and who chose it: `--layout`, the show's robot.layout, else seed."""
     if given is not None:
-        try:
-            return layout_named(given), "command line"
-        except ValueError as exc:
-            raise UsageError(f"--layout: {exc}") from None
+        return given_layout(given), "command line"
     if in_show is not None:
         return layout_named(in_show), "show"
     return SEED, "default"
