@@ -18,12 +18,13 @@ from typing import TYPE_CHECKING, Any
 
 from choreo.show.model import MOTION_NAME_FORMAT, is_motion_name
 from choreo.show.report import Doc, JsonPath, Report, closest, kind_text, value_text
-from choreo.wire.protocol import spell_bauds
+from choreo.wire.protocol import MOTION_SLOTS, spell_bauds
 
 if TYPE_CHECKING:
     from jsonschema import Draft202012Validator, ValidationError
 
 SCHEMA_FILE = "show.schema.json"
+_SLOTS = f"0..{MOTION_SLOTS - 1}"  # the motion numbers a board has, as messages write them
 
 
 def load_schema() -> dict[str, Any]:
@@ -276,10 +277,10 @@ def _either_problem(error: _Error) -> str:
         return f"wait takes seconds (a number > 0) or `done`, not {value_text(instance)}"
     for e in near:
         if e.validator in ("minimum", "maximum"):
-            return f"motion {value_text(instance)} is out of range 0..119"
+            return _slot_problem(instance)
         if e.validator == "minLength":
             return "the motion name is empty"
-    return (f"expected a motion number 0..119 or a name from `motions:`, not {kind_text(instance)}"
+    return (f"expected a motion number {_SLOTS} or a name from `motions:`, not {kind_text(instance)}"
             f"{_quote_hint(instance)}")
 
 
@@ -320,8 +321,9 @@ def _layout_problem(instance: Any, expected: Any) -> str:
             "(`choreo import` reads a board's layout from its Heart to Heart 4 project)")
 
 
-def _slot_problem(instance: Any, expected: Any) -> str:
-    return f"motion {value_text(instance)} is out of range 0..119"
+def _slot_problem(instance: Any, expected: Any = None) -> str:
+    """A motion number past the board's slots (`expected`: the schema's bound, implied)."""
+    return f"motion {value_text(instance)} is out of range {_SLOTS}"
 
 
 _Say = Callable[[Any, Any], str]  # (the value, the keyword's value in the schema) -> message
