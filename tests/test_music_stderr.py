@@ -42,6 +42,7 @@ def test_devices_doctor_and_a_music_run_never_point_fd_2_elsewhere(tmp_path: Pat
     with contextlib.suppress(AudioError):
         try_output(None)  # the default output: on a machine without a sound card, ALSA's noisiest path
     assert try_output(NULL_OUTPUT) == "Null"
+    assert main(["doctor", "--no-probe"]) in (0, 1)  # its audio check opens the default output
     write_song(tmp_path / "song.wav", 0.4)
     show = music_show(tmp_path, "{file: song.wav}", "  - play: 1\n    at: 0.1\n")
     assert main(["run", str(show), "--no-log"]) == 0  # the default output, or null where it will not open
