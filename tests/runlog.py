@@ -61,6 +61,32 @@ class RunLog:
         return [m["hex"] for m in self.tx]
 
 
+ON_CUE_S = 0.02  # a real-time run's motion starts this close to its cue on an idle machine
+
+
+def off_cue_s(steps: list[dict], end: dict) -> float:
+    """How far past its cue a play's motion started, less however late the run itself measured
+    the step's start (its thread woke late: a loaded machine's scheduler, which the log says).
+
+    Real-time tests check the show clock's arithmetic with this, not the machine's speed (that
+    is bench/'s to measure): a motion the runner put off its cue is off by the same amount
+    however idle the machine, while a wake-up the scheduler delayed is excused only as far as
+    the run measured and logged it. A motion started early is never excused (negative result)."""
+    woke_late_s = 0.0
+    for message in steps:
+        if message is end:
+            break
+        if message["event"] == "start" and message["index"] == end["index"]:
+            woke_late_s = max(0.0, message["late_ms"] / 1e3)
+    offset = end["start_s"] - end["cue"]
+    return offset if offset < 0 else max(0.0, offset - woke_late_s)
+
+
+def started_on_cue(steps: list[dict], end: dict, within_s: float = ON_CUE_S) -> bool:
+    """A play's motion started on its cue (`off_cue_s`), never early by more than `within_s`."""
+    return abs(off_cue_s(steps, end)) < within_s
+
+
 def read_log(path: Path) -> RunLog:
     """A complete log, through the indexed (seeking) reader."""
     log = RunLog()

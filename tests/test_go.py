@@ -18,7 +18,7 @@ from choreo.cli import main
 from choreo.events import PANIC, StopRequest
 from choreo.run.session import Session
 from choreo.run.settings import RunRequest
-from runlog import LiveRun as Running, read_log, wait_for, write_show
+from runlog import LiveRun as Running, read_log, started_on_cue, wait_for, write_show
 
 GO_SHOW = """\
 version: 1
@@ -183,8 +183,9 @@ def test_in_a_music_show_a_go_cue_waits_while_the_music_plays_on(tmp_path):
     # the GO came about 0.3 s into the music: the step went then, reported against the music
     assert 0.25 < steps["bow"]["actual_s"] < 0.6 and steps["bow"]["go"]
     # the cue after it stays where it is in the music (the clock did not hold)
-    end = next(m for m in run.log().topic("/choreo/step") if m["event"] == "end" and m.get("label") == "later")
-    assert abs(end["start_s"] - 0.8) < 0.02
+    steps = run.log().topic("/choreo/step")
+    end = next(m for m in steps if m["event"] == "end" and m.get("label") == "later")
+    assert end["cue"] == 0.8 and started_on_cue(steps, end)
 
 
 def test_a_go_cue_in_a_repeat_waits_on_every_pass(tmp_path):
@@ -267,7 +268,8 @@ def test_loop_in_a_music_show_restarts_the_music_with_each_pass(tmp_path):
     ends = [m for m in log.topic("/choreo/step") if m["event"] == "end"]
     assert [m["label"] for m in ends][:4] == ["a", "b", "a", "b"] and 3 not in [m.get("motion") for m in ends]
     # each pass starts the music again from a's moment: the motions start on its cues every time
-    assert all(abs(m["start_s"] - m["cue"]) < 0.02 for m in ends if m["outcome"] == "ok")
+    steps = log.topic("/choreo/step")
+    assert all(started_on_cue(steps, m) for m in ends if m["outcome"] == "ok")
     shows = [m["show_s"] for m in log.topic("/choreo/clock")]
     assert any(later < earlier for earlier, later in pairwise(shows))  # the clock went back to a
 
@@ -320,19 +322,25 @@ def test_the_reviews_place_frames_on_the_held_clock(tmp_path, capsys):
     time.sleep(0.4)
     assert run.go().ok
     run.finish()
+    # the third play, cued at 0.5: what the reviews must show, give or take the run's own
+    # measure of how late its thread woke on a busy machine (0.9 would mean the hold counted)
+    steps = run.log().topic("/choreo/step")
+    third = [m for m in steps if m["event"] == "end" and m["kind"] == "play"][2]
+    assert third["cue"] == 0.5 and started_on_cue(steps, third)
+    late_s = third["start_s"] - 0.5
     assert main(["log", "frames", str(run.log_path), "--kind", "play"]) == 0
     plays = [line for line in capsys.readouterr().out.splitlines() if "CALL" in line]
-    assert len(plays) == 3 and 0.48 < float(plays[2].split()[0]) < 0.53  # cued at 0.5 (not 0.9: the hold is out)
+    assert len(plays) == 3 and 0.48 < float(plays[2].split()[0]) < 0.53 + late_s
     assert main(["log", "summary", str(run.log_path), "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["clock"]["samples"] >= 3
     from choreo.review.summary import summarize
 
     starts = [play.start_s for play in summarize(run.log_path).plays]
-    assert abs(starts[2] - 0.5) < 0.03, starts  # the motion on its cue, on the show clock (0.9 if the hold counted)
+    assert starts[2] == pytest.approx(third["start_s"], abs=1e-3), starts  # the log's, on the show clock
     from choreo.review.timeline import build
     from choreo.log.reader import LogReader
 
     with LogReader(run.log_path) as reader:
         runs = [r for r in build(reader).runs if r.motion == 3]
-    assert len(runs) == 1 and abs(runs[0].start_s - 0.5) < 0.03
+    assert len(runs) == 1 and runs[0].start_s == pytest.approx(third["start_s"], abs=1e-3)
