@@ -413,10 +413,11 @@ class Recorder:
             self._stop_request = None
 
     def _ask_to_stop(self, reason: str) -> None:
+        """The log stopped the run only if its reason took: a disk that fills once a panic (or
+        a Ctrl-C) is stopping the run leaves the run that reason (first reason wins)."""
         stop = self._stop_request
         if not self.stopped_run and stop is not None:
-            self.stopped_run = True
-            stop.request(reason)
+            self.stopped_run = stop.request(reason)
 
     def check(self) -> None:
         """LogError if the log failed, or stopped the run: the run's outcome is this error."""
