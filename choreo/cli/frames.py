@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from choreo.errors import UsageError
-from choreo.wire.layouts import DEFAULT_LAYOUT, LAYOUT_NAMES
+from choreo.wire.layouts import DEFAULT_LAYOUT, HTH4_22, LAYOUT_NAMES, SEED
 from choreo.wire.protocol import BAUD_CODES, DEFAULT_BAUD, MOTION_SLOTS, spell_bauds
 
 KINDS = ("play", "stop", "counter", "restore", "status")
@@ -55,7 +55,8 @@ def _config(text: str | None, used: bool) -> int | None:
     if text is None:
         return None
     if not used:
-        raise UsageError("--config: the seed layout's frames are fixed; --config is for --layout hth4-2.2")
+        raise UsageError(f"--config: the {SEED.name} layout's frames are fixed; "
+                         f"--config is for --layout {HTH4_22.name}")
     try:
         word = int(text, 0)
     except ValueError:

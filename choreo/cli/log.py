@@ -19,7 +19,9 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING, BinaryIO, TextIO, cast
 
 from choreo.errors import UsageError
+from choreo.log import LOG_DIR, LOG_SUFFIX
 from choreo.textfit import visible
+from choreo.wire.layouts import LAYOUT_NAMES
 from choreo.wire.protocol import DEFAULT_BAUD, spell_bauds
 
 if TYPE_CHECKING:  # loaded by the commands that read logs: --help stays light
@@ -65,7 +67,7 @@ def _latest_parser(commands: argparse._SubParsersAction) -> None:
         "latest", help="print the newest log's path",
         description="Print the path of the newest .mcap log in DIR (default runs/, where `choreo run` "
         "writes them), for scripts: `choreo log summary \"$(choreo log latest)\"`.")
-    latest.add_argument("dir", nargs="?", default="runs", help="the folder (default runs)")
+    latest.add_argument("dir", nargs="?", default=LOG_DIR, help=f"the folder (default {LOG_DIR})")
     latest.set_defaults(handler=run_latest)
 
 
@@ -125,7 +127,7 @@ def _replay_parser(subparsers: argparse._SubParsersAction) -> None:
     replay.add_argument("--speed", type=float, default=1.0, metavar="X",
                         help="timing factor, 0.01..1000: 2 plays twice as fast, and a sim:// board runs its "
                         "motions twice as fast too (default 1, the recorded timing)")
-    replay.add_argument("--layout", choices=("seed", "hth4-2.2"),
+    replay.add_argument("--layout", choices=LAYOUT_NAMES,
                         help="the board layout the simulator models, for every robot of a show for several "
                         "(default: the one the log records for each robot)")
     replay.add_argument("--baud", type=int, help=f"{spell_bauds('or')} (default: the recorded run's "
@@ -220,7 +222,7 @@ def _folder_logs(folder: Path) -> list[Path]:
 
     logs, others = [], 0
     for path in listing(folder, "log folder"):
-        if not path.name.endswith(".mcap") or path.name.startswith("."):
+        if not path.name.endswith(LOG_SUFFIX) or path.name.startswith("."):
             continue
         modified = modified_if_regular(path)
         if modified is None:

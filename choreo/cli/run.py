@@ -506,7 +506,7 @@ def _layout_line(link: LinkSettings) -> str:
     layout = link.layout
     line = f"layout: {layout.name} (motion 0 at 0x{layout.first_slot:04x})"
     if link.assumes_layout:
-        other = "hth4-2.2" if layout.name == "seed" else "seed"
+        other = next(name for name in LAYOUT_NAMES if name != layout.name)
         return (f"{line}, assumed: the show names no robot.layout; a board whose motions were "
                 f"written by Heart to Heart 4 2.2 or later needs --layout {other} "
                 "(`choreo probe` hints which)")

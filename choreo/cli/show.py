@@ -18,7 +18,7 @@ from choreo.cli.jsonout import problem_record
 from choreo.cli.terminal import columns
 from choreo.errors import ShowError, one_line
 from choreo.textfit import display_width, fit, pad, visible
-from choreo.wire.layouts import EXAMPLE_CONFIG
+from choreo.wire.layouts import EXAMPLE_CONFIG, layout_named
 
 if TYPE_CHECKING:  # the model is imported by the handlers, not by `choreo --help`
     from choreo.show.model import Plan, PlannedStep, Show
@@ -207,7 +207,7 @@ def _step_table(steps: Sequence[PlannedStep], shared: bool = False) -> list[str]
 
 
 def _layout_note(plan: Plan) -> str:
-    if plan.layout == "seed":
+    if not layout_named(plan.layout).reads_config:
         return ""
     return (f" (suspend and resume shown for config 0x{EXAMPLE_CONFIG:04x}: the run makes them "
             "from the config word it reads from the board)")

@@ -48,7 +48,9 @@ from mcap.writer import CompressionType, Writer
 from choreo import __version__
 from choreo.errors import LogError
 from choreo.limits import UNLOGGED
+from choreo.log import LOG_DIR, LOG_SUFFIX
 from choreo.events import CommandEvent, RxEvent, StepEvent, StopRequest, TxEvent
+from choreo.wire.layouts import DEFAULT_LAYOUT
 from choreo.log.format import (CLOCK_TOPIC, COMMAND_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC,
                                STEP_TOPIC, TX_TOPIC, ClockRecord, CommandRecord, LogRecord, RxRecord, StepRecord,
                                TxRecord, channels_for, layout_key, robot_topic)
@@ -75,14 +77,14 @@ ROOM_MARGIN = RESERVE_AHEAD // 4 // MESSAGE_BUDGET  # messages short of the room
 MAX_NAME_BYTES = 200  # of a default log name's show part: 255 less the time, a suffix, `.mcap`
 
 
-def default_log_path(show_name: str, directory: str | Path = "runs", now: datetime | None = None) -> Path:
-    """`runs/<show name>-<UTC time>.mcap`, a name that sorts by time and never repeats a run's."""
+def default_log_path(show_name: str, directory: str | Path = LOG_DIR, now: datetime | None = None) -> Path:
+    """`runs/<show name>-<UTC time>.mcap` (LOG_DIR, LOG_SUFFIX), a name that sorts by time and never repeats a run's."""
     now = now or datetime.now(timezone.utc)
     safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in show_name) or "show"
     # A file name is at most 255 bytes: a long show name is cut (at a character) so that the
     # time, a `-99` suffix and `.mcap` always fit.
     safe = safe.encode()[:MAX_NAME_BYTES].decode("utf-8", "ignore")
-    return Path(directory) / f"{safe}-{now.strftime('%Y%m%dT%H%M%SZ')}.mcap"
+    return Path(directory) / f"{safe}-{now.strftime('%Y%m%dT%H%M%SZ')}{LOG_SUFFIX}"
 
 
 def schema_text(filename: str) -> bytes:
@@ -96,7 +98,7 @@ class RobotInfo:
     name: str
     port: str
     baud: int
-    layout: str = "seed"
+    layout: str = DEFAULT_LAYOUT
 
 
 @dataclass(frozen=True)
@@ -110,7 +112,7 @@ class RunInfo:
     port: str
     baud: int
     start_ns: int
-    layout: str = "seed"
+    layout: str = DEFAULT_LAYOUT
     robots: tuple[RobotInfo, ...] = ()
     unison: bool = False  # the robots share their steps (a unison play's starts are comparable)
 

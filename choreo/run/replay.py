@@ -32,6 +32,7 @@ from choreo.errors import UsageError
 from choreo.events import Tag
 from choreo.log.format import (LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, LogLayouts, Record, RxRecord,
                                StepRecord, TxRecord, parse, reply_meaning)
+from choreo.log import LOG_DIR
 from choreo.log.reader import Cut, LogReader
 from choreo.log.recorder import Recorder, RobotInfo, RunInfo, default_log_path
 from choreo.numtext import whole_number
@@ -162,7 +163,7 @@ class ReplayRequest:
     baud: int | None = None
     timeout: float | None = None
     log_path: str | Path | None = None
-    log_dir: str | Path = "runs"
+    log_dir: str | Path = LOG_DIR
     layout: str | None = None
 
 
@@ -184,7 +185,7 @@ class ReplaySettings:
 
 
 def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, baud: int | None = None,
-           timeout: float | None = None, log_path: str | Path | None = None, log_dir: str | Path = "runs",
+           timeout: float | None = None, log_path: str | Path | None = None, log_dir: str | Path = LOG_DIR,
            layout: str | None = None, time_source: TimeSource | None = None,
            on_difference: Callable[[Difference], None] | None = None,
            on_start: Callable[[ReplayReport], None] | None = None) -> ReplayReport:

@@ -23,6 +23,7 @@ from typing import TypeVar
 from choreo.board.link import DEFAULT_TIMEOUT_S, DEFAULT_TRIES
 from choreo.clock import TimeSource
 from choreo.errors import UsageError, did_you_mean
+from choreo.log import LOG_DIR
 from choreo.log.recorder import RobotInfo, RunInfo, default_log_path
 from choreo.music.player import Output, Song, pick_output
 from choreo.run.sections import Sections, select
@@ -53,7 +54,7 @@ class RunRequest:
     timeout: float | None = None
     retries: int | None = None
     layout: str | None = None
-    log_dir: str = "runs"
+    log_dir: str = LOG_DIR
     robot_ports: Mapping[str, str] = field(default_factory=dict)  # `--port NAME=URL`
     no_music: bool = False  # `--no-music`: silent, on the machine's clock
     audio_device: str | None = None  # `--audio-device`: an output from `choreo devices`

@@ -14,6 +14,7 @@ from enum import Enum
 from pathlib import Path
 
 from choreo.numtext import whole_number
+from choreo.wire.layouts import DEFAULT_LAYOUT
 from choreo.wire.protocol import Frame
 from choreo.textfit import is_hidden
 
@@ -257,7 +258,7 @@ class Plan:
 
     steps: tuple[PlannedStep, ...]
     estimated_s: float  # estimated total duration on the show clock
-    layout: str = "seed"  # the board layout whose frames the steps carry
+    layout: str = DEFAULT_LAYOUT  # the board layout whose frames the steps carry
     robot: str = SOLO  # whose plan it is
     unison: bool = False  # shared steps: each starts when every robot it is for is through the one before
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from choreo.wire import protocol
-from choreo.wire.layouts import Layout, layout_named
+from choreo.wire.layouts import DEFAULT_LAYOUT, Layout, layout_named
 from choreo.show.load import load_show
 from choreo.show.model import DEFAULT_MOTION_S, Plan, PlannedStep, Repeat, Show, Step, StepKind
 
@@ -64,7 +64,7 @@ def compile_plans(show: Show, layouts: Mapping[str, Layout] | None = None,
     """
     layouts = layouts or {}
     bauds = bauds or {}
-    links = {name: (layouts.get(name) or layout_named(settings.layout or "seed"),
+    links = {name: (layouts.get(name) or layout_named(settings.layout or DEFAULT_LAYOUT),
                     bauds.get(name) or settings.baud or protocol.DEFAULT_BAUD)
              for name, settings in show.cast.items()}
     if show.tracks:

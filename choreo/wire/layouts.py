@@ -30,7 +30,6 @@ from functools import lru_cache
 from choreo.wire import protocol as p
 from choreo.wire.protocol import Frame, FrameKind
 
-DEFAULT_LAYOUT = "seed"
 # The config word a real HTH4 2.2+ project saves (docs/hardware.md, "Layouts: Two ways to play a
 # motion"): what `choreo plan` and `choreo frames` show for hth4-2.2 when no board has been read.
 EXAMPLE_CONFIG = 0x821B
@@ -155,6 +154,7 @@ HTH4_22 = Layout(
     build=_hth4_sequence,
 )
 LAYOUTS: dict[str, Layout] = {layout.name: layout for layout in (SEED, HTH4_22)}
+DEFAULT_LAYOUT = SEED.name  # what a show, a log and the simulator assume when none is named
 LAYOUT_NAMES = tuple(LAYOUTS)
 
 
