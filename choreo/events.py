@@ -274,6 +274,10 @@ class GoCue:
     released: bool = False
     key: object = None
 
+    def reached_by(self, robot: str) -> None:
+        """`robot` waits at it too (the live controls call it, under their lock)."""
+        self.robots.add(robot)
+
     def release(self) -> None:
         """Its GO was given (the live controls call it, under their lock)."""
         self.released = True

@@ -403,6 +403,9 @@ ALLOWED = {
     "live_render._shape": "rich keeps no public way to forget the drawn shape after a terminal resize",
     "self._screen.size": "rich's Console.size setter, on the console this object made",
     "self.line.settings": "the simulator's own line, held by the port that made it",
+    "setattr(sys)": "the process entry gives Python a stream on a standard descriptor found closed at start-up",
+    "serial.protocol_handler_packages.append": "pyserial's documented way to find URL handlers by package name "
+                                               "(register_url_handlers adds choreo.sim once)",
 }
 
 
@@ -455,6 +458,47 @@ def _outside_assignments(path: Path, root: Path = CHOREO.parent) -> list[str]:
                 if isinstance(attribute.value, ast.Name) and attribute.value.id in own:
                     continue
                 found.append(f"{path.relative_to(root)}:{node.lineno}: {ast.unparse(attribute)}")
+        found += [f"{path.relative_to(root)}:{line}: {what}" for line, what in _outside_mutations(function, own)]
+    return found
+
+
+# What changes an object as surely as `x.attr = ...` does: a container attribute edited in
+# place, an attribute deleted, or set and read by name.
+_MUTATORS = {"append", "extend", "insert", "remove", "pop", "popitem", "clear", "update", "setdefault",
+             "add", "discard", "sort", "reverse", "__setitem__", "__delitem__", "__setattr__", "__delattr__"}
+
+
+def _foreign(node: ast.AST, own: set[str]) -> bool:
+    """An attribute of something other than the function's own names (`link.listeners`,
+    `self.runner.cues`, `make().x`): not `self.x`, not `record.x` of its own record."""
+    return isinstance(node, ast.Attribute) and not (isinstance(node.value, ast.Name) and node.value.id in own)
+
+
+def _outside_mutations(function: ast.FunctionDef | ast.AsyncFunctionDef, own: set[str]) -> list[tuple[int, str]]:
+    """`setattr(x, ...)`, `vars(x)`, `x.__dict__`, `x.items.append(...)`, `x.table[k] = v`,
+    `x.total[k] += 1`, `del x.attr`, `del x.table[k]`, `for x.attr in ...`, `with ... as x.attr`."""
+    found: list[tuple[int, str]] = []
+    for node in ast.walk(function):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.args and \
+                node.func.id in ("setattr", "delattr", "vars") and \
+                not (isinstance(node.args[0], ast.Name) and node.args[0].id in own):
+            found.append((node.lineno, f"{node.func.id}({ast.unparse(node.args[0])})"))
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and \
+                node.func.attr in _MUTATORS and _foreign(node.func.value, own):
+            found.append((node.lineno, ast.unparse(node.func)))
+        elif isinstance(node, ast.Attribute) and node.attr == "__dict__":
+            found.append((node.lineno, ast.unparse(node)))
+        targets = node.targets if isinstance(node, (ast.Assign, ast.Delete)) else \
+            [node.target] if isinstance(node, (ast.AugAssign, ast.AnnAssign, ast.For, ast.AsyncFor)) else \
+            [item.optional_vars for item in node.items if item.optional_vars is not None] \
+            if isinstance(node, (ast.With, ast.AsyncWith)) else []
+        for target in targets:
+            if isinstance(target, ast.Subscript) and _foreign(target.value, own):
+                found.append((node.lineno, f"{ast.unparse(target.value)}[]"))
+            elif isinstance(node, ast.Delete) and _foreign(target, own):
+                found.append((node.lineno, f"del {ast.unparse(target)}"))
+            elif isinstance(node, (ast.For, ast.AsyncFor, ast.With, ast.AsyncWith)) and _foreign(target, own):
+                found.append((node.lineno, ast.unparse(target)))
     return found
 
 
@@ -489,3 +533,34 @@ def test_the_attribute_check_sees_wiring_from_outside(tmp_path):
     assert _outside_assignments(sample, tmp_path) == ["choreo/sample.py:5: runner.cues",
                                                       "choreo/sample.py:13: runner.on_idle"]
     assert "port.time_source" in ALLOWED  # the allow-list is applied by the test, not by the check
+
+
+def test_the_attribute_check_sees_edits_that_are_not_plain_assignments(tmp_path):
+    """The holes a plain `x.attr = ...` check leaves: a list or dict attribute edited in place,
+    set by name or through `__dict__`/`vars`, deleted, or bound by a loop or a `with`. The
+    function's own names (`self`, its own records) stay its own to change."""
+    sample = tmp_path / "choreo" / "sample.py"
+    sample.parent.mkdir()
+    sample.write_text("class Record:\n    total = 0\n"
+                      "def wire(link, runner, live, name, make):\n"
+                      "    link.listeners.append(print)\n"        # 4
+                      "    runner.gates[name] = None\n"           # 5
+                      "    runner.counts[name] += 1\n"            # 6
+                      "    setattr(runner, name, None)\n"         # 7
+                      "    runner.__dict__['cues'] = None\n"      # 8
+                      "    vars(live)['show'] = None\n"           # 9
+                      "    del link.should_stop\n"                # 10
+                      "    del runner.gates[name]\n"              # 11
+                      "    make().extras.update(a=1)\n"           # 12
+                      "    for live.show in (1, 2):\n        pass\n"  # 13
+                      "    self.link.listeners.remove(print)\n"   # 15
+                      "def own(self, name):\n"
+                      "    record = Record()\n"
+                      "    self.items.append(name)\n    self.table[name] = 1\n    del self.table[name]\n"
+                      "    setattr(self, name, 1)\n    setattr(record, name, 2)\n    record.parts.append(3)\n")
+    assert sorted(_outside_assignments(sample, tmp_path)) == sorted(
+        f"choreo/sample.py:{line}: {what}" for line, what in [
+            (4, "link.listeners.append"), (5, "runner.gates[]"), (6, "runner.counts[]"), (7, "setattr(runner)"),
+            (8, "runner.__dict__[]"), (8, "runner.__dict__"), (9, "vars(live)"),
+            (10, "del link.should_stop"), (11, "runner.gates[]"), (12, "make().extras.update"),
+            (13, "live.show"), (15, "self.link.listeners.remove")])

@@ -147,7 +147,7 @@ class Live:
             new = cue is None
             if cue is None:
                 cue = self._waiting[key] = GoCue(step, set(), reached_s, key=key)
-            cue.robots.add(robot)
+            cue.reached_by(robot)
             if isinstance(show, HoldingShowClock):
                 show.hold_at(reached_s)
             self._changed.notify_all()
