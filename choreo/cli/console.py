@@ -638,7 +638,7 @@ class Console:
                 mode.restore()
 
     def _watch_links(self) -> None:
-        stage = getattr(self.session, "stage", None)
+        stage = self.session.stage  # None until the session opens: no links to watch yet
         for name, link in (stage.links.items() if stage is not None else ()):
             self._watches.append(link.subscribe(_LinkWatch(self, name)))
 
