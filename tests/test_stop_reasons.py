@@ -61,3 +61,78 @@ def test_a_log_disk_filling_after_the_stop_leaves_the_stop_its_reason(tmp_path, 
     log = read_log(Path(log_path))
     assert log.metadata["choreo.result"]["outcome"] == "aborted"
     assert any(m["message"].startswith(f"show {reason} at") for m in log.logs)
+
+
+# -- --loop: what each pass attaches goes with it ----------------------------------------------------
+
+LOOP_TWO_ROBOTS_GO = """
+    version: 1
+    robots:
+      left: {}
+      right: {}
+    steps:
+      - play: 1
+        label: intro
+      - play: 2
+        label: a
+        at: go
+      - wait: 0.1
+      - play: 3
+        label: b
+      - play: 4
+"""
+
+
+class GoAndStopAtPass:
+    """Gives each GO cue its GO as it is reached (the operator, at once) and stops the run as
+    pass `last + 1` begins."""
+
+    def __init__(self, live, last: int) -> None:  # type: ignore[no-untyped-def]
+        self.live = live
+        self.last = last
+        self.cues = 0
+
+    def on_step(self, event: StepEvent) -> None:
+        pass
+
+    def on_log(self, level: int, message: str, time_ns: int) -> None:
+        if message.startswith(f"loop: pass {self.last + 1} "):
+            self.live.stop.request("interrupted (test)")
+
+    def on_waiting(self, cue) -> None:  # type: ignore[no-untyped-def]
+        self.cues += 1
+        from choreo.events import Command
+
+        assert self.live.command(Command("go", "test")).ok
+
+    def on_command(self, event) -> None:  # type: ignore[no-untyped-def]
+        pass
+
+
+def test_loop_with_two_robots_a_go_cue_and_the_live_controls_logs_each_failed_try_once(tmp_path):
+    """The variant of issue 22's `--loop` defect with several robots, a GO cue each pass and
+    the live controls heard by the log: every NAK either robot meets is one warning line, and
+    after the run nothing of it is left on the links or the controls."""
+    from choreo.live.controls import Live
+
+    show = write_show(tmp_path, LOOP_TWO_ROBOTS_GO)
+    log_path = tmp_path / "run.mcap"
+    ports = {"left": "sim://?nak=5", "right": "sim://?nak=4"}
+    session = prepare(RunRequest(str(show), robot_ports=ports, log_path=str(log_path), loop="a..b"))
+    live = Live(StopRequest(), now=session.clock.mono, wall_ns=session.clock.wall_ns, lockout_s=0.0)
+    operator = GoAndStopAtPass(live, 3)
+    with session, live.subscribe(operator):
+        result = session.run([operator], live=live)
+        links = session.stage.links if session.stage is not None else {}
+        assert [len(link.listeners) for link in links.values()] == [1, 1]  # the log's own, only
+    assert result.outcome == "aborted" and operator.cues == 3  # a GO cue in each of the 3 passes
+    assert len(live.listeners) == 0  # the log's subscription went with the run, the operator's with its block
+    log = read_log(Path(log_path))
+    passes = [m["message"] for m in log.logs if m["message"].startswith("loop: pass")]
+    assert passes[:2] == ["loop: pass 2 from 'a' to 'b'", "loop: pass 3 from 'a' to 'b'"]
+    for robot in ("left", "right"):
+        naks = [m for m in log.topic(f"/rcb4/{robot}/rx") if m["kind"] == "nak"]
+        warned = [m["message"] for m in log.logs
+                  if m["message"].startswith(f"robot {robot}: ") and "NAK" in m["message"]]
+        assert len(naks) >= 3 and len(warned) == len(naks), (robot, len(naks), warned)
+        assert len(set(warned)) == len(warned)
