@@ -445,7 +445,11 @@ def _outside_assignments(path: Path, root: Path = CHOREO.parent) -> list[str]:
     tree = ast.parse(path.read_text(encoding="utf-8"))
     classes = {n.name for n in ast.walk(tree) if isinstance(n, ast.ClassDef)}
     found = []
-    for function in ast.walk(tree):
+    # what the module does as it is imported (`Other.attr = ...` at its top level) is read too
+    top = [s for s in tree.body if not isinstance(s, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))]
+    on_import = ast.FunctionDef(name="<module>", args=ast.arguments(posonlyargs=[], args=[], kwonlyargs=[],
+                                kw_defaults=[], defaults=[]), body=top or [ast.Pass()], decorator_list=[])
+    for function in [*ast.walk(tree), on_import]:
         if not isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef)):
             continue
         own = _own_records(function, classes) | {"self", "cls"}
@@ -557,10 +561,14 @@ def test_the_attribute_check_sees_edits_that_are_not_plain_assignments(tmp_path)
                       "def own(self, name):\n"
                       "    record = Record()\n"
                       "    self.items.append(name)\n    self.table[name] = 1\n    del self.table[name]\n"
-                      "    setattr(self, name, 1)\n    setattr(record, name, 2)\n    record.parts.append(3)\n")
+                      "    setattr(self, name, 1)\n    setattr(record, name, 2)\n    record.parts.append(3)\n"
+                      "Runner.on_idle = print\n"                 # 24: on import, another module's class
+                      "serial.protocol_handler_packages.append('x')\n"  # 25
+                      "HANDLERS = []\nHANDLERS.append(print)\n")  # the module's own list
     assert sorted(_outside_assignments(sample, tmp_path)) == sorted(
         f"choreo/sample.py:{line}: {what}" for line, what in [
             (4, "link.listeners.append"), (5, "runner.gates[]"), (6, "runner.counts[]"), (7, "setattr(runner)"),
             (8, "runner.__dict__[]"), (8, "runner.__dict__"), (9, "vars(live)"),
             (10, "del link.should_stop"), (11, "runner.gates[]"), (12, "make().extras.update"),
-            (13, "live.show"), (15, "self.link.listeners.remove")])
+            (13, "live.show"), (15, "self.link.listeners.remove"), (24, "Runner.on_idle"),
+            (25, "serial.protocol_handler_packages.append")])
