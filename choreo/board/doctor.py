@@ -15,12 +15,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from choreo.errors import ChoreoError, UsageError, one_line
+from choreo.board.link import NETWORK_URLS
 from choreo.board.probe import BoardInfo
-from choreo.board.usb import KONDO_USB, KONDO_USB_ID, NEW_ID_FIX, SYSFS, latency_fix, latency_timer_ms, usb_devices
-from choreo.wire.protocol import play_sequence
+from choreo.board.usb import (KONDO_USB, KONDO_USB_ID, LOW_LATENCY_MS, NEW_ID_FIX, SYSFS, latency_cost, latency_fix,
+                              latency_timer_ms, usb_devices)
+from choreo.show.model import SIM_URL, is_simulator
 
 OK, PROBLEM, NOTE = "ok", "problem", "note"
-PLAY_FRAMES = len(play_sequence(0))  # the replies a play waits for (the document's sequence)
+OTHER_URLS = (*NETWORK_URLS, "loop://")  # pyserial ports that are no device of this machine
 
 
 @dataclass(frozen=True)
@@ -58,13 +60,13 @@ def examine(ports: Sequence[SerialPort], port: str | None = None, *, sysfs: Path
     the board on `port` (or on the one Kondo adapter found), then the music's output."""
     findings = _adapters(ports, sysfs)
     target = port or _only_kondo(ports)
-    if target is not None and not target.lower().startswith(("sim://", "socket://", "rfc2217://", "loop://")):
+    if target is not None and not is_simulator(target) and not target.lower().startswith(OTHER_URLS):
         findings += _device(target, sysfs)
     if target is None:  # a show could not run either: a problem, not a note
         several = sum(1 for p in ports if p.is_kondo) > 1
         findings.append(Finding(PROBLEM, "board", "no port to check: no --port given and "
                                 f"{'several Kondo adapters' if several else 'no Kondo adapter'} found",
-                                "choreo doctor --port /dev/ttyUSB0 (or sim:// to try the simulator)"))
+                                f"choreo doctor --port /dev/ttyUSB0 (or {SIM_URL} to try the simulator)"))
     elif probe is not None:
         findings.append(_board(target, probe))
     if audio is not None:
@@ -90,7 +92,7 @@ def _adapters(ports: Sequence[SerialPort], sysfs: Path) -> list[Finding]:
         return [Finding(NOTE, "adapter", f"no Kondo adapter ({KONDO_USB_ID}) found; serial ports: {listed}",
                         "plug in Kondo's adapter, or give --port for another one")]
     return [Finding(PROBLEM, "adapter", f"no serial ports and no Kondo adapter ({KONDO_USB_ID}) found",
-                    "plug in the adapter (and check `lsusb`); sim:// runs shows without one")]
+                    f"plug in the adapter (and check `lsusb`); {SIM_URL} runs shows without one")]
 
 
 def _device(device: str, sysfs: Path) -> list[Finding]:
@@ -108,9 +110,9 @@ def _device(device: str, sysfs: Path) -> list[Finding]:
     if timer is None:
         findings.append(Finding(NOTE, "latency", f"{device} has no FTDI latency timer to read (not an FTDI "
                                 "adapter, or not Linux)"))
-    elif timer > 1:
-        findings.append(Finding(PROBLEM, "latency", f"{device}'s FTDI latency timer is {timer} ms: each reply "
-                                f"may wait up to {timer} ms, a play up to {PLAY_FRAMES * timer} ms more",
+    elif timer > LOW_LATENCY_MS:
+        findings.append(Finding(PROBLEM, "latency", f"{device}'s FTDI latency timer is {timer} ms: "
+                                f"{latency_cost(timer)}",
                                 latency_fix(device, sysfs)))
     else:
         findings.append(Finding(OK, "latency", f"{device}'s FTDI latency timer is {timer} ms"))

@@ -15,6 +15,7 @@ from contextlib import contextmanager, suppress
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
+from choreo.board import usb
 from choreo.clock import RunClock, TimeSource
 from choreo.errors import Interrupted, LinkError
 from choreo.events import LinkListener, Listeners, RxEvent, Subscription, Tag, TxEvent, never
@@ -77,6 +78,7 @@ class PortLost(Exception):
 # pyserial's `serial_for_url` imports `protocol_<scheme>` from each package named in
 # `serial.protocol_handler_packages`: the simulator's `sim://` is found by its package's name, so
 # the board layer never imports the simulator.
+NETWORK_URLS = ("socket://", "rfc2217://")  # pyserial's ports over the network: HOST:PORT
 URL_HANDLER_PACKAGES = ("choreo.sim",)
 
 
@@ -118,17 +120,15 @@ def open_port(url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TI
 def usb_latency_note(port: serial.SerialBase) -> str | None:
     """Ask a real serial device's driver for low latency; if its FTDI latency timer still holds
     replies over 1 ms, what that costs and the command that fixes it (said once, at open)."""
-    from choreo.board.usb import LOW_LATENCY_MS, ask_low_latency, latency_fix, latency_timer_ms
-
     device = str(getattr(port, "port", "") or "")
     if not device.startswith("/dev/"):
         return None  # a URL port (sim://, socket://): no USB adapter of its own
-    ask_low_latency(port)
-    timer = latency_timer_ms(device)
-    if timer is None or timer <= LOW_LATENCY_MS:
+    usb.ask_low_latency(port)
+    timer = usb.latency_timer_ms(device)
+    if timer is None or timer <= usb.LOW_LATENCY_MS:
         return None
-    return (f"port {device}: the USB adapter's latency timer is {timer} ms: each reply may wait up to "
-            f"{timer} ms, a play up to {3 * timer} ms more; fix: {latency_fix(device)}")
+    return (f"port {device}: the USB adapter's latency timer is {timer} ms: {usb.latency_cost(timer)}; "
+            f"fix: {usb.latency_fix(device)}")
 
 
 def _reason(exc: BaseException) -> str:

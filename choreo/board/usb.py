@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
+from choreo.wire.protocol import play_sequence
+
 KONDO_USB = (0x165C, 0x0008)  # Kondo Dual USB Adapter HS (an FTDI chip)
 KONDO_USB_ID = f"{KONDO_USB[0]:04X}:{KONDO_USB[1]:04X}"  # `165C:0008`, as lsusb and messages show it
 SYSFS = Path("/sys")
@@ -20,6 +22,13 @@ FTDI_DRIVER = "bus/usb-serial/drivers/ftdi_sio"
 NEW_ID = f"{KONDO_USB[0]:04X} {KONDO_USB[1]:04X}"  # what ftdi_sio's new_id file takes: `165C 0008`
 NEW_ID_FIX = f"echo {NEW_ID} | sudo tee /sys/{FTDI_DRIVER}/new_id   (after: sudo modprobe ftdi_sio)"
 LOW_LATENCY_MS = 1
+PLAY_FRAMES = len(play_sequence(0))  # the replies a play waits for (the document's sequence)
+
+
+def latency_cost(timer_ms: int) -> str:
+    """What a latency timer of `timer_ms` costs: a run says it at open, `choreo doctor` in its
+    finding, in the same words."""
+    return f"each reply may wait up to {timer_ms} ms, a play up to {PLAY_FRAMES * timer_ms} ms more"
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from choreo.cli.terminal import StatusWriter
 from choreo.cli.terminal import columns as terminal_columns
-from choreo.errors import ChoreoError, Interrupted
+from choreo.errors import ChoreoError, Interrupted, UsageError
 from choreo.signals import STOP_SIGNALS
 from choreo.wire.layouts import LAYOUT_NAMES
 from choreo.wire.protocol import spell_bauds
@@ -174,8 +174,6 @@ def _wants_console(args: argparse.Namespace) -> bool:
 def _check_go_sources(settings: RunSettings, console: bool, args: argparse.Namespace) -> None:
     """A show with GO cues (or --wait-start) needs someone to give the GO: refused before any
     port opens, not a show that waits for ever."""
-    from choreo.errors import UsageError
-
     if args.osc is None:
         given = [name for name, value in (("--osc-allow", args.osc_allow), ("--osc-notify", args.osc_notify),
                                           ("--osc-host", args.osc_host != "127.0.0.1")) if value]
@@ -199,7 +197,6 @@ def _check_osc_options(args: argparse.Namespace) -> tuple[int | None, tuple]:
     """The OSC options' values, checked before anything is loaded or opened (the port's binding
     and the notify targets' look-up come next, still before the session opens): --osc's port
     number (None: no OSC) and --osc-notify's targets."""
-    from choreo.errors import UsageError
     from choreo.live.osc import parse_allow
     from choreo.live.oscnotify import parse_targets, port_number
 
@@ -287,7 +284,6 @@ def _console(session: Session, live: Live | None, console: bool, listeners: list
 
 def port_arguments(values: list[str] | None) -> tuple[str | None, dict[str, str]]:
     """`--port URL` (one robot) and `--port NAME=URL` (repeatable, one robot of several)."""
-    from choreo.errors import UsageError
     from choreo.run.settings import split_robot_port
 
     plain: list[str] = []
@@ -309,17 +305,14 @@ def port_arguments(values: list[str] | None) -> tuple[str | None, dict[str, str]
     return (plain[0] if plain else None), named
 
 
-NETWORK_PORTS = ("socket://", "rfc2217://")  # pyserial's URLs of a port over the network: HOST:PORT
-
-
 def _check_network_port(url: str, given: str) -> None:
     """A network port's URL names a host and a port number (1..65535): a bad one is a bad
     argument (exit 2) found before anything opens, not a port that would not open (exit 3)."""
     from urllib.parse import urlsplit
 
-    from choreo.errors import UsageError
+    from choreo.board.link import NETWORK_URLS
 
-    if not url.lower().startswith(NETWORK_PORTS):
+    if not url.lower().startswith(NETWORK_URLS):
         return
     try:
         parts = urlsplit(url)

@@ -70,6 +70,7 @@ def channels_for(robots: tuple[str, ...] = ()) -> dict[str, tuple[str, str]]:
     return {**split, **{topic: CHANNELS[topic] for topic in shared}}
 METADATA_NAME = "choreo"
 RESULT_METADATA_NAME = "choreo.result"
+SHOW_MEDIA_TYPE = "application/yaml"  # how the run attaches its show file, and how a review finds it
 
 
 def layout_key(robot: str | None) -> str:

@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import IO
 
 from choreo.errors import InputError, LogError
-from choreo.log.format import CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME, base_topic
+from choreo.log.format import CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME, SHOW_MEDIA_TYPE, base_topic
 from choreo.userfile import open_input, reading
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -161,7 +161,7 @@ class LogReader:
 
     def show_attachment(self) -> Attachment | None:
         """The show file the run played (attached as application/yaml), if the log has it."""
-        return next((a for a in self.attachments if a.media_type == "application/yaml"), None)
+        return next((a for a in self.attachments if a.media_type == SHOW_MEDIA_TYPE), None)
 
     def attachment_data(self, attachment: Attachment) -> bytes:
         """An attachment's bytes (read now: a log's attachments never sit in memory unasked)."""

@@ -52,8 +52,8 @@ from choreo.log import LOG_DIR, LOG_SUFFIX
 from choreo.events import CommandEvent, RxEvent, StepEvent, StopRequest, TxEvent
 from choreo.wire.layouts import DEFAULT_LAYOUT
 from choreo.log.format import (CLOCK_TOPIC, COMMAND_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC,
-                               STEP_TOPIC, TX_TOPIC, ClockRecord, CommandRecord, LogRecord, RxRecord, StepRecord,
-                               TxRecord, channels_for, layout_key, robot_topic)
+                               SHOW_MEDIA_TYPE, STEP_TOPIC, TX_TOPIC, ClockRecord, CommandRecord, LogRecord, RxRecord,
+                               StepRecord, TxRecord, channels_for, layout_key, robot_topic)
 
 FLUSH_EVERY_S = 0.5
 BATCH = 16  # messages the background flusher writes before it lets the runner have the GIL
@@ -274,7 +274,7 @@ class Recorder:
         self._writer.add_metadata(METADATA_NAME, info.metadata())
         self._writer.add_attachment(
             create_time=info.start_ns, log_time=info.start_ns,
-            name=_utf8(Path(info.show_path).name), media_type="application/yaml", data=info.show_source,
+            name=_utf8(Path(info.show_path).name), media_type=SHOW_MEDIA_TYPE, data=info.show_source,
         )
         self._writer.flush()
         self._file.flush()

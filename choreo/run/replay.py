@@ -40,8 +40,7 @@ from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.showtime import ShowTimes
 from choreo.run.settings import LinkSettings, check_output_folder, check_timeout, given_layout, show_durations
 from choreo.run.stage import Stage
-from choreo.show.model import SOLO
-from choreo.sim.options import is_simulator
+from choreo.show.model import SIM_URL, SOLO, is_simulator
 from choreo.wire.layouts import LAYOUT_NAMES, layout_named
 from choreo.wire.protocol import BAUDS, DEFAULT_BAUD, Frame, FrameKind, spell_bauds
 
@@ -245,7 +244,7 @@ def _solo_link(reader: LogReader, show: AttachedShow, request: ReplayRequest, la
     if baud is None:
         recorded = whole_number(reader.run_info.get("baud", ""))
         baud = recorded if request.port and recorded is not None and recorded in BAUDS else DEFAULT_BAUD
-    return LinkSettings(SOLO, request.port or "sim://", "command line", baud, request.timeout or DEFAULT_TIMEOUT_S,
+    return LinkSettings(SOLO, request.port or SIM_URL, "command line", baud, request.timeout or DEFAULT_TIMEOUT_S,
                         tries=1, durations=show_durations(show.show, show.plan), board_layout=layout_named(layout),
                         speed=request.speed)
 
@@ -258,7 +257,7 @@ def _robot_link(reader: LogReader, show: AttachedShow, robot: str, layout_name: 
     baud = recorded if recorded is not None and recorded in BAUDS else DEFAULT_BAUD
     plan = show.plan_of(robot)
     abort = show.show.abort_motion(robot) if show.show is not None and plan is not None else None
-    return LinkSettings(robot, "sim://", "simulator", baud, request.timeout or DEFAULT_TIMEOUT_S, tries=1,
+    return LinkSettings(robot, SIM_URL, "simulator", baud, request.timeout or DEFAULT_TIMEOUT_S, tries=1,
                         durations=show_durations(show.show, plan, abort), board_layout=layout_named(layout_name),
                         speed=request.speed)
 

@@ -28,9 +28,9 @@ from choreo.log.recorder import RobotInfo, RunInfo, default_log_path
 from choreo.music.player import Output, Song, pick_output
 from choreo.run.sections import Sections, select
 from choreo.show.load import load_show
-from choreo.show.model import DEFAULT_MOTION_S, Plan, RobotSettings, Show, same_port
+from choreo.show.model import DEFAULT_MOTION_S, SIM_URL, Plan, RobotSettings, Show, is_simulator, same_port
 from choreo.show.plan import compile_plans
-from choreo.sim.options import SimUrl, durations_text, is_simulator, ms_text
+from choreo.sim.options import SimUrl, durations_text, ms_text
 from choreo.wire.layouts import SEED, Layout, layout_named
 from choreo.wire.protocol import BAUDS, DEFAULT_BAUD, spell_bauds
 
@@ -171,14 +171,14 @@ def _port(given: str | None, robot: RobotSettings, request: RunRequest) -> tuple
     if request.rehearse:
         if given is not None and not is_simulator(given):
             raise UsageError(f"--rehearse runs every robot on the simulator: leave out --port {given}")
-        return given or "sim://", "simulator (--rehearse)"
+        return given or SIM_URL, "simulator (--rehearse)"
     if given is not None:
         if not given.strip():
             raise UsageError("--port: empty; give a device (/dev/ttyUSB0, COM3) or a URL (sim://)")
         return given, "command line"
     if robot.port:
         return robot.port, "show"
-    return "sim://", "simulator"
+    return SIM_URL, "simulator"
 
 
 def _with_durations(show: Show, plan: Plan, draft: LinkSettings) -> LinkSettings:

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, TypeGuard
 
 from choreo.show.build import tempo_of
-from choreo.show.model import GO, MUSIC_FORMATS, SOLO, hidden_character, same_port
+from choreo.show.model import GO, MUSIC_FORMATS, SOLO, hidden_character, is_simulator, same_port
 from choreo.show.report import Doc, JsonPath, Report, closest, format_path, value_text
 from choreo.userfile import problem as file_problem
 
@@ -120,7 +120,7 @@ def _check_robots(walk: _Walk) -> None:
         if "on_abort" in settings and walk.ok(here + ("on_abort",)):
             _check_motion_ref(walk, here + ("on_abort",), settings["on_abort"])
         port = settings.get("port")
-        if not isinstance(port, str) or port.strip().lower().startswith("sim://"):
+        if not isinstance(port, str) or is_simulator(port.strip()):
             continue  # every simulator is a board of its own
         first = ports.setdefault(same_port(port), name)
         if first != name:

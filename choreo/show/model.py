@@ -77,6 +77,16 @@ class RobotSettings:
     on_fault: str = "stop"  # `ON_FAULT`: stop the show, or let the other robots go on
 
 
+SIM_URL = "sim://"  # the built-in simulator's port: a show may name it, a run without a port plays on it
+SIM_SCHEME = SIM_URL.removesuffix("://")  # pyserial finds the simulator's handler (sim.protocol_sim) by it
+
+
+def is_simulator(port: str) -> bool:
+    """A port that is the built-in simulator (`sim://...`), not a device or another URL: the
+    show's checks, the run's settings, the doctor and the replay ask this one question."""
+    return port.lower().startswith(SIM_URL)
+
+
 def same_port(port: str) -> str:
     """A port as compared for sharing: a device path normalised (`/dev/../dev/ttyUSB0`, a
     trailing space), a URL as written. The show's checks and the run's (a port given on the

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
+from choreo.show.model import SIM_SCHEME, SIM_URL
 from choreo.wire.layouts import SEED, Layout, layout_named
 from choreo.wire.protocol import BAUDS, DEFAULT_BAUD, MOTION_SLOTS, spell_bauds
 from choreo.sim.board import (
@@ -94,9 +95,6 @@ class SimOptions:
         return f"{self.baud} baud 8E1, {board}, {motions}, {status}{adapter}, {self.faults.describe()}"
 
 
-SCHEME = "sim"
-
-
 @dataclass(frozen=True)
 class SimUrl:
     """A `sim://` URL as the options it spells out, in their order: read through the same
@@ -114,7 +112,7 @@ class SimUrl:
     def parse(cls, url: str) -> SimUrl:
         """ValueError names what is wrong: not a `sim://` URL, an unknown option, a bad value."""
         parts = urlsplit(url)
-        if parts.scheme.lower() != SCHEME:
+        if parts.scheme.lower() != SIM_SCHEME:
             raise ValueError(f"{url!r}: expected a URL like sim://?motion_s=0.5&drop=5")
         if parts.netloc or parts.path.strip("/") or parts.fragment:
             raise ValueError(f"{url!r}: sim:// takes options only after '?', like sim://?motion_s=0.5")
@@ -142,12 +140,7 @@ class SimUrl:
         return self.with_text(**{name: text for name, text in values.items() if not self.says(name)})
 
     def __str__(self) -> str:
-        return f"{SCHEME}://" + (f"?{urlencode(self.said, safe=':,')}" if self.said else "")
-
-
-def is_simulator(url: str) -> bool:
-    """A port that is the built-in simulator (`sim://...`), not a device or another URL."""
-    return url.lower().startswith(f"{SCHEME}://")
+        return SIM_URL + (f"?{urlencode(self.said, safe=':,')}" if self.said else "")
 
 
 def durations_text(durations: Mapping[int, float]) -> str:
