@@ -11,6 +11,8 @@ import json
 import math
 from typing import TYPE_CHECKING
 
+from choreo.errors import UsageError
+
 if TYPE_CHECKING:  # numpy and miniaudio load only when a song is read
     from choreo.music.beats import Beat, BeatEstimate
 
@@ -41,8 +43,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from choreo.errors import UsageError
-
     try:
         from choreo.music import beats
     except ModuleNotFoundError as exc:
@@ -67,8 +67,6 @@ def run(args: argparse.Namespace) -> int:
 
 def parse_bpm_range(text: str, limits: tuple[float, float]) -> tuple[float, float]:
     """`100..180` as (100.0, 180.0); anything else is a usage error that shows the form."""
-    from choreo.errors import UsageError
-
     lo, sep, hi = text.partition("..")
     try:
         bounds = (float(lo), float(hi)) if sep else None

@@ -18,7 +18,7 @@ from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, BinaryIO, TextIO, cast
 
-from choreo.errors import UsageError
+from choreo.errors import UsageError, did_you_mean
 from choreo.log import LOG_DIR, LOG_SUFFIX
 from choreo.textfit import visible
 from choreo.wire.layouts import LAYOUT_NAMES
@@ -242,8 +242,6 @@ def run_frames(args: argparse.Namespace) -> int:
     with LogReader(args.log) as reader:
         robots = reader.robots
         if args.robot is not None and args.robot not in robots:
-            from choreo.errors import UsageError, did_you_mean
-
             known = f"its robots: {', '.join(robots)}" if robots else "it is a one-robot log"
             raise UsageError(f"--robot {args.robot}: not a robot of this log"
                              f"{did_you_mean(args.robot, robots)}; {known}")

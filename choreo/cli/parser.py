@@ -8,7 +8,7 @@ import re
 from collections.abc import Sequence
 from typing import NoReturn
 
-from choreo.errors import did_you_mean
+from choreo.errors import UsageError, did_you_mean
 
 _INVALID_CHOICE = re.compile(r"invalid choice: '(?P<given>[^']*)' \(choose from (?P<choices>.*)\)")
 
@@ -31,7 +31,6 @@ class ChoreoParser(argparse.ArgumentParser):
             message += did_you_mean(match.group("given"), choices)
         if self._wants_json():
             from choreo.cli.jsonout import error_record, print_json
-            from choreo.errors import UsageError
 
             print_json(error_record(UsageError(f"{self.prog}: {message}")))
         super().error(message)
