@@ -483,13 +483,9 @@ def _outside_mutations(function: ast.FunctionDef | ast.AsyncFunctionDef, own: se
     `x.total[k] += 1`, `del x.attr`, `del x.table[k]`, `for x.attr in ...`, `with ... as x.attr`."""
     found: list[tuple[int, str]] = []
     for node in ast.walk(function):
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.args and \
-                node.func.id in ("setattr", "delattr", "vars") and \
-                not (isinstance(node.args[0], ast.Name) and node.args[0].id in own):
-            found.append((node.lineno, f"{node.func.id}({ast.unparse(node.args[0])})"))
-        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and \
-                node.func.attr in _MUTATORS and _foreign(node.func.value, own):
-            found.append((node.lineno, ast.unparse(node.func)))
+        call = _outside_call(node, own) if isinstance(node, ast.Call) else None
+        if call is not None:
+            found.append((node.lineno, call))
         elif isinstance(node, ast.Attribute) and node.attr == "__dict__":
             found.append((node.lineno, ast.unparse(node)))
         targets = node.targets if isinstance(node, (ast.Assign, ast.Delete)) else \
@@ -504,6 +500,25 @@ def _outside_mutations(function: ast.FunctionDef | ast.AsyncFunctionDef, own: se
             elif isinstance(node, (ast.For, ast.AsyncFor, ast.With, ast.AsyncWith)) and _foreign(target, own):
                 found.append((node.lineno, ast.unparse(target)))
     return found
+
+
+def _outside_call(node: ast.Call, own: set[str]) -> str | None:
+    """A call that changes another object: `setattr(x, ...)`, `vars(x)`, `x.items.append(...)`,
+    `x.__setattr__(...)`, `object.__setattr__(x, ...)`; None for anything else."""
+    func = node.func
+    if isinstance(func, ast.Name) and node.args and func.id in ("setattr", "delattr", "vars"):
+        receiver: ast.expr = node.args[0]
+    elif isinstance(func, ast.Attribute) and func.attr in _MUTATORS and _foreign(func.value, own):
+        return ast.unparse(func)
+    elif isinstance(func, ast.Attribute) and func.attr in ("__setattr__", "__delattr__") and \
+            isinstance(func.value, ast.Name):
+        receiver = node.args[0] if func.value.id in ("object", "type") and node.args else func.value
+    else:
+        return None
+    if isinstance(receiver, ast.Name) and receiver.id in own:
+        return None
+    name = func.id if isinstance(func, ast.Name) else func.attr
+    return f"{name}({ast.unparse(receiver)})"
 
 
 def _all_outside_assignments() -> list[str]:
@@ -564,11 +579,16 @@ def test_the_attribute_check_sees_edits_that_are_not_plain_assignments(tmp_path)
                       "    setattr(self, name, 1)\n    setattr(record, name, 2)\n    record.parts.append(3)\n"
                       "Runner.on_idle = print\n"                 # 24: on import, another module's class
                       "serial.protocol_handler_packages.append('x')\n"  # 25
-                      "HANDLERS = []\nHANDLERS.append(print)\n")  # the module's own list
+                      "HANDLERS = []\nHANDLERS.append(print)\n"  # the module's own list
+                      "def dunder(runner, self):\n"
+                      "    runner.__setattr__('cues', None)\n"      # 29
+                      "    object.__setattr__(runner, 'cues', None)\n"  # 30
+                      "    object.__setattr__(self, 'frozen', 1)\n")  # a frozen dataclass's own field
     assert sorted(_outside_assignments(sample, tmp_path)) == sorted(
         f"choreo/sample.py:{line}: {what}" for line, what in [
             (4, "link.listeners.append"), (5, "runner.gates[]"), (6, "runner.counts[]"), (7, "setattr(runner)"),
             (8, "runner.__dict__[]"), (8, "runner.__dict__"), (9, "vars(live)"),
             (10, "del link.should_stop"), (11, "runner.gates[]"), (12, "make().extras.update"),
             (13, "live.show"), (15, "self.link.listeners.remove"), (24, "Runner.on_idle"),
-            (25, "serial.protocol_handler_packages.append")])
+            (25, "serial.protocol_handler_packages.append"), (29, "__setattr__(runner)"),
+            (30, "__setattr__(runner)")])
