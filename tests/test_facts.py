@@ -95,3 +95,29 @@ def test_a_copy_is_found_in_code_and_not_in_prose(tmp_path):
                                                 "sim.py:1: 'seed' (its home is layouts.py)"]
     assert list(copies(package, facts, {("sim.py", "seed"): "another meaning"})) == [
         "run.py:5: 115200 (its home is wire/protocol.py)"]
+
+
+def test_every_refusal_of_a_baud_says_the_same_words(capsys, tmp_path):
+    """The board model, the wire, `choreo frames` and a run refuse 9600 in one text (the baud list
+    and its wording come from protocol.baud_refusal; replay alone used to add the unit)."""
+    import pytest
+
+    from choreo.cli import main
+    from choreo.errors import UsageError
+    from choreo.run.settings import RunRequest, RunSettings
+    from choreo.sim.board import SimBoard
+    from choreo.wire.protocol import check_baud
+
+    said = "baud 9600: the RCB-4 runs at 115200, 625000, 1250000 baud"
+    with pytest.raises(ValueError) as wire:
+        check_baud(9600)
+    with pytest.raises(ValueError) as board:
+        SimBoard(baud=9600)
+    assert str(wire.value) == str(board.value) == said
+    assert main(["frames", "status", "--baud", "9600"]) == 2
+    assert capsys.readouterr().err.strip() == "--" + said
+    show = tmp_path / "show.yaml"
+    show.write_text("version: 1\nname: hello\nmotions:\n  wave: {number: 1}\nsteps:\n  - play: wave\n")
+    with pytest.raises(UsageError) as run:
+        RunSettings.settle(RunRequest(str(show), baud=9600))
+    assert str(run.value) == said

@@ -6,7 +6,7 @@ import argparse
 
 from choreo.errors import UsageError
 from choreo.wire.layouts import DEFAULT_LAYOUT, HTH4_22, LAYOUT_NAMES, SEED
-from choreo.wire.protocol import BAUD_CODES, DEFAULT_BAUD, MOTION_SLOTS, spell_bauds
+from choreo.wire.protocol import BAUD_CODES, DEFAULT_BAUD, MOTION_SLOTS, baud_refusal, spell_bauds
 
 KINDS = ("play", "stop", "counter", "restore", "status")
 
@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
 
     layout = layout_named(args.layout)
     if args.baud not in BAUD_CODES:
-        raise UsageError(f"--baud {args.baud}: the RCB-4 runs at {spell_bauds()}")
+        raise UsageError(baud_refusal(args.baud, "--baud"))
     config = _config(args.config, layout.reads_config)
     if args.kind != "play":
         _no_motion(args)

@@ -42,7 +42,7 @@ from choreo.run.settings import LinkSettings, check_output_folder, check_timeout
 from choreo.run.stage import Stage
 from choreo.show.model import SIM_URL, SOLO, is_simulator
 from choreo.wire.layouts import LAYOUT_NAMES, layout_named
-from choreo.wire.protocol import BAUDS, DEFAULT_BAUD, Frame, FrameKind, spell_bauds
+from choreo.wire.protocol import BAUDS, DEFAULT_BAUD, Frame, FrameKind, baud_refusal
 
 LISTED_DIFFERENCES = 200  # kept in the report; all are counted (and written to the new log)
 
@@ -148,7 +148,7 @@ def check_options(speed: float, baud: int | None, timeout: float | None, layout:
     if layout is not None:
         given_layout(layout)
     if baud is not None and baud not in BAUDS:
-        raise UsageError(f"--baud {baud}: the RCB-4 runs at {spell_bauds()} baud")
+        raise UsageError(baud_refusal(baud, "--baud"))
     if timeout is not None:
         check_timeout(timeout)
 

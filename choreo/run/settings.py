@@ -32,7 +32,7 @@ from choreo.show.model import DEFAULT_MOTION_S, SIM_URL, Plan, RobotSettings, Sh
 from choreo.show.plan import compile_plans
 from choreo.sim.options import SimUrl, durations_text, ms_text
 from choreo.wire.layouts import SEED, Layout, layout_named
-from choreo.wire.protocol import BAUDS, DEFAULT_BAUD, spell_bauds
+from choreo.wire.protocol import BAUDS, DEFAULT_BAUD, baud_refusal
 
 MAX_TIMEOUT_S = 10.0
 MAX_RETRIES = 10
@@ -154,7 +154,7 @@ def _link_settings(name: str, robot: RobotSettings, request: RunRequest, ensembl
     yet: they come from its plan, compiled for this baud and layout)."""
     baud = _pick(request.baud, robot.baud, DEFAULT_BAUD)
     if baud not in BAUDS:
-        raise UsageError(f"baud {baud}: the RCB-4 runs at {spell_bauds()}")
+        raise UsageError(baud_refusal(baud))
     layout, layout_source = _layout(request.layout, robot.layout)
     timeout = float(_pick(request.timeout, robot.timeout, DEFAULT_TIMEOUT_S))
     retries = int(_pick(request.retries, robot.retries, DEFAULT_TRIES - 1))

@@ -180,7 +180,7 @@ class SimBoard:
 
     def __post_init__(self) -> None:
         if self.baud not in p.BAUDS:
-            raise ValueError(f"baud {self.baud}: an RCB-4 runs at {p.spell_bauds()}")
+            raise ValueError(p.baud_refusal(self.baud))
         if self.reply_delay_s < 0:
             raise ValueError(f"reply delay must be >= 0, not {self.reply_delay_s}")
         if not self.refresh_s >= 0:

@@ -181,10 +181,16 @@ _SYNC = build_frame(CMD_ACK_CHECK, bytes((ACK_BYTE,)))
 _VERSION = build_frame(CMD_VERSION, b"")
 
 
+def baud_refusal(baud: int, named: str = "baud") -> str:
+    """Why `baud` will not do, in the words every refusal uses (`named`: how the user gave it,
+    `--baud` or `baud`): `--baud 9600: the RCB-4 runs at 115200, 625000, 1250000 baud`."""
+    return f"{named} {baud}: the RCB-4 runs at {spell_bauds()} baud"
+
+
 def check_baud(baud: int) -> int:
     """`baud` if an RCB-4 runs at it, else a ValueError that lists the bauds it runs at."""
     if baud not in BAUD_CODES:
-        raise ValueError(f"baud {baud}: the RCB-4 runs at {spell_bauds()}")
+        raise ValueError(baud_refusal(baud))
     return baud
 
 
