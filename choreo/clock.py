@@ -32,17 +32,45 @@ IDLE_S = 0.01
 SWITCH_S = 0.0001
 
 
+class _SwitchInterval:
+    """The interpreter's switch interval is the whole process's: one object stands for it, so
+    that blocks entered and left on several threads (two runs in one program) keep it quick
+    until the last one ends, then put back what was there before the first. Saving and
+    restoring per block would let the first run to end slow the other's threads down, and the
+    last to end leave the process switching every SWITCH_S for good."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._users = 0
+        self._before = 0.0
+
+    def enter(self) -> None:
+        with self._lock:
+            if self._users == 0:
+                self._before = sys.getswitchinterval()
+                sys.setswitchinterval(SWITCH_S)
+            self._users += 1
+
+    def leave(self) -> None:
+        with self._lock:
+            self._users -= 1
+            if self._users == 0:
+                sys.setswitchinterval(self._before)
+
+
+_SWITCHES = _SwitchInterval()  # the process's one switch interval (see _SwitchInterval)
+
+
 @contextlib.contextmanager
 def quick_thread_switches() -> Iterator[None]:
     """Python hands its lock between threads every 5 ms by default: while other threads share
     a show, a thread due to send could wait that long behind another's work. Every SWITCH_S
-    inside the block, as it was after it."""
-    before = sys.getswitchinterval()
-    sys.setswitchinterval(SWITCH_S)
+    inside the block (and any other such block, on any thread), as it was after the last."""
+    _SWITCHES.enter()
     try:
         yield
     finally:
-        sys.setswitchinterval(before)
+        _SWITCHES.leave()
 
 
 class TimeSource(Protocol):
