@@ -5,3 +5,4 @@ heavy modules (serial, mcap, jsonschema) are imported only by the code paths tha
 """
 
 __version__ = "0.1.0"
+SCHEMAS = "choreo.schemas"  # the JSON Schemas shipped with choreo: the show format's and the log's

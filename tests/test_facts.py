@@ -4,8 +4,9 @@ everywhere else, so changing it is one edit and no copy can drift from it.
 The check reads the code (not docstrings or comments) of every module of choreo/ for the facts
 below, each a constant as the code compares or builds with it: a baud, a layout's name, the
 simulator's URL, the log's folder and file suffix, the show attachment's media type, the
-schema's file name, pyserial's network URLs. A copy elsewhere fails with where it stands and where
-its home is. The second test proves the check on a made-up package.
+schema's file name, package and modeline, pyserial's network URLs, an interrupt's exit code.
+A copy elsewhere fails with where it stands and where its home is; the check is proved on a
+made-up package.
 """
 
 from __future__ import annotations
@@ -30,6 +31,9 @@ FACTS: dict[str | int, str] = {
     ".mcap": "log/__init__.py",
     "application/yaml": "log/format.py",
     "show.schema.json": "show/schema.py",
+    "# yaml-language-server: $schema=": "show/schema.py",
+    "choreo.schemas": "__init__.py",
+    130: "errors.py",  # Interrupted's exit code
 }
 # The same spelling that means something else there: (module, value) -> why it is not the fact.
 OTHER_MEANINGS: dict[tuple[str, str | int], str] = {

@@ -18,7 +18,7 @@ from choreo import __version__
 from choreo.cli.parser import ChoreoParser
 from choreo.cli.terminal import visible_output
 from choreo.cli.output import OUTPUT_ERROR_EXIT, Output, drop_output
-from choreo.errors import ChoreoError, OutputError
+from choreo.errors import ChoreoError, Interrupted, LinkError, OutputError, UsageError
 
 if TYPE_CHECKING:
     from choreo.clock import TimeSource
@@ -34,8 +34,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="choreo",
         description="Play stored motions on a Kondo RCB-4 robot from a YAML show file, "
         "byte-exact and on time, and record every frame to an MCAP log.",
-        epilog="Exit codes: 0 done; 2 bad show file or bad arguments (nothing was sent); "
-        "3 the robot link failed; 130 interrupted (Ctrl-C, SIGTERM). "
+        epilog=f"Exit codes: 0 done; {UsageError.exit_code} bad show file or bad arguments (nothing was sent); "
+        f"{LinkError.exit_code} the robot link failed; {Interrupted.exit_code} interrupted (Ctrl-C, SIGTERM). "
         "`choreo COMMAND --help` tells more.",
     )
     parser.add_argument("--version", action="version", version=f"choreo {__version__}")
@@ -96,7 +96,7 @@ def _outcome(argv: Sequence[str] | None, signals: SignalGuard | None, time_sourc
         return exc.exit_code
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
-        return 130
+        return Interrupted.exit_code
     except BrokenPipeError:
         # The reader of our output went away (`choreo log frames LOG | head`): not an error.
         drop_output(output.wrapped)

@@ -19,8 +19,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from choreo.show.load import schema_path
+    from choreo.show.schema import modeline, schema_path
 
     path = schema_path()
-    print(f"# yaml-language-server: $schema={path.as_uri()}" if args.modeline else path)
+    print(modeline(path.as_uri()) if args.modeline else path)
     return 0

@@ -45,7 +45,7 @@ from typing import IO, Any
 
 from mcap.writer import CompressionType, Writer
 
-from choreo import __version__
+from choreo import SCHEMAS, __version__
 from choreo.errors import LogError
 from choreo.limits import UNLOGGED
 from choreo.log import LOG_DIR, LOG_SUFFIX
@@ -88,7 +88,7 @@ def default_log_path(show_name: str, directory: str | Path = LOG_DIR, now: datet
 
 
 def schema_text(filename: str) -> bytes:
-    return (resources.files("choreo.schemas") / filename).read_bytes()
+    return (resources.files(SCHEMAS) / filename).read_bytes()
 
 
 @dataclass(frozen=True)

@@ -107,7 +107,7 @@ def outcome_metadata(finished: dict[str, str] | None, exc: BaseException | None)
         meta["error"] = str(exc)
         meta["exit_code"] = str(exc.exit_code)
     elif isinstance(exc, KeyboardInterrupt):
-        meta["exit_code"] = "130"
+        meta["exit_code"] = str(Interrupted.exit_code)
     elif exc is None:
-        meta.setdefault("exit_code", "130" if meta["outcome"] == "aborted" else "0")
+        meta.setdefault("exit_code", str(Interrupted.exit_code) if meta["outcome"] == "aborted" else "0")
     return meta

@@ -16,6 +16,7 @@ from importlib.resources import files
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from choreo import SCHEMAS
 from choreo.show.model import MOTION_NAME_FORMAT, is_motion_name
 from choreo.show.report import Doc, JsonPath, Report, closest, kind_text, value_text
 from choreo.wire.protocol import MOTION_SLOTS, spell_bauds
@@ -33,9 +34,15 @@ def load_schema() -> dict[str, Any]:
     return schema
 
 
+def modeline(schema: str) -> str:
+    """A show's first line that points editors with the YAML language server at `schema`
+    (`choreo schema --modeline` prints it, `choreo import` writes it)."""
+    return f"# yaml-language-server: $schema={schema}"
+
+
 def schema_path() -> Path:
     """Where the installed show schema is: what an editor's `$schema=` modeline points at."""
-    return Path(str(files("choreo.schemas") / SCHEMA_FILE)).resolve()
+    return Path(str(files(SCHEMAS) / SCHEMA_FILE)).resolve()
 
 
 @functools.lru_cache(maxsize=1)

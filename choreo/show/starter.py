@@ -15,9 +15,10 @@ from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
 
+from choreo import SCHEMAS
 from choreo.show.hth4 import LAYOUT_FIRST_SLOT, Project, ProjectSlot
 from choreo.show.model import MOTION_NAME_MAX, hidden_character, is_motion_name
-from choreo.show.schema import SCHEMA_FILE
+from choreo.show.schema import SCHEMA_FILE, modeline
 
 NAME_MAX = 200  # characters of a show's `name` and of an `hth4_name` (the schema's maxLength)
 
@@ -66,7 +67,7 @@ def starter_show(project: Project, schema: str | None = None) -> str:
     """
     motions = starter_motions(project.motions)
     source = _one_line(Path(project.path).name)
-    lines = [f"# yaml-language-server: $schema={schema}", "#"] if schema else []
+    lines = [modeline(schema), "#"] if schema else []
     lines += [
         f"# A starter show written by `choreo import` from the Heart to Heart 4 project {source}.",
         f"# The project puts slot 0 at ROM 0x{LAYOUT_FIRST_SLOT[project.layout]:04X}, "
@@ -88,7 +89,7 @@ def starter_show(project: Project, schema: str | None = None) -> str:
 
 def schema_reference(show: Path) -> str | None:
     """The installed show schema as a path relative to where `show` will be, if there is one."""
-    schema = files("choreo.schemas") / SCHEMA_FILE
+    schema = files(SCHEMAS) / SCHEMA_FILE
     if not isinstance(schema, Path) or not schema.is_file():
         return None  # inside a zip: no file an editor could open
     try:
