@@ -346,12 +346,22 @@ class Player:
 
     def start(self) -> MusicClock:
         """Open the output, start playing and return the clock once it is trusted."""
+        import miniaudio
+
         self.clock = MusicClock(self.song.sample_rate, self.origin - self.lead_in_s)
         self.feed = Feed(self.song, self.clock, self.lead_in_s, self.origin)
         self._device = self._open_device()
-        generator = self.feed.generator()
-        next(generator)
-        self._device.start(generator)
+        try:  # what it opened, it closes if the start fails: the run has not wired its close yet
+            generator = self.feed.generator()
+            next(generator)
+            self._device.start(generator)
+        except miniaudio.MiniaudioError as exc:
+            self.close()
+            raise AudioError(f"the audio output ({self.backend}) will not start playing ({_reason(exc)}): "
+                             "see `choreo devices`, or run with --no-music") from None
+        except BaseException:
+            self.close()
+            raise
         self._await_lock()
         return self.clock
 
