@@ -10,6 +10,8 @@ import difflib
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from choreo.textfit import visible
+
 
 def did_you_mean(given: str, known: Iterable[str]) -> str:
     """`: did you mean 'summary'?` when one of `known` is close to `given`, else ''."""
@@ -19,8 +21,6 @@ def did_you_mean(given: str, known: Iterable[str]) -> str:
 
 def one_line(text: str) -> str:
     """`text` with its line breaks (and every other control or invisible character) escaped."""
-    from choreo.textfit import visible
-
     return visible(text)
 
 

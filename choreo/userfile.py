@@ -24,6 +24,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from choreo.errors import InputError
+from choreo.textfit import visible
 
 _KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a named pipe"), (stat.S_ISCHR, "a device"),
           (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket"))
@@ -124,8 +125,6 @@ def _os_reason(name: str, exc: OSError, what: str) -> str:
 
 
 def _link_target(name: str) -> str:
-    from choreo.textfit import visible
-
     try:
         return repr(visible(os.readlink(name)))
     except OSError:

@@ -30,6 +30,7 @@ import numpy as np
 from choreo.errors import UsageError
 from choreo.show.model import MUSIC_FORMATS_TEXT, Tempo
 from choreo.textfit import visible
+from choreo.userfile import read_input
 
 SAMPLE_RATE = 22050  # Hz: enough for onsets, half the work of 44.1 kHz
 SONG_FORMATS = MUSIC_FORMATS_TEXT
@@ -124,8 +125,6 @@ class _Grid:
 def read_song(path: str, sample_rate: int = SAMPLE_RATE) -> Song:
     """The song as mono floats, read with miniaudio so that every format decodes without system
     libraries; unreadable files become one line that says what to do."""
-    from choreo.userfile import read_input
-
     name = os.fspath(path)
     data = read_input(name, "sound file", MAX_SONG_BYTES)  # a pipe, a device, a read error: one line
     if not data:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from bisect import bisect_right
 
+from choreo.numtext import whole_number
 from choreo.log.format import CLOCK_TOPIC, STEP_TOPIC, ClockRecord, StepRecord, parse
 from choreo.log.reader import LogReader
 
@@ -32,8 +33,6 @@ LOOKAHEAD_MESSAGES = 10_000
 
 def show_zero_ns(reader: LogReader) -> int | None:
     """The run's start as the metadata gives it (wall-clock ns), before a step says better."""
-    from choreo.numtext import whole_number
-
     return whole_number(reader.run_info.get("start_ns") or "")
 
 
