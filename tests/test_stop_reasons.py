@@ -60,7 +60,35 @@ def test_a_log_disk_filling_after_the_stop_leaves_the_stop_its_reason(tmp_path, 
     assert result.outcome == "aborted" and stop.reason == reason
     log = read_log(Path(log_path))
     assert log.metadata["choreo.result"]["outcome"] == "aborted"
+    assert log.metadata["choreo.result"]["stop_reason"] == reason
     assert any(m["message"].startswith(f"show {reason} at") for m in log.logs)
+
+
+def test_the_logs_metadata_names_the_panic_that_a_link_fault_followed(tmp_path):
+    """A panic, then robot right's link fails (its panic stop frame is lost): the run fails with
+    the link's error, and the log's metadata still says who stopped the show (before, only the
+    error: a review could not tell a panic from a fault that stopped the show by itself)."""
+    from choreo.errors import LinkError
+    from test_wiring import TWO_ROBOTS, PanicAt
+
+    log_path = tmp_path / "run.mcap"
+    ports = {"left": "sim://", "right": "sim://?lose=2&faults_on=stop"}
+    session = prepare(RunRequest(str(write_show(tmp_path, TWO_ROBOTS)), robot_ports=ports, log_path=str(log_path)))
+    stop = StopRequest()
+    with pytest.raises(LinkError, match="robot right"), session:  # the session closes on the error
+        session.run([PanicAt(stop, "right", "hold")], stop)
+    result = read_log(Path(log_path)).metadata["choreo.result"]
+    assert result["outcome"] == "failed" and result["stop_reason"] == PANIC
+    assert result["error"].startswith("robot right")
+
+
+def test_a_run_nobody_stopped_has_no_stop_reason(tmp_path):
+    log_path = tmp_path / "run.mcap"
+    session = prepare(RunRequest(str(write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n")),
+                                 log_path=str(log_path)))
+    with session:
+        assert session.run().outcome == "done"
+    assert "stop_reason" not in read_log(Path(log_path)).metadata["choreo.result"]
 
 
 # -- --loop: what each pass attaches goes with it ----------------------------------------------------

@@ -84,6 +84,15 @@ class Session:
         assert self.stage is not None, "open the session first (with session:)"
         stop = live.stop if live is not None else stop if stop is not None else StopRequest()
         everyone: list[RunListener] = ([self.recorder] if self.recorder else []) + list(listeners)
+        try:
+            return self._run(everyone, stop, live)
+        finally:  # the log's metadata names who stopped the run, however it ended (a panic then a fault)
+            if stop():
+                self.stage.add_to_outcome({"stop_reason": stop.reason})
+
+    def _run(self, everyone: list[RunListener], stop: StopRequest, live: Live | None) -> RunResult:
+        """The run, its log wired to the stop request and the live controls for its time."""
+        assert self.stage is not None
         with contextlib.ExitStack() as wiring:  # the log's wiring, for the run's time only
             if self.recorder is not None:
                 wiring.enter_context(self.recorder.stopping(stop))
