@@ -164,3 +164,18 @@ def test_loop_with_two_robots_a_go_cue_and_the_live_controls_logs_each_failed_tr
                   if m["message"].startswith(f"robot {robot}: ") and "NAK" in m["message"]]
         assert len(naks) >= 3 and len(warned) == len(naks), (robot, len(naks), warned)
         assert len(set(warned)) == len(warned)
+
+
+def test_a_run_given_two_stop_requests_is_refused_before_anything_moves(tmp_path):
+    """The signal handler's stop request and the live controls' must be one: given two, the
+    run read only the controls', and a Ctrl-C through the other was never seen."""
+    from choreo.live.controls import Live
+
+    session = prepare(RunRequest(str(write_show(tmp_path, "version: 1\nsteps:\n  - play: 1\n")), no_log=True))
+    signals, controls = StopRequest(), StopRequest()
+    with session:
+        with pytest.raises(ValueError, match="one stop request"):
+            session.run([], signals, Live(controls))
+        link = next(iter(session.stage.links.values())) if session.stage is not None else None
+        assert link is not None and not link.moved  # refused before a frame
+        assert session.run([], controls, Live(controls)).outcome == "done"  # the same one: fine

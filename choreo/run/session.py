@@ -82,6 +82,9 @@ class Session:
         motion) and its LogError is the run's outcome. `live`: the operator's controls (GO cues
         wait on them; --wait-start waits for start)."""
         assert self.stage is not None, "open the session first (with session:)"
+        if live is not None and stop is not None and stop is not live.stop:
+            # one stop request a run: the one given would never be read (a Ctrl-C through it lost)
+            raise ValueError("give the run one stop request: the live controls' own, or none")
         stop = live.stop if live is not None else stop if stop is not None else StopRequest()
         everyone: list[RunListener] = ([self.recorder] if self.recorder else []) + list(listeners)
         try:
