@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from choreo.events import PANIC, StepEvent, StopRequest
+from choreo.events import PANIC, StepEvent, StopRequest, never
 from choreo.log.format import INFO
 from choreo.run.session import Session
 from choreo.run.settings import RunRequest
@@ -77,6 +77,9 @@ def test_the_logs_metadata_names_the_panic_that_a_link_fault_followed(tmp_path):
     stop = StopRequest()
     with pytest.raises(LinkError, match="robot right"), session:  # the session closes on the error
         session.run([PanicAt(stop, "right", "hold")], stop)
+    links = session.stage.links if session.stage is not None else {}
+    assert [len(link.listeners) for link in links.values()] == [1, 1]  # a failed run's wiring went too
+    assert all(link._should_stop is never for link in links.values())  # and its stop checks
     result = read_log(Path(log_path)).metadata["choreo.result"]
     assert result["outcome"] == "failed" and result["stop_reason"] == PANIC
     assert result["error"].startswith("robot right")
