@@ -85,7 +85,7 @@ def test_latest_prints_the_newest_log(two_logs, tmp_path, capsys):
 
 @pytest.mark.parametrize("columns", [200, 80, 60, 40, 30, 20, 12, 8, 2])
 def test_the_live_line_never_fills_the_last_column(columns):
-    from choreo.cli.run import live_line
+    from choreo.cli.progress import live_line
 
     step = "step 12 'chorus' (13/26): play 30 (spin_around_twice_and_bow)"
     line = live_line(step, 12.34, 22.0, columns)
@@ -97,6 +97,6 @@ def test_the_live_line_never_fills_the_last_column(columns):
 
 
 def test_the_live_line_keeps_its_step_whole_when_it_fits():
-    from choreo.cli.run import live_line
+    from choreo.cli.progress import live_line
 
     assert live_line("step 0: play 1", 0.5, 1.0, 80) == "step 0: play 1  0.5/1.0 s [##########----------]"

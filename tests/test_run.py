@@ -497,7 +497,7 @@ def test_progress_is_a_plain_line_a_step_off_a_terminal_and_silent_with_quiet(tm
 def test_live_progress_line_redraws_in_place(tmp_path):
     import io
 
-    from choreo.cli.run import Progress
+    from choreo.cli.progress import Progress
     from choreo.events import StepEvent
 
     session = prepare(RunRequest(str(write_show(tmp_path, WIRE_SHOW)), no_log=True))

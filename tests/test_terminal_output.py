@@ -26,7 +26,7 @@ from mcap.reader import make_reader
 from rich.console import Console as RichConsole
 
 from choreo.cli.console import Note, Row, Screen, render
-from choreo.cli.run import Progress
+from choreo.cli.progress import Progress
 from choreo.cli.terminal import StatusWriter, VisibleStream, visible_output
 from choreo.events import Answer, Command, CommandEvent
 from choreo.events import StepEvent

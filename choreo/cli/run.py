@@ -5,27 +5,22 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
-import threading
-import time
 from collections.abc import Iterator
 from contextlib import closing, contextmanager, nullcontext
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING
 
-from choreo.cli.terminal import StatusWriter
-from choreo.cli.terminal import columns as terminal_columns
 from choreo.errors import ChoreoError, Interrupted, UsageError
 from choreo.signals import STOP_SIGNALS
 from choreo.wire.layouts import LAYOUT_NAMES
 from choreo.wire.protocol import spell_bauds
-from choreo.textfit import fit
 
 if TYPE_CHECKING:  # the run's modules load when a run starts: `choreo validate` and --help stay light
-    from choreo.events import CommandEvent, GoCue, RunResult, StopRequest
+    from choreo.cli.progress import Progress, Say
+    from choreo.events import RunResult, StopRequest
     from choreo.live.controls import Live
     from choreo.live.osc import OscServer
     from choreo.run.session import Session
-    from choreo.show.model import Plan
-    from choreo.run.settings import LinkSettings, RunSettings
+    from choreo.run.settings import RunSettings
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -113,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, report: "_RunReport") -> int:
+    from choreo.cli.progress import Progress, Say, opening_lines
     from choreo.events import ResultListener, StopRequest
     from choreo.run.session import Session
     from choreo.run.settings import RunRequest
@@ -132,8 +128,8 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     live = _live(args, stop, console)
     # listening (not serving yet) before a line is said or anything opens
     osc = _bound_osc(args, osc_port, notify, live)
-    say = _Say(sys.stderr, quiet=args.quiet)
-    for line in _opening_lines(session.settings):
+    say = Say(sys.stderr, quiet=args.quiet)
+    for line in opening_lines(session.settings):
         say(line)
     progress = Progress(session, sys.stderr, live=sys.stderr.isatty() and not console, quiet=args.quiet or console)
     signals = _StopOnSignals(stop)
@@ -151,7 +147,7 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
                         listener.on_result(result)
         report.finished(result)
         progress.finish()
-        say.quiet = args.quiet and result.outcome == "done"
+        say.ended(result.outcome == "done")
         late = f", {result.late_steps} late" if result.late_steps else ""
         say(f"{result.outcome}: {result.steps_run} steps in {result.show_s:.3f} s{late}")
         if session.log_path:
@@ -233,7 +229,7 @@ def _bound_osc(args: argparse.Namespace, port: int | None, notify: tuple, live: 
 
 
 @contextmanager
-def _controls(live: Live | None, osc: OscServer | None, say: _Say, progress: Progress) -> Iterator[list]:
+def _controls(live: Live | None, osc: OscServer | None, say: Say, progress: Progress) -> Iterator[list]:
     """The operator's controls for the run (none without a Live): the OSC server, bound
     already, serving before the session opens, which commands the Live and listens to the show
     (its notifications); the listeners the run should tell. The commands held back by the
@@ -365,12 +361,14 @@ class _RunReport:
 
 def _session_record(session: Session) -> dict:
     """What `run --json` says of the run's settings: the show, the log, each robot's link."""
+    from choreo.cli.progress import solo
+
     settings = session.settings
     record: dict = {"name": settings.show.name,
                     "log": str(session.log_path) if session.log_path and session.recorder else None}
     if not settings.show.ensemble:  # with several robots, the first one's would pass for the show's
-        solo = _solo(settings)
-        record.update(port=solo.port, baud=solo.baud, layout=solo.layout.name)
+        link = solo(settings)
+        record.update(port=link.port, baud=link.baud, layout=link.layout.name)
     record["robots"] = {link.robot: {"port": link.port, "baud": link.baud, "layout": link.layout.name}
                         for link in settings.links.values()}
     if settings.show.ensemble:
@@ -383,7 +381,7 @@ def _session_record(session: Session) -> dict:
 
 
 @contextmanager
-def _log_named_on_failure(session: Session, say: _Say) -> Iterator[None]:
+def _log_named_on_failure(session: Session, say: Say) -> Iterator[None]:
     """A run that failed before it said where its log is (the port would not open) still has
     a log, with the error in it: say where, before the error line."""
     try:
@@ -392,118 +390,6 @@ def _log_named_on_failure(session: Session, say: _Say) -> Iterator[None]:
         if session.recorder is not None and session.stage is not None and not session.stage.opened:
             say(f"log: {session.log_path}")
         raise
-
-
-def live_line(step: str, show_s: float, estimated_s: float, columns: int) -> str:
-    """The live line, one character narrower than the terminal (a line that fills the last
-    column wraps on many terminals, and every redraw would then leave a line behind): the show
-    time is kept, then the bar as room allows, then the step, cut with `…`."""
-    width = max(columns - 1, 1)
-    clock = f"{show_s:.1f}/{estimated_s:.1f} s"
-    bar_room = min(20, width - len(clock) - 12)  # keep about ten columns for the step
-    bar = ""
-    if bar_room >= 5:
-        done = min(bar_room, int(bar_room * show_s / estimated_s)) if estimated_s > 0 else bar_room
-        bar = f" [{'#' * done}{'-' * (bar_room - done)}]"
-    tail = f"  {clock}{bar}"
-    room = width - len(tail)
-    if room < 1:
-        return clock[:width]
-    return fit(step, room) + tail
-
-
-class _Say:
-    """Lines for the user on stderr, before and after the show (never from its threads: those
-    go through `Progress`); on a terminal each is cut to its width, measured at each line; a
-    closed pipe or terminal never stops the show."""
-
-    def __init__(self, out: TextIO, quiet: bool) -> None:
-        self.out = out
-        self.quiet = quiet
-
-    def __call__(self, line: str) -> None:
-        if self.quiet:
-            return
-        try:
-            width = terminal_columns(self.out) if self.out.isatty() else None
-            print(fit(line, width), file=self.out, flush=True)
-        except (OSError, ValueError):
-            self.quiet = True
-
-
-def _solo(settings: RunSettings) -> LinkSettings:
-    """A one-robot show's robot."""
-    return next(iter(settings.links.values()))
-
-
-def _opening_lines(settings: RunSettings) -> list[str]:
-    """What the run says before it opens anything: the ports and layouts, the show, the music."""
-    lines = _robot_lines(settings) if settings.show.ensemble else [
-        _port_line(_solo(settings)), _layout_line(_solo(settings))]
-    lines.append(_show_line(settings))
-    if settings.show.music is not None:
-        lines.append(_music_line(settings))
-    return lines
-
-
-def _show_line(settings: RunSettings) -> str:
-    show, sections = settings.show, settings.sections
-    start = sections.starts[_solo(settings).robot]  # shared steps: every robot starts at this step
-    first = f" from step {start}" if start and not show.tracks else ""
-    if show.tracks and sections.origin:
-        first = f" from {sections.origin:.3f} s"
-    estimated = max(plan.estimated_s for plan in settings.plans.values())
-    if not show.ensemble:
-        steps = len(settings.plans[_solo(settings).robot].steps)
-        return f"show: {show.name}: {steps} steps{first}, about {estimated:.1f} s"
-    form = "tracks" if show.tracks else "shared steps"
-    return f"show: {show.name}: {len(settings.links)} robots, {form}{first}, about {estimated:.1f} s"
-
-
-def _robot_lines(settings: RunSettings) -> list[str]:
-    """With several robots: a line per robot, its port and layout and where they came from."""
-    lines = []
-    for link in settings.links.values():
-        source = {"simulator": "built-in simulator", "show": "from the show",
-                  "simulator (--rehearse)": "built-in simulator, --rehearse"}.get(link.port_source, "from --port")
-        assumed = ", layout assumed" if link.assumes_layout else ""
-        lines.append(f"robot {link.robot}: {link.port} at {link.baud} baud ({source}), "
-                     f"layout {link.layout.name}{assumed}")
-    return lines
-
-
-def _music_line(settings: RunSettings) -> str:
-    """What keeps the show clock: the music (which file, from where, on which output) or, with
-    --no-music, the machine."""
-    song = settings.song
-    if song is None:
-        music = settings.show.music.file if settings.show.music is not None else ""
-        return f"music: {music} not played (--no-music): the machine's clock keeps the show"
-    start = song.music.start + settings.sections.origin
-    from choreo.music.player import output_name
-
-    where = output_name(settings.output)
-    return f"music: {song.music.file} from {start:.1f} s of {song.duration_s:.1f} s, on {where}: the show clock"
-
-
-def _port_line(link: LinkSettings) -> str:
-    where = {
-        "simulator": "the built-in simulator (no --port given and the show names no robot.port)",
-        "simulator (--rehearse)": "the built-in simulator (--rehearse: in real time, the show's ports left alone)",
-        "show": "the show's robot.port",
-    }.get(link.port_source, "the command line")
-    return f"port: {link.port} at {link.baud} baud, from {where}"
-
-
-def _layout_line(link: LinkSettings) -> str:
-    layout = link.layout
-    line = f"layout: {layout.name} (motion 0 at 0x{layout.first_slot:04x})"
-    if link.assumes_layout:
-        other = next(name for name in LAYOUT_NAMES if name != layout.name)
-        return (f"{line}, assumed: the show names no robot.layout; a board whose motions were "
-                f"written by Heart to Heart 4 2.2 or later needs --layout {other} "
-                "(`choreo probe` hints which)")
-    return line + {"show": ", from the show", "command line": ", from --layout"}.get(link.layout_source, "")
 
 
 # Ctrl-\\ stops a show as Ctrl-C does: killed by it, no robot would get its abort motion and the
@@ -547,96 +433,3 @@ class _StopOnSignals:
     def restore(self) -> None:
         for signum, handler in self._previous.items():
             signal.signal(signum, handler)
-
-
-def _own_steps(plan: Plan, start: int, robot: str) -> list[int]:
-    """The indices of the steps a robot plays from `start`: the progress line counts those."""
-    return [step.index for step in plan.steps[start:] if step.is_for(robot)]
-
-
-class Progress:
-    """The run on screen: a live line on a terminal, a plain line a step otherwise.
-
-    Never on the show's path: the runners and the OSC server only note what happened; a
-    `StatusWriter` thread writes (and redraws the live line every quarter second, so the show
-    time moves during long waits). A terminal stopped with Ctrl-S or a full pipe holds up only
-    that thread: lines past its queue are dropped, counted, and the count said later.
-    """
-
-    def __init__(self, session, out: TextIO, *, live: bool, quiet: bool) -> None:
-        # each robot's steps from where it starts (a robot's own, in shared steps), by robot
-        settings = session.settings
-        self.counts = {name if settings.show.ensemble else None: _own_steps(plan, settings.sections.starts[name], name)
-                       for name, plan in settings.plans.items()}
-        self.estimated = max(plan.estimated_s for plan in settings.plans.values())
-        self.live = live and not quiet
-        self.quiet = quiet
-        self._lock = threading.Lock()
-        self._current = ""  # the step part of the live line
-        self._zero: float | None = None  # monotonic time of the show clock's zero
-        self.writer = None if quiet else StatusWriter(out, fit_lines=self.live,
-                                                      status=self._live_line if self.live else None)
-
-    def on_step(self, event) -> None:
-        if self.quiet or event.event != "start":
-            return
-        step = event.step
-        label = f" '{step.label}'" if step.label else ""
-        robot = f"{event.robot}: " if event.robot else ""
-        own = self.counts.get(event.robot, [])
-        place = f" ({own.index(step.index) + 1}/{len(own)})" if step.index in own else ""
-        where = f"{robot}step {step.index}{label}{place}"
-        if not self.live:
-            self._say_line(f"[{event.actual_s:8.3f} s] {where}: {step.describe()}")
-            return
-        with self._lock:
-            self._zero = time.monotonic() - event.actual_s
-            self._current = f"{where}: {step.describe()}"
-        if self.writer is not None:  # always, live (quiet has no writer and returned above)
-            self.writer.redraw()
-
-    def _live_line(self, columns: int) -> str:
-        """The live line now (the writer's thread asks, at each draw)."""
-        with self._lock:
-            current, zero = self._current, self._zero
-        if not current:
-            return ""
-        show_s = time.monotonic() - zero if zero is not None else 0.0
-        return live_line(current, show_s, self.estimated, columns)
-
-    def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
-        if level < 3 or level >= 4:
-            return  # errors reach the user once, as the command's final line
-        self._say_line(f"warning: {message}")
-
-    def on_waiting(self, cue: GoCue) -> None:
-        """A GO cue is reached (live control): say so, it is what the operator waits for."""
-        self._say_line(f"[{cue.reached_s:8.3f} s] waiting for GO: {cue.name}")
-
-    def on_command(self, event: CommandEvent) -> None:
-        """An operator's command (live control): its answer, with who gave it."""
-        answer = event.answer
-        verdict = "" if answer.ok or answer.message.startswith("refused") else "refused: "
-        self._say_line(f"{event.command.name} ({event.command.source}): {verdict}{answer.message}")
-
-    def _say_line(self, text: str, last_step_done: bool = False) -> None:
-        """A line above the live one (which is drawn again below it, unless the steps are done)."""
-        if self.writer is None:
-            return
-        if last_step_done:
-            with self._lock:
-                self._current = ""
-        self.writer.line(text)
-
-    def on_play_out(self, end_s: float) -> None:
-        """The steps are done; the music plays on to its end."""
-        self._say_line(f"music: the steps are done; the music plays to its end at {end_s:.1f} s (Ctrl-C stops it)",
-                       last_step_done=True)
-
-    def finish(self) -> None:
-        """The live line cleared and every line written (an output that takes nothing for a
-        second is left behind: the run's last lines will wait for it)."""
-        with self._lock:
-            self._current = ""
-        if self.writer is not None:
-            self.writer.close()
