@@ -22,14 +22,16 @@ from choreo.errors import UsageError, did_you_mean
 from choreo.log import LOG_DIR, LOG_SUFFIX
 from choreo.textfit import visible
 from choreo.wire.layouts import LAYOUT_NAMES
-from choreo.wire.protocol import DEFAULT_BAUD, spell_bauds
+from choreo.wire.protocol import DEFAULT_BAUD, FrameKind, ReplyKind, spell_bauds
 
 if TYPE_CHECKING:  # loaded by the commands that read logs: --help stays light
     from choreo.log.reader import LogReader
     from choreo.run.replay import ReplayReport
 
-FRAME_AND_REPLY_KINDS = ("stop", "counter", "play", "restore", "status", "read", "sync",
-                         "ack", "nak", "timeout", "invalid")
+# what --kind takes, in the order a run sends them: the wire's names (FrameKind, ReplyKind), not copies
+FRAME_AND_REPLY_KINDS = tuple(kind.value for kind in (
+    FrameKind.STOP, FrameKind.COUNTER, FrameKind.PLAY, FrameKind.RESTORE, FrameKind.STATUS, FrameKind.READ,
+    FrameKind.SYNC, ReplyKind.ACK, ReplyKind.NAK, ReplyKind.TIMEOUT, ReplyKind.INVALID))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

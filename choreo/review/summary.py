@@ -16,13 +16,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from choreo.numtext import whole_number
-from choreo.log.format import (CHOREO_TOPICS, ERROR, LATE_MS, WARNING, ClockRecord, CommandRecord, LogLayouts,
-                               LogRecord, MotionPlay, MotionTracker, Record, RxRecord, StepRecord, TxRecord, is_late,
-                               parse, slipped)
+from choreo.log.format import (CHOREO_TOPICS, COMMAND_TOPIC, ERROR, LATE_MS, WARNING, ClockRecord, CommandRecord,
+                               LogLayouts, LogRecord, MotionPlay, MotionTracker, Record, RxRecord, StepRecord, TxRecord,
+                               is_late, parse, slipped)
 from choreo.log.reader import Cut, LogReader
 from choreo.review.showtime import ShowTimes
-FRAME_KINDS = ("stop", "play", "restore", "status")
-REPLY_KINDS = ("ack", "nak", "status", "timeout", "invalid")
+from choreo.wire.protocol import FrameKind, ReplyKind
+# counted (and shown) even at 0: the frames every run sends, and every reply (the wire's names)
+FRAME_KINDS = tuple(kind.value for kind in (FrameKind.STOP, FrameKind.PLAY, FrameKind.RESTORE, FrameKind.STATUS))
+REPLY_KINDS = tuple(kind.value for kind in ReplyKind)
 LISTED_PLAYS = 30  # plays listed one by one; past this, per motion slot only
 LISTED_LOG_LINES = 10
 LISTED_COMMANDS = 20
@@ -669,7 +671,7 @@ def _render_commands(summary: Summary) -> Iterable[str]:
         yield f"  {when}  {what:<12} {command.source}{verdict}: {command.message}"
     if summary.command_records > len(summary.commands):
         more = summary.command_records - len(summary.commands)
-        yield f"  ... and {more} more (all on the log's /choreo/command topic: open the log in Foxglove)"
+        yield f"  ... and {more} more (all on the log's {COMMAND_TOPIC} topic: open the log in Foxglove)"
 
 
 def _int(result: dict[str, str] | None, key: str) -> int | None:
