@@ -31,6 +31,7 @@ from choreo.errors import ChoreoError, UsageError
 from choreo.music import alsa
 from choreo.numtext import whole_number
 from choreo.show.model import MUSIC_FORMATS_TEXT, Music
+from choreo.userfile import problem
 
 PERIOD_MS = 10  # how much the device asks for at a time
 PERIODS = 3  # periods in the device's buffer
@@ -80,8 +81,6 @@ class Song:
         """The song's facts, read from its header; AudioError naming the show if it will not
         decode or `start` is past its end (before any port opens)."""
         import miniaudio
-
-        from choreo.userfile import problem
 
         where = f"{show_path}: music.file {music.file}"
         unreadable = problem(music.path, "sound file")  # a pipe or a device would hang the decoder
