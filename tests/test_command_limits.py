@@ -22,7 +22,8 @@ from choreo.live.controls import Live
 from choreo.events import Command
 from choreo.log.format import CommandRecord
 from choreo.log.recorder import Recorder, RunInfo
-from choreo.review.summary import render, summarize
+from choreo.review.summary import summarize
+from choreo.review.summarytext import render
 from choreo.events import PANIC, StopRequest
 from choreo.show.model import PlannedStep, StepKind
 

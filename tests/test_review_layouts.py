@@ -290,7 +290,8 @@ def test_summary_names_each_robots_layout_and_an_assumed_one(logs, tmp_path, cap
     old = _hostile_log(tmp_path / "old.mcap", 0.0)
     with LogReader(old) as reader:
         reader.metadata["choreo"].pop("layout")  # as a log from before layouts were recorded
-        from choreo.review.summary import render, summarize_reader
+        from choreo.review.summary import summarize_reader
+        from choreo.review.summarytext import render
 
         lines = list(render(summarize_reader(reader)))
     assert any(", layout seed (not recorded: assumed) " in line for line in lines if line.startswith("run "))

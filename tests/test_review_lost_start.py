@@ -12,7 +12,8 @@ import pytest
 from choreo.wire.layouts import HTH4_22, SEED
 from choreo.log.format import MotionTracker, RxRecord, TxRecord
 from choreo.log.reader import LogReader
-from choreo.review.summary import render, summarize
+from choreo.review.summary import summarize
+from choreo.review.summarytext import render
 from choreo.review.timeline import build
 from choreo.run.settings import RunRequest
 from runlog import prepare, vmain, write_show

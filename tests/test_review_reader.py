@@ -394,7 +394,7 @@ def test_a_play_its_retries_made_late_is_late_once(tmp_path):
     assert (summary.steps_late, summary.steps_late_by_retries) == (2, 1)
     assert len(summary.lateness) == 5 and summary.lateness.above(1.0) == 1  # cue lateness: the starts
     assert (summary.steps_done, summary.steps_aborted, summary.steps_unfinished) == (4, 1, 0)
-    from choreo.review.summary import render
+    from choreo.review.summarytext import render
 
     steps = next(line for line in render(summary) if line.startswith("steps"))
     assert steps == "steps     5 run: 4 done, 2 late (1 by retries), 0 failed, 1 aborted"

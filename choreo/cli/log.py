@@ -163,7 +163,8 @@ def run_summary(args: argparse.Namespace) -> int:
     from choreo.cli.jsonout import error_record
     from choreo.cli.terminal import columns
     from choreo.errors import ChoreoError
-    from choreo.review.summary import render, summarize, summary_record
+    from choreo.review.summary import summarize, summary_record
+    from choreo.review.summarytext import render
     from choreo.textfit import fit
 
     failed = 0

@@ -11,14 +11,13 @@ from __future__ import annotations
 
 import math
 
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from choreo.numtext import whole_number
-from choreo.log.format import (CHOREO_TOPICS, COMMAND_TOPIC, ERROR, LATE_MS, WARNING, ClockRecord, CommandRecord,
-                               LogLayouts, LogRecord, MotionPlay, MotionTracker, Record, RxRecord, StepRecord, TxRecord,
-                               is_late, parse, slipped)
+from choreo.log.format import (CHOREO_TOPICS, ERROR, WARNING, ClockRecord, CommandRecord, LogLayouts, LogRecord,
+                               MotionPlay, MotionTracker, Record, RxRecord, StepRecord, TxRecord, is_late, parse,
+                               slipped)
 from choreo.log.reader import Cut, LogReader
 from choreo.review.showtime import ShowTimes
 from choreo.wire.protocol import FrameKind, ReplyKind
@@ -517,123 +516,6 @@ def _add_plays(summary: Summary, plays: list[MotionPlay], times: ShowTimes) -> N
     plays.clear()
 
 
-# -- text --------------------------------------------------------------------------------------
-
-
-def _ms(value: float | None) -> str:
-    return "-" if value is None else f"{value:.3f} ms"
-
-
-def render(summary: Summary) -> Iterable[str]:
-    """The summary as the lines `choreo log summary` prints."""
-    yield from _render_run(summary)
-    yield from _render_outcome(summary)
-    yield from _render_wire(summary)
-    yield from _render_clock(summary)
-    yield from _render_motions(summary)
-    yield from _render_robots(summary)
-    yield from _render_commands(summary)
-    yield from _render_log_lines(summary)
-    yield f"messages  {summary.messages}"
-
-
-def _state(summary: Summary) -> str:
-    """Whether the log is whole, and if not, why."""
-    if summary.complete:
-        return "complete"
-    if summary.cut is not None:
-        return f"{summary.cut.state.upper()}: {summary.cut}"
-    if summary.result is None:
-        return "UNFINISHED: the run recorded no result (it did not close its log)"
-    return "UNFINISHED: no MCAP footer"
-
-
-def _render_run(summary: Summary) -> Iterable[str]:
-    """Which log, which show, and the run that wrote it (where, when, with what)."""
-    run = summary.run
-    yield f"log       {summary.path}  ({_state(summary)})"
-    sha = run.get("show_sha256", "")
-    where = f" ({run['show_path']}" + (f", sha256 {sha[:12]}" if sha else "") + ")" if run.get("show_path") else ""
-    yield f"show      {summary.show_name}{where}"
-    if run and run.get("robots"):
-        names = run["robots"].split(",")
-        yield (f"run       started {run.get('start_time', '?')}, {len(names)} robots ({', '.join(names)}; "
-               f"ports below) (choreo {run.get('version', '?')}, host {run.get('host', '?')})")
-    elif run:
-        yield (f"run       started {run.get('start_time', '?')} on {run.get('port', '?')} at "
-               f"{run.get('baud', '?')} baud, layout {LogLayouts.of(run).describe(None)} "
-               f"(choreo {run.get('version', '?')}, host {run.get('host', '?')})")
-    else:
-        yield "run       no `choreo` metadata: not a log written by choreo run"
-
-
-def _render_outcome(summary: Summary) -> Iterable[str]:
-    """How the run ended, and what its steps came to."""
-    duration = f"{summary.duration_s:.3f} s" if summary.duration_s is not None else "-"
-    if summary.result:
-        outcome = summary.result.get("outcome", "?")
-        error = summary.result.get("error")
-        code = summary.result.get("exit_code")
-        yield f"outcome   {outcome}" + (f" (exit {code})" if code else "") + f", {duration} on the show clock"
-        if error:
-            yield f"          {error}"
-    else:
-        yield f"outcome   unknown (no result recorded): {duration} on the show clock up to the last message"
-    by_retries = f" ({summary.steps_late_by_retries} by retries)" if summary.steps_late_by_retries else ""
-    steps = (f"steps     {summary.steps_run} run: {summary.steps_done} done, {summary.steps_late} late{by_retries}, "
-             f"{summary.steps_failed} failed")
-    if summary.steps_aborted:
-        steps += f", {summary.steps_aborted} aborted"
-    if summary.steps_unfinished:
-        steps += f", {summary.steps_unfinished} unfinished"
-    yield steps
-
-
-def _render_wire(summary: Summary) -> Iterable[str]:
-    """Frames and replies, and the timing figures: reply latency, cue lateness, motion starts."""
-    kinds = ", ".join(f"{k} {n}" for k, n in summary.frames.items() if n or k in FRAME_KINDS)
-    yield f"frames    {summary.frames_sent} sent ({kinds}); {summary.retries} retries"
-    replies = ", ".join(f"{k.upper() if k in ('ack', 'nak') else k} {n}" for k, n in summary.replies.items())
-    unanswered = f"; {summary.unanswered} unanswered (log cut)" if summary.unanswered else ""
-    yield f"replies   {replies}; stale {summary.stale} (late replies to earlier frames, set aside){unanswered}"
-    lat = summary.latency
-    yield (f"latency   min {_ms(lat.min)}, median {_ms(lat.median)}, p99 {_ms(lat.p99)}, "
-           f"max {_ms(lat.max)} ({len(lat)} replies)")
-    lateness = summary.lateness
-    yield (f"cues      lateness median {_ms(lateness.median)}, p99 {_ms(lateness.p99)}, max "
-           f"{_ms(lateness.max)} ({len(lateness)} plays, {lateness.above(LATE_MS)} over {LATE_MS:g} ms)")
-    starts = summary.motion_starts
-    if len(starts):
-        yield (f"starts    motion start vs cue (start frame written): median {_ms(starts.median)}, p99 "
-               f"{_ms(starts.p99)}, max {_ms(starts.max)} ({len(starts)} cued plays, sent early by their lead)")
-
-
-def _render_log_lines(summary: Summary) -> Iterable[str]:
-    """The warnings and errors the run logged: counted, the first few listed."""
-    yield f"log lines {summary.warnings} warnings, {summary.errors} errors"
-    for line in summary.log_lines:
-        word = "error  " if line.level >= ERROR else "warning"
-        yield f"  {line.show_s:9.3f} s  {word} {line.message}"
-    if summary.warnings + summary.errors > len(summary.log_lines):
-        yield f"  ... and {summary.warnings + summary.errors - len(summary.log_lines)} more (choreo log frames)"
-
-
-def _render_clock(summary: Summary) -> Iterable[str]:
-    """Which clock kept the show, and how it ran against the machine's."""
-    clock, result = summary.clock, summary.result or {}
-    if clock is None:
-        return
-    if clock.source == "music":
-        music = f"the music ({result.get('music.file', '?')} from {result.get('music.start', '0')} s"
-        backend = result.get("audio.backend")
-        kept = music + (f", on {backend})" if backend else ")")
-    else:
-        kept = "the machine's"
-    drift = (f"; show clock minus machine clock {clock.drift_ms:+.3f} ms over {clock.span_s:.1f} s"
-             if clock.samples > 1 else "")
-    yield f"clock     {kept}: {clock.samples} samples{drift}"
-
-
 def _command(summary: Summary, record: CommandRecord) -> None:
     """Counted from every record: a summary record (`unlogged`) by the counts it carries."""
     count = record.commands
@@ -654,69 +536,5 @@ def _command(summary: Summary, record: CommandRecord) -> None:
         summary.commands.append(record)
 
 
-def _render_commands(summary: Summary) -> Iterable[str]:
-    """Who pressed what and when: every GO, panic, start and stop, refused ones included, and
-    the counts of those the limits kept out of the log one by one."""
-    if not summary.commands_total:
-        return
-    unlogged = ""
-    if summary.commands_unlogged:
-        by = ", ".join(f"{n} {name}" for name, n in sorted(summary.commands_by.items(), key=lambda kv: (-kv[1], kv[0])))
-        unlogged = f"; {summary.commands_unlogged} of them not logged one by one, over the log's limit): {by}"
-    yield f"commands  {summary.commands_total} from the operator ({summary.commands_refused} refused{unlogged or ')'}"
-    for command in summary.commands:
-        when = f"{command.show_s:9.3f} s" if command.show_s is not None else "   before  "
-        what = command.command + (f" {command.label}" if command.label else "")
-        verdict = "" if command.status == "ok" else f" {command.status.upper()}"
-        yield f"  {when}  {what:<12} {command.source}{verdict}: {command.message}"
-    if summary.command_records > len(summary.commands):
-        more = summary.command_records - len(summary.commands)
-        yield f"  ... and {more} more (all on the log's {COMMAND_TOPIC} topic: open the log in Foxglove)"
-
-
 def _int(result: dict[str, str] | None, key: str) -> int | None:
     return whole_number((result or {}).get(key, ""))
-
-
-def _render_robots(summary: Summary) -> Iterable[str]:
-    """A show for several robots: a line or two per robot, and how together the unison plays began."""
-    if not summary.robots:
-        return
-    if len(summary.skew):
-        skew = summary.skew
-        yield (f"unison    motion starts apart: median {_ms(skew.median)}, p99 {_ms(skew.p99)}, max "
-               f"{_ms(skew.max)} ({len(skew)} plays by several robots; first robot's start to the last's)")
-    layouts = LogLayouts.of(summary.run)
-    for name, robot in summary.robots.items():
-        run = robot.run
-        late = f", {robot.steps_late} late" if robot.steps_late else ""
-        failed = f", {robot.steps_failed} failed" if robot.steps_failed else ""
-        aborted = f", {robot.steps_aborted} aborted" if robot.steps_aborted else ""
-        yield (f"robot {name}: {run.get('port', '?')} at {run.get('baud', '?')} baud, "
-               f"layout {layouts.describe(name)}; "
-               f"{robot.steps_run} steps{late}{failed}{aborted}, {robot.frames_sent} frames, {robot.retries} retries, "
-               f"{robot.plays_total} plays")
-        lat, cues = robot.latency, robot.lateness
-        yield (f"          latency median {_ms(lat.median)}, p99 {_ms(lat.p99)}; cue lateness median "
-               f"{_ms(cues.median)}, max {_ms(cues.max)}")
-
-
-def _render_motions(summary: Summary) -> Iterable[str]:
-    if not summary.plays_total:
-        yield "motions   none played"
-        return
-    yield f"motions   {summary.plays_total} played (measured: restore to the first status not executing)"
-    for stats in sorted(summary.motions.values(), key=lambda s: s.motion):
-        if stats.durations:
-            spread = (f"median {stats.median_s:.3f} s (min {min(stats.durations):.3f}, "
-                      f"max {max(stats.durations):.3f})")
-        else:
-            spread = "not measured (no status query saw it end)"
-        yield f"  motion {stats.motion:3d}  x{stats.plays:<5d} {spread}"
-    if summary.plays_total <= LISTED_PLAYS:
-        for play in summary.plays:
-            label = f" '{play.label}'" if play.label else ""
-            where = f"step {play.step}{label}" if play.step is not None else "abort"
-            took = (f"{play.duration_s:.3f} s" if play.duration_s is not None
-                    else f"not measured (ended by {play.ended_by})")
-            yield f"  {play.start_s:9.3f} s  motion {play.motion:3d}  {where}: {took}"
