@@ -61,7 +61,13 @@ class RunLog:
         return [m["hex"] for m in self.tx]
 
 
-ON_CUE_S = 0.02  # a real-time run's motion starts this close to its cue on an idle machine
+# How close to its cue a real-time run's motion must start, past the wake-up lateness the run
+# logged itself: wide enough for a busy CI machine's scheduler (a thread can be put off tens of ms
+# after it woke, between its first frames and the one on the cue), narrow enough for every error
+# of the show clock's arithmetic that shows on stage: a lead-in counted twice (250 ms), a GO hold
+# counted (400 ms), a beat at 150 bpm (400 ms), --from's offset. The milliseconds on an idle
+# machine are measured by bench/motion_start.py and bench/music_clock.py, never asserted here.
+ON_CUE_S = 0.1
 
 
 def off_cue_s(steps: list[dict], end: dict) -> float:
@@ -73,9 +79,7 @@ def off_cue_s(steps: list[dict], end: dict) -> float:
     however idle the machine, while a wake-up the scheduler delayed is excused only as far as
     the run measured and logged it. A motion started early is never excused (negative result)."""
     woke_late_s = 0.0
-    for message in steps:
-        if message is end:
-            break
+    for message in steps[:steps.index(end)]:
         if message["event"] == "start" and message["index"] == end["index"]:
             woke_late_s = max(0.0, message["late_ms"] / 1e3)
     offset = end["start_s"] - end["cue"]
