@@ -28,7 +28,8 @@ from choreo.clock import MachineShowClock
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from choreo.cli.console import LEGEND, Console, Note, Row, Screen, _LinkWatch, render
+from choreo.cli.console import Console, _LinkWatch
+from choreo.cli.screen import LEGEND, Note, Row, Screen, render
 from choreo.cli.keys import KeyParser, KeyReader, TerminalMode
 from choreo.events import RxEvent, TxEvent
 from choreo.live.controls import Live

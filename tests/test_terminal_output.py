@@ -25,7 +25,7 @@ import pytest
 from mcap.reader import make_reader
 from rich.console import Console as RichConsole
 
-from choreo.cli.console import Note, Row, Screen, render
+from choreo.cli.screen import Note, Row, Screen, render
 from choreo.cli.progress import Progress
 from choreo.cli.terminal import StatusWriter, VisibleStream, visible_output
 from choreo.events import Answer, Command, CommandEvent
