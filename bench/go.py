@@ -30,7 +30,7 @@ from pythonosc.udp_client import SimpleUDPClient
 from common import Capture, median, percentile, pty_sim, row, temp_dir, write_show
 
 from choreo.live.controls import Live
-from choreo.limits import Limits, Rate
+from choreo.live.limits import Limits, Rate
 from choreo.live.osc import OscServer
 from choreo.events import StopRequest
 from choreo.run.session import Session

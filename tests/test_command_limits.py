@@ -1,4 +1,4 @@
-"""The limits on what commands may cost a show (`choreo.limits`), and the commands a stopping
+"""The limits on what commands may cost a show (`choreo.live.limits`), and the commands a stopping
 show refuses (`choreo.live.controls`): on the virtual clock, no network.
 
 A flood of commands must not fill the log or the terminal (what is refused is logged one by one
@@ -17,7 +17,8 @@ import jsonschema
 import pytest
 
 from choreo.clock import VirtualTime
-from choreo.limits import LIMITS, UNLOGGED, Budgets, Limits, Rate, ReportGate, SenderLimits
+from choreo.live.limits import LIMITS, Budgets, Limits, Rate, ReportGate, SenderLimits
+from choreo.log.format import UNLOGGED
 from choreo.live.controls import Live
 from choreo.events import Command
 from choreo.log.format import CommandRecord

@@ -22,7 +22,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "choreo"
 # Lowest first. A module may import its own package (the longest prefix below that names it)
 # or any lower layer; names in one layer are independent of each other, except the base
 # modules, which are small enough to lean on one another (without a cycle).
-BASE = ("choreo", "choreo.errors", "choreo.textfit", "choreo.numtext", "choreo.clock", "choreo.limits",
+BASE = ("choreo", "choreo.errors", "choreo.textfit", "choreo.numtext", "choreo.clock",
         "choreo.userfile", "choreo.signals")
 LAYERS: tuple[tuple[str, ...], ...] = (
     BASE,

@@ -24,7 +24,7 @@ from pythonosc.udp_client import SimpleUDPClient
 from choreo.errors import UsageError
 from choreo.live.controls import Live
 from choreo.log.format import ERROR, WARNING
-from choreo.limits import Budget
+from choreo.live.limits import Budget
 from choreo.live.oscwire import encode_message, slip_encode
 from choreo.live.osc import OscServer, command_for, parse_allow, sender_allowed
 from choreo.events import PANIC, StopRequest

@@ -1,4 +1,4 @@
-"""OSC on a hostile network, what a packet may cost (`choreo.limits` through `choreo.live.osc`): one
+"""OSC on a hostile network, what a packet may cost (`choreo.live.limits` through `choreo.live.osc`): one
 bundle of many GOs carries out and answers only what one sender's budget allows; replies and
 notifications sent back to choreo are never answered nor notified; `--osc-notify` pointed at
 choreo's own port is refused at start-up, and every target given is notified; `choreo run`
@@ -21,7 +21,8 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 
 from choreo.clock import VirtualTime
 from choreo.errors import UsageError
-from choreo.limits import LIMITS, UNLOGGED, Limits, Rate
+from choreo.live.limits import LIMITS, Limits, Rate
+from choreo.log.format import UNLOGGED
 from choreo.live.controls import Live
 from choreo.events import Command
 from choreo.live.osc import OscServer

@@ -377,7 +377,8 @@ def test_datagrams_the_system_dropped_are_counted():
     before choreo sees them: `log summary` said fewer commands than were sent (620,000 sent,
     85% counted). The system's count of drops is read with each datagram and logged as `lost`."""
     from choreo.clock import VirtualTime
-    from choreo.limits import UNLOGGED, Limits, Rate
+    from choreo.live.limits import Limits, Rate
+    from choreo.log.format import UNLOGGED
     from choreo.live.controls import Live
     from choreo.events import StopRequest
 

@@ -237,7 +237,7 @@ def _controls(live: Live | None, osc: OscServer | None, say: Say, progress: Prog
     if live is None:
         yield []
         return
-    from choreo.limits import LIMITS, Ticker
+    from choreo.live.limits import LIMITS, Ticker
 
     # off the console, the plain lines say what waits and what was pressed: to the very end
     heard = live.subscribe(progress)

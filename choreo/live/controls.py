@@ -20,7 +20,8 @@ from collections.abc import Callable
 from choreo.clock import ShowClock
 from choreo.events import (PANIC, STOPPED, Answer, Command, CommandEvent, CommandListener, GoCue, Listeners,
                            StopRequest, Subscription, WaitingListener)
-from choreo.limits import LIMITS, UNLOGGED, Held, Limits, ReportGate
+from choreo.live.limits import LIMITS, Held, Limits, ReportGate
+from choreo.log.format import UNLOGGED
 from choreo.show.model import PlannedStep
 
 LOCKOUT_S = 0.5  # a second GO this soon after one is taken for a double press, and refused
@@ -203,7 +204,7 @@ class Live:
     def report(self, command: Command, answer: Answer) -> None:
         """Tell the listeners of a command and its answer: one carried out here, or one a
         source refused itself (a sender not allowed, an address it does not know). Refused
-        ones only within the limits (`choreo.limits.ReportGate`): the rest are counted and told
+        ones only within the limits (`choreo.live.limits.ReportGate`): the rest are counted and told
         later as one `unlogged` summary."""
         passes = self._reports.passes(command.name, command.source, answer.ok)
         self.flush_reports()  # the summary of what came before, first

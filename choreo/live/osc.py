@@ -23,7 +23,7 @@ nothing happens; a TCP peer's address is proven by its handshake). A refused UDP
 `denied` reply, addressed `/reply` (its message is not read). A UDP sender's address is not
 proven (it can be forged to make us send replies to a victim, and a
 flood of refusals would fill the log, which stops the show when it cannot take more), so what
-any message may cost is bounded (`choreo.limits`): refusals are answered within a small budget
+any message may cost is bounded (`choreo.live.limits`): refusals are answered within a small budget
 shared by every refused sender, an allowed sender's commands and replies within its own, and
 refused or ignored commands are logged one by one only within a budget, the rest counted.
 A reply or notification sent to our port is never answered nor notified (two would loop).
@@ -45,7 +45,8 @@ from typing import Any
 
 from choreo.errors import UsageError, did_you_mean
 from choreo.events import Answer, Command, CommandEvent, GoCue, RunResult, StepEvent
-from choreo.limits import LIMITS, UNLOGGED, Limits, SenderLimits
+from choreo.live.limits import LIMITS, Limits, SenderLimits
+from choreo.log.format import UNLOGGED
 from choreo.live.controls import Live
 from choreo.live.oscnet import ListenFailed, OscNet
 from choreo.live.osclimits import LIMITS as WIRE_LIMITS
@@ -317,7 +318,7 @@ class OscServer:
 
     def _receive(self, host: str, budget: str, source: str, address: str, args: tuple) -> Reply | None:
         """A message from an allowed sender (one of a bundle's, each counted alone): its reply
-        (None: none is sent). What it may cost is bounded (`choreo.limits`): its commands are
+        (None: none is sent). What it may cost is bounded (`choreo.live.limits`): its commands are
         carried out and answered within its own budgets, and past them ignored (and counted)."""
         address = self._shown(address)
         if address.startswith(ECHOES):  # a reply or notification come back: answering it could loop

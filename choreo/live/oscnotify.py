@@ -19,7 +19,7 @@ from typing import Any
 
 
 from choreo.errors import UsageError
-from choreo.limits import LIMITS
+from choreo.live.limits import LIMITS
 from choreo.numtext import whole_number
 from choreo.live.oscwire import encode_message
 

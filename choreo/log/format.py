@@ -70,6 +70,7 @@ def channels_for(robots: tuple[str, ...] = ()) -> dict[str, tuple[str, str]]:
     return {**split, **{topic: CHANNELS[topic] for topic in shared}}
 METADATA_NAME = "choreo"
 RESULT_METADATA_NAME = "choreo.result"
+UNLOGGED = "unlogged"  # the command name of a summary of commands not logged one by one (live/limits)
 SHOW_MEDIA_TYPE = "application/yaml"  # how the run attaches its show file, and how a review finds it
 
 

@@ -47,13 +47,12 @@ from mcap.writer import CompressionType, Writer
 
 from choreo import SCHEMAS, __version__
 from choreo.errors import LogError
-from choreo.limits import UNLOGGED
 from choreo.log import LOG_DIR, LOG_SUFFIX
 from choreo.events import CommandEvent, RxEvent, StepEvent, StopRequest, TxEvent
 from choreo.wire.layouts import DEFAULT_LAYOUT
 from choreo.log.format import (CLOCK_TOPIC, COMMAND_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC,
-                               SHOW_MEDIA_TYPE, STEP_TOPIC, TX_TOPIC, ClockRecord, CommandRecord, LogRecord, RxRecord,
-                               StepRecord, TxRecord, channels_for, layout_key, robot_topic)
+                               SHOW_MEDIA_TYPE, STEP_TOPIC, TX_TOPIC, UNLOGGED, ClockRecord, CommandRecord, LogRecord,
+                               RxRecord, StepRecord, TxRecord, channels_for, layout_key, robot_topic)
 
 FLUSH_EVERY_S = 0.5
 BATCH = 16  # messages the background flusher writes before it lets the runner have the GIL

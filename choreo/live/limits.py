@@ -34,7 +34,6 @@ from collections import Counter
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 
-UNLOGGED = "unlogged"  # the command name of a summary of commands not logged one by one
 
 
 @dataclass(frozen=True)
