@@ -30,6 +30,7 @@ FACTS: dict[str | int, str] = {
     "runs": "log/__init__.py",
     ".mcap": "log/__init__.py",
     "application/yaml": "log/format.py",
+    "show.yaml": "log/format.py",
     "show.schema.json": "show/schema.py",
     "# yaml-language-server: $schema=": "show/schema.py",
     "choreo.schemas": "__init__.py",

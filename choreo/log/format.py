@@ -72,6 +72,7 @@ METADATA_NAME = "choreo"
 RESULT_METADATA_NAME = "choreo.result"
 UNLOGGED = "unlogged"  # the command name of a summary of commands not logged one by one (live/limits)
 SHOW_MEDIA_TYPE = "application/yaml"  # how the run attaches its show file, and how a review finds it
+SHOW_FALLBACK_NAME = "show.yaml"  # what a review and a replay call an attached show the log names not
 
 
 def layout_key(robot: str | None) -> str:

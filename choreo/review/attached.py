@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from choreo.log.format import SHOW_FALLBACK_NAME
 from choreo.log.reader import LogReader
 
 if TYPE_CHECKING:  # for the types only: the show loader is imported when a log has a show attached
@@ -57,7 +58,7 @@ def attached_show(reader: LogReader) -> AttachedShow:
         from choreo.show.plan import compile_plans
     except ImportError as exc:  # pragma: no cover - the loader ships with choreo
         return AttachedShow(problem=f"cannot load shows here: {exc}")
-    name = Path(attachment.name).name or "show.yaml"
+    name = Path(attachment.name).name or SHOW_FALLBACK_NAME
     try:
         show = load_show_bytes(source, name)
         plans = compile_plans(show)

@@ -30,8 +30,8 @@ from choreo.board.link import DEFAULT_TIMEOUT_S, Link
 from choreo.clock import RunClock, SystemTime, TimeSource
 from choreo.errors import UsageError
 from choreo.events import Tag
-from choreo.log.format import (LATE_MS, RX_TOPIC, STEP_TOPIC, TX_TOPIC, WARNING, LogLayouts, Record, RxRecord,
-                               StepRecord, TxRecord, parse, reply_meaning)
+from choreo.log.format import (LATE_MS, RX_TOPIC, SHOW_FALLBACK_NAME, STEP_TOPIC, TX_TOPIC, WARNING, LogLayouts,
+                               Record, RxRecord, StepRecord, TxRecord, parse, reply_meaning)
 from choreo.log import LOG_DIR
 from choreo.log.reader import Cut, LogReader
 from choreo.log.recorder import Recorder, RobotInfo, RunInfo, default_log_path
@@ -230,7 +230,7 @@ def _settle(reader: LogReader, show: AttachedShow, request: ReplayRequest, clock
     name = reader.run_info.get("show") or reader.path.stem
     attachment = reader.show_attachment()
     show_source = reader.attachment_data(attachment) if attachment else b""
-    show_path = reader.run_info.get("show_path") or (attachment.name if attachment else "show.yaml")
+    show_path = reader.run_info.get("show_path") or (attachment.name if attachment else SHOW_FALLBACK_NAME)
     info = RunInfo(show_path, name, show_source, solo.port, solo.baud, clock.wall_anchor_ns, layout, robot_info,
                    reader.run_info.get("unison") == "yes")
     new_log = Path(request.log_path) if request.log_path else default_log_path(f"{name}-replay", request.log_dir)
