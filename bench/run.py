@@ -27,7 +27,7 @@ BENCH = Path(__file__).resolve().parent
 if str(BENCH) not in sys.path:
     sys.path.insert(0, str(BENCH))
 
-# (module, what it measures), in the order of issue 6.
+# (module, what it measures), in the order of issue 6, then issue 23's.
 BENCHMARKS = (
     ("cues", "1. cue accuracy"),
     ("drift", "2. drift"),
@@ -41,6 +41,7 @@ BENCHMARKS = (
     ("music_clock", "10. the music's clock (5-minute song)"),
     ("go", "11. GO over OSC to the wire"),
     ("go_key", "12. GO by a key on the console to the wire"),
+    ("beats", "13. beat finding on songs with known beats (issue 23)"),
 )
 RESULTS = BENCH / "RESULTS.md"
 
