@@ -127,8 +127,9 @@ def generate_log(path: Path, messages: int) -> int:
         step(wait, lambda tag: t.__setitem__(0, t[0] + 250_000_000))
         cycle += 1
     from choreo.events import RunResult
+    from choreo.log.format import result_metadata
 
-    recorder.close(RunResult("done", index, 0, (t[0] - zero) / 1e9).metadata())
+    recorder.close(result_metadata(RunResult("done", index, 0, (t[0] - zero) / 1e9)))
     return recorder.messages
 
 

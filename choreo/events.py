@@ -200,11 +200,7 @@ class RunResult:
     outcome: str  # done | aborted
     steps_run: int
     late_steps: int
-    show_s: float  # show clock at the end
-
-    def metadata(self) -> dict[str, str]:
-        return {"outcome": self.outcome, "steps_run": str(self.steps_run),
-                "late_steps": str(self.late_steps), "show_s": f"{self.show_s:.6f}"}
+    show_s: float  # show clock at the end (the log's `choreo.result` text: log/format.result_metadata)
 
 
 @runtime_checkable

@@ -18,6 +18,8 @@ from functools import lru_cache
 from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Any, ClassVar
 
+from choreo.events import RunResult
+from choreo.numtext import whole_number
 from choreo.wire.framewords import describe_frame, describe_reply, is_slot
 from choreo.wire.layouts import DEFAULT_LAYOUT, LAYOUTS, Layout, StartState
 
@@ -75,9 +77,80 @@ SHOW_MEDIA_TYPE = "application/yaml"  # how the run attaches its show file, and 
 SHOW_FALLBACK_NAME = "show.yaml"  # what a review and a replay call an attached show the log names not
 
 
+class Info:
+    """The keys of the `choreo` metadata: the run as it started (written by the recorder's
+    RunInfo, read by the reviews and replay). Spelled as logs always have: older choreo reads
+    a newer log by these names, and a newer choreo an older one."""
+
+    VERSION = "version"
+    SHOW = "show"
+    SHOW_PATH = "show_path"
+    SHOW_SHA256 = "show_sha256"
+    PORT = "port"  # the first robot's, in a show for several
+    BAUD = "baud"
+    LAYOUT = "layout"
+    START_TIME = "start_time"
+    START_NS = "start_ns"
+    HOST = "host"
+    PYTHON = "python"
+    PLATFORM = "platform"
+    ROBOTS = "robots"  # a show for several: their names, comma-separated
+    UNISON = "unison"  # YES or NO
+    YES, NO = "yes", "no"
+
+
+class Result:
+    """The keys of the `choreo.result` metadata: how the run ended (RunResult, the stage's
+    outcome, the session's clock and music, a replay's source)."""
+
+    OUTCOME = "outcome"  # done | aborted | interrupted | failed
+    STEPS_RUN = "steps_run"
+    LATE_STEPS = "late_steps"
+    SHOW_S = "show_s"
+    ERROR = "error"
+    EXIT_CODE = "exit_code"
+    STOP_REASON = "stop_reason"
+    CLOCK = "clock"  # music | machine
+    SHOW_ZERO_MONOTONIC_NS = "show_zero_monotonic_ns"
+    SHOW_ZERO_WALL_NS = "show_zero_wall_ns"
+    MUSIC_FILE = "music.file"
+    MUSIC_START = "music.start"
+    AUDIO_BACKEND = "audio.backend"
+    REPLAY_OF = "replay_of"  # a replay's: the log it replayed, at what speed, what it found
+    SPEED = "speed"
+    FRAMES = "frames"
+    DIFFERENCES = "differences"
+
+
+def result_metadata(result: RunResult) -> dict[str, str]:
+    """A finished run's result as its log's `choreo.result` metadata holds it."""
+    return {Result.OUTCOME: result.outcome, Result.STEPS_RUN: str(result.steps_run),
+            Result.LATE_STEPS: str(result.late_steps), Result.SHOW_S: f"{result.show_s:.6f}"}
+
+
+def robot_key(robot: str, what: str) -> str:
+    """A robot's key in a show for several (`robot.left.port`): MCAP metadata is flat text."""
+    return f"robot.{robot}.{what}"
+
+
 def layout_key(robot: str | None) -> str:
     """The metadata key of a robot's board layout (`layout` in a one-robot log)."""
-    return "layout" if robot is None else f"robot.{robot}.layout"
+    return Info.LAYOUT if robot is None else robot_key(robot, Info.LAYOUT)
+
+
+def logged_robots(run_info: Mapping[str, str]) -> list[str]:
+    """The robots a log's `choreo` metadata names, in the show's order (none: a one-robot log)."""
+    return [name for name in str(run_info.get(Info.ROBOTS, "")).split(",") if name]
+
+
+def logged_unison(run_info: Mapping[str, str]) -> bool:
+    """The robots shared their steps (an old or one-robot log does not say: no)."""
+    return run_info.get(Info.UNISON) == Info.YES
+
+
+def logged_start_ns(run_info: Mapping[str, str]) -> int | None:
+    """The run's wall-clock start, or None where the log gives none or a damaged one."""
+    return whole_number(run_info.get(Info.START_NS) or "")
 
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5  # foxglove.Log levels
 ABORT_LABEL = "on_abort"  # the label of the abort motion's frames (they belong to no step)
@@ -502,7 +575,7 @@ class LogLayouts:
 
     @classmethod
     def of(cls, run_info: Mapping[str, str]) -> LogLayouts:
-        robots = [name for name in str(run_info.get("robots", "")).split(",") if name]
+        robots = logged_robots(run_info)
         return cls({robot: str(run_info.get(layout_key(robot), "")) for robot in [None, *robots]})
 
     def name(self, robot: str | None) -> str:

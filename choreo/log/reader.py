@@ -33,7 +33,8 @@ from pathlib import Path
 from typing import IO
 
 from choreo.errors import InputError, LogError
-from choreo.log.format import CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME, SHOW_MEDIA_TYPE, base_topic
+from choreo.log.format import (CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME, SHOW_MEDIA_TYPE, base_topic,
+                               logged_robots)
 from choreo.userfile import open_input, reading
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -147,7 +148,7 @@ class LogReader:
     @property
     def robots(self) -> list[str]:
         """The robots of a show for several, in the show's order (empty for a one-robot log)."""
-        return [name for name in self.run_info.get("robots", "").split(",") if name]
+        return logged_robots(self.run_info)
 
     @property
     def result(self) -> dict[str, str] | None:

@@ -51,8 +51,9 @@ from choreo.log import LOG_DIR, LOG_SUFFIX
 from choreo.events import CommandEvent, RxEvent, StepEvent, StopRequest, TxEvent
 from choreo.wire.layouts import DEFAULT_LAYOUT
 from choreo.log.format import (CLOCK_TOPIC, COMMAND_TOPIC, LOG_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, RX_TOPIC,
-                               SHOW_MEDIA_TYPE, STEP_TOPIC, TX_TOPIC, UNLOGGED, ClockRecord, CommandRecord, LogRecord,
-                               RxRecord, StepRecord, TxRecord, channels_for, layout_key, robot_topic)
+                               SHOW_MEDIA_TYPE, STEP_TOPIC, TX_TOPIC, UNLOGGED, ClockRecord, CommandRecord, Info,
+                               LogRecord, RxRecord, StepRecord, TxRecord, channels_for, layout_key, robot_key,
+                               robot_topic)
 
 FLUSH_EVERY_S = 0.5
 BATCH = 16  # messages the background flusher writes before it lets the runner have the GIL
@@ -122,26 +123,27 @@ class RunInfo:
         """`robots: left,right` and `robot.left.port` etc.: MCAP metadata is flat text."""
         if not self.robots:
             return {}
-        named = {"robots": ",".join(robot.name for robot in self.robots), "unison": "yes" if self.unison else "no"}
+        named = {Info.ROBOTS: ",".join(robot.name for robot in self.robots),
+                 Info.UNISON: Info.YES if self.unison else Info.NO}
         for robot in self.robots:
-            named.update({f"robot.{robot.name}.port": robot.port, f"robot.{robot.name}.baud": str(robot.baud),
-                          layout_key(robot.name): robot.layout})
+            named.update({robot_key(robot.name, Info.PORT): robot.port,
+                          robot_key(robot.name, Info.BAUD): str(robot.baud), layout_key(robot.name): robot.layout})
         return named
 
     def _run(self) -> dict[str, str]:
         return {
-            "version": __version__,
-            "show": self.show_name,
-            "show_path": self.show_path,
-            "show_sha256": hashlib.sha256(self.show_source).hexdigest(),
-            "port": self.port,
-            "baud": str(self.baud),
+            Info.VERSION: __version__,
+            Info.SHOW: self.show_name,
+            Info.SHOW_PATH: self.show_path,
+            Info.SHOW_SHA256: hashlib.sha256(self.show_source).hexdigest(),
+            Info.PORT: self.port,
+            Info.BAUD: str(self.baud),
             layout_key(None): self.layout,
-            "start_time": _iso(self.start_ns),
-            "start_ns": str(self.start_ns),
-            "host": socket.gethostname(),
-            "python": platform.python_version(),
-            "platform": sys.platform,
+            Info.START_TIME: _iso(self.start_ns),
+            Info.START_NS: str(self.start_ns),
+            Info.HOST: socket.gethostname(),
+            Info.PYTHON: platform.python_version(),
+            Info.PLATFORM: sys.platform,
         }
 
 

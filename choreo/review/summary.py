@@ -16,8 +16,8 @@ from pathlib import Path
 
 from choreo.numtext import whole_number
 from choreo.log.format import (CHOREO_TOPICS, ERROR, WARNING, ClockRecord, CommandRecord, LogLayouts, LogRecord,
-                               MotionPlay, MotionTracker, Record, RxRecord, StepRecord, TxRecord, is_late, parse,
-                               slipped)
+                               Info, MotionPlay, MotionTracker, Record, Result, RxRecord, StepRecord, TxRecord,
+                               is_late, logged_unison, parse, robot_key, slipped)
 from choreo.log.reader import Cut, LogReader
 from choreo.review.showtime import ShowTimes
 from choreo.wire.protocol import FrameKind, ReplyKind
@@ -196,7 +196,7 @@ class Summary:
 
     @property
     def show_name(self) -> str:
-        return self.run.get("show") or self.path.stem
+        return self.run.get(Info.SHOW) or self.path.stem
 
 
 _SHARED_FIELDS = ("log", "state", "cut", "show", "result")  # a robot's record in a summary leaves out the whole log's
@@ -229,8 +229,8 @@ def summary_record(summary: Summary) -> dict:
         "clock": None if summary.clock is None else {
             "source": summary.clock.source, "samples": summary.clock.samples, "span_s": round(summary.clock.span_s, 6),
             "drift_ms": round(summary.clock.drift_ms, 3),
-            "show_zero_monotonic_ns": _int(summary.result, "show_zero_monotonic_ns"),
-            "show_zero_wall_ns": _int(summary.result, "show_zero_wall_ns")},
+            Result.SHOW_ZERO_MONOTONIC_NS: _int(summary.result, Result.SHOW_ZERO_MONOTONIC_NS),
+            Result.SHOW_ZERO_WALL_NS: _int(summary.result, Result.SHOW_ZERO_WALL_NS)},
         "motions": [{"motion": m.motion, "plays": m.plays, "measured": m.measured, "median_s": m.median_s}
                     for m in sorted(summary.motions.values(), key=lambda m: m.motion)],
         "commands": [command.to_json() for command in summary.commands],
@@ -309,8 +309,8 @@ def summarize_reader(reader: LogReader) -> Summary:
     if parts:
         order = [name for name in reader.robots if name in parts]
         summary.robots = {name: parts[name].summary for name in order + [n for n in parts if n not in order]}
-        _gather(summary, parts, reader.run_info.get("unison") == "yes")
-    result_s = _seconds((reader.result or {}).get("show_s"))
+        _gather(summary, parts, logged_unison(reader.run_info))
+    result_s = _seconds((reader.result or {}).get(Result.SHOW_S))
     if result_s is not None:
         summary.duration_s = result_s
     elif last_time is not None:
@@ -348,9 +348,9 @@ class _Part:
     @classmethod
     def named(cls, reader: LogReader, robot: str, whole: _Tally) -> _Part:
         layouts = LogLayouts.of(reader.run_info)
-        run = {"port": reader.run_info.get(f"robot.{robot}.port", "?"),
-               "baud": reader.run_info.get(f"robot.{robot}.baud", "?"),
-               "layout": layouts.name(robot)}
+        run = {Info.PORT: reader.run_info.get(robot_key(robot, Info.PORT), "?"),
+               Info.BAUD: reader.run_info.get(robot_key(robot, Info.BAUD), "?"),
+               Info.LAYOUT: layouts.name(robot)}
         tracker = MotionTracker(layouts.layout(robot))
         return cls(Summary(reader.path, run, None, False, None), _Tally(whole.times), tracker)
 

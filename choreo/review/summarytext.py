@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from choreo.log.format import COMMAND_TOPIC, ERROR, LATE_MS, LogLayouts
+from choreo.log.format import COMMAND_TOPIC, ERROR, LATE_MS, Info, LogLayouts, Result
 from choreo.review.summary import FRAME_KINDS, LISTED_PLAYS, Summary
 
 def _ms(value: float | None) -> str:
@@ -44,17 +44,17 @@ def _render_run(summary: Summary) -> Iterable[str]:
     """Which log, which show, and the run that wrote it (where, when, with what)."""
     run = summary.run
     yield f"log       {summary.path}  ({_state(summary)})"
-    sha = run.get("show_sha256", "")
-    where = f" ({run['show_path']}" + (f", sha256 {sha[:12]}" if sha else "") + ")" if run.get("show_path") else ""
+    sha, path = run.get(Info.SHOW_SHA256, ""), run.get(Info.SHOW_PATH)
+    where = f" ({path}" + (f", sha256 {sha[:12]}" if sha else "") + ")" if path else ""
     yield f"show      {summary.show_name}{where}"
-    if run and run.get("robots"):
-        names = run["robots"].split(",")
-        yield (f"run       started {run.get('start_time', '?')}, {len(names)} robots ({', '.join(names)}; "
-               f"ports below) (choreo {run.get('version', '?')}, host {run.get('host', '?')})")
+    made = f"(choreo {run.get(Info.VERSION, '?')}, host {run.get(Info.HOST, '?')})"
+    if run and run.get(Info.ROBOTS):
+        names = run[Info.ROBOTS].split(",")
+        yield (f"run       started {run.get(Info.START_TIME, '?')}, {len(names)} robots ({', '.join(names)}; "
+               f"ports below) {made}")
     elif run:
-        yield (f"run       started {run.get('start_time', '?')} on {run.get('port', '?')} at "
-               f"{run.get('baud', '?')} baud, layout {LogLayouts.of(run).describe(None)} "
-               f"(choreo {run.get('version', '?')}, host {run.get('host', '?')})")
+        yield (f"run       started {run.get(Info.START_TIME, '?')} on {run.get(Info.PORT, '?')} at "
+               f"{run.get(Info.BAUD, '?')} baud, layout {LogLayouts.of(run).describe(None)} {made}")
     else:
         yield "run       no `choreo` metadata: not a log written by choreo run"
 
@@ -63,9 +63,9 @@ def _render_outcome(summary: Summary) -> Iterable[str]:
     """How the run ended, and what its steps came to."""
     duration = f"{summary.duration_s:.3f} s" if summary.duration_s is not None else "-"
     if summary.result:
-        outcome = summary.result.get("outcome", "?")
-        error = summary.result.get("error")
-        code = summary.result.get("exit_code")
+        outcome = summary.result.get(Result.OUTCOME, "?")
+        error = summary.result.get(Result.ERROR)
+        code = summary.result.get(Result.EXIT_CODE)
         yield f"outcome   {outcome}" + (f" (exit {code})" if code else "") + f", {duration} on the show clock"
         if error:
             yield f"          {error}"
@@ -116,8 +116,8 @@ def _render_clock(summary: Summary) -> Iterable[str]:
     if clock is None:
         return
     if clock.source == "music":
-        music = f"the music ({result.get('music.file', '?')} from {result.get('music.start', '0')} s"
-        backend = result.get("audio.backend")
+        music = f"the music ({result.get(Result.MUSIC_FILE, '?')} from {result.get(Result.MUSIC_START, '0')} s"
+        backend = result.get(Result.AUDIO_BACKEND)
         kept = music + (f", on {backend})" if backend else ")")
     else:
         kept = "the machine's"
@@ -160,7 +160,7 @@ def _render_robots(summary: Summary) -> Iterable[str]:
         late = f", {robot.steps_late} late" if robot.steps_late else ""
         failed = f", {robot.steps_failed} failed" if robot.steps_failed else ""
         aborted = f", {robot.steps_aborted} aborted" if robot.steps_aborted else ""
-        yield (f"robot {name}: {run.get('port', '?')} at {run.get('baud', '?')} baud, "
+        yield (f"robot {name}: {run.get(Info.PORT, '?')} at {run.get(Info.BAUD, '?')} baud, "
                f"layout {layouts.describe(name)}; "
                f"{robot.steps_run} steps{late}{failed}{aborted}, {robot.frames_sent} frames, {robot.retries} retries, "
                f"{robot.plays_total} plays")

@@ -19,7 +19,7 @@ from choreo.clock import (MachineShowClock, RunClock, ShowClock, SystemTime, Tim
                           sleep_until_show)
 from choreo.events import PlayOutListener, RunListener, RunResult, StopRequest
 from choreo.live.controls import HoldingShowClock, Live
-from choreo.log.format import CLOCK_EVERY_S, INFO, WARNING, ClockRecord
+from choreo.log.format import CLOCK_EVERY_S, INFO, WARNING, ClockRecord, Result, result_metadata
 from choreo.log.recorder import Recorder
 from choreo.music.player import LEAD_IN_S, Player
 from choreo.run.ensemble import Ensemble, Part
@@ -91,7 +91,7 @@ class Session:
             return self._run(everyone, stop, live)
         finally:  # the log's metadata names who stopped the run, however it ended (a panic then a fault)
             if stop():
-                self.stage.add_to_outcome({"stop_reason": stop.reason})
+                self.stage.add_to_outcome({Result.STOP_REASON: stop.reason})
 
     def _run(self, everyone: list[RunListener], stop: StopRequest, live: Live | None) -> RunResult:
         """The run, its log wired to the stop request and the live controls for its time."""
@@ -108,7 +108,7 @@ class Session:
                 self.result = self._run_passes(everyone, stop, live)
         if self.recorder is not None:
             self.recorder.check()
-        self.stage.finished(self.result.metadata())
+        self.stage.finished(result_metadata(self.result))
         return self.result
 
     def _run_passes(self, everyone: list[RunListener], stop: StopRequest, live: Live | None) -> RunResult:
@@ -206,11 +206,11 @@ class Session:
             self._tell(listeners, INFO, f"music: {self.player.describe()}")
         zero_ns = round(show.mono_at(0.0) * 1e9)
         self.stage.add_to_outcome({
-            "clock": "music" if self.player else "machine", "show_zero_monotonic_ns": str(zero_ns),
-            "show_zero_wall_ns": str(self.clock.wall_ns(zero_ns))})
+            Result.CLOCK: "music" if self.player else "machine", Result.SHOW_ZERO_MONOTONIC_NS: str(zero_ns),
+            Result.SHOW_ZERO_WALL_NS: str(self.clock.wall_ns(zero_ns))})
         if song is not None:
-            self.stage.add_to_outcome({"music.file": song.music.file, "music.start": f"{song.music.start:g}",
-                                       "audio.backend": self.player.backend if self.player else ""})
+            self.stage.add_to_outcome({Result.MUSIC_FILE: song.music.file, Result.MUSIC_START: f"{song.music.start:g}",
+                                       Result.AUDIO_BACKEND: self.player.backend if self.player else ""})
         return show
 
     def _play_out(self, show: ShowClock, stop: StopRequest, sampler: ClockSampler | None,

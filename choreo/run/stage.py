@@ -16,7 +16,7 @@ from types import TracebackType
 from choreo.board.link import Link
 from choreo.clock import RunClock
 from choreo.errors import ChoreoError, Interrupted, LinkError
-from choreo.log.format import ERROR, INFO, WARNING
+from choreo.log.format import ERROR, INFO, WARNING, Result
 from choreo.log.recorder import Recorder, RunInfo
 from choreo.run.settings import LinkSettings
 
@@ -100,14 +100,14 @@ def outcome_metadata(finished: dict[str, str] | None, exc: BaseException | None)
     if finished is not None and exc is None:
         meta = dict(finished)
     elif isinstance(exc, (Interrupted, KeyboardInterrupt)):
-        meta = {"outcome": "interrupted"}
+        meta = {Result.OUTCOME: "interrupted"}
     else:
-        meta = {"outcome": "failed"}
+        meta = {Result.OUTCOME: "failed"}
     if isinstance(exc, ChoreoError):
-        meta["error"] = str(exc)
-        meta["exit_code"] = str(exc.exit_code)
+        meta[Result.ERROR] = str(exc)
+        meta[Result.EXIT_CODE] = str(exc.exit_code)
     elif isinstance(exc, KeyboardInterrupt):
-        meta["exit_code"] = str(Interrupted.exit_code)
+        meta[Result.EXIT_CODE] = str(Interrupted.exit_code)
     elif exc is None:
-        meta.setdefault("exit_code", str(Interrupted.exit_code) if meta["outcome"] == "aborted" else "0")
+        meta.setdefault(Result.EXIT_CODE, str(Interrupted.exit_code) if meta[Result.OUTCOME] == "aborted" else "0")
     return meta
