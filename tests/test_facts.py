@@ -4,7 +4,10 @@ everywhere else, so changing it is one edit and no copy can drift from it.
 The check reads the code (not docstrings or comments) of every module of choreo/ for the facts
 below, each a constant as the code compares or builds with it: a baud, a layout's name, the
 simulator's URL, the log's folder and file suffix, the show attachment's media type, the
-schema's file name, package and modeline, pyserial's network URLs, an interrupt's exit code.
+schema's file name, package and modeline, pyserial's network URLs, an interrupt's exit code,
+and the run log's metadata keys (log/format's Info and Result; their spellings that mean other
+things elsewhere too, `port`, `baud`, `show`, `error`..., are caught where a metadata mapping is
+read or written with a literal key: `run_info.get("port")`, `meta["error"] = ...`).
 A copy elsewhere fails with where it stands and where its home is; the check is proved on a
 made-up package.
 """
@@ -35,7 +38,29 @@ FACTS: dict[str | int, str] = {
     "# yaml-language-server: $schema=": "show/schema.py",
     "choreo.schemas": "__init__.py",
     130: "errors.py",  # Interrupted's exit code
+    # the run log's metadata: its keys (the spellings that mean nothing else in choreo)
+    "choreo.result": "log/format.py",
+    "show_path": "log/format.py",
+    "show_sha256": "log/format.py",
+    "start_time": "log/format.py",
+    "start_ns": "log/format.py",
+    "unison": "log/format.py",
+    "robot.": "log/format.py",  # robot.<name>.port etc.
+    "outcome": "log/format.py",
+    "steps_run": "log/format.py",
+    "late_steps": "log/format.py",
+    "exit_code": "log/format.py",
+    "stop_reason": "log/format.py",
+    "show_zero_monotonic_ns": "log/format.py",
+    "show_zero_wall_ns": "log/format.py",
+    "music.file": "log/format.py",
+    "music.start": "log/format.py",
+    "audio.backend": "log/format.py",
+    "replay_of": "log/format.py",
 }
+# The mappings that hold the log's metadata, by the names choreo gives them where it reads or
+# builds one: a literal metadata key on one of these is a key typed outside log/format.
+METADATA_MAPPINGS = frozenset({"run_info", "result", "run", "meta", "metadata", "named", "finished"})
 # The same spelling that means something else there: (module, value) -> why it is not the fact.
 OTHER_MEANINGS: dict[tuple[str, str | int], str] = {
     ("sim/options.py", "seed"): "the simulator's random seed option, not the seed layout",
@@ -74,6 +99,68 @@ def copies(package: Path, facts: dict[str | int, str],
 def test_each_fact_is_written_only_in_its_home():
     found = list(copies(PACKAGE, FACTS, OTHER_MEANINGS))
     assert found == [], "facts written outside their home (import them instead):\n" + "\n".join(found)
+
+
+def _metadata_keys() -> set[str]:
+    from choreo.log.format import Info, Result
+
+    return {value for kind in (Info, Result) for name, value in vars(kind).items()
+            if name.isupper() and isinstance(value, str) and value not in (Info.YES, Info.NO)}
+
+
+def _mapping_name(node: ast.expr) -> str | None:
+    """`run_info` of `reader.run_info`, `run` of `run`, `result` of `(reader.result or {})`."""
+    if isinstance(node, ast.BoolOp):
+        return _mapping_name(node.values[0])
+    if isinstance(node, ast.Attribute):
+        return node.attr
+    return node.id if isinstance(node, ast.Name) else None
+
+
+def literal_metadata_keys(package: Path, keys: set[str]) -> Iterator[str]:
+    """`module:line: KEY` for each metadata mapping read (`.get(KEY)`, `[KEY]`) or written
+    (`[KEY] = `) with a literal key outside log/format."""
+    for path in sorted(package.rglob("*.py")):
+        module = path.relative_to(package).as_posix()
+        if module == "log/format.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            key: ast.expr | None = None
+            if isinstance(node, ast.Subscript):
+                mapping, key = node.value, node.slice
+            elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                  and node.func.attr in ("get", "setdefault") and node.args):
+                mapping, key = node.func.value, node.args[0]
+            if key is None or _mapping_name(mapping) not in METADATA_MAPPINGS:
+                continue
+            if isinstance(key, ast.Constant) and key.value in keys:
+                yield f"{module}:{node.lineno}: {key.value!r}"
+
+
+def test_no_metadata_key_is_read_or_written_by_a_literal():
+    found = list(literal_metadata_keys(PACKAGE, _metadata_keys()))
+    assert found == [], "metadata keys typed outside log/format (use its Info and Result):\n" + "\n".join(found)
+
+
+def test_a_literal_metadata_key_is_found(tmp_path):
+    package = tmp_path / "pkg"
+    (package / "log").mkdir(parents=True)
+    (package / "log" / "format.py").write_text('PORT = "port"\nx = run_info.get("port")\n')
+    (package / "review.py").write_text('def f(reader, run, rows):\n'
+                                       '    a = reader.run_info.get("port", "?") + (reader.result or {}).get("port")\n'
+                                       '    run["port"] = a\n'
+                                       '    return rows.get("port"), run.get(PORT)\n')
+    assert sorted(literal_metadata_keys(package, {"port"})) == [
+        "review.py:2: 'port'", "review.py:2: 'port'", "review.py:3: 'port'"]
+
+
+def test_the_metadata_keys_are_the_ones_logs_have_always_had():
+    """The names on disk do not change with the code: old logs read, and older choreo reads new ones."""
+    assert _metadata_keys() == {
+        "version", "show", "show_path", "show_sha256", "port", "baud", "layout", "start_time", "start_ns", "host",
+        "python", "platform", "robots", "unison", "outcome", "steps_run", "late_steps", "show_s", "error",
+        "exit_code", "stop_reason", "clock", "show_zero_monotonic_ns", "show_zero_wall_ns", "music.file",
+        "music.start", "audio.backend", "replay_of", "speed", "frames", "differences"}
 
 
 def test_the_homes_hold_their_facts_and_every_exception_is_still_there():
