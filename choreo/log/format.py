@@ -143,14 +143,39 @@ def logged_robots(run_info: Mapping[str, str]) -> list[str]:
     return [name for name in str(run_info.get(Info.ROBOTS, "")).split(",") if name]
 
 
-def logged_unison(run_info: Mapping[str, str]) -> bool:
-    """The robots shared their steps (an old or one-robot log does not say: no)."""
-    return run_info.get(Info.UNISON) == Info.YES
+@dataclass(frozen=True)
+class LoggedRun:
+    """The `choreo` metadata read back as typed values (the reader's `info`). A log that lacks a
+    key (older choreo's, a cut one, another program's) or holds a damaged number reads as empty
+    or None, never as an error: a review says what it has."""
 
+    text: Mapping[str, str]  # the record as stored (a review prints it as it is)
 
-def logged_start_ns(run_info: Mapping[str, str]) -> int | None:
-    """The run's wall-clock start, or None where the log gives none or a damaged one."""
-    return whole_number(run_info.get(Info.START_NS) or "")
+    @property
+    def show(self) -> str:
+        return self.text.get(Info.SHOW, "")
+
+    @property
+    def show_path(self) -> str:
+        return self.text.get(Info.SHOW_PATH, "")
+
+    @property
+    def robots(self) -> list[str]:
+        return logged_robots(self.text)
+
+    @property
+    def unison(self) -> bool:
+        """The robots shared their steps (an old or one-robot log does not say: no)."""
+        return self.text.get(Info.UNISON) == Info.YES
+
+    @property
+    def start_ns(self) -> int | None:
+        """The run's wall-clock start."""
+        return whole_number(self.text.get(Info.START_NS) or "")
+
+    def baud(self, robot: str | None = None) -> int | None:
+        """The baud the log gives (the first robot's, or `robot`'s in a show for several)."""
+        return whole_number(self.text.get(Info.BAUD if robot is None else robot_key(robot, Info.BAUD), ""))
 
 DEBUG, INFO, WARNING, ERROR, FATAL = 1, 2, 3, 4, 5  # foxglove.Log levels
 ABORT_LABEL = "on_abort"  # the label of the abort motion's frames (they belong to no step)

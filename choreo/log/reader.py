@@ -34,7 +34,7 @@ from typing import IO
 
 from choreo.errors import InputError, LogError
 from choreo.log.format import (CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME, SHOW_MEDIA_TYPE, base_topic,
-                               logged_robots)
+                               LoggedRun)
 from choreo.userfile import open_input, reading
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -146,9 +146,14 @@ class LogReader:
         return self.metadata.get(METADATA_NAME, {})
 
     @property
+    def info(self) -> LoggedRun:
+        """The `choreo` metadata as typed values."""
+        return LoggedRun(self.run_info)
+
+    @property
     def robots(self) -> list[str]:
         """The robots of a show for several, in the show's order (empty for a one-robot log)."""
-        return logged_robots(self.run_info)
+        return self.info.robots
 
     @property
     def result(self) -> dict[str, str] | None:

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from bisect import bisect_right
 
-from choreo.log.format import CLOCK_TOPIC, STEP_TOPIC, ClockRecord, StepRecord, logged_start_ns, parse
+from choreo.log.format import CLOCK_TOPIC, STEP_TOPIC, ClockRecord, StepRecord, parse
 from choreo.log.reader import LogReader
 
 BREAK_S = 0.001  # a clock sample this far from the mapping's prediction starts a new piece
@@ -32,7 +32,7 @@ LOOKAHEAD_MESSAGES = 10_000
 
 def show_zero_ns(reader: LogReader) -> int | None:
     """The run's start as the metadata gives it (wall-clock ns), before a step says better."""
-    return logged_start_ns(reader.run_info)
+    return reader.info.start_ns
 
 
 class ShowTimes:

@@ -17,7 +17,7 @@ from pathlib import Path
 from choreo.numtext import whole_number
 from choreo.log.format import (CHOREO_TOPICS, ERROR, WARNING, ClockRecord, CommandRecord, LogLayouts, LogRecord,
                                Info, MotionPlay, MotionTracker, Record, Result, RxRecord, StepRecord, TxRecord,
-                               is_late, logged_unison, parse, robot_key, slipped)
+                               is_late, parse, robot_key, slipped)
 from choreo.log.reader import Cut, LogReader
 from choreo.review.showtime import ShowTimes
 from choreo.wire.protocol import FrameKind, ReplyKind
@@ -309,7 +309,7 @@ def summarize_reader(reader: LogReader) -> Summary:
     if parts:
         order = [name for name in reader.robots if name in parts]
         summary.robots = {name: parts[name].summary for name in order + [n for n in parts if n not in order]}
-        _gather(summary, parts, logged_unison(reader.run_info))
+        _gather(summary, parts, reader.info.unison)
     result_s = _seconds((reader.result or {}).get(Result.SHOW_S))
     if result_s is not None:
         summary.duration_s = result_s

@@ -19,7 +19,7 @@ from choreo.errors import ChoreoError
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.showtime import ShowTimes
 from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC,
-                               ClockRecord, Info, LogLayouts, LogRecord, MotionPlay, MotionTracker, Record, Result,
+                               ClockRecord, LogLayouts, LogRecord, MotionPlay, MotionTracker, Record, Result,
                                RxRecord, StepRecord, TxRecord, is_late, parse, slipped)
 from choreo.log.reader import Cut, LogReader
 from choreo.textfit import fit
@@ -150,7 +150,7 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
     """One pass over the log: the motion runs (from the same tracker as `log summary`), the
     marks (late plays by the same rule), the cues, and the plan's plays the run never reached."""
     show = show or attached_show(reader)
-    timeline = Timeline(reader.run_info.get(Info.SHOW) or reader.path.stem, show_problem=show.problem)
+    timeline = Timeline(reader.info.show or reader.path.stem, show_problem=show.problem)
     seen = _Pass(timeline, ShowTimes.of(reader), LogLayouts.of(reader.run_info))
     topic, number = None, 0
     try:

@@ -31,12 +31,10 @@ from choreo.clock import RunClock, SystemTime, TimeSource
 from choreo.errors import UsageError
 from choreo.events import Tag
 from choreo.log.format import (LATE_MS, RX_TOPIC, SHOW_FALLBACK_NAME, STEP_TOPIC, TX_TOPIC, WARNING, LogLayouts,
-                               Info, Record, Result, RxRecord, StepRecord, TxRecord, logged_unison, parse,
-                               reply_meaning, robot_key)
+                               Record, Result, RxRecord, StepRecord, TxRecord, parse, reply_meaning)
 from choreo.log import LOG_DIR
 from choreo.log.reader import Cut, LogReader
 from choreo.log.recorder import Recorder, RobotInfo, RunInfo, default_log_path
-from choreo.numtext import whole_number
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.showtime import ShowTimes
 from choreo.run.settings import LinkSettings, check_output_folder, check_timeout, given_layout, show_durations
@@ -228,12 +226,12 @@ def _settle(reader: LogReader, show: AttachedShow, request: ReplayRequest, clock
     links = tuple(_robot_link(reader, show, name, boards[name], request) for name in robots) if robots else (solo,)
     robot_info = tuple(RobotInfo(link.robot, link.port, link.baud, boards[link.robot]) for link in links) \
         if robots else ()
-    name = reader.run_info.get(Info.SHOW) or reader.path.stem
+    name = reader.info.show or reader.path.stem
     attachment = reader.show_attachment()
     show_source = reader.attachment_data(attachment) if attachment else b""
-    show_path = reader.run_info.get(Info.SHOW_PATH) or (attachment.name if attachment else SHOW_FALLBACK_NAME)
+    show_path = reader.info.show_path or (attachment.name if attachment else SHOW_FALLBACK_NAME)
     info = RunInfo(show_path, name, show_source, solo.port, solo.baud, clock.wall_anchor_ns, layout, robot_info,
-                   logged_unison(reader.run_info))
+                   reader.info.unison)
     new_log = Path(request.log_path) if request.log_path else default_log_path(f"{name}-replay", request.log_dir)
     return ReplaySettings(links, boards, info, new_log, unique_log=request.log_path is None)
 
@@ -243,7 +241,7 @@ def _solo_link(reader: LogReader, show: AttachedShow, request: ReplayRequest, la
     at --baud, else the recorded baud on a port that was given, else the default."""
     baud = request.baud
     if baud is None:
-        recorded = whole_number(reader.run_info.get(Info.BAUD, ""))
+        recorded = reader.info.baud()
         baud = recorded if request.port and recorded is not None and recorded in BAUDS else DEFAULT_BAUD
     return LinkSettings(SOLO, request.port or SIM_URL, "command line", baud, request.timeout or DEFAULT_TIMEOUT_S,
                         tries=1, durations=show_durations(show.show, show.plan), board_layout=layout_named(layout),
@@ -254,7 +252,7 @@ def _robot_link(reader: LogReader, show: AttachedShow, robot: str, layout_name: 
                 request: ReplayRequest) -> LinkSettings:
     """A recorded robot's replay link: its own simulator of `layout_name`, set up from its plan,
     at its baud."""
-    recorded = whole_number(reader.run_info.get(robot_key(robot, Info.BAUD), ""))
+    recorded = reader.info.baud(robot)
     baud = recorded if recorded is not None and recorded in BAUDS else DEFAULT_BAUD
     plan = show.plan_of(robot)
     abort = show.show.abort_motion(robot) if show.show is not None and plan is not None else None
