@@ -39,6 +39,7 @@ from choreo.cli import build_parser
 from choreo.errors import ChoreoError
 from choreo.log.format import RESULT_METADATA_NAME
 from choreo.show.load import load_show_bytes
+from choreo_source import source_files
 
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
@@ -462,7 +463,7 @@ def citation_problems(source: str) -> list[str]:
 
 def test_the_code_cites_docs_that_exist():
     """choreo's modules say where a fact is explained: the file and the heading they name exist."""
-    problems = [f"{path.relative_to(ROOT)}: {problem}" for path in sorted((ROOT / "choreo").rglob("*.py"))
+    problems = [f"{path.relative_to(ROOT)}: {problem}" for path in source_files()
                 for problem in citation_problems(path.read_text(encoding="utf-8"))]
     assert problems == []
 
@@ -509,8 +510,8 @@ def test_the_architecture_page_names_every_module():
     start = text.index("## What each package holds")
     section = text[start:text.index("\n## ", start + 1)]
     named = set(re.findall(r"`([\w.]+)`", section))
-    unnamed = [str(path.relative_to(ROOT)) for path in sorted((ROOT / "choreo").rglob("*.py"))
-               if "__pycache__" not in path.parts and path.name != "__init__.py" and path.stem not in named]
+    unnamed = [str(path.relative_to(ROOT)) for path in source_files()
+               if path.name != "__init__.py" and path.stem not in named]
     assert unnamed == []
 
 

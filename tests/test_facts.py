@@ -18,7 +18,8 @@ import ast
 from collections.abc import Iterator
 from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parent.parent / "choreo"
+from choreo_source import PACKAGE, source_files, syntax_tree
+
 
 # fact -> its home (a path under choreo/)
 FACTS: dict[str | int, str] = {
@@ -82,9 +83,9 @@ def _docstrings(tree: ast.AST) -> set[int]:
 def copies(package: Path, facts: dict[str | int, str],
            other_meanings: dict[tuple[str, str | int], str]) -> Iterator[str]:
     """`module:line: VALUE (its home is HOME)` for each fact written outside its home."""
-    for path in sorted(package.rglob("*.py")):
+    for path in source_files(package):
         module = path.relative_to(package).as_posix()
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = syntax_tree(path)
         prose = _docstrings(tree)
         for node in ast.walk(tree):
             if not isinstance(node, ast.Constant) or id(node) in prose or isinstance(node.value, bool):
@@ -120,11 +121,11 @@ def _mapping_name(node: ast.expr) -> str | None:
 def literal_metadata_keys(package: Path, keys: set[str]) -> Iterator[str]:
     """`module:line: KEY` for each metadata mapping read (`.get(KEY)`, `[KEY]`) or written
     (`[KEY] = `) with a literal key outside log/format."""
-    for path in sorted(package.rglob("*.py")):
+    for path in source_files(package):
         module = path.relative_to(package).as_posix()
         if module == "log/format.py":
             continue
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in ast.walk(syntax_tree(path)):
             key: ast.expr | None = None
             if isinstance(node, ast.Subscript):
                 mapping, key = node.value, node.slice
@@ -166,10 +167,10 @@ def test_the_metadata_keys_are_the_ones_logs_have_always_had():
 def test_the_homes_hold_their_facts_and_every_exception_is_still_there():
     """A fact moved away from its home, or an exception left after its cause went, fails too."""
     for value, home in FACTS.items():
-        tree = ast.parse((PACKAGE / home).read_text(encoding="utf-8"))
+        tree = syntax_tree(PACKAGE / home)
         assert any(isinstance(n, ast.Constant) and n.value == value for n in ast.walk(tree)), (value, home)
     for module, value in OTHER_MEANINGS:
-        tree = ast.parse((PACKAGE / module).read_text(encoding="utf-8"))
+        tree = syntax_tree(PACKAGE / module)
         assert any(isinstance(n, ast.Constant) and n.value == value for n in ast.walk(tree)), (module, value)
 
 

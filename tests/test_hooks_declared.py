@@ -10,7 +10,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-CHOREO = Path(__file__).resolve().parent.parent / "choreo"
+from choreo_source import PACKAGE, source_files, syntax_tree
+
 
 # `receiver.name` as written (`*`: a name computed at run time), with why probing it is right.
 PROBED = {
@@ -47,10 +48,10 @@ PROBED = {
 }
 
 
-def probes(path: Path, root: Path = CHOREO.parent) -> list[str]:
+def probes(path: Path, root: Path = PACKAGE.parent) -> list[str]:
     """Each `hasattr(x, name)` / `getattr(x, name, ...)` in a module: `path:line: x.name`."""
     found = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in ast.walk(syntax_tree(path)):
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and \
                 node.func.id in ("hasattr", "getattr") and len(node.args) >= 2:
             name = node.args[1]
@@ -60,7 +61,7 @@ def probes(path: Path, root: Path = CHOREO.parent) -> list[str]:
 
 
 def _all_probes() -> list[str]:
-    return sorted(line for path in sorted(CHOREO.rglob("*.py")) for line in probes(path))
+    return sorted(line for path in source_files() for line in probes(path))
 
 
 def test_nothing_of_choreos_own_is_probed_by_name():

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import pytest
 
-PACKAGE = Path(__file__).resolve().parent.parent / "choreo"
+from choreo_source import PACKAGE, source_files, syntax_tree
+
 
 # Lowest first. A module may import its own package (the longest prefix below that names it)
 # or any lower layer; names in one layer are independent of each other, except the base
@@ -58,14 +59,14 @@ def module_name(path: Path, root: Path) -> str:
 
 
 def modules(root: Path) -> dict[str, Path]:
-    return {module_name(path, root): path for path in sorted(root.rglob("*.py")) if "__pycache__" not in path.parts}
+    return {module_name(path, root): path for path in source_files(root)}
 
 
 @functools.cache
 def _trees(root: Path) -> dict[str, tuple[Path, ast.Module]]:
     """Each module's syntax tree, parsed once for all the checks (the package does not change
     while the tests run; a made-up package is a new root)."""
-    return {name: (path, ast.parse(path.read_text(encoding="utf-8"), str(path)))
+    return {name: (path, syntax_tree(path))
             for name, path in modules(root).items()}
 
 

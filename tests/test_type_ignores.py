@@ -11,11 +11,11 @@ from __future__ import annotations
 import io
 import re
 import tokenize
-from pathlib import Path
 
 import pytest
 
-PACKAGE = Path(__file__).resolve().parent.parent / "choreo"
+from choreo_source import PACKAGE, source_files
+
 
 _IGNORE = re.compile(r"type:\s*ignore(?P<codes>\[[^\]]*\])?")
 _NOQA = re.compile(r"\bnoqa\b(?P<codes>:\s*[A-Z]+[0-9]+(?:\s*,\s*[A-Z]+[0-9]+)*)?", re.IGNORECASE)
@@ -48,7 +48,7 @@ def silencing_problems(source: str) -> list[str]:
 
 def test_every_ignore_and_noqa_in_the_package_names_its_code_and_says_why():
     found = []
-    for path in sorted(PACKAGE.rglob("*.py")):
+    for path in source_files():
         for problem in silencing_problems(path.read_text(encoding="utf-8")):
             found.append(f"{path.relative_to(PACKAGE.parent)} {problem}")
     assert found == []

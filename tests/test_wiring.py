@@ -23,9 +23,9 @@ from choreo.log.format import WARNING
 from choreo.run.runner import Runner
 from choreo.show.load import load_show
 from choreo.show.plan import compile_plan
+from choreo_source import PACKAGE, source_files, syntax_tree
 from runlog import prepare, read_log, write_show
 
-CHOREO = Path(__file__).resolve().parent.parent / "choreo"
 FAULT = "stopped: robot right's link failed"
 
 
@@ -376,11 +376,11 @@ def test_nothing_imports_the_process_entry():
     """`choreo.__main__` imports the CLI; the CLI and everything else read the signals from
     `choreo.signals`: the dependency runs one way."""
     importers = []
-    for path in sorted(CHOREO.rglob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for path in source_files():
+        for node in ast.walk(syntax_tree(path)):
             if isinstance(node, ast.ImportFrom) and node.module == "choreo.__main__" or \
                     isinstance(node, ast.Import) and any(a.name == "choreo.__main__" for a in node.names):
-                importers.append(str(path.relative_to(CHOREO.parent)))
+                importers.append(str(path.relative_to(PACKAGE.parent)))
     assert importers == []
 
 
@@ -441,8 +441,8 @@ def _called_classes(node: ast.AST) -> set[str]:
     return {n.func.id for n in ast.walk(node) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
 
 
-def _outside_assignments(path: Path, root: Path = CHOREO.parent) -> list[str]:
-    tree = ast.parse(path.read_text(encoding="utf-8"))
+def _outside_assignments(path: Path, root: Path = PACKAGE.parent) -> list[str]:
+    tree = syntax_tree(path)
     classes = {n.name for n in ast.walk(tree) if isinstance(n, ast.ClassDef)}
     found = []
     # what the module does as it is imported (`Other.attr = ...` at its top level) is read too
@@ -522,7 +522,7 @@ def _outside_call(node: ast.Call, own: set[str]) -> str | None:
 
 
 def _all_outside_assignments() -> list[str]:
-    return sorted({line for path in sorted(CHOREO.rglob("*.py")) for line in _outside_assignments(path)})
+    return sorted({line for path in source_files() for line in _outside_assignments(path)})
 
 
 def test_no_module_sets_another_objects_attributes():
