@@ -353,9 +353,6 @@ class RunClock:
             mono_ns = self.source.now_ns()
         return self.wall_anchor_ns + mono_ns - self.mono_anchor_ns
 
-    def to_wall_ns(self, mono_s: float) -> int:
-        return self.wall_anchor_ns + round(mono_s * 1e9) - self.mono_anchor_ns
-
     def sleep_until(self, deadline: float | Callable[[], float], should_stop: Callable[[], bool] = lambda: False,
                     slice_s: float = 0.05, on_idle: Callable[[], None] | None = None) -> bool:
         """Sleep until a monotonic deadline, spinning the last SPIN_S; False if told to stop.

@@ -22,7 +22,7 @@ at the end, saying who dropped out and when).
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from choreo.clock import MachineShowClock, RunClock, ShowClock, quick_thread_switches, sleep_until_show
@@ -276,7 +276,3 @@ class Ensemble:
             everyone = len(self._dropouts) == len(self.parts)
             raise RobotFault(f"{named} ({'every robot dropped out' if everyone else 'the others finished the show'})")
         return result
-
-
-def parts_of(runners: Mapping[str, Runner], on_fault: Mapping[str, str]) -> list[Part]:
-    return [Part(name, runner, on_fault.get(name, "stop")) for name, runner in runners.items()]
