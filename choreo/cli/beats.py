@@ -11,7 +11,7 @@ import json
 import math
 from typing import TYPE_CHECKING
 
-from choreo.errors import UsageError
+from choreo.errors import UsageError, one_line
 
 if TYPE_CHECKING:  # numpy and miniaudio load only when a song is read
     from choreo.music.beats import Beat, BeatEstimate
@@ -58,8 +58,6 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(json_record(song.path, found), ensure_ascii=False))
         return 0
-    from choreo.errors import one_line
-
     for line in text_lines(song.path, found, with_beats=args.beats):
         print(one_line(line))  # a song named with a line break must not add a line to the YAML
     return 0

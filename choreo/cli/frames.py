@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 
 from choreo.errors import UsageError
-from choreo.wire.layouts import DEFAULT_LAYOUT, HTH4_22, LAYOUT_NAMES, SEED
-from choreo.wire.protocol import BAUD_CODES, DEFAULT_BAUD, MOTION_SLOTS, baud_refusal, spell_bauds
+from choreo.wire.layouts import DEFAULT_LAYOUT, HTH4_22, LAYOUT_NAMES, SEED, layout_named
+from choreo.wire.protocol import BAUD_CODES, DEFAULT_BAUD, MOTION_SLOTS, baud_refusal, check_motion, spell_bauds
 
 KINDS = ("play", "stop", "counter", "restore", "status")
 
@@ -31,8 +31,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from choreo.wire.layouts import layout_named
-
     layout = layout_named(args.layout)
     if args.baud not in BAUD_CODES:
         raise UsageError(baud_refusal(args.baud, "--baud"))
@@ -78,6 +76,4 @@ def _motion(args: argparse.Namespace) -> int:
         motion = int(args.motion, 10)
     except ValueError:
         raise UsageError(f"frames play: motion {args.motion!r} is not a whole number 0..{MOTION_SLOTS - 1}") from None
-    from choreo.wire.protocol import check_motion
-
     return check_motion(motion)

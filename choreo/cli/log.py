@@ -18,9 +18,11 @@ from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, BinaryIO, TextIO, cast
 
-from choreo.errors import UsageError, did_you_mean
+from choreo.cli.jsonout import error_record, print_json
+from choreo.cli.terminal import UNKNOWN_COLUMNS, columns
+from choreo.errors import ChoreoError, UsageError, did_you_mean
 from choreo.log import LOG_DIR, LOG_SUFFIX
-from choreo.textfit import visible
+from choreo.textfit import fit, visible
 from choreo.wire.layouts import LAYOUT_NAMES
 from choreo.wire.protocol import DEFAULT_BAUD, FrameKind, ReplyKind, spell_bauds
 
@@ -148,9 +150,6 @@ def _replay_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def _print_all(lines: Iterable[str]) -> None:
     """Each line fitted to the terminal (cut with '…'); to a file or a pipe, whole."""
-    from choreo.cli.terminal import columns
-    from choreo.textfit import fit
-
     width = columns()
     for line in lines:
         sys.stdout.write(fit(line, width) + "\n")
@@ -160,12 +159,8 @@ def run_summary(args: argparse.Namespace) -> int:
     """One summary a log, a blank line between; a log that cannot be read is one line on stderr
     (with --json, its error object in the stream too) and the others are still summarised
     (exit 2 at the end)."""
-    from choreo.cli.jsonout import error_record
-    from choreo.cli.terminal import columns
-    from choreo.errors import ChoreoError
     from choreo.review.summary import summarize, summary_record
     from choreo.review.summarytext import render
-    from choreo.textfit import fit
 
     failed = 0
     width = columns()
@@ -272,8 +267,6 @@ def _print_frames_json(reader: LogReader, args: argparse.Namespace) -> None:
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise reader.not_choreo(TX_TOPIC, exchange.seq, exc) from None
     cut = {"state": reader.cut.state, "reason": str(reader.cut)} if reader.cut is not None else None
-    from choreo.cli.jsonout import print_json
-
     print_json({"ok": True, "log": str(reader.path), "frames": records, "cut": cut})
 
 
@@ -283,7 +276,6 @@ def run_timeline(args: argparse.Namespace) -> int:
 
     if args.png:
         return _timeline_png(args.log, args.png)
-    from choreo.cli.terminal import UNKNOWN_COLUMNS, columns
 
     with LogReader(args.log) as reader:
         timeline = build(reader)
@@ -403,8 +395,6 @@ def run_replay(args: argparse.Namespace) -> int:
                     time_source=args.time_source)
     code = 1 if args.strict and report.board_differences else 0
     if args.json:
-        from choreo.cli.jsonout import print_json
-
         print_json(_replay_record(report, code))
         return code
     unmatched = f", {report.unmatched} with no recorded reply" if report.unmatched else ""
