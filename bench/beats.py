@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import statistics
 from collections import Counter
+from collections.abc import Callable
 import sys
 import time
 import tracemalloc
@@ -85,11 +86,11 @@ def score(song: Song) -> Result:
     return Result(song, scored, found.bpm if found else None, seconds, error)
 
 
-def peak_memory_mb(song: Song) -> float:
-    """The analysis's peak of traced allocations (numpy's arrays included), in MB."""
+def peak_memory_mb(analysis: Callable[[], object]) -> float:
+    """An analysis's peak of traced allocations (numpy's arrays included), in MB."""
     tracemalloc.start()
     try:
-        analyse(song)
+        analysis()
         return tracemalloc.get_traced_memory()[1] / 1e6
     finally:
         tracemalloc.stop()
@@ -138,12 +139,7 @@ def hour_rows(songs: list[Song]) -> list[dict]:
     began = time.perf_counter()
     analyse_samples(hour)
     seconds = time.perf_counter() - began
-    tracemalloc.start()
-    try:
-        analyse_samples(hour)
-        memory_mb = (hour.samples.nbytes + tracemalloc.get_traced_memory()[1]) / 1e6
-    finally:
-        tracemalloc.stop()
+    memory_mb = hour.samples.nbytes / 1e6 + peak_memory_mb(lambda: analyse_samples(hour))
     return [
         row("beats: an hour of audio, analysis time", round(seconds, 1), "s", f"<= {GOAL_HOUR_S:g}",
             seconds <= GOAL_HOUR_S),
@@ -162,7 +158,8 @@ def measure(quick: bool = False, seed: int = 0) -> tuple[list[Result], list[dict
     songs = generate_set(seed, QUICK_SIZE if quick else SET_SIZE)
     beats.estimate(beats.Song("warm-up", songs[0].samples[: 10 * songs[0].sample_rate]))  # first-call costs
     results = [score(song) for song in songs]
-    memory_mb = peak_memory_mb(max(songs, key=lambda s: s.duration_s))
+    longest = max(songs, key=lambda s: s.duration_s)
+    memory_mb = peak_memory_mb(lambda: analyse(longest))
     table_rows = rows(results, score_set([r.score for r in results]), memory_mb)
     return results, table_rows if quick else table_rows + hour_rows(songs)
 
