@@ -557,11 +557,14 @@ class DiskReserve:
                 self._fd = os.dup(fd)
             except OSError:
                 self._fallocate = None  # no descriptor to spare: run unreserved
-        self.supported = self._fallocate is not None
+
+    @property
+    def supported(self) -> bool:
+        return self._fallocate is not None
 
     def extend_to(self, end: int) -> None:
         """Hold the disk space up to `end`; OSError (ENOSPC, EDQUOT) if the disk has not got it."""
-        if not self.supported or self._fallocate is None or end <= self.end:
+        if self._fallocate is None or end <= self.end:  # not supported, or held already
             return
         if self._fallocate(self._fd, self.KEEP_SIZE, self.end, end - self.end) != 0:
             import ctypes
@@ -569,7 +572,7 @@ class DiskReserve:
             code = ctypes.get_errno()
             if code not in self.UNSUPPORTED:
                 raise OSError(code, os.strerror(code))
-            self.supported = False
+            self._fallocate = None  # not supported here after all
             return
         self.end = end
 
