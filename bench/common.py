@@ -27,9 +27,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from choreo.events import RxEvent, TxEvent  # noqa: E402
+from choreo.events import RunResult, RxEvent, StepEvent, TxEvent  # noqa: E402
 from choreo.run.runner import Runner  # noqa: E402
-from choreo.events import RunResult, StepEvent  # noqa: E402
 from choreo.run.session import Session  # noqa: E402
 from choreo.run.settings import RunRequest  # noqa: E402
 

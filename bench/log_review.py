@@ -51,11 +51,10 @@ def generate_log(path: Path, messages: int) -> int:
     Returns the number of messages written. Times advance as on a real run (frames a millisecond
     apart, polls 50 ms apart), so durations and latencies in the summary look like a show's.
     """
-    from choreo.wire import protocol
-    from choreo.events import RxEvent, Tag, TxEvent
-    from choreo.log.format import WARNING
+    from choreo.events import RunResult, RxEvent, StepEvent, Tag, TxEvent
+    from choreo.log.format import WARNING, result_metadata
     from choreo.log.recorder import Recorder, RunInfo
-    from choreo.events import StepEvent
+    from choreo.wire import protocol
     from choreo.show.model import PlannedStep, StepKind
 
     start_ns = 1_790_000_000_000_000_000
@@ -126,9 +125,6 @@ def generate_log(path: Path, messages: int) -> int:
         index += 1
         step(wait, lambda tag: t.__setitem__(0, t[0] + 250_000_000))
         cycle += 1
-    from choreo.events import RunResult
-    from choreo.log.format import result_metadata
-
     recorder.close(result_metadata(RunResult("done", index, 0, (t[0] - zero) / 1e9)))
     return recorder.messages
 
