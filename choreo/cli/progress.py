@@ -141,9 +141,11 @@ def _layout_line(link: LinkSettings) -> str:
     return line + {"show": ", from the show", "command line": ", from --layout"}.get(link.layout_source, "")
 
 
-def _own_steps(plan: Plan, start: int, robot: str) -> list[int]:
-    """The indices of the steps a robot plays from `start`: the progress line counts those."""
-    return [step.index for step in plan.steps[start:] if step.is_for(robot)]
+def _own_steps(plan: Plan, start: int, robot: str) -> dict[int, int]:
+    """The steps a robot plays from `start`, each index with its place among them (from 1): the
+    progress line counts those (looked up, not searched: it is said on the runner's thread)."""
+    own = (step.index for step in plan.steps[start:] if step.is_for(robot))
+    return {index: place for place, index in enumerate(own, 1)}
 
 
 class Progress:
@@ -175,8 +177,8 @@ class Progress:
         step = event.step
         label = f" '{step.label}'" if step.label else ""
         robot = f"{event.robot}: " if event.robot else ""
-        own = self.counts.get(event.robot, [])
-        place = f" ({own.index(step.index) + 1}/{len(own)})" if step.index in own else ""
+        own = self.counts.get(event.robot, {})
+        place = f" ({own[step.index]}/{len(own)})" if step.index in own else ""
         where = f"{robot}step {step.index}{label}{place}"
         if not self.live:
             self._say_line(f"[{event.actual_s:8.3f} s] {where}: {step.describe()}")
