@@ -18,14 +18,12 @@ import pytest
 
 from choreo.clock import VirtualTime
 from choreo.live.limits import LIMITS, Budgets, Limits, Rate, ReportGate, SenderLimits
-from choreo.log.format import UNLOGGED
+from choreo.log.format import UNLOGGED, CommandRecord
 from choreo.live.controls import Live
-from choreo.events import Command
-from choreo.log.format import CommandRecord
+from choreo.events import PANIC, Command, StopRequest
 from choreo.log.recorder import Recorder, RunInfo
 from choreo.review.summary import summarize
 from choreo.review.summarytext import render
-from choreo.events import PANIC, StopRequest
 from choreo.show.model import PlannedStep, StepKind
 
 SCHEMA = json.loads((Path(__file__).resolve().parent.parent / "schemas" / "log.command.schema.json").read_text())

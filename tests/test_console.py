@@ -31,12 +31,10 @@ from hypothesis import strategies as st
 from choreo.cli.console import Console, _LinkWatch
 from choreo.cli.screen import LEGEND, Note, Row, Screen, render
 from choreo.cli.keys import KeyParser, KeyReader, TerminalMode
-from choreo.events import RxEvent, TxEvent
+from choreo.events import Answer, Command, CommandEvent, RxEvent, StepEvent, StopRequest, TxEvent
 from choreo.live.controls import Live
-from choreo.events import Answer, Command, CommandEvent
 from choreo.log.format import WARNING
 from choreo.wire.protocol import Reply, ReplyKind
-from choreo.events import StepEvent, StopRequest
 from choreo.run.session import Session
 from choreo.run.settings import RunRequest
 from runlog import REPO, read_log, write_show

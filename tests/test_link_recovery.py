@@ -10,8 +10,7 @@ import pytest
 from choreo.wire import protocol as p
 from choreo.errors import Interrupted, LinkError
 from choreo.board.link import Link
-from choreo.events import Tag
-from choreo.events import StopRequest
+from choreo.events import StopRequest, Tag
 from test_link import ACK_CALL, ACK_MOV, IDLE, SYNC_ACK, Events, ScriptedPort, link_for
 
 SYNC_NAK = p.nak(p.CMD_ACK_CHECK)

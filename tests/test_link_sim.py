@@ -20,8 +20,7 @@ from choreo.errors import LinkError
 from choreo.clock import RunClock, VirtualTime
 from choreo.board.link import Link
 from choreo.events import RxEvent, TxEvent
-from choreo.wire.protocol import FrameKind
-from choreo.wire.protocol import ReplyKind
+from choreo.wire.protocol import FrameKind, ReplyKind
 from choreo.sim.faults import FaultPlan
 from choreo.sim.board import SimBoard
 from choreo.sim.pty import PtyServer

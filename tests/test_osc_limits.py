@@ -24,9 +24,8 @@ from choreo.errors import UsageError
 from choreo.live.limits import LIMITS, Limits, Rate
 from choreo.log.format import UNLOGGED
 from choreo.live.controls import Live
-from choreo.events import Command
+from choreo.events import Command, StopRequest
 from choreo.live.osc import OscServer
-from choreo.events import StopRequest
 from runlog import choreo, ended_if_left, read_log, start_choreo, wait_for, write_show
 from test_osc import ONE_GO_SHOW, Receiver, free_port, outside_address
 

@@ -8,9 +8,8 @@ import pytest
 from choreo.wire import protocol as p
 from choreo.errors import LinkError
 from choreo.board.link import Link
-from choreo.events import Tag
+from choreo.events import StopRequest, Tag
 from choreo.run.runner import Runner
-from choreo.events import StopRequest
 from choreo.show.load import load_show
 from choreo.show.plan import compile_plan
 from runlog import write_show

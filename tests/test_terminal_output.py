@@ -28,8 +28,7 @@ from rich.console import Console as RichConsole
 from choreo.cli.screen import Note, Row, Screen, render
 from choreo.cli.progress import Progress
 from choreo.cli.terminal import StatusWriter, VisibleStream, visible_output
-from choreo.events import Answer, Command, CommandEvent
-from choreo.events import StepEvent
+from choreo.events import Answer, Command, CommandEvent, StepEvent
 from choreo.run.settings import RunRequest
 from choreo.textfit import display_width, is_hidden
 from runlog import REPO, prepare, read_log, vmain, wait_for, write_show
