@@ -215,7 +215,7 @@ class Link:
         suspend and resume frames are made from."""
         self.exchange(protocol.sync_frame(), Tag(None, "open"))
         reply = self.exchange(protocol.read_frame(protocol.CONFIG_ADDRESS, protocol.CONFIG_BYTES), Tag(None, "open"))
-        self.config = int.from_bytes(reply.data[2:4], "little")
+        self.config = protocol.config_word(reply.data)
         return self.config
 
     @property

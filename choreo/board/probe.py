@@ -195,7 +195,7 @@ def _read(link: Link, url: str, baud: int, notes: list[str]) -> BoardInfo:
         info.version = version[2:-1].decode("ascii", "replace").strip()
     config = _ask(link, protocol.read_frame(protocol.CONFIG_ADDRESS, protocol.CONFIG_BYTES), info, "config word")
     if config is not None:
-        info.config = ConfigWord(int.from_bytes(config[2:2 + protocol.CONFIG_BYTES], "little"))
+        info.config = ConfigWord(protocol.config_word(config))
     counter = _ask(link, protocol.read_frame(protocol.PROGRAM_COUNTER_ADDRESS, protocol.COUNTER_READ_BYTES),
                    info, "program counter")
     if counter is not None:

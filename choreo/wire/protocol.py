@@ -355,8 +355,12 @@ def _status(frame: Frame, data: bytes) -> Reply:
         ram = data[2:-1]
         counter = int.from_bytes(ram[:ADDRESS_BYTES], "little")
         return Reply(ReplyKind.STATUS, data, executing=in_called_motion(ram), status=counter)
-    word = data[2] | data[3] << 8
-    return Reply(ReplyKind.STATUS, data, executing=data[2] == EXECUTING_BYTE, status=word)
+    return Reply(ReplyKind.STATUS, data, executing=data[2] == EXECUTING_BYTE, status=config_word(data))
+
+
+def config_word(data: bytes) -> int:
+    """The config word in a framed reply to a read at CONFIG_ADDRESS (size, command, word...)."""
+    return int.from_bytes(data[2:2 + CONFIG_BYTES], "little")
 
 
 # What the running rule looks at from 0x0002: the counter, the return address, the call depth and
@@ -395,7 +399,7 @@ def program_state(data: bytes) -> ProgramState | None:
     def word(at: int, size: int) -> int:
         return int.from_bytes(ram[at - CONFIG_ADDRESS:at - CONFIG_ADDRESS + size], "little")
 
-    return ProgramState(config=word(CONFIG_ADDRESS, 2), counter=word(PROGRAM_COUNTER_ADDRESS, ADDRESS_BYTES),
+    return ProgramState(config=word(CONFIG_ADDRESS, CONFIG_BYTES), counter=word(PROGRAM_COUNTER_ADDRESS, ADDRESS_BYTES),
                         return_address=word(RETURN_ADDRESS_ADDRESS, ADDRESS_BYTES), depth=word(CALL_DEPTH_ADDRESS, 1))
 
 
