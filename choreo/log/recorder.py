@@ -72,8 +72,6 @@ START_SLACK = 4 * 1024  # the start beyond the schemas and the show: header, met
 RESERVE_AHEAD = 256 * 1024  # reserved beyond what is needed, so the reserve grows only now and then
 ROOM_MARGIN = RESERVE_AHEAD // 4 // MESSAGE_BUDGET  # messages short of the room: look at the reserve again
 
-
-
 MAX_NAME_BYTES = 200  # of a default log name's show part: 255 less the time, a suffix, `.mcap`
 
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 from choreo.clock import MachineShowClock, RunClock, ShowClock, quick_thread_switches, sleep_until_show
 from choreo.errors import LinkError
-from choreo.events import STOPPED, RunResult, StopRequest
+from choreo.events import STOPPED, RunResult, StopRequest, never
 from choreo.log.format import ERROR, WARNING
 from choreo.run.runner import Runner
 from choreo.show.model import PlannedStep
@@ -98,7 +98,7 @@ class Gates:
                 if not gate.taking:  # stopping before the writes began: this robot writes its own
                     gate.writes.pop(robot, None)
                     return None
-            self.clock.source.wait_for(lambda: gate.written is not None, lambda: False)
+            self.clock.source.wait_for(lambda: gate.written is not None, never)
         return gate.written.get(robot) if gate.written is not None else None
 
     def _write_all(self, gate: _Gate) -> None:
