@@ -1,0 +1,266 @@
+"""What beat finding hears in a song, computed while it is decoded, so that memory stays bounded.
+
+An hour of audio is 318 MB of float32 samples at 22050 Hz; what the beat, tempo and bar finders
+need from it is a hundredth of that: a log-frequency spectrogram (onsets by band: the kick, the
+snare, the hats), chroma (which chords sound: chords change on bar lines), and a fine attack
+envelope (where a sound starts, to the millisecond). So the song is streamed from its file in
+blocks, each block reduced to those features, and the samples are never held whole: about
+100 MB an hour of audio, whatever the file's format or sample rate.
+
+The decoder is miniaudio (wav, mp3, flac, ogg, any sample rate, mixed down to mono), reading from
+a file choreo opened and checked itself (a regular file, not a pipe or a device).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+
+import miniaudio
+import numpy as np
+
+from choreo.errors import UsageError
+from choreo.show.model import MUSIC_FORMATS_TEXT
+from choreo.textfit import visible
+from choreo.userfile import open_input, reading
+
+SAMPLE_RATE = 22050  # Hz: enough for onsets and chords, half the work of 44.1 kHz
+MAX_SONG_S = 3 * 3600.0  # longer audio is refused: the features of 3 hours take about 300 MB
+MAX_SONG_BYTES = 4 * 1024 ** 3  # a file past this is refused before it is decoded
+FRAME = 1024  # spectrogram window, samples (46 ms)
+HOP = 256  # spectrogram step, samples (11.6 ms): `Features.fps` frames a second
+CHROMA_FRAME = 4096  # chroma window (186 ms): 5.4 Hz bins tell the semitones of a bass apart
+CHROMA_EVERY = 4  # chroma is computed every this many spectrogram frames (21.5 a second)
+ATTACK_HOP = 32  # the attack envelope's step, samples (1.45 ms)
+ATTACK_WINDOW = 8  # its trailing energy window, in steps (256 samples, 11.6 ms)
+BANDS_PER_OCTAVE = 6
+LOWEST_HZ = 30.0
+LOG_GAIN = 1000.0  # log(1 + gain * magnitude / full scale): a quiet hi-hat counts beside a kick
+CHROMA_HZ = (110.0, 2000.0)  # pads and chords
+BASS_CHROMA_HZ = (30.0, 220.0)  # bass notes
+_READ_FRAMES = 65536  # samples decoded at a time
+_BLOCK_FRAMES = 512  # spectrogram frames transformed at once
+
+
+@dataclass(frozen=True)
+class Features:
+    """A song as the beat finders see it. Frame j of `bands` is centred on sample j * `hop`;
+    chroma frame i on sample i * `hop` * `chroma_every`; attack step m ends at sample
+    m * `attack_hop` (its value is how much the energy rose in that step)."""
+
+    path: str
+    duration_s: float
+    sample_rate: int
+    hop: int
+    bands: np.ndarray  # (frames, len(band_hz)) float32: log(1 + LOG_GAIN * mean magnitude in the band)
+    band_hz: np.ndarray  # (len, 2): each band's lower and upper edge, Hz
+    chroma: np.ndarray  # (chroma frames, 12) float32: magnitude by pitch class (C = 0), CHROMA_HZ
+    bass_chroma: np.ndarray  # (chroma frames, 12) float32: the same in BASS_CHROMA_HZ
+    chroma_every: int
+    attack: np.ndarray  # (steps,) float32: the rise of log energy of the signal's first difference
+    attack_hop: int
+    peak: float  # the largest sample's magnitude (0: silence)
+
+    @property
+    def fps(self) -> float:
+        """Spectrogram frames a second."""
+        return self.sample_rate / self.hop
+
+    @property
+    def chroma_fps(self) -> float:
+        return self.sample_rate / (self.hop * self.chroma_every)
+
+    def band_range(self, low_hz: float, high_hz: float) -> np.ndarray:
+        """Indices of the bands whose centre lies in low_hz..high_hz."""
+        centres = np.sqrt(self.band_hz[:, 0] * self.band_hz[:, 1])
+        return np.flatnonzero((centres >= low_hz) & (centres < high_hz))
+
+
+def read_features(path: str | os.PathLike[str], sample_rate: int = SAMPLE_RATE) -> Features:
+    """The features of the song in the file at `path`, decoded in blocks; an unreadable file is
+    one line that says what to do (`UsageError`, exit 2)."""
+    name = os.fspath(path)
+    with open_input(name, "sound file", MAX_SONG_BYTES) as stream, reading(name, "sound file"):
+        if os.fstat(stream.fileno()).st_size == 0:
+            raise UsageError(f"{visible(name)}: the file is empty")
+        return features_of(_decoded(stream, name, sample_rate), sample_rate, name)
+
+
+def features_of(blocks: Iterable[np.ndarray], sample_rate: int = SAMPLE_RATE, path: str = "") -> Features:
+    """The features of mono float samples that arrive in blocks (any lengths)."""
+    extractor = _Extractor(sample_rate, path)
+    for block in blocks:
+        extractor.add(np.asarray(block, dtype=np.float32))
+    return extractor.finish()
+
+
+class _Source(miniaudio.StreamableSource):
+    """A file choreo opened and checked, as miniaudio reads it."""
+
+    def __init__(self, stream: io.BufferedReader) -> None:
+        self.stream = stream
+
+    def read(self, num_bytes: int) -> bytes:
+        return self.stream.read(num_bytes)
+
+    def seek(self, offset: int, origin: miniaudio.SeekOrigin) -> bool:
+        self.stream.seek(offset, os.SEEK_CUR if origin == miniaudio.SeekOrigin.CURRENT else os.SEEK_SET)
+        return True
+
+
+def _decoded(stream: io.BufferedReader, name: str, sample_rate: int) -> Iterator[np.ndarray]:
+    """The file's audio as mono float32 blocks at `sample_rate`."""
+    limit = int(MAX_SONG_S * sample_rate)
+    total = 0
+    try:
+        for block in miniaudio.stream_any(_Source(stream), output_format=miniaudio.SampleFormat.FLOAT32,
+                                          nchannels=1, sample_rate=sample_rate, frames_to_read=_READ_FRAMES):
+            samples = np.frombuffer(block, dtype=np.float32)
+            total += len(samples)
+            if total > limit:
+                raise UsageError(f"{visible(name)}: longer than {MAX_SONG_S / 3600:g} hours: "
+                                 "give a shorter song (cut it where the show needs it)")
+            yield samples
+    except miniaudio.DecodeError as exc:
+        raise UsageError(f"{visible(name)}: cannot decode: not a {MUSIC_FORMATS_TEXT} file, or a damaged one "
+                         f"(miniaudio: {exc.args[0] if exc.args else exc})") from None
+    if total == 0:
+        raise UsageError(f"{visible(name)}: no audio in it (0 samples)")
+
+
+class _Framer:
+    """Cuts samples arriving in blocks into frames of `size` every `hop`, frame j centred on
+    sample j * hop (zeros before the first sample and after the last)."""
+
+    def __init__(self, size: int, hop: int) -> None:
+        self.size, self.hop = size, hop
+        self.pending = np.zeros(size // 2, dtype=np.float32)
+
+    def frames(self, block: np.ndarray) -> np.ndarray:
+        self.pending = np.concatenate([self.pending, block])
+        count = (len(self.pending) - self.size) // self.hop + 1
+        if count <= 0:
+            return np.zeros((0, self.size), dtype=np.float32)
+        out = np.lib.stride_tricks.sliding_window_view(self.pending, self.size)[: count * self.hop: self.hop].copy()
+        self.pending = self.pending[count * self.hop:]
+        return out
+
+
+class _Extractor:
+    """The features, block by block."""
+
+    def __init__(self, sample_rate: int, path: str) -> None:
+        self.rate, self.path = sample_rate, path
+        self.window = np.hanning(FRAME + 1)[:-1].astype(np.float32)
+        self.chroma_window = np.hanning(CHROMA_FRAME + 1)[:-1].astype(np.float32)
+        self.edges = _band_edges(sample_rate)
+        self.pitch_classes = _pitch_classes(sample_rate, CHROMA_HZ)
+        self.bass_classes = _pitch_classes(sample_rate, BASS_CHROMA_HZ)
+        self.framer = _Framer(FRAME, HOP)
+        self.chroma_framer = _Framer(CHROMA_FRAME, HOP * CHROMA_EVERY)
+        self.bands: list[np.ndarray] = []
+        self.chroma: list[np.ndarray] = []
+        self.bass_chroma: list[np.ndarray] = []
+        self.energy: list[np.ndarray] = []  # squared first differences, summed every ATTACK_HOP samples
+        self.attack_pending = np.zeros(0, dtype=np.float64)
+        self.previous = 0.0
+        self.seen = 0
+        self.peak = 0.0
+
+    def add(self, block: np.ndarray) -> None:
+        if block.size == 0:
+            return
+        self.seen += len(block)
+        self.peak = max(self.peak, float(np.max(np.abs(block))))
+        self._spectra(self.framer.frames(block), self.chroma_framer.frames(block))
+        self._attack(block)
+
+    def _spectra(self, frames: np.ndarray, chroma_frames: np.ndarray) -> None:
+        for start in range(0, len(frames), _BLOCK_FRAMES):
+            magnitude = np.abs(np.fft.rfft(frames[start:start + _BLOCK_FRAMES] * self.window, axis=1))
+            self.bands.append(_band_means(magnitude, self.edges).astype(np.float32))
+        for start in range(0, len(chroma_frames), _BLOCK_FRAMES):
+            magnitude = np.abs(np.fft.rfft(chroma_frames[start:start + _BLOCK_FRAMES] * self.chroma_window, axis=1))
+            self.chroma.append(_fold(magnitude, self.pitch_classes))
+            self.bass_chroma.append(_fold(magnitude, self.bass_classes))
+
+    def _attack(self, block: np.ndarray) -> None:
+        bright = np.diff(block.astype(np.float64), prepend=self.previous)
+        self.previous = float(block[-1])
+        pending = np.concatenate([self.attack_pending, bright * bright])
+        whole = len(pending) // ATTACK_HOP * ATTACK_HOP
+        self.energy.append(pending[:whole].reshape(-1, ATTACK_HOP).sum(axis=1))
+        self.attack_pending = pending[whole:]
+
+    def finish(self) -> Features:
+        wanted = self.seen // HOP + 1
+        self._spectra(self.framer.frames(np.zeros(FRAME // 2, dtype=np.float32)),
+                      self.chroma_framer.frames(np.zeros(CHROMA_FRAME // 2, dtype=np.float32)))
+        full_scale = max(self.peak, 1e-12) * FRAME / 4.0  # a full-scale sine's peak bin, Hann window
+        bands = _joined(self.bands, len(self.edges))[:wanted]
+        self.bands = []  # the blocks' copies go before the next arrays are made
+        np.log1p(bands * np.float32(LOG_GAIN / full_scale), out=bands)
+        chroma_wanted = self.seen // (HOP * CHROMA_EVERY) + 1
+        return Features(self.path, self.seen / self.rate, self.rate, HOP, bands,
+                        _edges_hz(self.edges, self.rate),
+                        _joined(self.chroma, 12)[:chroma_wanted], _joined(self.bass_chroma, 12)[:chroma_wanted],
+                        CHROMA_EVERY, self._attack_envelope(), ATTACK_HOP, self.peak)
+
+    def _attack_envelope(self) -> np.ndarray:
+        """The rise of log energy over a trailing window of ATTACK_WINDOW steps: it jumps in the
+        step where a sound starts (attacks are bright), placing an onset within a millisecond."""
+        if len(self.attack_pending):
+            self.energy.append(np.array([self.attack_pending.sum()]))
+        steps = np.concatenate(self.energy) if self.energy else np.zeros(1)
+        sums = np.cumsum(np.concatenate([np.zeros(ATTACK_WINDOW), steps]))
+        windowed = sums[ATTACK_WINDOW:] - sums[:-ATTACK_WINDOW]
+        floor = 1e-3 * float(windowed.mean()) + 1e-12  # quiet passages: no rises out of nothing
+        logs = np.log(windowed + floor)
+        return np.diff(logs, prepend=math.log(floor)).astype(np.float32)
+
+
+def _band_edges(sample_rate: int) -> list[tuple[int, int]]:
+    """FFT bin ranges [lo, hi) of log-spaced bands, BANDS_PER_OCTAVE an octave from LOWEST_HZ;
+    at the low end, where bins are wider than a band, each band gets at least one bin of its own."""
+    bin_hz = sample_rate / FRAME
+    top = sample_rate / 2
+    count = int(math.log2(top / LOWEST_HZ) * BANDS_PER_OCTAVE)
+    edges_hz = LOWEST_HZ * 2.0 ** (np.arange(count + 1) / BANDS_PER_OCTAVE)
+    bins = sorted(set(int(round(hz / bin_hz)) for hz in edges_hz) | {FRAME // 2 + 1})
+    return [(lo, hi) for lo, hi in zip(bins[:-1], bins[1:], strict=True) if hi > lo and lo >= 1]
+
+
+def _edges_hz(edges: list[tuple[int, int]], sample_rate: int) -> np.ndarray:
+    bin_hz = sample_rate / FRAME
+    return np.array([(max(lo - 0.5, 0.5) * bin_hz, (hi - 0.5) * bin_hz) for lo, hi in edges])
+
+
+def _band_means(magnitude: np.ndarray, edges: list[tuple[int, int]]) -> np.ndarray:
+    sums = np.cumsum(np.pad(magnitude, ((0, 0), (1, 0))), axis=1)
+    lo = np.array([e[0] for e in edges])
+    hi = np.array([e[1] for e in edges])
+    return (sums[:, hi] - sums[:, lo]) / (hi - lo)
+
+
+def _pitch_classes(sample_rate: int, hz: tuple[float, float]) -> np.ndarray:
+    """For each bin of the chroma FFT, its pitch class (C = 0), or -1 outside `hz`."""
+    freqs = np.arange(CHROMA_FRAME // 2 + 1) * sample_rate / CHROMA_FRAME
+    classes = np.full(len(freqs), -1)
+    inside = (freqs >= hz[0]) & (freqs < hz[1])
+    midi = 69.0 + 12.0 * np.log2(freqs[inside] / 440.0)
+    classes[inside] = np.round(midi).astype(int) % 12
+    return classes
+
+
+def _fold(magnitude: np.ndarray, classes: np.ndarray) -> np.ndarray:
+    out = np.zeros((len(magnitude), 12), dtype=np.float32)
+    for pitch in range(12):
+        out[:, pitch] = magnitude[:, classes == pitch].sum(axis=1)
+    return out
+
+
+def _joined(parts: list[np.ndarray], width: int) -> np.ndarray:
+    return np.concatenate(parts).astype(np.float32, copy=False) if parts else np.zeros((0, width), dtype=np.float32)
