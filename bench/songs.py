@@ -12,8 +12,10 @@ eighth-note hats (the tempo doubled), pop and rock with a backbeat, house (four 
 hats on the off-beats), reggaeton's dembow, hip-hop with swing, drum'n'bass (fast, broken), a 3/4
 waltz, 6/8, a pads-only intro (bar 1 is the first chord, not the drums' entry), a fade-in, a live
 band's 1 % drift, a ritardando, a tempo change (two fifths in), chords anticipated by an eighth, a
-breakdown without drums and drum fills. Bar 1 is the first downbeat of the music, after the
-silence that opens each song.
+breakdown without drums and drum fills; and, beyond the issue's list, funk's busy sixteenths, a
+triplet shuffle, a song with no drums (a piano comping over pads and bass) and a quiet kit in a
+reverberant room. Bar 1 is the first downbeat of the music, after the silence that opens each
+song.
 
 A set made here is easier than the world: tune on principles, not on this set; another seed makes
 another set (the issue's hidden set judges).
@@ -53,6 +55,9 @@ class Case:
     breakdown_bars: int = 0  # pads and bass alone mid-song
     fills: bool = False  # a snare and tom fill closes every fourth bar, a crash opens the next
     jitter_s: float = 0.0  # a player's timing: each hit off the grid by this much (sd)
+    comp: str = ""  # chord stabs (a piano or guitar comping) on these steps, over the held pads
+    drums_db: float = 0.0  # the drums' level against the harmony (a quiet kit: -12)
+    room_s: float = 0.0  # a room's reverberation time (RT60): every sound smeared by its echoes
 
 
 POP = Case("pop/rock", (96, 132), kick="x.......x.x.....", snare="....x.......x...", hat="x.x.x.x.x.x.x.x.")
@@ -77,9 +82,16 @@ CASES: tuple[Case, ...] = (
     Case("breakdown", (118, 128), kick="x...x...x...x...", snare="....x.......x...", hat="..x...x...x...x.",
          breakdown_bars=4),
     replace(POP, name="fills", fills=True),
+    # Beyond the issue's list, so that a tracker tuned here meets more of the world: busy
+    # sixteenths, a triplet shuffle, a song with no drums at all, a quiet kit in a reverberant room.
+    Case("funk sixteenths", (92, 112), kick="x..x..x...x..x..", snare="....x..o.o..x...",
+         hat="xoxoxoxoxoxoxoxo"),
+    Case("shuffle 12/8", (76, 108), kick="x.....x.....", snare="...x.....x..", hat="x.xx.xx.xx.x", steps=3),
+    Case("piano, no drums", (70, 110), kick="", snare="", comp="x.o.x.o.x.o.x.o."),
+    replace(POP, name="quiet kit, room", drums_db=-12.0, room_s=1.2, comp="..x...x...x...x."),
 )
 CASE_NAMES = tuple(case.name for case in CASES)
-SET_SIZE = 2 * len(CASES)  # every case twice: 32
+SET_SIZE = 2 * len(CASES)  # every case twice: 40
 DRIFT = 0.01  # live drift: the tempo swings this share either side of its figure
 RITARDANDO_BARS, RITARDANDO_TO = 4, 0.75  # the last bars slow down to this share of the tempo
 CHANGE_BY = (0.85, 1.18)  # a tempo change mid-song multiplies the tempo by one of these
@@ -218,10 +230,35 @@ def _harmony(out: np.ndarray, case: Case, beats: np.ndarray, bars: int, rng: np.
         envelope = np.minimum(1.0, t / 0.04) * np.minimum(1.0, (n - np.arange(n)) / (0.03 * RATE)) * np.exp(-t / 3.0)
         pad = sum(np.sin(np.float32(2 * np.pi * base * 2 ** (s / 12)) * t) for s in (0, third, 7))
         _add(out, (0.12 * envelope * pad).astype(np.float32), begin, 1.0)
+        if case.comp and bar >= case.intro_bars:
+            _comp(out, case, beats, bar, [base * 2 ** (s / 12) for s in (12, 12 + third, 19)])
         if bar >= case.intro_bars:  # the bass plays on through a breakdown
             bass = np.sin(np.float32(2 * np.pi * base / 4) * t) * np.minimum(1.0, t / 0.01) * np.exp(-t / 1.2)
             _add(out, (0.35 * bass).astype(np.float32), begin, 1.0)
     return starts
+
+
+def _comp(out: np.ndarray, case: Case, beats: np.ndarray, bar: int, notes: list[float]) -> None:
+    """The bar's chord struck on the comping pattern's steps, a piano's bright attack and decay."""
+    t = np.arange(int(0.5 * RATE), dtype=np.float32) / RATE
+    stab = sum(np.sin(np.float32(2 * np.pi * f * h) * t) / h for f in notes for h in (1, 2, 3))
+    stab = (stab * np.minimum(1.0, t / 0.003) * np.exp(-t / 0.18)).astype(np.float32)
+    for step, mark in enumerate(case.comp):
+        if mark in "xo":
+            beat = bar * case.meter + step // case.steps
+            _add(out, stab, _step_time(beats, beat, (step % case.steps) / case.steps, case.swing),
+                 0.05 if mark == "x" else 0.02)
+
+
+def _room(out: np.ndarray, rt60: float, rng: np.random.Generator) -> np.ndarray:
+    """`out` heard in a room: its echoes as decaying noise (60 dB down after `rt60` seconds),
+    mixed at half the direct sound's level, by FFT convolution."""
+    t = np.arange(int(rt60 * RATE)) / RATE
+    echoes = rng.standard_normal(len(t)) * np.exp(-6.9 * t / rt60)
+    echoes *= 0.5 / np.sqrt(np.sum(echoes ** 2))
+    size = 1 << int(np.ceil(np.log2(len(out) + len(echoes))))
+    wet = np.fft.irfft(np.fft.rfft(out, size) * np.fft.rfft(echoes, size), size)[: len(out)]
+    return (out + wet).astype(np.float32)
 
 
 def make_song(case: Case, seed: int, name: str | None = None) -> Song:
@@ -235,8 +272,11 @@ def make_song(case: Case, seed: int, name: str | None = None) -> Song:
     chords = _harmony(out, case, beats, bars, rng)
     kit = _Kit(rng)
     hits = _drum_hits(case, beats, bars, rng)
+    drums = 10.0 ** (case.drums_db / 20.0)
     for instrument, at, gain in hits:
-        _add(out, kit.sounds[instrument], at, gain)
+        _add(out, kit.sounds[instrument], at, drums * gain)
+    if case.room_s:
+        out = _room(out, case.room_s, rng)
     if case.fade_in_s:
         t = np.arange(len(out)) / RATE - start
         out *= np.clip(t / case.fade_in_s, 0.0, 1.0).astype(np.float32) ** 2
