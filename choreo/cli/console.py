@@ -409,7 +409,15 @@ class Console:
             return Screen(self.session.settings.show.name, None if show_s is None else round(show_s, 1),
                           self._clock_text(stopping), cue, go, go_waiting, rows, tuple(self._notes),
                           QUESTION if self._asking else None,
-                          self._final_line() if self._closing else LEGEND)
+                          self._final_line() if self._closing else LEGEND, self._bar(show_s))
+
+    def _bar(self, show_s: float | None) -> tuple[int, int] | None:
+        """Bar and beat now on the show's `tempo:` (through its map, if it has one)."""
+        tempo = self.session.settings.show.tempo
+        if tempo is None or show_s is None:
+            return None
+        bar, beat = tempo.position(show_s)
+        return bar, int(beat)
 
     def _clock_text(self, stopping: bool) -> str:
         clock = "music" if self.session.settings.song is not None else "machine"

@@ -55,6 +55,7 @@ class Screen:
     notes: tuple[Note, ...]
     prompt: str | None = None  # a question the next key answers
     legend: str = LEGEND
+    bar: tuple[int, int] | None = None  # bar and beat of the music now, in a show with `tempo:`
 
 
 NARROW = 80  # below this many columns the link column is written short
@@ -93,7 +94,8 @@ def _title(screen: Screen) -> Table:
     grid.add_column(ratio=1, no_wrap=True, overflow="ellipsis")
     grid.add_column(no_wrap=True, overflow="ellipsis", justify="right")
     time = f"{screen.show_s:.1f} s" if screen.show_s is not None else "not started"
-    grid.add_row(_cell(screen.title, "bold"), _cell(f" show {time} · {screen.clock}"))
+    bar = f" · bar {screen.bar[0]}.{screen.bar[1]}" if screen.bar is not None else ""  # 12.3: bar 12, beat 3
+    grid.add_row(_cell(screen.title, "bold"), _cell(f" show {time}{bar} · {screen.clock}"))
     return grid
 
 

@@ -21,7 +21,7 @@ from choreo.textfit import display_width, fit, pad, visible
 from choreo.wire.layouts import EXAMPLE_CONFIG, layout_named
 
 if TYPE_CHECKING:  # the model is imported by the handlers, not by `choreo --help`
-    from choreo.show.model import Plan, PlannedStep, Show
+    from choreo.show.model import Plan, PlannedStep, Show, Tempo
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -89,7 +89,9 @@ def _clock_record(show: Show) -> dict[str, Any]:
     if show.music is not None:
         record["music"] = {"file": show.music.file, "start": show.music.start}
     if show.tempo is not None:
-        record["tempo"] = {"bpm": show.tempo.bpm, "offset": show.tempo.offset, "meter": show.tempo.meter}
+        tempo = show.tempo
+        record["tempo"] = {"bpm": tempo.bpm, "offset": tempo.offset, "meter": tempo.meter,
+                           **({"bars": list(tempo.bars)} if tempo.bars else {})}
     return record
 
 
@@ -100,9 +102,19 @@ def _clock_lines(show: Show) -> list[str]:
         lines.append(f"music: {show.music.file} from {show.music.start:g} s: show time is the music's position "
                      "(--no-music: the machine's clock)")
     if show.tempo is not None:
-        tempo = show.tempo
-        lines.append(f"tempo: {tempo.bpm:g} bpm, {tempo.meter} beats a bar, bar 1 at {tempo.offset:g} s")
+        lines.append(tempo_line(show.tempo))
     return lines
+
+
+def tempo_line(tempo: Tempo) -> str:
+    """`tempo: 120 bpm, 4 beats a bar, bar 1 at 0.5 s`; a map's bars and the range of its tempo:
+    `tempo map: 24 bars, 4 beats a bar, 118.2-121.9 bpm, bar 1 at 0.512 s`."""
+    if not tempo.bars:
+        return f"tempo: {tempo.bpm:g} bpm, {tempo.meter} beats a bar, bar 1 at {tempo.offset:g} s"
+    low, high = f"{min(tempo.bar_bpm):.1f}", f"{max(tempo.bar_bpm):.1f}"
+    span = low if low == high else f"{low}-{high}"
+    return (f"tempo map: {len(tempo.bars)} bars, {tempo.meter} beats a bar, {span} bpm, "
+            f"bar 1 at {tempo.offset:g} s")
 
 
 def _plan_record(show: Show, plan: Plan) -> dict[str, Any]:
@@ -123,7 +135,7 @@ def summary_line(show: Show, plans: dict[str, Plan]) -> str:
         names.setdefault(entry.number, entry.name)
     used = sorted({m for plan in plans.values() for m in plan.motions_used()})
     motions = ", ".join(f"{n} {names[n]}" if n in names else str(n) for n in used)
-    late = "".join(_late_note(plan) for plan in plans.values())
+    late = "".join(_late_note(plan) for plan in plans.values()) + _past_map_note(show, plans)
     count = sum(1 for plan in plans.values() for step in plan.steps if step.is_for(plan.robot))
     steps = f"{count} step{'s' if count != 1 else ''}"
     robots = f"{len(plans)} robots, " if show.ensemble else ""
@@ -169,7 +181,7 @@ def ensemble_lines(show: Show, plans: dict[str, Plan]) -> list[str]:
         lines.append("")
         lines.append(f"robot {name}: layout {plan.layout}{_layout_note(plan)}")
         mine = [step for step in plan.steps if step.is_for(name)]
-        lines.extend(_step_table(mine, show.tracks == {} and show.ensemble))
+        lines.extend(_step_table(mine, show.tracks == {} and show.ensemble, show.tempo))
     total = max(plan.estimated_s for plan in plans.values())
     lines.append("")
     lines.append(f"estimated total {_seconds(total)}" + "".join(_late_note(plan) for plan in plans.values()))
@@ -179,20 +191,21 @@ def ensemble_lines(show: Show, plans: dict[str, Plan]) -> list[str]:
 def plan_lines(show: Show, plan: Plan) -> list[str]:
     """The plan as aligned text: a header, one line a step, the total."""
     lines = [f"{show.name} ({show.path}), layout {plan.layout}{_layout_note(plan)}", *_clock_lines(show)]
-    lines.extend(_step_table(plan.steps))
+    lines.extend(_step_table(plan.steps, tempo=show.tempo))
     lines.append(f"estimated total {_seconds(plan.estimated_s)} ({len(plan.steps)} steps){_late_note(plan)}")
     return lines
 
 
-def _step_table(steps: Sequence[PlannedStep], shared: bool = False) -> list[str]:
-    """Header and one aligned line a step; `shared`: who else does each step."""
+def _step_table(steps: Sequence[PlannedStep], shared: bool = False, tempo: Tempo | None = None) -> list[str]:
+    """Header and one aligned line a step; `shared`: who else does each step; `tempo`: the
+    show's, to say which bar-and-beat cues lie past a tempo map."""
     digits = max((len(f"{step.planned_s:.3f}") for step in steps), default=1)
     rows = [
         (
             str(step.index),
             step.path,
             step.label or "-",
-            _start(step, digits),
+            _start(step, digits, tempo),
             step.describe() + (f" [{', '.join(step.robots)}]" if shared and step.robots else ""),
             " | ".join(frame.hex for frame in step.frames) or "-",
         )
@@ -213,7 +226,7 @@ def _layout_note(plan: Plan) -> str:
             "from the config word it reads from the board)")
 
 
-def _start(step: PlannedStep, digits: int) -> str:
+def _start(step: PlannedStep, digits: int, tempo: Tempo | None = None) -> str:
     """` 4.000 s`, with the cue when the step has one: `14.000 s (at 14)`, late ones flagged."""
     text = f"{step.planned_s:{digits}.3f} s"
     if step.go:
@@ -221,9 +234,25 @@ def _start(step: PlannedStep, digits: int) -> str:
     if step.at is None:
         return text
     cue = f"{step.at:g}" if step.at_beat is None else f"{step.at:g} = bar {step.at_beat[0]} beat {step.at_beat[1]:g}"
+    if step.at_beat is not None and tempo is not None and tempo.past_map(*step.at_beat):
+        cue += ", past the tempo map"
     if step.planned_s > step.at + 1e-9:
         return f"{text} (at {cue}, late {step.planned_s - step.at:.3f} s)"
     return f"{text} (at {cue})"
+
+
+def _past_map_note(show: Show, plans: dict[str, Plan]) -> str:
+    """`; 2 cues past the tempo map's last bar (24): ...`: cues the map does not reach are timed
+    by its last bar's length, which a song that keeps drifting will not follow."""
+    tempo = show.tempo
+    if tempo is None or not tempo.bars:
+        return ""
+    past = {(step.path, step.at_beat) for plan in plans.values() for step in plan.steps
+            if step.at_beat is not None and tempo.past_map(*step.at_beat)}
+    if not past:
+        return ""
+    return (f"; {len(past)} cue{'s' if len(past) != 1 else ''} past the tempo map's last bar ({len(tempo.bars)}), "
+            "timed at its length")
 
 
 def _late_note(plan: Plan) -> str:

@@ -54,8 +54,12 @@ def build_show(file: str, source: bytes, doc: Doc, folder: Path | None = None) -
 
 
 def tempo_of(entry: dict[str, Any]) -> Tempo:
-    """`tempo:` as written (checked): beats a minute, the offset to bar 1 and the meter."""
-    return Tempo(float(entry["bpm"]), float(entry.get("offset", 0.0)), int(entry.get("meter", 4)))
+    """`tempo:` as written (checked): beats a minute, the offset to bar 1 and the meter, or a
+    tempo map (`bars:`, each bar's beat 1 in show seconds) and the meter."""
+    meter = int(entry.get("meter", 4))
+    if "bars" in entry:
+        return Tempo.of_bars(tuple(float(start) for start in entry["bars"]), meter)
+    return Tempo(float(entry["bpm"]), float(entry.get("offset", 0.0)), meter)
 
 
 def _music(entry: dict[str, Any] | None, folder: Path | None) -> Music | None:

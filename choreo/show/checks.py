@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, TypeGuard
 
 from choreo.show.build import tempo_of
-from choreo.show.model import GO, MUSIC_FORMATS, SOLO, hidden_character, is_simulator, same_port
+from choreo.show.model import GO, MUSIC_FORMATS, SOLO, Tempo, hidden_character, is_simulator, same_port
 from choreo.show.report import Doc, JsonPath, Report, closest, format_path, value_text
 from choreo.userfile import problem as file_problem
 
@@ -35,6 +35,7 @@ class _Walk:
     robots: tuple[str, ...] = (SOLO,)  # the robots of the step list being walked
     declared: tuple[str, ...] = ()  # `robots:` (empty for a one-robot show)
     in_track: bool = False
+    tempo: Tempo | None = None  # the show's tempo when it is usable (checked)
 
     def ok(self, path: JsonPath) -> bool:
         """Whether the value at `path` passed the schema (so it is the type it should be)."""
@@ -64,6 +65,7 @@ def check_meaning(doc: Doc, report: Report, folder: Path | None = None) -> None:
         _check_motion_ref(walk, ("on_abort",), data["on_abort"])
     _check_robots(walk)
     _check_music(walk, folder)
+    walk.tempo = _checked_tempo(walk)
     steps = data.get("steps")
     if isinstance(steps, list) and walk.ok(("steps",)):
         walk.robots = walk.declared or (SOLO,)
@@ -279,22 +281,46 @@ def _check_cue(walk: _Walk, step: dict[str, Any], here: JsonPath, looping: bool)
 
 def _beat_seconds(walk: _Walk, at: dict[str, Any], path: JsonPath) -> float | None:
     """A bar-and-beat cue in seconds; None (reported) without a usable tempo or past the bar."""
-    tempo = walk.doc.data.get("tempo")
-    if not isinstance(tempo, dict) or not walk.ok(("tempo",)):
-        if not isinstance(tempo, dict):
-            walk.problem(path, "a cue in bars and beats needs the music's `tempo:` "
-                               "(e.g. `tempo: {bpm: 120, offset: 0.5, meter: 4}`), or give seconds")
+    if not isinstance(walk.doc.data.get("tempo"), dict):
+        walk.problem(path, "a cue in bars and beats needs the music's `tempo:` "
+                           "(e.g. `tempo: {bpm: 120, offset: 0.5, meter: 4}`), or give seconds")
         return None
     bar, beat = at.get("bar"), at.get("beat", 1)
-    fields_ok = all(walk.ok(("tempo", key)) for key in tempo) and all(walk.ok(path + (key,)) for key in at)
-    if not fields_ok or not _number(bar) or not _number(beat):
-        return None  # the schema has said what is wrong with them
-    built = tempo_of(tempo)
-    if float(beat) >= built.meter + 1:
-        walk.problem(path + ("beat",), f"beat {value_text(at.get('beat'))}: a bar has {built.meter} beats "
-                                       f"(tempo.meter), so beats run from 1 to below {built.meter + 1}")
+    fields_ok = all(walk.ok(path + (key,)) for key in at)
+    tempo = walk.tempo
+    if tempo is None or not fields_ok or not _number(bar) or not _number(beat):
+        return None  # the schema or the tempo's checks have said what is wrong
+    if float(beat) >= tempo.meter + 1:
+        walk.problem(path + ("beat",), f"beat {value_text(at.get('beat'))}: a bar has {tempo.meter} beats "
+                                       f"(tempo.meter), so beats run from 1 to below {tempo.meter + 1}")
         return None
-    return built.seconds(int(bar), float(beat))
+    return tempo.seconds(int(bar), float(beat))
+
+
+def _checked_tempo(walk: _Walk) -> Tempo | None:
+    """The show's `tempo:` when it can place cues; None when it has none, or it is broken (said)."""
+    tempo = walk.doc.data.get("tempo")
+    if not isinstance(tempo, dict) or not walk.ok(("tempo",)) or not all(walk.ok(("tempo", key)) for key in tempo):
+        return None
+    bars = tempo.get("bars")
+    if bars is not None and not _check_bars(walk, bars):
+        return None
+    return tempo_of(tempo)
+
+
+def _check_bars(walk: _Walk, bars: list[Any]) -> bool:
+    """A tempo map's bars are numbers (the schema's to say) that go forward in time: a bar that
+    starts no later than the one before would run the music backwards or stop it."""
+    path = ("tempo", "bars")
+    if not all(walk.ok(path + (index,)) for index in range(len(bars))):
+        return False
+    for index in range(1, len(bars)):
+        if bars[index] <= bars[index - 1]:
+            walk.problem(path + (index,), f"bar {index + 1} starts at {value_text(bars[index])} s, not after bar "
+                                          f"{index}'s {value_text(bars[index - 1])} s: each bar of the map "
+                                          "starts later than the one before")
+            return False
+    return True
 
 
 def _number(value: Any) -> TypeGuard[int | float]:

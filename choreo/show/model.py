@@ -7,10 +7,13 @@ never looks at YAML; it walks the plan.
 
 from __future__ import annotations
 
+import bisect
+import math
 import os
 import unicodedata
 from dataclasses import dataclass, field
 from enum import Enum
+from itertools import pairwise
 from pathlib import Path
 
 from choreo.numtext import whole_number
@@ -142,17 +145,69 @@ class Repeat:
     robots: tuple[str, ...] | None = None  # the robots its steps are for, unless a step says
 
 
+MAX_TEMPO_BARS = 100_000  # entries of a tempo map (`tempo.bars`); the schema's `maxItems` says the same
+
+
 @dataclass(frozen=True)
 class Tempo:
-    """`tempo:`: where the music's bars and beats fall on the show clock."""
+    """`tempo:`: where the music's bars and beats fall on the show clock.
+
+    One tempo (`bpm`, `offset` to bar 1) is a straight line. A song played live drifts, and a
+    ritardando slows down: for those, `bars` is a tempo map, the show time of each bar's beat 1
+    (bar 1 first), and a cue follows the map. Within a bar the beats are evenly spaced; before
+    bar 1 and after the last bar the nearest bar's length goes on, as a sequencer carries its
+    last tempo on past the end of its tempo track. With a map, `bpm` is its median tempo and
+    `offset` its bar 1: figures to show, not to place beats by.
+    """
 
     bpm: float
     offset: float = 0.0  # seconds to bar 1, beat 1
     meter: int = 4  # beats a bar
+    bars: tuple[float, ...] = ()  # a tempo map: each bar's beat 1 in show seconds, bar 1 first; () for one tempo
+
+    def __post_init__(self) -> None:
+        if self.bars and (len(self.bars) < 2 or any(b <= a for a, b in pairwise(self.bars))):
+            raise ValueError("a tempo map needs two or more bars, each after the one before")
+
+    @classmethod
+    def of_bars(cls, bars: tuple[float, ...], meter: int = 4) -> Tempo:
+        """A tempo map from its bars' starts: its figures (median bpm, bar 1) worked out."""
+        tempi = sorted(60.0 * meter / (b - a) for a, b in pairwise(bars))
+        middle = len(tempi) // 2
+        median = tempi[middle] if len(tempi) % 2 else (tempi[middle - 1] + tempi[middle]) / 2
+        return cls(round(median, 3), bars[0], meter, tuple(bars))
 
     def seconds(self, bar: int, beat: float = 1.0) -> float:
         """Bar and beat (counted from 1) on the show clock, to the nanosecond."""
-        return round(self.offset + ((bar - 1) * self.meter + (beat - 1)) * 60.0 / self.bpm, 9)
+        where = (bar - 1) + (beat - 1) / self.meter  # in bars from bar 1's downbeat
+        if not self.bars:
+            return round(self.offset + where * self.meter * 60.0 / self.bpm, 9)
+        index = min(max(math.floor(where), 0), len(self.bars) - 2)  # the bar whose length counts
+        start, end = self.bars[index], self.bars[index + 1]
+        return round(start + (where - index) * (end - start), 9)
+
+    def position(self, seconds: float) -> tuple[int, float]:
+        """(bar, beat) at a show time, both from 1: the inverse of `seconds`. Before bar 1 the
+        bars count down from 0, as a count-in's do."""
+        if not self.bars:
+            where = (seconds - self.offset) * self.bpm / (60.0 * self.meter)
+        else:
+            index = min(max(bisect.bisect_right(self.bars, seconds) - 1, 0), len(self.bars) - 2)
+            start, end = self.bars[index], self.bars[index + 1]
+            where = index + (seconds - start) / (end - start)
+        where = round(where, 9)  # a beat's own time reads as that beat, not a hair before it
+        bar = math.floor(where)
+        return bar + 1, (where - bar) * self.meter + 1
+
+    def past_map(self, bar: int, beat: float = 1.0) -> bool:
+        """Whether a tempo map places this beat after its last bar's downbeat, where it has no
+        anchor and its last bar's length goes on (never, for one tempo)."""
+        return bool(self.bars) and (bar - 1) + (beat - 1) / self.meter > len(self.bars) - 1
+
+    @property
+    def bar_bpm(self) -> tuple[float, ...]:
+        """The tempo of each bar of a map (the last has no end: it is not counted); () for one tempo."""
+        return tuple(60.0 * self.meter / (b - a) for a, b in pairwise(self.bars))
 
 
 MUSIC_FORMATS = (".wav", ".mp3", ".flac", ".ogg")  # what miniaudio decodes

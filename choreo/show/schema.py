@@ -127,6 +127,18 @@ def _dependent_schema(error: _Error, data: Any) -> list[_Said] | None:
     return [(step, _step_kind_problem(here if isinstance(here, dict) else {}), False)]
 
 
+def _tempo_form(error: _Error, data: Any) -> list[_Said] | None:
+    """`tempo:` is one tempo (`bpm:`) or a tempo map (`bars:`): not both, not neither."""
+    if error.validator != "oneOf" or error.path != ("tempo",) or not isinstance(error.instance, dict):
+        return None
+    extra = [key for key in ("bpm", "offset") if key in error.instance]
+    if "bars" in error.instance and extra:
+        return [(error.path + (key,), f"a tempo map (`bars:`) places bar 1 and every bar itself: leave out `{key}:`",
+                 True) for key in extra]
+    return [(error.path, "needs `bpm:` (one tempo, e.g. `{bpm: 120, offset: 0.5}`) or `bars:` (a tempo "
+                         "map: each bar's start in seconds, as `choreo beats` prints it)", False)]
+
+
 def _whole_show(error: _Error, data: Any) -> list[_Said] | None:
     if error.path or error.validator not in ("oneOf", "not", "dependentRequired"):
         return None
@@ -198,7 +210,7 @@ def _one_of_forms(error: _Error, data: Any) -> list[_Said] | None:
 
 # In this order: the first that knows the error says it.
 _RULES: tuple[Callable[[_Error, Any], list[_Said] | None], ...] = (
-    _dependent_schema, _whole_show, _robot_settings, _property_name, _unknown_keys, _missing_keys,
+    _tempo_form, _dependent_schema, _whole_show, _robot_settings, _property_name, _unknown_keys, _missing_keys,
     _step_kind, _repeat_parts, _one_of_forms,
 )
 
@@ -344,6 +356,10 @@ _ON_FIELD: dict[tuple[str, str | int], _Say] = {
     ("enum", "layout"): _layout_problem,
     ("minimum", "number"): _slot_problem,
     ("maximum", "number"): _slot_problem,
+    ("minItems", "bars"): lambda instance, expected: f"a tempo map needs at least {expected} bars (where each "
+        "starts, in seconds); for one tempo give `bpm:` and `offset:`",
+    ("maxItems", "bars"): lambda instance, expected:
+        f"a tempo map of {len(instance):,} bars is more than the {expected:,} a show may hold",
     ("pattern", "label"): lambda instance, expected:
         f"label {instance!r} must not be only digits (those name steps by index) nor hold `#` or control characters",
 }
