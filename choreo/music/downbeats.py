@@ -1,0 +1,240 @@
+"""Where the bars start: which beats are downbeats, and which one is bar 1 (issue 23).
+
+The bar is heard in more than the bass's loudness, and no one cue is right in every song: a kick
+on 1 and 3 makes beats 1 and 3 alike, dembow's kick falls on every beat, a breakdown has no drums,
+a pads-only intro has nothing but chords. So several cues each say, beat by beat, how much that
+beat sounds like the one, and the meter's possible phases (phase p: the beats whose index modulo
+the meter is p) are scored on all of them jointly:
+
+- harmony: chords change on bar lines. The chroma over the bar after a beat is compared with the
+  chroma over the bar before; a chord anticipated by an eighth still falls mostly in the bar after.
+- bass: the bass notes (`bass_chroma`) change on bar lines, compared the same way.
+- kick: low-band onsets (kick drum, bass-note attacks) on the beat.
+- backbeat: a snare on the beat speaks against it being the one (backbeat on 2 and 4).
+- sections: the whole sound (drums coming in, a breakdown ending) changes on bar lines.
+
+Each cue's evidence for a phase is its mean over that phase's beats against the other phases',
+in standard errors of the beat-to-beat spread (a t statistic), so that no cue weighs more for its
+units or scale, and capped, so that one clear cue cannot outvote all the others on its own.
+
+Bar 1 is the first beat of the chosen phase where the music has begun: `music_start` is the first
+moment the song rises above its own noise floor, so a fade-in from silence begins bar 1 where it
+becomes audible at all, not where it reaches some share of the peak.
+
+The work is per beat and per feature frame, never per sample: an hour of audio is a few thousand
+beats.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from choreo.errors import UsageError
+from choreo.music.features import Features
+
+CUES = ("harmony", "bass", "kick", "backbeat", "sections")
+WEIGHTS = {"harmony": 1.0, "bass": 1.0, "kick": 1.0, "backbeat": 1.0, "sections": 0.5}
+CHANGE_BEATS = 1  # harmony and bass notes before and after a beat are compared over this many beats
+CAP = 4.0  # a cue's evidence for a phase, in standard errors, counts up to this much
+ONSET_REACH_S = 0.04  # an onset this near a beat is on it (a tracker's beats are ~10 ms off)
+KICK_HZ = (30.0, 150.0)  # kick drums and bass-note attacks
+SNARE_HZ = (1000.0, 5000.0)  # a snare's noise (hats sound on every beat alike)
+NOISE_FLOOR_DB = 12.0  # the music starts where the sound rises this much above the silence's level
+QUIETEST_S = 0.25  # the noise floor is the quietest stretch this long
+# Below the song's loudest, a floor deeper than this (digital silence) is taken as this: float32
+# audio is exact to about -140 dB.
+DEEPEST_DB = -120.0
+EARLY_BEAT = 0.4  # a downbeat up to this share of a beat before `music_start` may be bar 1
+EARLY_S = 0.05  # and at least this much before (an attack's rise, the analysis window)
+MIN_VOTING = 0.25  # a cue is named in `by` when it gave this share of the winning margin
+
+
+@dataclass(frozen=True)
+class Downbeats:
+    """Bar 1 among the tracked beats, and how sure that is."""
+
+    first: int  # index in beat_times of bar 1 beat 1: the first downbeat at or after the music starts
+    contrast: float | None  # the chosen phase's score over the runner-up's, in standard errors; None: meter 1
+    by: str  # the cues that decided, strongest first, joined by "+" ("" when none did)
+    other_first: int | None  # bar 1 at the next likeliest phase (None: meter 1)
+
+
+def find_downbeats(features: Features, beat_times: np.ndarray, meter: int) -> Downbeats:
+    """Bar 1 among `beat_times` (every tracked beat in seconds, ascending; it may start before the
+    music) with `meter` beats a bar."""
+    beats = np.asarray(beat_times, dtype=np.float64)
+    if beats.ndim != 1 or len(beats) == 0:
+        raise UsageError("no beats to find the bars among: the song needs a beat first")
+    start = music_start(features)
+    if meter <= 1:
+        return Downbeats(_first_from(beats, 0, 1, start), None, "", None)
+    evidence = phase_evidence(features, beats, meter, start)
+    scores = np.sum([WEIGHTS[name] * evidence[name] for name in CUES], axis=0)
+    order = np.argsort(-scores, kind="stable")
+    best, runner_up = int(order[0]), int(order[1])
+    margins = {name: WEIGHTS[name] * (evidence[name][best] - evidence[name][runner_up]) for name in CUES}
+    return Downbeats(_first_from(beats, best, meter, start),
+                     round(float(scores[best] - scores[runner_up]), 2), _deciders(margins),
+                     _first_from(beats, runner_up, meter, start))
+
+
+def phase_evidence(features: Features, beats: np.ndarray, meter: int, start: float) -> dict[str, np.ndarray]:
+    """Each cue's evidence for each phase (capped standard errors; higher: likelier the one)."""
+    values = beat_cues(features, beats, meter)
+    heard = beats >= start - _early(beats)
+    phases = np.arange(len(beats)) % meter
+    return {name: _phase_t(values[name], phases, heard, meter) for name in CUES}
+
+
+def beat_cues(features: Features, beats: np.ndarray, meter: int) -> dict[str, np.ndarray]:
+    """Each cue's value at each beat (NaN where it cannot be told: a bar window past an end)."""
+    chroma_at = _frame_times(len(features.chroma), features.chroma_fps)
+    band_at = _frame_times(len(features.bands), features.fps)
+    kick = _onsets_at(features, features.band_range(*KICK_HZ), beats)
+    snare = _onsets_at(features, features.band_range(*SNARE_HZ), beats)
+    return {
+        "harmony": _changes(features.chroma, chroma_at, beats),
+        "bass": _changes(features.bass_chroma, chroma_at, beats),
+        "kick": kick,
+        "backbeat": -snare,
+        "sections": _novelty(_beat_means(features.bands, band_at, beats), meter, cosine=False),
+    }
+
+
+def _frame_times(count: int, fps: float) -> np.ndarray:
+    return np.arange(count) / fps
+
+
+def _beat_means(frames: np.ndarray, times: np.ndarray, beats: np.ndarray) -> np.ndarray:
+    """The mean of `frames` over each beat (from it to the next; the last beat as long as the one
+    before it), a row a beat; a beat with no frame in it takes the nearest frame."""
+    ends = np.append(beats[1:], beats[-1] + (beats[-1] - beats[-2] if len(beats) > 1 else 0.5))
+    lo = np.searchsorted(times, beats)
+    hi = np.maximum(np.searchsorted(times, ends), lo + 1)
+    lo, hi = np.clip(lo, 0, len(frames) - 1), np.clip(hi, 1, len(frames))
+    lo = np.minimum(lo, hi - 1)
+    sums = np.concatenate([np.zeros((1, frames.shape[1])), np.cumsum(frames, axis=0, dtype=np.float64)])
+    return (sums[hi] - sums[lo]) / (hi - lo)[:, None]
+
+
+def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray) -> np.ndarray:
+    """How much the pitch classes change at each beat or in the half beat before it (a chord
+    anticipated by an eighth belongs to the bar line after it): the cosine distance between the
+    CHANGE_BEATS after each eighth and the CHANGE_BEATS before it, the larger of the two eighths."""
+    if len(beats) < 2:
+        return np.full(len(beats), np.nan)
+    last = beats[-1] + (beats[-1] - beats[-2])
+    edges = np.concatenate([beats, [last]])
+    grid = np.empty(2 * len(edges) - 1)
+    grid[0::2], grid[1::2] = edges, (edges[:-1] + edges[1:]) / 2
+    slots = _beat_means(frames, times, grid)[:-1]  # one a half beat
+    width = 2 * CHANGE_BEATS
+    novelty = _novelty(slots, width, cosine=True)  # at each eighth
+    on_beat = novelty[0::2][:len(beats)]
+    before = np.concatenate([[np.nan], novelty[1::2]])[:len(beats)]
+    return np.fmax(on_beat, before)  # NaN only where both are
+
+
+def _novelty(per_beat: np.ndarray, meter: int, cosine: bool) -> np.ndarray:
+    """How different the bar after each beat sounds from the bar before it (NaN where either bar
+    runs past the beats)."""
+    count = len(per_beat)
+    out = np.full(count, np.nan)
+    if count < 2 * meter:
+        return out
+    sums = np.concatenate([np.zeros((1, per_beat.shape[1])), np.cumsum(per_beat, axis=0)])
+    bars = (sums[meter:] - sums[:-meter]) / meter  # bars[i]: the bar from beat i on
+    after, before = bars[meter:], bars[:-meter]  # the bars after and before beats meter..count-meter
+    if cosine:
+        dot = np.sum(after * before, axis=1)
+        norms = np.linalg.norm(after, axis=1) * np.linalg.norm(before, axis=1)
+        change = np.where(norms > 0, 1.0 - dot / np.maximum(norms, 1e-30), np.nan)
+    else:
+        change = np.linalg.norm(after - before, axis=1)
+    out[meter:count - meter + 1] = change
+    return out
+
+
+def _onsets_at(features: Features, bands: np.ndarray, beats: np.ndarray) -> np.ndarray:
+    """The strongest onset in `bands` within ONSET_REACH_S of each beat (mean log-magnitude rise)."""
+    if len(bands) == 0 or len(features.bands) < 2:
+        return np.zeros(len(beats))
+    levels = features.bands[:, bands].astype(np.float64)
+    flux = np.concatenate([[0.0], np.maximum(np.diff(levels, axis=0), 0.0).mean(axis=1)])
+    reach = max(1, int(round(ONSET_REACH_S * features.fps)))
+    centre = np.round(beats * features.fps).astype(np.int64)
+    where = np.clip(centre[:, None] + np.arange(-reach, reach + 1)[None, :], 0, len(flux) - 1)
+    return flux[where].max(axis=1)
+
+
+def _phase_t(values: np.ndarray, phases: np.ndarray, heard: np.ndarray, meter: int) -> np.ndarray:
+    """Evidence for each phase from one cue's beat values: the phase's mean over the mean of all
+    phases, in standard errors of the spread within phases; capped at +-CAP; 0 without data."""
+    usable = heard & np.isfinite(values)
+    x, p = values[usable], phases[usable]
+    counts = np.bincount(p, minlength=meter).astype(np.float64)
+    if np.count_nonzero(counts) < meter or len(x) <= meter:
+        return np.zeros(meter)
+    means = np.bincount(p, weights=x, minlength=meter) / counts
+    spread = np.sqrt(np.sum((x - means[p]) ** 2) / (len(x) - meter))
+    spread = max(spread, 0.05 * float(np.std(x)), 1e-12)
+    t = (means - means.mean()) / (spread / np.sqrt(counts))
+    return np.clip(t, -CAP, CAP)
+
+
+def _deciders(margins: dict[str, float]) -> str:
+    """The cues that favoured the winner over the runner-up by MIN_VOTING of the margin or more."""
+    total = sum(m for m in margins.values() if m > 0)
+    if total <= 0:
+        return ""
+    named = sorted((m, name) for name, m in margins.items() if m >= MIN_VOTING * total)
+    return "+".join(name for _, name in reversed(named))
+
+
+def _early(beats: np.ndarray) -> float:
+    """How far before `music_start` a downbeat may fall and still be bar 1."""
+    beat_s = float(np.median(np.diff(beats))) if len(beats) > 1 else 0.0
+    return max(EARLY_S, EARLY_BEAT * beat_s)
+
+
+def _first_from(beats: np.ndarray, phase: int, meter: int, start: float) -> int:
+    """The first beat at `phase` at or after the music starts (the last such beat if the music
+    starts after them all, the first beat if there is none at that phase)."""
+    at_phase = np.arange(phase, len(beats), meter)
+    if len(at_phase) == 0:
+        return 0
+    after = at_phase[beats[at_phase] >= start - _early(beats)]
+    return int(after[0]) if len(after) else int(at_phase[-1])
+
+
+def music_start(features: Features) -> float:
+    """Seconds from the file's start where the music begins: the first moment the sound rises
+    NOISE_FLOOR_DB above the song's quietest stretch (its noise floor, or digital silence), so a
+    fade-in begins where it is first heard at all."""
+    if len(features.bands) == 0 or features.peak <= 0:
+        return 0.0
+    level = _level_db(features.bands)
+    loudest = float(level.max())
+    width = max(1, int(round(QUIETEST_S * features.fps)))
+    floor = float(_running_mean(level, width).min()) if len(level) > width else float(level.min())
+    threshold = max(floor, loudest + DEEPEST_DB) + NOISE_FLOOR_DB
+    above = np.flatnonzero(level > threshold)
+    if len(above) == 0:
+        return 0.0
+    # A frame hears half a window ahead of its centre: the sound began between the previous
+    # frame's leading edge and this one's.
+    lead = (features.hop * 1.5) / features.sample_rate
+    return max(0.0, float(above[0]) / features.fps + lead)
+
+
+def _level_db(bands: np.ndarray) -> np.ndarray:
+    """Each frame's level in dB (relative to full scale, from the bands' log magnitudes)."""
+    magnitude = np.expm1(bands.astype(np.float64))
+    return 10.0 * np.log10(np.sum(magnitude * magnitude, axis=1) + 1e-30)
+
+
+def _running_mean(values: np.ndarray, width: int) -> np.ndarray:
+    sums = np.concatenate([[0.0], np.cumsum(values)])
+    return (sums[width:] - sums[:-width]) / width
