@@ -401,7 +401,8 @@ def _span(start: float | None, end: float | None) -> str:
 # -- picture -----------------------------------------------------------------------------------
 
 
-def require_matplotlib() -> None:
+def require_matplotlib(needed_by: str = "timeline --png",
+                       works_without: str = "the text timeline works without it") -> None:
     """PlotUnavailable (exit 2, how to get it) before any file is made or any log read."""
     try:
         import matplotlib
@@ -409,8 +410,8 @@ def require_matplotlib() -> None:
         matplotlib.use("Agg")
         import matplotlib.pyplot  # noqa: F401 - imported to fail here, before any file is made
     except ImportError:
-        raise PlotUnavailable("timeline --png needs matplotlib: pip install 'choreo[plot]' "
-                              "(or pip install matplotlib); the text timeline works without it") from None
+        raise PlotUnavailable(f"{needed_by} needs matplotlib: pip install 'choreo[plot]' "
+                              f"(or pip install matplotlib); {works_without}") from None
 
 
 def render_png(timeline: Timeline, out: BinaryIO) -> None:
