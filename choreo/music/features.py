@@ -83,10 +83,18 @@ def read_features(path: str | os.PathLike[str], sample_rate: int = SAMPLE_RATE) 
     """The features of the song in the file at `path`, decoded in blocks; an unreadable file is
     one line that says what to do (`UsageError`, exit 2)."""
     name = os.fspath(path)
+    return features_of(song_blocks(name, sample_rate), sample_rate, name)
+
+
+def song_blocks(path: str | os.PathLike[str], sample_rate: int = SAMPLE_RATE,
+                channels: int = 1) -> Iterator[np.ndarray]:
+    """The song in the file at `path` as float32 blocks (`channels` interleaved) at `sample_rate`,
+    decoded as they are read (a second pass, such as `choreo beats --click`, reads it this way too)."""
+    name = os.fspath(path)
     with open_input(name, "sound file", MAX_SONG_BYTES) as stream, reading(name, "sound file"):
         if os.fstat(stream.fileno()).st_size == 0:
             raise UsageError(f"{visible(name)}: the file is empty")
-        return features_of(_decoded(stream, name, sample_rate), sample_rate, name)
+        yield from _decoded(stream, name, sample_rate, channels)
 
 
 def features_of(blocks: Iterable[np.ndarray], sample_rate: int = SAMPLE_RATE, path: str = "") -> Features:
@@ -111,15 +119,15 @@ class _Source(miniaudio.StreamableSource):
         return True
 
 
-def _decoded(stream: io.BufferedReader, name: str, sample_rate: int) -> Iterator[np.ndarray]:
-    """The file's audio as mono float32 blocks at `sample_rate`."""
+def _decoded(stream: io.BufferedReader, name: str, sample_rate: int, channels: int = 1) -> Iterator[np.ndarray]:
+    """The file's audio as float32 blocks at `sample_rate`, `channels` interleaved."""
     limit = int(MAX_SONG_S * sample_rate)
     total = 0
     try:
         for block in miniaudio.stream_any(_Source(stream), output_format=miniaudio.SampleFormat.FLOAT32,
-                                          nchannels=1, sample_rate=sample_rate, frames_to_read=_READ_FRAMES):
+                                          nchannels=channels, sample_rate=sample_rate, frames_to_read=_READ_FRAMES):
             samples = np.frombuffer(block, dtype=np.float32)
-            total += len(samples)
+            total += len(samples) // channels
             if total > limit:
                 raise UsageError(f"{visible(name)}: longer than {MAX_SONG_S / 3600:g} hours: "
                                  "give a shorter song (cut it where the show needs it)")
