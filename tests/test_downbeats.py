@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from choreo.errors import UsageError
-from choreo.music.downbeats import find_downbeats, music_start
+from choreo.music.downbeats import beat_cues, find_downbeats, music_start
 from choreo.music.features import Features, features_of
 from choreo.music.scoring import bar_one_right
 
@@ -74,7 +74,7 @@ def test_the_pads_only_intro_starts_bar_1_at_the_first_chord_not_where_the_drums
 
 def synth(bars: int = 8, bpm: float = 110.0, meter: int = 4, start_s: float = 0.8, kick: dict[int, float] | None = None,
           snare: tuple[int, ...] = (1, 3), anticipate: bool = False, bass: bool = False,
-          fade_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+          fade_s: float = 0.0, pads: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """A small band: kick and snare on the given beats of the bar (0 = the one), hats on every
     eighth, a chord each bar (an eighth early when anticipated), optionally a bass note with it.
     Returns the samples and the true beats."""
@@ -93,7 +93,7 @@ def synth(bars: int = 8, bpm: float = 110.0, meter: int = 4, start_s: float = 0.
             for when in ((at, at + beat / 2) if name == "hat" else (at,)):
                 n = int(round(when * RATE))
                 out[n:n + len(t)] += gain * sounds[name][: len(out) - n]
-    for bar in range(bars):
+    for bar in range(bars if pads else 0):
         begin = beats[bar * meter] - (beat / 2 if anticipate and bar else 0.0)
         n = int((beats[bar * meter] + meter * beat - begin) * RATE)
         tt = np.arange(n) / RATE
@@ -128,6 +128,23 @@ def test_a_kick_on_1_and_3_with_a_snare_backbeat_puts_bar_1_on_the_kick_that_sta
     result = find_downbeats(features, given, 4)
     assert bar_one_right(beats[0], float(given[result.first]))
     assert "backbeat" not in result.by  # the snare tells 1 and 3 from 2 and 4, not 1 from 3
+
+
+def test_a_kick_over_a_bass_note_held_from_an_eighth_before_counts_as_much_as_over_silence():
+    samples, beats = synth(kick={0: 1.0, 2: 1.0}, anticipate=True, bass=True)
+    kick = beat_cues(features_of([samples]), beats, 4)["kick"]
+    assert np.nanmean(kick[0::4]) > 0.9 * np.nanmean(kick[2::4]) > 3 * np.nanmean(kick[1::2])
+
+
+def test_without_chords_the_kick_and_snare_pattern_finds_the_bar():
+    # 3/4: the kick on 1 alone, the snare on 2 and 3; no harmony to go by
+    samples, beats = synth(meter=3, kick={0: 1.0}, snare=(1, 2), pads=False, bars=10)
+    features = features_of([samples])
+    for before in (1, 2):
+        given = tracked(beats, np.random.default_rng(before), before, 0.01)
+        result = find_downbeats(features, given, 3)
+        assert bar_one_right(beats[0], float(given[result.first]))
+        assert set(result.by.split("+")) <= {"kick", "backbeat", "sections"} and "kick" in result.by
 
 
 def test_chords_anticipated_by_an_eighth_still_belong_to_the_bar_line_after_them():

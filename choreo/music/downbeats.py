@@ -41,8 +41,9 @@ CAP = 4.0  # a cue's evidence for a phase, in standard errors, counts up to this
 ONSET_REACH_S = 0.04  # an onset this near a beat is on it (a tracker's beats are ~10 ms off)
 KICK_HZ = (30.0, 150.0)  # kick drums and bass-note attacks
 SNARE_HZ = (1000.0, 5000.0)  # a snare's noise (hats sound on every beat alike)
-NOISE_FLOOR_DB = 12.0  # the music starts where the sound rises this much above the silence's level
-QUIETEST_S = 0.25  # the noise floor is the quietest stretch this long
+NOISE_FLOOR_DB = 12.0  # the music starts where a band rises this much above the silence's level there
+QUIETEST_S = 0.1  # the sound is measured in stretches this long, band by band
+QUIET_STRETCHES = 3  # the noise floor: the quietest this many stretches in a row
 # Below the song's loudest, a floor deeper than this (digital silence) is taken as this: float32
 # audio is exact to about -140 dB.
 DEEPEST_DB = -120.0
@@ -95,8 +96,8 @@ def beat_cues(features: Features, beats: np.ndarray, meter: int) -> dict[str, np
     kick = _onsets_at(features, features.band_range(*KICK_HZ), beats)
     snare = _onsets_at(features, features.band_range(*SNARE_HZ), beats)
     return {
-        "harmony": _changes(features.chroma, chroma_at, beats),
-        "bass": _changes(features.bass_chroma, chroma_at, beats),
+        "harmony": _changes(features.chroma, chroma_at, beats, meter),
+        "bass": _changes(features.bass_chroma, chroma_at, beats, meter),
         "kick": kick,
         "backbeat": -snare,
         "sections": _novelty(_beat_means(features.bands, band_at, beats), meter, cosine=False),
@@ -119,10 +120,12 @@ def _beat_means(frames: np.ndarray, times: np.ndarray, beats: np.ndarray) -> np.
     return (sums[hi] - sums[lo]) / (hi - lo)[:, None]
 
 
-def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray) -> np.ndarray:
+def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray, meter: int) -> np.ndarray:
     """How much the pitch classes change at each beat or in the half beat before it (a chord
-    anticipated by an eighth belongs to the bar line after it): the cosine distance between the
-    CHANGE_BEATS after each eighth and the CHANGE_BEATS before it, the larger of the two eighths."""
+    anticipated by an eighth belongs to the bar line after it): the distance between their shape
+    over the CHANGE_BEATS after each eighth and over the CHANGE_BEATS before it, the larger of the
+    two eighths. What repeats every bar (a pitched kick drum, a comping pattern) is taken out
+    first: it changes at the same place in every bar, whichever place the bar starts at."""
     if len(beats) < 2:
         return np.full(len(beats), np.nan)
     last = beats[-1] + (beats[-1] - beats[-2])
@@ -130,11 +133,21 @@ def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray) -> np.nda
     grid = np.empty(2 * len(edges) - 1)
     grid[0::2], grid[1::2] = edges, (edges[:-1] + edges[1:]) / 2
     slots = _beat_means(frames, times, grid)[:-1]  # one a half beat
-    width = 2 * CHANGE_BEATS
-    novelty = _novelty(slots, width, cosine=True)  # at each eighth
+    norms = np.linalg.norm(slots, axis=1, keepdims=True)
+    shapes = np.divide(slots, norms, out=np.zeros_like(slots), where=norms > 0)
+    novelty = _novelty(shapes - _bar_pattern(shapes, 2 * meter), 2 * CHANGE_BEATS, cosine=False)  # at each eighth
     on_beat = novelty[0::2][:len(beats)]
     before = np.concatenate([[np.nan], novelty[1::2]])[:len(beats)]
     return np.fmax(on_beat, before)  # NaN only where both are
+
+
+def _bar_pattern(rows: np.ndarray, period: int) -> np.ndarray:
+    """The mean of `rows` at each place in a `period` (rows i, i + period, ...), row by row."""
+    places = np.arange(len(rows)) % period
+    sums = np.zeros((period, rows.shape[1]))
+    np.add.at(sums, places, rows)
+    counts = np.bincount(places, minlength=period)[:, None]
+    return (sums / np.maximum(counts, 1))[places]
 
 
 def _novelty(per_beat: np.ndarray, meter: int, cosine: bool) -> np.ndarray:
@@ -158,15 +171,17 @@ def _novelty(per_beat: np.ndarray, meter: int, cosine: bool) -> np.ndarray:
 
 
 def _onsets_at(features: Features, bands: np.ndarray, beats: np.ndarray) -> np.ndarray:
-    """The strongest onset in `bands` within ONSET_REACH_S of each beat (mean log-magnitude rise)."""
+    """The strongest onset in `bands` within ONSET_REACH_S of each beat: the rise of their mean
+    magnitude from one frame to the next. In magnitude, not its log: a kick adds as much over a
+    bass note held from an eighth before as over silence."""
     if len(bands) == 0 or len(features.bands) < 2:
         return np.zeros(len(beats))
-    levels = features.bands[:, bands].astype(np.float64)
-    flux = np.concatenate([[0.0], np.maximum(np.diff(levels, axis=0), 0.0).mean(axis=1)])
     reach = max(1, int(round(ONSET_REACH_S * features.fps)))
     centre = np.round(beats * features.fps).astype(np.int64)
-    where = np.clip(centre[:, None] + np.arange(-reach, reach + 1)[None, :], 0, len(flux) - 1)
-    return flux[where].max(axis=1)
+    where = np.clip(centre[:, None] + np.arange(-reach - 1, reach + 1)[None, :], 0, len(features.bands) - 1)
+    levels = np.expm1(features.bands[where][:, :, bands].astype(np.float64))  # beats x frames x bands
+    rises = np.maximum(np.diff(levels, axis=1), 0.0).mean(axis=2)
+    return rises.max(axis=1)
 
 
 def _phase_t(values: np.ndarray, phases: np.ndarray, heard: np.ndarray, meter: int) -> np.ndarray:
@@ -210,31 +225,36 @@ def _first_from(beats: np.ndarray, phase: int, meter: int, start: float) -> int:
 
 
 def music_start(features: Features) -> float:
-    """Seconds from the file's start where the music begins: the first moment the sound rises
-    NOISE_FLOOR_DB above the song's quietest stretch (its noise floor, or digital silence), so a
-    fade-in begins where it is first heard at all."""
-    if len(features.bands) == 0 or features.peak <= 0:
+    """Seconds from the file's start where the music begins: the first moment any band rises
+    NOISE_FLOOR_DB above that band's quietest stretch (the recording's noise floor there, or
+    digital silence), so a fade-in begins where it is first heard at all. Band by band, because
+    a pad's first notes stand out of a hiss in their own band long before they outweigh it whole."""
+    bands = features.bands
+    if len(bands) == 0 or features.peak <= 0:
         return 0.0
-    level = _level_db(features.bands)
-    loudest = float(level.max())
-    width = max(1, int(round(QUIETEST_S * features.fps)))
-    floor = float(_running_mean(level, width).min()) if len(level) > width else float(level.min())
-    threshold = max(floor, loudest + DEEPEST_DB) + NOISE_FLOOR_DB
-    above = np.flatnonzero(level > threshold)
-    if len(above) == 0:
+    width = max(1, min(len(bands), int(round(QUIETEST_S * features.fps))))
+    stretches = np.expm1(bands[: len(bands) // width * width].reshape(-1, width, bands.shape[1])
+                         .mean(axis=1, dtype=np.float64))  # each band's mean magnitude a stretch
+    floor = np.maximum(_quietest(stretches), stretches.max() * 10.0 ** (DEEPEST_DB / 20.0))
+    threshold = floor * 10.0 ** (NOISE_FLOOR_DB / 20.0)
+    loud = np.flatnonzero(np.any(stretches > threshold, axis=1))
+    if len(loud) == 0:
         return 0.0
+    # The first frame above the threshold, in the stretch before the first loud one or in it
+    lo = max(0, int(loud[0]) - 1) * width
+    frames = np.expm1(bands[lo: lo + 2 * width].astype(np.float64))
+    first = lo + int(np.argmax(np.any(frames > threshold, axis=1)))
     # A frame hears half a window ahead of its centre: the sound began between the previous
     # frame's leading edge and this one's.
     lead = (features.hop * 1.5) / features.sample_rate
-    return max(0.0, float(above[0]) / features.fps + lead)
+    return max(0.0, first / features.fps + lead)
 
 
-def _level_db(bands: np.ndarray) -> np.ndarray:
-    """Each frame's level in dB (relative to full scale, from the bands' log magnitudes)."""
-    magnitude = np.expm1(bands.astype(np.float64))
-    return 10.0 * np.log10(np.sum(magnitude * magnitude, axis=1) + 1e-30)
-
-
-def _running_mean(values: np.ndarray, width: int) -> np.ndarray:
-    sums = np.concatenate([[0.0], np.cumsum(values)])
-    return (sums[width:] - sums[:-width]) / width
+def _quietest(stretches: np.ndarray) -> np.ndarray:
+    """Each band's mean level over the song's quietest QUIET_STRETCHES stretches in a row (all
+    bands together): the noise floor, measured long enough that its own flicker stays under
+    NOISE_FLOOR_DB (the quietest single stretch of each band would be a dip of the noise)."""
+    run = min(QUIET_STRETCHES, len(stretches))
+    totals = np.concatenate([[0.0], np.cumsum(stretches.sum(axis=1))])
+    begin = int(np.argmin(totals[run:] - totals[:-run]))
+    return np.asarray(stretches[begin:begin + run].mean(axis=0))
