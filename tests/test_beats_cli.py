@@ -22,6 +22,7 @@ import pytest
 from drumsong import BPM, METER, START_S, beat_times, drums, write_wav
 
 from choreo.cli import main
+from choreo.errors import Interrupted
 from choreo.cli.beats import MAP_WIDTH, straight_line_miss, tempo_lines, text_lines
 from choreo.music import click, picture
 from choreo.music.beats import Beat, BeatEstimate, estimate
@@ -257,6 +258,29 @@ def test_a_disk_that_fills_leaves_the_old_file_and_no_part(song_copy, tmp_path, 
     assert_one_line_and_nothing_left(capsys, [song_copy, "--click", out_path],
                                      f"--click {out_path}: cannot write: No space left on device", tmp_path, before)
     assert out_path.read_bytes() == b"yesterday's click track"
+
+
+def test_a_song_that_will_not_decode_leaves_no_output(tmp_path, capsys):
+    notes = tmp_path / "notes.mp3"
+    notes.write_text("not a song\n")
+    before = {p.name for p in tmp_path.iterdir()}
+    err = assert_one_line_and_nothing_left(capsys, [notes, "--click", tmp_path / "c.wav", "--png", tmp_path / "p.png"],
+                                           "cannot decode", tmp_path, before)
+    assert err.startswith(f"{notes}: ")
+
+
+def test_ctrl_c_while_writing_leaves_the_old_file_and_no_part(song_copy, tmp_path, capsys, monkeypatch):
+    out_path = tmp_path / "click.wav"
+    out_path.write_bytes(b"yesterday's click track")
+
+    def interrupted(self, data):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(wave.Wave_write, "writeframes", interrupted)
+    before = {p.name for p in tmp_path.iterdir()}
+    assert main(["beats", str(song_copy), "--click", str(out_path)]) == Interrupted.exit_code
+    assert {p.name for p in tmp_path.iterdir()} == before and out_path.read_bytes() == b"yesterday's click track"
+    capsys.readouterr()
 
 
 @pytest.fixture
