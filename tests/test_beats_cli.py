@@ -243,6 +243,18 @@ def test_an_output_in_a_folder_that_cannot_be_written_is_one_line(song_copy, tmp
         (tmp_path / "locked").chmod(0o700)
 
 
+def test_a_read_only_output_is_left_alone(song_copy, tmp_path, capsys):
+    kept = tmp_path / "kept.wav"
+    kept.write_bytes(b"keep me")
+    kept.chmod(0o444)
+    if os.access(kept, os.W_OK):
+        pytest.skip("this user may write any file (root)")
+    before = {p.name for p in tmp_path.iterdir()}
+    assert_one_line_and_nothing_left(capsys, [song_copy, "--click", kept], "cannot write: the file is read-only",
+                                     tmp_path, before)
+    assert kept.read_bytes() == b"keep me"
+
+
 def test_a_disk_that_fills_leaves_the_old_file_and_no_part(song_copy, tmp_path, capsys, monkeypatch):
     out_path = tmp_path / "click.wav"
     out_path.write_bytes(b"yesterday's click track")

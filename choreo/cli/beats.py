@@ -320,6 +320,8 @@ def _check_target(target: Path, path: str, option: str, song: str) -> None:
     if _same_file(str(target), song):
         raise UsageError(f"{option} {visible(path)}: that is the song itself: writing it would destroy the "
                          "song; give another file name")
+    if not os.access(target, os.W_OK):  # a rename would replace it all the same: its owner said no
+        raise UsageError(f"{option} {visible(path)}: cannot write: the file is read-only")
 
 
 def _why(exc: OSError | ValueError) -> str:
