@@ -42,6 +42,8 @@ METER_LIMITS = (1, 16)  # beats a bar, as the show schema allows
 MIN_BEATS = 4  # beats an attack must confirm before a tempo is worth printing
 ON_BEAT_S = 0.03  # an attack farther than this from the beat does not confirm it
 MAP_WHEN_OFF_S = 0.02  # a straight line that puts a beat farther off than this: a tempo map
+STEADY_SHARE = 0.95  # of the beats with an attack that must lie within MAP_WHEN_OFF_S of a steady tempo's line
+STRAY_S = 0.05  # and no beat farther off than this (one an attack confirms, or the tracker's guess)
 MIN_PULSE = 0.1  # the onsets' autocorrelation at the beat (share of its peak) below which no beat repeats
 _LAST_BEAT = 0.2  # a beat past the last heard one with less onset than this share of the median's: gone
 _SOUND = 0.02  # the music ends after the last frame whose its bands' sum reaches this share of the song's median sound
@@ -151,11 +153,12 @@ def _beat_times(strength: np.ndarray, periods: np.ndarray, fps: float, start: fl
 
 
 def _ending(times: np.ndarray, heard: np.ndarray, onsets: tempo_level.Onsets) -> tuple[np.ndarray, np.ndarray]:
-    """The beats up to the last one the music plays: past it, a song's last notes ring out, and
-    the tracker's beats there have no attack and next to no onset under them."""
+    """The beats up to the last one the music plays: one an attack confirms and with a fair onset
+    under it. Past it a song's last notes ring out, or stop (a sound's end makes no attack, though
+    its cut can splash across the spectrum)."""
     frames = np.clip(np.round(times * onsets.fps).astype(int), 0, len(onsets.strength) - 1)
     strength = np.array([onsets.strength[max(0, f - 2):f + 3].max() for f in frames])
-    weak = ~heard & (strength < _LAST_BEAT * float(np.median(strength)))
+    weak = ~heard | (strength < _LAST_BEAT * float(np.median(strength)))
     last = len(times) - int(np.argmin(weak[::-1])) if not np.all(weak) else 0
     return times[:last], heard[:last]
 
@@ -196,12 +199,16 @@ def _estimate_from(features: Features, times: np.ndarray, heard: np.ndarray, met
 
 
 def _show_tempo(times: np.ndarray, heard: np.ndarray, meter: int) -> Tempo:
-    """One tempo when a robust straight line through the beats (bar 1 first) puts none more than
-    MAP_WHEN_OFF_S off it, else a map of the bars; the figures rounded as a show file holds them."""
+    """One tempo when a robust straight line through the beats (bar 1 first) puts the attacks on
+    them within MAP_WHEN_OFF_S of it (all but a stray few: an attack near a beat may be another
+    sound) and no beat farther than STRAY_S, else a map of the bars; the figures rounded as a
+    show file holds them."""
     ks = np.arange(len(times))
     fit = heard if np.count_nonzero(heard) >= MIN_BEATS else np.ones(len(ks), dtype=bool)
     start, period = _robust_line(ks[fit], times[fit])
-    if float(np.max(np.abs(times - (start + ks * period)))) <= MAP_WHEN_OFF_S:
+    off = np.abs(times - (start + ks * period))
+    on_line = np.count_nonzero(off[fit] <= MAP_WHEN_OFF_S) >= STEADY_SHARE * np.count_nonzero(fit)
+    if on_line and float(np.max(off)) <= STRAY_S:
         return Tempo(round(60.0 / period, 2), max(0.0, round(start, 3)), meter)
     bars = _bar_anchors(times, meter)
     return Tempo(round(60.0 / float(np.median(np.diff(times))), 2), bars[0], meter, bars)
