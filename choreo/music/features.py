@@ -92,7 +92,7 @@ def song_blocks(path: str | os.PathLike[str], sample_rate: int = SAMPLE_RATE,
     decoded as they are read (a second pass, such as `choreo beats --click`, reads it this way too)."""
     name = os.fspath(path)
     with open_input(name, "sound file", MAX_SONG_BYTES) as stream, reading(name, "sound file"):
-        if os.fstat(stream.fileno()).st_size == 0:
+        if not stream.peek(1):  # read, not stat: /proc files say 0 bytes, and a read may fail (EIO)
             raise UsageError(f"{visible(name)}: the file is empty")
         yield from _decoded(stream, name, sample_rate, channels)
 
