@@ -256,8 +256,9 @@ def _write_outputs(args: argparse.Namespace, features: Features, found: BeatEsti
         title = f"{visible(features.path)}: {found.bpm:g} bpm{' (a tempo map)' if found.bars else ''}, " \
                 f"{found.meter} beats a bar"
         drawn = render_png(onset_strength(features), features.fps, found, title, outputs["--png"])
-        notes.append(f"png: {args.png}: {drawn.beats + drawn.bars} beat lines, {drawn.bars} of them "
-                     f"bar lines, {drawn.labels} bar numbers")
+        left_out = " (too many for the width)" if drawn.beats == 0 and found.meter > 1 else ""
+        notes.append(f"png: {args.png}: {drawn.bars} bar lines, {drawn.beats} other beat lines{left_out}, "
+                     f"{drawn.labels} bar numbers")
     return notes
 
 

@@ -7,7 +7,7 @@ on a second axis, so a drift, a ritardando or a beat on the off-beat shows at a 
 An hour of onset strength is 310,000 frames and 7,000 beats, more than a picture 1,400 pixels
 wide can show and more than matplotlib draws quickly: the strength is cut into as many pieces as
 the picture has room for and each drawn by its highest value (a peak stays a peak), beats are
-left out once they would stand closer than a few pixels, and bar numbers are written on every
+left out once they would stand closer than a few pixels, bar lines and numbers drawn on every
 first, second, fourth... bar, so that an hour draws about as fast as a song. matplotlib is
 imported here, in the function: only `--png` needs it (the `plot` extra).
 """
@@ -24,10 +24,11 @@ if TYPE_CHECKING:
     from choreo.music.beats import BeatEstimate
 
 WIDTH_IN, HEIGHT_IN, DPI = 14.0, 5.0, 100  # 1400 x 500 pixels
-MAX_POINTS = 2800  # pieces the onset strength and the tempo curve are cut into: 2 a pixel
-MAX_BEAT_LINES = 700  # beats drawn at most: 2 pixels apart; past it only downbeats are drawn
-MAX_BAR_LINES = 700
-MAX_BAR_LABELS = 48
+MAX_POINTS = 2800  # pieces the onset strength is cut into: 2 a pixel
+MAX_TEMPO_POINTS = 700  # and the tempo curve: each a median of its beats, so one odd beat is no spike
+MAX_BEAT_LINES = 400  # beats drawn at most (3.5 pixels apart); past it only bar lines are drawn
+MAX_BAR_LINES = 200  # bar lines drawn at most (7 pixels apart); past it every 2nd, 4th... bar
+MAX_BAR_LABELS = 32  # bar numbers written at most (44 pixels apart: room for "1793")
 STRENGTH, BEAT, DOWNBEAT, TEMPO = "#8c8c8c", "#9ecae1", "#08519c", "#d62728"
 
 
@@ -50,6 +51,8 @@ def render_png(strength: np.ndarray, fps: float, found: BeatEstimate, title: str
     times, values = peaks(np.asarray(strength, dtype=np.float64), fps, MAX_POINTS)
     ax.fill_between(times, values, color=STRENGTH, linewidth=0.0, alpha=0.6, label="onset strength")
     drawn = _draw_beats(ax, found)
+    if drawn.beats < len(found.beats) - len([b for b in found.beats if b.beat == 1]):
+        title += f" (beat lines left out: {len(found.beats)} beats are too many for the width)"
     ax.set_xlim(0.0, max(found.duration_s, times[-1] if len(times) else 0.0, 1e-3))
     ax.set_ylim(bottom=0.0)
     ax.set_xlabel("song time (s)")
@@ -105,14 +108,16 @@ def _draw_tempo(ax: Any, found: BeatEstimate) -> None:
     tempo = ax.twinx()
     curve = np.asarray(found.curve, dtype=np.float64).reshape(-1, 2)
     if len(curve):
-        run = max(1, math.ceil(len(curve) / MAX_POINTS))
+        run = max(1, math.ceil(len(curve) / MAX_TEMPO_POINTS))
         whole = len(curve) // run * run or len(curve)
-        means = curve[:whole].reshape(-1, min(run, whole), 2).mean(axis=1)
-        tempo.plot(means[:, 0], means[:, 1], color=TEMPO, linewidth=1.0, label="tempo (bpm)")
-        low, high = float(curve[:, 1].min()), float(curve[:, 1].max())
+        middles = np.median(curve[:whole].reshape(-1, min(run, whole), 2), axis=1)
+        tempo.plot(middles[:, 0], middles[:, 1], color=TEMPO, linewidth=1.0,
+                   label="tempo (bpm)" if run == 1 else f"tempo (bpm, median of {run} beats)")
+        low, high = float(middles[:, 1].min()), float(middles[:, 1].max())
         margin = max(0.05 * (high - low), 2.0)
         tempo.set_ylim(low - margin, high + margin)
     tempo.set_ylabel("tempo (bpm)", color=TEMPO)
     handles, labels = ax.get_legend_handles_labels()
     more_handles, more_labels = tempo.get_legend_handles_labels()
-    ax.legend(handles + more_handles, labels + more_labels, loc="upper right", fontsize="small", framealpha=0.8)
+    ax.legend(handles + more_handles, labels + more_labels, loc="upper center", bbox_to_anchor=(0.5, -0.12),
+              ncol=4, frameon=False, fontsize="small")
