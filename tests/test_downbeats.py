@@ -132,7 +132,7 @@ def test_a_kick_on_1_and_3_with_a_snare_backbeat_puts_bar_1_on_the_kick_that_sta
 
 def test_a_kick_over_a_bass_note_held_from_an_eighth_before_counts_as_much_as_over_silence():
     samples, beats = synth(kick={0: 1.0, 2: 1.0}, anticipate=True, bass=True)
-    kick = beat_cues(features_of([samples]), beats, 4)["kick"]
+    kick = beat_cues(features_of([samples]), beats, 4)["kick"].values
     assert np.nanmean(kick[0::4]) > 0.9 * np.nanmean(kick[2::4]) > 3 * np.nanmean(kick[1::2])
 
 
@@ -145,6 +145,30 @@ def test_without_chords_the_kick_and_snare_pattern_finds_the_bar():
         result = find_downbeats(features, given, 3)
         assert bar_one_right(beats[0], float(given[result.first]))
         assert set(result.by.split("+")) <= {"kick", "backbeat", "sections"} and "kick" in result.by
+
+
+def click_track(bpm: float, offset: float, meter: int, seconds: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+    """A metronome: a click on every beat, the one louder and an octave higher (the same pitch
+    class: no harmony), no drum, no noise."""
+    beats = offset + 60.0 / bpm * np.arange(int((seconds - offset - 0.1) * bpm / 60.0))
+    out = np.zeros(int(seconds * RATE))
+    t = np.arange(int(0.03 * RATE)) / RATE
+    for i, at in enumerate(beats):
+        one = i % meter == 0
+        click = (0.9 if one else 0.4) * np.sin(2 * np.pi * (1760 if one else 880) * t) * np.exp(-t / 0.008)
+        n = int(round(at * RATE))
+        out[n:n + len(click)] += click
+    return out.astype(np.float32), beats
+
+
+@pytest.mark.parametrize("meter", [3, 4])
+def test_a_metronome_puts_bar_1_on_its_accented_click(meter):
+    samples, beats = click_track(96.0, 0.75, meter)
+    features = features_of([samples])
+    for given in (beats, tracked(beats, np.random.default_rng(meter), 1, 0.002)):
+        result = find_downbeats(features, given, meter)
+        assert bar_one_right(beats[0], float(given[result.first])), result
+        assert result.by == "accent"  # no chord, bass note, kick or snare was heard
 
 
 def test_chords_anticipated_by_an_eighth_still_belong_to_the_bar_line_after_them():

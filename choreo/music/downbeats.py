@@ -34,13 +34,24 @@ import numpy as np
 from choreo.errors import UsageError
 from choreo.music.features import Features
 
-CUES = ("harmony", "bass", "kick", "backbeat", "sections")
-WEIGHTS = {"harmony": 1.0, "bass": 1.0, "kick": 1.0, "backbeat": 1.0, "sections": 0.5}
+CUES = ("harmony", "bass", "kick", "backbeat", "sections", "accent")
+WEIGHTS = {"harmony": 1.0, "bass": 1.0, "kick": 1.0, "backbeat": 1.0, "sections": 0.5, "accent": 0.5}
 CHANGE_BEATS = 1  # harmony and bass notes before and after a beat are compared over this many beats
+# The pitch classes' spread over a song (mean cosine distance from their mean shape, a row each
+# half beat) under which they carry no harmony (a click track: 0.005) and over which they do
+# (the generated songs: 0.03 to 0.35).
+VARIETY = (0.01, 0.025)
 CAP = 4.0  # a cue's evidence for a phase, in standard errors, counts up to this much
+CHANCE = 1.0  # standard errors of evidence that chance alone gives a cue: they do not count
 ONSET_REACH_S = 0.04  # an onset this near a beat is on it (a tracker's beats are ~10 ms off)
 KICK_HZ = (30.0, 150.0)  # kick drums and bass-note attacks
 SNARE_HZ = (1000.0, 5000.0)  # a snare's noise (hats sound on every beat alike)
+# The spectral flatness of the rises there (geometric over arithmetic mean across the bands): a
+# tone's (a click, a piano) is about 0.4 or less, a snare's or a hat's noise 0.9 or more.
+FLAT_TONE, FLAT_NOISE = 0.5, 0.8
+# A kick's or a bass note's rise in the low bands, over the rise of the loudest band (each summed
+# over its frequencies), is 1 or more at some beats; leakage from higher sounds a few hundredths.
+LOW_LEAK, LOW_SOUND = 0.1, 0.3
 NOISE_FLOOR_DB = 12.0  # the music starts where a band rises this much above the silence's level there
 QUIETEST_S = 0.1  # the sound is measured in stretches this long, band by band
 QUIET_STRETCHES = 3  # the noise floor: the quietest this many stretches in a row
@@ -50,6 +61,15 @@ DEEPEST_DB = -120.0
 EARLY_BEAT = 0.4  # a downbeat up to this share of a beat before `music_start` may be bar 1
 EARLY_S = 0.05  # and at least this much before (an attack's rise, the analysis window)
 MIN_VOTING = 0.25  # a cue is named in `by` when it gave this share of the winning margin
+
+
+@dataclass(frozen=True)
+class Cue:
+    """One cue's value at each beat (NaN where it cannot be told, as a bar window past an end),
+    and how far this song lets it be trusted (0..1: a song without drums has no backbeat)."""
+
+    values: np.ndarray
+    trust: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -83,24 +103,27 @@ def find_downbeats(features: Features, beat_times: np.ndarray, meter: int) -> Do
 
 def phase_evidence(features: Features, beats: np.ndarray, meter: int, start: float) -> dict[str, np.ndarray]:
     """Each cue's evidence for each phase (capped standard errors; higher: likelier the one)."""
-    values = beat_cues(features, beats, meter)
+    cues = beat_cues(features, beats, meter)
     heard = beats >= start - _early(beats)
     phases = np.arange(len(beats)) % meter
-    return {name: _phase_t(values[name], phases, heard, meter) for name in CUES}
+    return {name: cues[name].trust * _phase_t(cues[name].values, phases, heard, meter) for name in CUES}
 
 
-def beat_cues(features: Features, beats: np.ndarray, meter: int) -> dict[str, np.ndarray]:
-    """Each cue's value at each beat (NaN where it cannot be told: a bar window past an end)."""
+def beat_cues(features: Features, beats: np.ndarray, meter: int) -> dict[str, Cue]:
+    """Each cue's value at each beat, and how far the song lets it be trusted."""
     chroma_at = _frame_times(len(features.chroma), features.chroma_fps)
     band_at = _frame_times(len(features.bands), features.fps)
-    kick = _onsets_at(features, features.band_range(*KICK_HZ), beats)
-    snare = _onsets_at(features, features.band_range(*SNARE_HZ), beats)
+    rises = _rises_at(features, beats)
+    summed = rises * np.diff(features.band_hz, axis=1)[:, 0]  # each band's rise over all its frequencies
+    low = features.band_range(*KICK_HZ)
+    snare = rises[:, features.band_range(*SNARE_HZ)]
     return {
         "harmony": _changes(features.chroma, chroma_at, beats, meter),
         "bass": _changes(features.bass_chroma, chroma_at, beats, meter),
-        "kick": kick,
-        "backbeat": -snare,
-        "sections": _novelty(_beat_means(features.bands, band_at, beats), meter, cosine=False),
+        "kick": Cue(rises[:, low].mean(axis=1), _low_trust(summed[:, low].sum(axis=1), summed.max(axis=1))),
+        "backbeat": Cue(-np.median(snare, axis=1), _noise_trust(snare)),
+        "sections": Cue(_novelty(_beat_means(features.bands, band_at, beats), meter, cosine=False)),
+        "accent": Cue(summed.sum(axis=1)),
     }
 
 
@@ -120,25 +143,47 @@ def _beat_means(frames: np.ndarray, times: np.ndarray, beats: np.ndarray) -> np.
     return (sums[hi] - sums[lo]) / (hi - lo)[:, None]
 
 
-def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray, meter: int) -> np.ndarray:
+def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray, meter: int) -> Cue:
     """How much the pitch classes change at each beat or in the half beat before it (a chord
     anticipated by an eighth belongs to the bar line after it): the distance between their shape
     over the CHANGE_BEATS after each eighth and over the CHANGE_BEATS before it, the larger of the
     two eighths. What repeats every bar (a pitched kick drum, a comping pattern) is taken out
-    first: it changes at the same place in every bar, whichever place the bar starts at."""
+    first: it changes at the same place in every bar, whichever place the bar starts at. Trusted
+    as far as the pitch classes vary at all (a click track's never do)."""
     if len(beats) < 2:
-        return np.full(len(beats), np.nan)
+        return Cue(np.full(len(beats), np.nan), 0.0)
     last = beats[-1] + (beats[-1] - beats[-2])
     edges = np.concatenate([beats, [last]])
     grid = np.empty(2 * len(edges) - 1)
     grid[0::2], grid[1::2] = edges, (edges[:-1] + edges[1:]) / 2
     slots = _beat_means(frames, times, grid)[:-1]  # one a half beat
-    norms = np.linalg.norm(slots, axis=1, keepdims=True)
-    shapes = np.divide(slots, norms, out=np.zeros_like(slots), where=norms > 0)
+    loudness = _centred_mean(np.linalg.norm(slots, axis=1), 2 * meter)[:, None]
+    shapes = np.divide(slots, loudness, out=np.zeros_like(slots), where=loudness > 0)
     novelty = _novelty(shapes - _bar_pattern(shapes, 2 * meter), 2 * CHANGE_BEATS, cosine=False)  # at each eighth
     on_beat = novelty[0::2][:len(beats)]
     before = np.concatenate([[np.nan], novelty[1::2]])[:len(beats)]
-    return np.fmax(on_beat, before)  # NaN only where both are
+    return Cue(np.fmax(on_beat, before), _variety(slots))  # NaN only where both are
+
+
+def _variety(rows: np.ndarray) -> float:
+    """How much the pitch classes vary over the song, 0..1: the mean cosine distance of each
+    sounding row's shape from the song's mean shape, scaled by VARIETY."""
+    norms = np.linalg.norm(rows, axis=1)
+    sounding = norms > 1e-6 * max(float(norms.max(initial=0.0)), 1e-30)
+    if np.count_nonzero(sounding) < 2:
+        return 0.0
+    shapes = rows[sounding] / norms[sounding, None]
+    mean = shapes.mean(axis=0)
+    spread = float(np.mean(1.0 - shapes @ (mean / max(float(np.linalg.norm(mean)), 1e-30))))
+    return float(np.clip((spread - VARIETY[0]) / (VARIETY[1] - VARIETY[0]), 0.0, 1.0))
+
+
+def _centred_mean(values: np.ndarray, width: int) -> np.ndarray:
+    """The mean of `values` over `width` neighbours centred on each (fewer at the ends)."""
+    sums = np.concatenate([[0.0], np.cumsum(values)])
+    index = np.arange(len(values))
+    lo, hi = np.maximum(index - width // 2, 0), np.minimum(index + (width + 1) // 2, len(values))
+    return np.asarray((sums[hi] - sums[lo]) / (hi - lo))
 
 
 def _bar_pattern(rows: np.ndarray, period: int) -> np.ndarray:
@@ -170,18 +215,35 @@ def _novelty(per_beat: np.ndarray, meter: int, cosine: bool) -> np.ndarray:
     return out
 
 
-def _onsets_at(features: Features, bands: np.ndarray, beats: np.ndarray) -> np.ndarray:
-    """The strongest onset in `bands` within ONSET_REACH_S of each beat: the rise of their mean
-    magnitude from one frame to the next. In magnitude, not its log: a kick adds as much over a
-    bass note held from an eighth before as over silence."""
-    if len(bands) == 0 or len(features.bands) < 2:
-        return np.zeros(len(beats))
+def _rises_at(features: Features, beats: np.ndarray) -> np.ndarray:
+    """The strongest rise of each band's magnitude from one frame to the next within
+    ONSET_REACH_S of each beat (beats x bands). In magnitude, not its log: a kick adds as much
+    over a bass note held from an eighth before as over silence."""
+    if len(features.bands) < 2:
+        return np.zeros((len(beats), features.bands.shape[1]))
     reach = max(1, int(round(ONSET_REACH_S * features.fps)))
     centre = np.round(beats * features.fps).astype(np.int64)
     where = np.clip(centre[:, None] + np.arange(-reach - 1, reach + 1)[None, :], 0, len(features.bands) - 1)
-    levels = np.expm1(features.bands[where][:, :, bands].astype(np.float64))  # beats x frames x bands
-    rises = np.maximum(np.diff(levels, axis=1), 0.0).mean(axis=2)
-    return rises.max(axis=1)
+    levels = np.expm1(features.bands[where].astype(np.float64))  # beats x frames x bands
+    return np.asarray(np.maximum(np.diff(levels, axis=1), 0.0).max(axis=1))
+
+
+def _low_trust(low_sums: np.ndarray, loudest: np.ndarray) -> float:
+    """How far low onsets (kick drums, bass notes) can be told in this song: they can where some
+    onsets sound mostly low, not where all that rises there is leakage from a click or a hat."""
+    share = low_sums / np.maximum(loudest, 1e-12)
+    lows = float(np.percentile(share, 90)) if len(share) else 0.0
+    return float(np.clip((lows - LOW_LEAK) / (LOW_SOUND - LOW_LEAK), 0.0, 1.0))
+
+
+def _noise_trust(rises: np.ndarray) -> float:
+    """How far a snare can be told in this song: by how noise-like its rises in the snare's bands
+    are (their spectral flatness, beats x bands); a click's or a piano's tone rises in one band
+    and leaks into the others."""
+    if rises.size == 0:
+        return 0.0
+    flatness = np.exp(np.mean(np.log(rises + 1e-12), axis=1)) / (rises.mean(axis=1) + 1e-12)
+    return float(np.clip((float(np.median(flatness)) - FLAT_TONE) / (FLAT_NOISE - FLAT_TONE), 0.0, 1.0))
 
 
 def _phase_t(values: np.ndarray, phases: np.ndarray, heard: np.ndarray, meter: int) -> np.ndarray:
@@ -195,8 +257,8 @@ def _phase_t(values: np.ndarray, phases: np.ndarray, heard: np.ndarray, meter: i
     means = np.bincount(p, weights=x, minlength=meter) / counts
     spread = np.sqrt(np.sum((x - means[p]) ** 2) / (len(x) - meter))
     spread = max(spread, 0.05 * float(np.std(x)), 1e-12)
-    t = (means - means.mean()) / (spread / np.sqrt(counts))
-    return np.clip(t, -CAP, CAP)
+    t = np.clip((means - means.mean()) / (spread / np.sqrt(counts)), -CAP, CAP)
+    return np.sign(t) * np.maximum(np.abs(t) - CHANCE, 0.0)
 
 
 def _deciders(margins: dict[str, float]) -> str:
