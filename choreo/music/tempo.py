@@ -28,18 +28,17 @@ from choreo.errors import UsageError
 from choreo.music.features import Features
 
 GROUPS_HZ = ((0.0, 150.0), (150.0, 5000.0), (5000.0, 1e9))  # kick; snare, bass and chords; hats
-GROUP_WEIGHTS = (1.0, 1.0, 0.35)  # hats mark subdivisions more often than beats
+GROUP_WEIGHTS = (1.5, 1.0, 0.2)  # the kick marks the beat most, hats mark subdivisions more often than beats
 PRIOR_BPM = 120.0  # the centre of the tempo prior (log-normal), as in Ellis 2007
 PRIOR_OCTAVES = 0.9  # its width (one standard deviation), in octaves
 LEVELS = (1.0, 0.5, 2.0, 2.0 / 3.0, 1.5, 1.0 / 3.0, 3.0)  # tempo ratios to the best period's
 _LOCAL_MEAN_S = 0.4  # the onset strength less its mean over this: a crescendo is no onset
-BACKBEAT_WEIGHT = 4.0  # how much a snare on 2 and 4 counts for a level
+BACKBEAT_WEIGHT = 3.0  # how much a snare on 2 and 4 counts for a level
 _PEAKS = 3  # the comb's best peaks whose levels are compared
 _MULTIPLES = 4  # lags summed in the comb: the period and its multiples up to this
 _HARMONY_S = 0.4  # chroma is averaged over this either side of a possible chord change
 _DRUM_S = 0.12  # a burst of noise shorter than twice this is no chord
-_BASS_SHARE = 1.0  # how much the bass notes count in the chords (a kick drum is pitched, too)
-_HARMONY_WEIGHT = 2.0  # how much bars that match the chords' changes count against the onsets
+_HARMONY_WEIGHT = 2.5  # how much bars that match the chords' changes count against the onsets
 
 
 @dataclass(frozen=True)
@@ -230,8 +229,8 @@ def _harmonic_change(features: Features, fps: float) -> np.ndarray | None:
     """How much the chords change at each chroma frame: the cosine distance between the mean
     chroma of the `_HARMONY_S` before and after it (drums' noise averages out over that), or None
     when the song has next to no pitched sound."""
-    chroma = sustained(features.chroma.astype(np.float64) + _BASS_SHARE * features.bass_chroma,
-                       max(1, int(round(_DRUM_S * features.chroma_fps))))
+    # the pads' and chords' chroma only: in the bass band a kick drum is pitched too
+    chroma = sustained(features.chroma.astype(np.float64), max(1, int(round(_DRUM_S * features.chroma_fps))))
     width = max(2, int(round(_HARMONY_S * features.chroma_fps)))
     if len(chroma) < 4 * width or not np.any(chroma):
         return None

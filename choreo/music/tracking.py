@@ -24,9 +24,11 @@ from choreo.music.features import Features
 WINDOW_S = 7.0  # the tempogram's window
 STEP_S = 0.5  # its step
 TEMPO_SPAN = (0.7, 1.45)  # the local period is sought between these times the song's period
+COMB = 2  # the tempogram sums the autocorrelation at each lag's multiples up to this
+ASTRAY = 0.08  # a local tempo whose median is this far (log) from the song's is not the song's beat
 PULL = 8.0  # how much a local period far from the song's counts less (squared log ratio, on the window's best)
 CHANGE_COST = 12.0  # Viterbi: cost of a change of the period by a factor e (on unit-peak evidence)
-TIGHTNESS = 80.0  # Ellis's: how much an interval off the local period costs (squared log ratio)
+TIGHTNESS = 200.0  # Ellis's: how much an interval off the local period costs (squared log ratio)
 SNAP_S = 0.025  # a beat moves to an attack this near it
 SIGNIFICANT = 4.0  # robust deviations of the attack envelope that make an attack
 MIN_RISE = 0.25  # and at least this rise of log energy in a step (clean material's deviations are 0)
@@ -35,25 +37,27 @@ MIN_RISE = 0.25  # and at least this rise of log energy in a step (clean materia
 def local_periods(strength: np.ndarray, fps: float, period: float) -> np.ndarray:
     """The beat period (frames) at every frame, from the Viterbi path through the tempogram."""
     lags = np.arange(max(2, int(TEMPO_SPAN[0] * period)), int(math.ceil(TEMPO_SPAN[1] * period)) + 2)
-    window = max(int(WINDOW_S * fps), int(3 * lags[-1]))
+    window = max(int(WINDOW_S * fps), int(2 * lags[-1]))
     step = max(1, int(STEP_S * fps))
     n = len(strength)
-    if n < window + 2 * lags[-1]:
+    if n < window + COMB * lags[-1]:
         return np.full(n, period)
     centred = strength - strength.mean()
-    starts = np.arange(0, n - window - 2 * lags[-1] + 1, step)
+    starts = np.arange(0, n - window - COMB * lags[-1] + 1, step)
     energy = _window_sums(centred * centred, window, starts)
 
     def gram_at(lag: int) -> np.ndarray:
         return _window_sums(centred[:n - lag] * centred[lag:], window, starts) / (energy + 1e-12)
 
-    # the comb: a beat's period repeats at twice it, a syncopation's (a dembow's three
-    # sixteenths) does not
-    gram = np.stack([np.maximum(gram_at(lag), 0.0) + np.maximum(gram_at(2 * lag), 0.0) for lag in lags.tolist()],
+    # the comb: a beat's period repeats at its multiples, a syncopation's (a dembow's three
+    # sixteenths, a broken beat's kicks) at few of them
+    gram = np.stack([sum(np.maximum(gram_at(k * lag), 0.0) for k in range(1, COMB + 1)) for lag in lags.tolist()],
                     axis=1)
     gram -= PULL * np.log(lags / period)[None, :] ** 2 * gram.max(axis=1, keepdims=True)
     path = _viterbi(gram, np.log(lags.astype(float)))
     fine = np.array([_refined(gram[i], lag) for i, lag in enumerate(path)]) + lags[0]
+    if abs(math.log(float(np.median(fine)) / period)) > ASTRAY:
+        return np.full(n, period)  # locked onto a syncopation's period, not the song's beat
     centres = starts + window / 2
     return np.interp(np.arange(n), centres, fine)
 
