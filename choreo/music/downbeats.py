@@ -133,14 +133,20 @@ def _frame_times(count: int, fps: float) -> np.ndarray:
 
 def _beat_means(frames: np.ndarray, times: np.ndarray, beats: np.ndarray) -> np.ndarray:
     """The mean of `frames` over each beat (from it to the next; the last beat as long as the one
-    before it), a row a beat; a beat with no frame in it takes the nearest frame."""
+    before it), a row a beat; a beat with no frame in it takes the nearest frame. Summed a beat
+    at a time, never copying `frames` (an hour's bands are 50 MB)."""
     ends = np.append(beats[1:], beats[-1] + (beats[-1] - beats[-2] if len(beats) > 1 else 0.5))
-    lo = np.searchsorted(times, beats)
-    hi = np.maximum(np.searchsorted(times, ends), lo + 1)
-    lo, hi = np.clip(lo, 0, len(frames) - 1), np.clip(hi, 1, len(frames))
+    last = len(frames) - 1
+    lo = np.clip(np.searchsorted(times, beats), 0, last)
+    hi = np.clip(np.maximum(np.searchsorted(times, ends), lo + 1), 1, last + 1)
     lo = np.minimum(lo, hi - 1)
-    sums = np.concatenate([np.zeros((1, frames.shape[1])), np.cumsum(frames, axis=0, dtype=np.float64)])
-    return (sums[hi] - sums[lo]) / (hi - lo)[:, None]
+    bounds = np.empty(2 * len(lo), dtype=np.int64)
+    bounds[0::2], bounds[1::2] = lo, np.minimum(hi, last)  # a beat's sum, then the gap to the next
+    sums = np.add.reduceat(frames, bounds, axis=0)[0::2].astype(np.float64)  # a beat: float32 is exact enough
+    whole = hi > last  # reaching the last frame: reduceat stopped before it
+    sums[whole] += frames[last]
+    sums[hi - lo == 1] = frames[lo[hi - lo == 1]]
+    return np.asarray(sums / (hi - lo)[:, None])
 
 
 def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray, meter: int) -> Cue:
@@ -224,8 +230,8 @@ def _rises_at(features: Features, beats: np.ndarray) -> np.ndarray:
     reach = max(1, int(round(ONSET_REACH_S * features.fps)))
     centre = np.round(beats * features.fps).astype(np.int64)
     where = np.clip(centre[:, None] + np.arange(-reach - 1, reach + 1)[None, :], 0, len(features.bands) - 1)
-    levels = np.expm1(features.bands[where].astype(np.float64))  # beats x frames x bands
-    return np.asarray(np.maximum(np.diff(levels, axis=1), 0.0).max(axis=1))
+    levels = np.expm1(features.bands[where])  # beats x frames x bands, float32 as the bands are
+    return np.diff(levels, axis=1).max(axis=1).clip(0.0, None).astype(np.float64)
 
 
 def _low_trust(low_sums: np.ndarray, loudest: np.ndarray) -> float:
