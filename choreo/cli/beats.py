@@ -23,7 +23,7 @@ import secrets
 import stat
 import sys
 from collections.abc import Iterator
-from contextlib import ExitStack, contextmanager, suppress
+from contextlib import ExitStack, closing, contextmanager, suppress
 from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO
 
@@ -246,7 +246,8 @@ def _write_outputs(args: argparse.Namespace, features: Features, found: BeatEsti
         from choreo.music.features import song_blocks
 
         clicks = [(beat.time_s, beat.beat == 1) for beat in found.beats]
-        count = write_click_track(song_blocks(args.song, CLICK_RATE, CLICK_CHANNELS), clicks, outputs["--click"])
+        with closing(song_blocks(args.song, CLICK_RATE, CLICK_CHANNELS)) as blocks:  # a failed write closes the song
+            count = write_click_track(blocks, clicks, outputs["--click"])
         notes.append(f"click: {args.click}: {count.frames / CLICK_RATE:.1f} s with {count.clicks} clicks "
                      f"({CLICK_FORMAT})")
     if "--png" in outputs:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import io
 import math
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Generator, Iterable, Iterator
 from dataclasses import dataclass
 
 import miniaudio
@@ -87,7 +87,7 @@ def read_features(path: str | os.PathLike[str], sample_rate: int = SAMPLE_RATE) 
 
 
 def song_blocks(path: str | os.PathLike[str], sample_rate: int = SAMPLE_RATE,
-                channels: int = 1) -> Iterator[np.ndarray]:
+                channels: int = 1) -> Generator[np.ndarray, None, None]:
     """The song in the file at `path` as float32 blocks (`channels` interleaved) at `sample_rate`,
     decoded as they are read (a second pass, such as `choreo beats --click`, reads it this way too)."""
     name = os.fspath(path)
