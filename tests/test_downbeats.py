@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from choreo.errors import UsageError
-from choreo.music.downbeats import beat_cues, find_downbeats, music_start
+from choreo.music.downbeats import beat_cues, find_downbeats, music_start, phase_evidence
 from choreo.music.features import Features, features_of
 from choreo.music.scoring import bar_one_right
 
@@ -145,6 +145,18 @@ def test_without_chords_the_kick_and_snare_pattern_finds_the_bar():
         result = find_downbeats(features, given, 3)
         assert bar_one_right(beats[0], float(given[result.first]))
         assert set(result.by.split("+")) <= {"kick", "backbeat", "sections"} and "kick" in result.by
+
+
+def test_a_dembows_snare_off_the_beats_casts_no_vote_by_its_ringing():
+    # The snare falls a sixteenth before beats 2 and 4 and an eighth before 1 and 3: its decay
+    # makes 2 and 4 look less snare-like than 1 and 3, by a twentieth of a hit.
+    song = make_song(CASE["reggaeton"], 3)
+    features = features_of([song.samples])
+    beats = tracked(np.array(song.beats), np.random.default_rng(9), 1)
+    evidence = phase_evidence(features, beats, song.meter, music_start(features))
+    assert np.all(np.abs(evidence["backbeat"]) < 0.5) and np.all(np.abs(evidence["accent"]) < 0.5)
+    assert np.argmax(evidence["harmony"]) == 1  # bar 1 is beats[1]
+    assert bar_one_right(song.downbeats[0], bar_one(features, beats, song.meter))
 
 
 def click_track(bpm: float, offset: float, meter: int, seconds: float = 10.0) -> tuple[np.ndarray, np.ndarray]:

@@ -41,6 +41,10 @@ CHANGE_BEATS = 1  # harmony and bass notes before and after a beat are compared 
 # half beat) under which they carry no harmony (a click track: 0.005) and over which they do
 # (the generated songs: 0.03 to 0.35).
 VARIETY = (0.01, 0.025)
+HIT_PERCENTILE = 95  # a hit of a drum: this percentile of its rises over every sixteenth
+# An onset cue's phases differ by less than SALIENT[0] of a hit: not a pattern of the beats (a
+# dembow's or four on the floor's: about 0.05); by SALIENT[1] or more: one (a backbeat: 0.6 to 1).
+SALIENT = (0.1, 0.3)
 CAP = 4.0  # a cue's evidence for a phase, in standard errors, counts up to this much
 CHANCE = 1.0  # standard errors of evidence that chance alone gives a cue: they do not count
 ONSET_REACH_S = 0.04  # an onset this near a beat is on it (a tracker's beats are ~10 ms off)
@@ -60,6 +64,7 @@ QUIET_STRETCHES = 3  # the noise floor: the quietest this many stretches in a ro
 DEEPEST_DB = -120.0
 EARLY_BEAT = 0.4  # a downbeat up to this share of a beat before `music_start` may be bar 1
 EARLY_S = 0.05  # and at least this much before (an attack's rise, the analysis window)
+_BLOCK_BEATS = 2048  # beats whose onsets are measured at once
 MIN_VOTING = 0.25  # a cue is named in `by` when it gave this share of the winning margin
 
 
@@ -70,6 +75,7 @@ class Cue:
 
     values: np.ndarray
     trust: float = 1.0
+    hit: float = 0.0  # what a clear hit of this cue measures in this song (0: no such scale)
 
 
 @dataclass(frozen=True)
@@ -106,25 +112,49 @@ def phase_evidence(features: Features, beats: np.ndarray, meter: int, start: flo
     cues = beat_cues(features, beats, meter)
     heard = beats >= start - _early(beats)
     phases = np.arange(len(beats)) % meter
-    return {name: cues[name].trust * _phase_t(cues[name].values, phases, heard, meter) for name in CUES}
+    return {name: cues[name].trust * _phase_t(cues[name], phases, heard, meter) for name in CUES}
 
 
 def beat_cues(features: Features, beats: np.ndarray, meter: int) -> dict[str, Cue]:
     """Each cue's value at each beat, and how far the song lets it be trusted."""
     chroma_at = _frame_times(len(features.chroma), features.chroma_fps)
     band_at = _frame_times(len(features.bands), features.fps)
-    rises = _rises_at(features, beats)
-    summed = rises * np.diff(features.band_hz, axis=1)[:, 0]  # each band's rise over all its frequencies
-    low = features.band_range(*KICK_HZ)
-    snare = rises[:, features.band_range(*SNARE_HZ)]
     return {
         "harmony": _changes(features.chroma, chroma_at, beats, meter),
         "bass": _changes(features.bass_chroma, chroma_at, beats, meter),
-        "kick": Cue(rises[:, low].mean(axis=1), _low_trust(summed[:, low].sum(axis=1), summed.max(axis=1))),
-        "backbeat": Cue(-np.median(snare, axis=1), _noise_trust(snare)),
+        **_onset_cues(features, beats),
         "sections": Cue(_novelty(_beat_means(features.bands, band_at, beats), meter, cosine=False)),
-        "accent": Cue(summed.sum(axis=1)),
     }
+
+
+def _onset_cues(features: Features, beats: np.ndarray) -> dict[str, Cue]:
+    """The kick, the backbeat and the accent at each beat, each with the size of a hit of its own
+    (its HIT_PERCENTILE over every sixteenth of the song): a pattern of the beats counts as far
+    as it stands out by a hit's share, so that a dembow's snare, which never falls on a beat,
+    does not vote by the ringing of its off-beat hits."""
+    width = np.diff(features.band_hz, axis=1)[:, 0]  # a band's rise summed over its frequencies
+    low, noise = features.band_range(*KICK_HZ), features.band_range(*SNARE_HZ)
+
+    def values(rises: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return rises[:, low].mean(axis=1), np.median(rises[:, noise], axis=1), (rises * width).sum(axis=1)
+
+    rises = _rises_at(features, beats)
+    at_beats, hits = values(rises), values(_rises_at(features, _sixteenths(beats)))
+    size = [float(np.percentile(h, HIT_PERCENTILE)) if len(h) else 0.0 for h in hits]
+    summed = rises * width
+    return {
+        "kick": Cue(at_beats[0], _low_trust(summed[:, low].sum(axis=1), summed.max(axis=1)), size[0]),
+        "backbeat": Cue(-at_beats[1], _noise_trust(rises[:, noise]), size[1]),
+        "accent": Cue(at_beats[2], 1.0, size[2]),
+    }
+
+
+def _sixteenths(beats: np.ndarray) -> np.ndarray:
+    """Each beat and the three sixteenths after it (the last beat alone)."""
+    if len(beats) < 2:
+        return beats
+    steps = np.diff(beats)[:, None] * np.arange(4)[None, :] / 4.0
+    return np.append((beats[:-1, None] + steps).ravel(), beats[-1])
 
 
 def _frame_times(count: int, fps: float) -> np.ndarray:
@@ -229,9 +259,12 @@ def _rises_at(features: Features, beats: np.ndarray) -> np.ndarray:
         return np.zeros((len(beats), features.bands.shape[1]))
     reach = max(1, int(round(ONSET_REACH_S * features.fps)))
     centre = np.round(beats * features.fps).astype(np.int64)
-    where = np.clip(centre[:, None] + np.arange(-reach - 1, reach + 1)[None, :], 0, len(features.bands) - 1)
-    levels = np.expm1(features.bands[where])  # beats x frames x bands, float32 as the bands are
-    return np.diff(levels, axis=1).max(axis=1).clip(0.0, None).astype(np.float64)
+    out = np.empty((len(beats), features.bands.shape[1]))
+    for first in range(0, len(beats), _BLOCK_BEATS):  # a block at a time: an hour's sixteenths are many
+        near = centre[first:first + _BLOCK_BEATS, None] + np.arange(-reach - 1, reach + 1)[None, :]
+        levels = np.expm1(features.bands[np.clip(near, 0, len(features.bands) - 1)])  # beats x frames x bands
+        out[first:first + _BLOCK_BEATS] = np.diff(levels, axis=1).max(axis=1).clip(0.0, None)
+    return out
 
 
 def _low_trust(low_sums: np.ndarray, loudest: np.ndarray) -> float:
@@ -252,11 +285,12 @@ def _noise_trust(rises: np.ndarray) -> float:
     return float(np.clip((float(np.median(flatness)) - FLAT_TONE) / (FLAT_NOISE - FLAT_TONE), 0.0, 1.0))
 
 
-def _phase_t(values: np.ndarray, phases: np.ndarray, heard: np.ndarray, meter: int) -> np.ndarray:
+def _phase_t(cue: Cue, phases: np.ndarray, heard: np.ndarray, meter: int) -> np.ndarray:
     """Evidence for each phase from one cue's beat values: the phase's mean over the mean of all
-    phases, in standard errors of the spread within phases; capped at +-CAP; 0 without data."""
-    usable = heard & np.isfinite(values)
-    x, p = values[usable], phases[usable]
+    phases, in standard errors of the spread within phases; capped at +-CAP, less the CHANCE
+    share, and scaled down where the phases differ by less than SALIENT of a hit; 0 without data."""
+    usable = heard & np.isfinite(cue.values)
+    x, p = cue.values[usable], phases[usable]
     counts = np.bincount(p, minlength=meter).astype(np.float64)
     if np.count_nonzero(counts) < meter or len(x) <= meter:
         return np.zeros(meter)
@@ -264,7 +298,11 @@ def _phase_t(values: np.ndarray, phases: np.ndarray, heard: np.ndarray, meter: i
     spread = np.sqrt(np.sum((x - means[p]) ** 2) / (len(x) - meter))
     spread = max(spread, 0.05 * float(np.std(x)), 1e-12)
     t = np.clip((means - means.mean()) / (spread / np.sqrt(counts)), -CAP, CAP)
-    return np.sign(t) * np.maximum(np.abs(t) - CHANCE, 0.0)
+    evidence = np.sign(t) * np.maximum(np.abs(t) - CHANCE, 0.0)
+    if cue.hit > 0:
+        share = float(means.max() - means.min()) / cue.hit
+        evidence = evidence * float(np.clip((share - SALIENT[0]) / (SALIENT[1] - SALIENT[0]), 0.0, 1.0))
+    return np.asarray(evidence)
 
 
 def _deciders(margins: dict[str, float]) -> str:
