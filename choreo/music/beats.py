@@ -44,8 +44,10 @@ ON_BEAT_S = 0.03  # an attack farther than this from the beat does not confirm i
 MAP_WHEN_OFF_S = 0.02  # a straight line that puts a beat farther off than this: a tempo map
 STEADY_SHARE = 0.95  # of the beats with an attack that must lie within MAP_WHEN_OFF_S of a steady tempo's line
 STRAY_S = 0.05  # and no beat farther off than this (one an attack confirms, or the tracker's guess)
+PULSE_S = 30.0  # the stretches whose repetition is measured
 MIN_PULSE = 0.1  # the onsets' autocorrelation at the beat (share of its peak) below which no beat repeats
 _LAST_BEAT = 0.2  # a beat past the last heard one with less onset than this share of the median's: gone
+_EARLY_S = 0.05  # an onset this much before the music's start (its first frames) still counts
 _SOUND = 0.02  # the music ends after the last frame whose its bands' sum reaches this share of the song's median sound
 
 
@@ -94,7 +96,7 @@ def estimate(features: Features, meter: int = 4, bpm_range: tuple[float, float] 
         raise UsageError(f"{name}: no beat found: the song is silent")
     onsets = tempo_level.onsets_of(features)
     period = tempo_level.best_period(onsets, features, meter, bpm_range)
-    if _pulse(onsets.strength, period) < MIN_PULSE:
+    if _pulse(onsets.strength, onsets.fps, bpm_range) < MIN_PULSE:
         raise UsageError(f"{name}: no steady beat found (nothing repeats between "
                          f"{bpm_range[0]:g} and {bpm_range[1]:g} bpm)")
     periods = local_periods(onsets.strength, onsets.fps, period)
@@ -118,16 +120,25 @@ def _check_arguments(meter: int, bpm_range: tuple[float, float]) -> None:
                          f"{BPM_LIMITS[0]:g} <= LO < HI <= {BPM_LIMITS[1]:g}")
 
 
-def _pulse(strength: np.ndarray, period: float) -> float:
-    """The onsets' autocorrelation at the period's multiples, as a share of their energy: noise
-    has onsets but nothing that repeats."""
+def _pulse(strength: np.ndarray, fps: float, bpm_range: tuple[float, float]) -> float:
+    """How much the onsets repeat: in each stretch of PULSE_S, the best mean autocorrelation at a
+    period in the range and its multiples, as a share of the onsets' energy; the median stretch's.
+    Noise has onsets but nothing that repeats; a long mix of songs repeats in each song."""
+    size = int(PULSE_S * fps)
+    starts = range(0, max(1, len(strength) - size // 2), size)
+    pulses = [_stretch_pulse(strength[a:a + size], fps, bpm_range) for a in starts]
+    return float(np.median(pulses))
+
+
+def _stretch_pulse(strength: np.ndarray, fps: float, bpm_range: tuple[float, float]) -> float:
     correlation = tempo_level.autocorrelation(strength)
-    if correlation[0] <= 0:
+    lo, hi = int(fps * 60.0 / bpm_range[1]), int(math.ceil(fps * 60.0 / bpm_range[0]))
+    lags = np.arange(max(2, lo), min(hi, (len(correlation) - 2) // 4) + 1)
+    if correlation[0] <= 0 or not len(lags):
         return 0.0
-    lags = [int(round(k * period)) for k in (1, 2, 3, 4) if k * period + 1 < len(correlation)]
-    if not lags:
-        return 0.0
-    return float(np.mean([correlation[lag - 1:lag + 2].max() for lag in lags]) / correlation[0])
+    peaks = np.maximum(correlation[:-1], correlation[1:])  # a period between two frames
+    comb = np.mean([peaks[k * lags - 1] for k in (1, 2, 3, 4)], axis=0)
+    return float(comb.max() / correlation[0])
 
 
 def _music_end(features: Features) -> float:
@@ -142,9 +153,12 @@ def _music_end(features: Features) -> float:
 
 
 def _beat_times(strength: np.ndarray, periods: np.ndarray, fps: float, start: float, end: float) -> np.ndarray:
-    """The tracked beats, in seconds, from where the music starts to where it ends: the beat
-    goes on at the local period before the first beat the tracker placed and after the last."""
-    frames = beat_frames(strength, periods)
+    """The tracked beats, in seconds, from where the music starts to where it ends (the beat
+    goes on at the local period before the first beat the tracker placed). Before the music
+    there is nothing to follow: a noise floor's flickers must not start the beats off."""
+    music = strength.copy()
+    music[:max(0, int((start - _EARLY_S) * fps))] = 0.0
+    frames = beat_frames(music, periods)
     times = frames / fps
     first_period = periods[frames[0]] / fps
     before = np.arange(times[0] - first_period, start - 0.5 * first_period, -first_period)[::-1]
