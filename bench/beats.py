@@ -1,18 +1,18 @@
 """Benchmark 13, beat finding (issue 23): `choreo beats`' analysis on a generated set of songs with
 known beats, scored by choreo/music/scoring.py against the issue's goals.
 
-The songs are bench/songs.py's (32 of them, every case twice; `--quick`: 16, every case once),
-made from a seed (`--seed N`, default 0: another seed is another set). Each is analysed in memory
-as `choreo beats SONG --meter M` analyses a file once decoded: `choreo.music.beats.estimate` on
-the samples at 22050 Hz, with the song's meter (a user gives `--meter`; 6/8 counts 2 dotted
+The songs are bench/songs.py's (every case twice; `--quick`: every case once), made from a seed
+(`--seed N`, default 0: another seed is another set). Each is analysed in memory as `choreo beats
+SONG --meter M` analyses a file: `features_of` on the samples at 22050 Hz, then
+`choreo.music.beats.estimate` with the song's meter (a user gives `--meter`; 6/8 counts 2 dotted
 quarters a bar). The table gives, per song, the true and the found tempo, the level found, bar 1,
-the beat F-measure (+-70 ms) and the seconds the analysis took; then the totals against the goals:
-the right tempo level and bar 1 for >= 97.5 % of songs, F median >= 0.99 and mean >= 0.97, and
-<= 1 s a minute of audio (the median song's). Peak memory is traced (tracemalloc) over one more
-analysis of the longest song, apart from the timed runs, which it would slow. The full run (not
-`--quick`) also analyses an hour of audio, the set's songs end to end: <= 30 s and <= 400 MB
-(the decoded samples, 318 MB of float32 at 22050 Hz, counted; the file's bytes that
-`choreo beats` reads whole before decoding are not).
+the beat F-measure (+-70 ms), the downbeat F-measure and the seconds the analysis took; then the
+totals against the goals: the right tempo level and bar 1 for >= 97.5 % of songs, F median >= 0.99
+and mean >= 0.97, and <= 1 s a minute of audio (the median song's). Peak memory is traced
+(tracemalloc) over one more analysis of the longest song, apart from the timed runs, which it
+would slow. The full run (not `--quick`) also writes an hour of audio (the set's songs end to end,
+16-bit WAV) to a temporary folder and analyses that file as `choreo beats` does, streamed from
+disk: `read_features` then `estimate`, timed, then again under tracemalloc: <= 30 s and <= 400 MB.
 
     python bench/beats.py [--quick] [--seed N]    # the per-song table, then the totals
 """
