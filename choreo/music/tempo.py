@@ -28,12 +28,16 @@ from choreo.errors import UsageError
 from choreo.music.features import Features
 
 GROUPS_HZ = ((0.0, 150.0), (150.0, 5000.0), (5000.0, 1e9))  # kick; snare, bass and chords; hats
+SNARE_HZ = (1500.0, 5000.0)  # a snare's noise, above most pitched sound, below the hats
 GROUP_WEIGHTS = (1.5, 1.0, 0.2)  # the kick marks the beat most, hats mark subdivisions more often than beats
 PRIOR_BPM = 120.0  # the centre of the tempo prior (log-normal), as in Ellis 2007
 PRIOR_OCTAVES = 0.9  # its width (one standard deviation), in octaves
 LEVELS = (1.0, 0.5, 2.0, 2.0 / 3.0, 1.5, 1.0 / 3.0, 3.0)  # tempo ratios to the best period's
 _LOCAL_MEAN_S = 0.4  # the onset strength less its mean over this: a crescendo is no onset
 BACKBEAT_WEIGHT = 3.0  # how much a snare on 2 and 4 counts for a level
+EVENNESS_POWER = 0.5  # how much unlike successive beats count against a level
+SEGMENT_BEATS = 24  # a level is judged on stretches of this many of its beats, each at its own phase
+MAX_SEGMENTS = 24  # and on this many stretches at most, spread over the song (an hour needs no more)
 _PEAKS = 3  # the comb's best peaks whose levels are compared
 _MULTIPLES = 4  # lags summed in the comb: the period and its multiples up to this
 _HARMONY_S = 0.4  # chroma is averaged over this either side of a possible chord change
@@ -49,20 +53,23 @@ class Onsets:
     strength: np.ndarray
     fps: float
     scales: np.ndarray  # each group's loud onsets before it was normalised (its 99th percentile)
+    snare: np.ndarray  # the flux of the bands a snare's noise fills and pitched sound rarely (SNARE_HZ)
 
 
 def onsets_of(features: Features) -> Onsets:
     """Positive log-spectral flux by band group, each group scaled by its own loud onsets (its
     99th percentile; a group with next to nothing in it is not blown up), less a local mean."""
     bands = features.bands
-    groups = np.zeros((len(bands), len(GROUPS_HZ)), dtype=np.float32)
-    for i, (lo, hi) in enumerate(GROUPS_HZ):
+    groups = np.zeros((len(bands), len(GROUPS_HZ) + 1), dtype=np.float32)
+    for i, (lo, hi) in enumerate((*GROUPS_HZ, SNARE_HZ)):
         picked = features.band_range(lo, hi)
         for band in picked:  # band by band: an hour's whole flux matrix would be 55 MB more
             column = bands[:, band]
             groups[1:, i] += np.maximum(column[1:] - column[:-1], 0.0)
             groups[0, i] += max(float(column[0]), 0.0)  # silence before the song: a sound at 0 s is an onset
         groups[:, i] /= max(len(picked), 1)
+    snare = groups[:, -1].copy()
+    groups = groups[:, :-1]
     scales = np.array([np.percentile(g, 99) if len(g) else 0.0 for g in groups.T])
     floor = 0.1 * float(scales.max()) + 1e-9
     groups /= np.maximum(scales, floor).astype(np.float32)
@@ -70,7 +77,7 @@ def onsets_of(features: Features) -> Onsets:
     for i in range(groups.shape[1]):
         groups[:, i] = np.maximum(groups[:, i] - running_mean(groups[:, i], width), 0.0)
     strength = groups @ np.asarray(GROUP_WEIGHTS, dtype=np.float32)
-    return Onsets(groups, strength, features.fps, scales)
+    return Onsets(groups, strength, features.fps, scales, snare)
 
 
 def onset_strength(features: Features) -> np.ndarray:
@@ -184,20 +191,32 @@ def folded(values: np.ndarray, period: float, bins: int = 48) -> np.ndarray:
 
 
 def explained(onsets: Onsets, period: float, meter: int, harmony: np.ndarray | None) -> float:
-    """How well beats every `period` frames explain the onsets: the weighed onset strength on
-    them (at their best phase) less that between them (halfway, and at the thirds), times how
-    well bars of `meter` such beats match the chords' changes."""
-    histogram = folded(onsets.strength, period)
+    """How well beats every `period` frames explain the onsets (`_pulse_score`, stretch by
+    stretch of SEGMENT_BEATS, each at its own phase: a live band's drift, a splice or a period a
+    fraction of a percent off moves the phase over a song, and one fold over it all would blur
+    the levels unevenly), times how well bars of
+    `meter` such beats match the chords' changes."""
+    size = int(SEGMENT_BEATS * period)
+    count = max(1, (len(onsets.strength) + size // 2) // size)
+    starts = (np.linspace(0, len(onsets.strength) - size, min(count, MAX_SEGMENTS)).astype(int) if count > 1 else [0])
+    score = float(np.mean([_pulse_score(onsets.strength[a:a + size], onsets.snare[a:a + size], period)
+                           for a in starts]))
+    if harmony is not None:
+        score *= math.exp(_HARMONY_WEIGHT * _bar_match(harmony, meter * period * len(harmony) / len(onsets.strength)))
+    return score
+
+
+def _pulse_score(strength: np.ndarray, snare: np.ndarray, period: float) -> float:
+    """The weighed onset strength on the beats (at their best phase) less that between them
+    (halfway, and at the thirds), times how alike successive beats are and a snare backbeat."""
+    histogram = folded(strength, period)
     bins = len(histogram)
     peak = int(np.argmax(histogram))
     between = max(histogram[(peak + bins // 2) % bins],
                   0.5 * (histogram[(peak + bins // 3) % bins] + histogram[(peak + 2 * bins // 3) % bins]))
-    score = max(float(histogram[peak] - between), 1e-9) * min(evenness(onsets.strength, period, 2),
-                                                                evenness(onsets.strength, period, 3))
-    score *= 1.0 + BACKBEAT_WEIGHT * backbeat(onsets.groups[:, 1], period, peak / bins)
-    if harmony is not None:
-        score *= math.exp(_HARMONY_WEIGHT * _bar_match(harmony, meter * period * len(harmony) / len(onsets.strength)))
-    return score
+    alike = min(evenness(strength, period, 2), evenness(strength, period, 3)) ** EVENNESS_POWER
+    score = max(float(histogram[peak] - between), 1e-9) * alike
+    return score * (1.0 + BACKBEAT_WEIGHT * backbeat(snare, period, peak / bins))
 
 
 def evenness(strength: np.ndarray, period: float, group: int) -> float:
