@@ -62,6 +62,17 @@ def test_bar_1_is_found_in_every_kind_of_song_among_a_trackers_beats(bench_songs
         assert bar_one_right(song.downbeats[1], found), (missing, found, song.downbeats[1])
 
 
+@pytest.mark.parametrize("name", ["pop/rock", "waltz 3/4", "anticipations", "breakdown"])
+def test_a_beat_the_tracker_adds_or_misses_later_on_does_not_move_bar_1(bench_songs, name):
+    # After the slip most of the song's bars start a beat later in the list: bar 1 is where its
+    # own stretch says, not where the majority of the song's does.
+    song, features = bench_songs[name]
+    beats = tracked(np.array(song.beats), np.random.default_rng(10), 1, 0.005)
+    slip = int(0.4 * len(beats)) + 1
+    for given in (np.insert(beats, slip, (beats[slip - 1] + beats[slip]) / 2), np.delete(beats, slip)):
+        assert bar_one_right(song.downbeats[0], bar_one(features, given, song.meter)), slip
+
+
 def test_the_pads_only_intro_starts_bar_1_at_the_first_chord_not_where_the_drums_come_in(bench_songs):
     song, features = bench_songs["pads-only intro"]
     beats = tracked(np.array(song.beats), np.random.default_rng(2))
@@ -153,7 +164,8 @@ def test_a_dembows_snare_off_the_beats_casts_no_vote_by_its_ringing():
     song = make_song(CASE["reggaeton"], 3)
     features = features_of([song.samples])
     beats = tracked(np.array(song.beats), np.random.default_rng(9), 1)
-    evidence = phase_evidence(features, beats, song.meter, music_start(features))
+    evidence = {name: e.sum(axis=0) for name, e in phase_evidence(features, beats, song.meter,
+                                                                  music_start(features)).items()}
     assert np.all(np.abs(evidence["backbeat"]) < 0.5) and np.all(np.abs(evidence["accent"]) < 0.5)
     assert np.argmax(evidence["harmony"]) == 1  # bar 1 is beats[1]
     assert bar_one_right(song.downbeats[0], bar_one(features, beats, song.meter))
@@ -180,7 +192,8 @@ def test_a_metronome_puts_bar_1_on_its_accented_click(meter):
     for given in (beats, tracked(beats, np.random.default_rng(meter), 1, 0.002)):
         result = find_downbeats(features, given, meter)
         assert bar_one_right(beats[0], float(given[result.first])), result
-        assert result.by == "accent"  # no chord, bass note, kick or snare was heard
+        assert result.by.split("+")[0] == "accent"
+        assert not {"harmony", "bass", "kick", "backbeat"} & set(result.by.split("+"))  # none was heard
 
 
 def test_chords_anticipated_by_an_eighth_still_belong_to_the_bar_line_after_them():

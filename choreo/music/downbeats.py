@@ -2,27 +2,36 @@
 
 The bar is heard in more than the bass's loudness, and no one cue is right in every song: a kick
 on 1 and 3 makes beats 1 and 3 alike, dembow's kick falls on every beat, a breakdown has no drums,
-a pads-only intro has nothing but chords. So several cues each say, beat by beat, how much that
-beat sounds like the one, and the meter's possible phases (phase p: the beats whose index modulo
-the meter is p) are scored on all of them jointly:
+a pads-only intro has nothing but chords, a metronome has nothing but a louder click. So several
+cues each say, beat by beat, how much that beat sounds like the one:
 
-- harmony: chords change on bar lines. The chroma over the bar after a beat is compared with the
-  chroma over the bar before; a chord anticipated by an eighth still falls mostly in the bar after.
+- harmony: chords change on bar lines. The pitch classes over the beat after each eighth are
+  compared with those over the beat before it (what repeats every bar taken out first); a change
+  in the half beat before a beat belongs to it: a chord anticipated by an eighth.
 - bass: the bass notes (`bass_chroma`) change on bar lines, compared the same way.
 - kick: low-band onsets (kick drum, bass-note attacks) on the beat.
 - backbeat: a snare on the beat speaks against it being the one (backbeat on 2 and 4).
 - sections: the whole sound (drums coming in, a breakdown ending) changes on bar lines.
+- accent: the beat's whole onset (a metronome's louder click).
 
-Each cue's evidence for a phase is its mean over that phase's beats against the other phases',
-in standard errors of the beat-to-beat spread (a t statistic), so that no cue weighs more for its
-units or scale, and capped, so that one clear cue cannot outvote all the others on its own.
+Each cue counts as far as the song has it (pitch classes that vary at all; low onsets that are
+not leakage; a snare band that rises as noise; a pattern on the beats that stands out by a share
+of the cue's own hits), so a cue a song lacks does not vote with its artefacts. The meter's
+phases (phase p: the beats whose index modulo the meter is p) are scored jointly over all cues,
+each cue's evidence in standard errors (a t statistic: no cue weighs more for its units),
+capped, and less what chance gives, in stretches of about WINDOW_BEATS beats. That learns the
+bar's pattern of each cue over the song; then every beat's place in the bar is decided along the
+likeliest path through the beats (a hidden Markov model: from each place to the next, or over to
+another place at a cost, for a beat the tracker added or missed, or an odd bar), each beat's
+cue values against the pattern, so bar 1 is where the song's opening says, not where the
+majority of its bars would put it after a slip.
 
-Bar 1 is the first beat of the chosen phase where the music has begun: `music_start` is the first
-moment the song rises above its own noise floor, so a fade-in from silence begins bar 1 where it
+Bar 1 is the first beat at that phase where the music has begun: `music_start` is the first
+moment a band rises above its own noise floor, so a fade-in from silence begins bar 1 where it
 becomes audible at all, not where it reaches some share of the peak.
 
 The work is per beat and per feature frame, never per sample: an hour of audio is a few thousand
-beats.
+beats (about 1.5 s and 25 MB).
 """
 
 from __future__ import annotations
@@ -41,10 +50,15 @@ CHANGE_BEATS = 1  # harmony and bass notes before and after a beat are compared 
 # half beat) under which they carry no harmony (a click track: 0.005) and over which they do
 # (the generated songs: 0.03 to 0.35).
 VARIETY = (0.01, 0.025)
+PATTERN_BARS = 9  # what repeats every bar is measured over this many bars around each
 HIT_PERCENTILE = 95  # a hit of a drum: this percentile of its rises over every sixteenth
 # An onset cue's phases differ by less than SALIENT[0] of a hit: not a pattern of the beats (a
 # dembow's or four on the floor's: about 0.05); by SALIENT[1] or more: one (a backbeat: 0.6 to 1).
 SALIENT = (0.1, 0.3)
+WINDOW_BEATS = 16  # the phase is scored in stretches of this many beats (whole bars, at least)
+SWITCH = 4.0  # what going over to another phase costs between stretches, in their evidence
+BEAT_SWITCH = 6.0  # and between beats, in their log-likelihoods
+BEAT_CAP = 2.0  # a cue's log-likelihood for one beat's place in the bar counts up to this much
 CAP = 4.0  # a cue's evidence for a phase, in standard errors, counts up to this much
 CHANCE = 1.0  # standard errors of evidence that chance alone gives a cue: they do not count
 ONSET_REACH_S = 0.04  # an onset this near a beat is on it (a tracker's beats are ~10 ms off)
@@ -83,7 +97,9 @@ class Downbeats:
     """Bar 1 among the tracked beats, and how sure that is."""
 
     first: int  # index in beat_times of bar 1 beat 1: the first downbeat at or after the music starts
-    contrast: float | None  # the chosen phase's score over the runner-up's, in standard errors; None: meter 1
+    # The chosen phase's log-likelihood over the runner-up's (natural log) on the beats up to the
+    # first change of phase; None: meter 1
+    contrast: float | None
     by: str  # the cues that decided, strongest first, joined by "+" ("" when none did)
     other_first: int | None  # bar 1 at the next likeliest phase (None: meter 1)
 
@@ -97,22 +113,117 @@ def find_downbeats(features: Features, beat_times: np.ndarray, meter: int) -> Do
     start = music_start(features)
     if meter <= 1:
         return Downbeats(_first_from(beats, 0, 1, start), None, "", None)
-    evidence = phase_evidence(features, beats, meter, start)
-    scores = np.sum([WEIGHTS[name] * evidence[name] for name in CUES], axis=0)
-    order = np.argsort(-scores, kind="stable")
-    best, runner_up = int(order[0]), int(order[1])
-    margins = {name: WEIGHTS[name] * (evidence[name][best] - evidence[name][runner_up]) for name in CUES}
-    return Downbeats(_first_from(beats, best, meter, start),
-                     round(float(scores[best] - scores[runner_up]), 2), _deciders(margins),
-                     _first_from(beats, runner_up, meter, start))
-
-
-def phase_evidence(features: Features, beats: np.ndarray, meter: int, start: float) -> dict[str, np.ndarray]:
-    """Each cue's evidence for each phase (capped standard errors; higher: likelier the one)."""
     cues = beat_cues(features, beats, meter)
     heard = beats >= start - _early(beats)
+    evidence = phase_evidence(features, beats, meter, start, cues)
+    scores = np.sum([WEIGHTS[name] * evidence[name] for name in CUES], axis=0)
+    windows = _windows(heard, meter)
+    stretches = _best_paths(scores)
+    phase_of = _path(stretches, int(np.argmax(stretches[0])))[windows]
+    emissions = _emissions(cues, heard, meter, (np.arange(len(beats)) - phase_of) % meter)
+    places = _places(emissions, meter)
+    sums = _rigid_sums(emissions, places)  # cue x shift of every place in the bar
+    shift = 1 + int(np.argmax(sums.sum(axis=0)[1:]))  # the runner-up: the bar shifted by this
+    margins = {name: float(sums[c, 0] - sums[c, shift]) for c, name in enumerate(CUES)}
+    best, runner_up = (-int(places[0])) % meter, (-int(places[0]) - shift) % meter
+    return Downbeats(_first_from(beats, best, meter, start), round(float(sum(margins.values())), 2),
+                     _deciders(margins), _first_from(beats, runner_up, meter, start))
+
+
+def _places(emissions: dict[str, np.ndarray], meter: int) -> np.ndarray:
+    """Each beat's place in the bar (0: the one) along the likeliest path through the beats: from
+    place to next place, beat by beat, or over to any other place for BEAT_SWITCH (a tracker's
+    extra or missed beat, an odd bar)."""
+    likelihood = np.sum(list(emissions.values()), axis=0)
+    totals = _best_paths(likelihood, cyclic=True)
+    return _path(totals, int(np.argmax(totals[0])), cyclic=True)
+
+
+def _rigid_sums(emissions: dict[str, np.ndarray], places: np.ndarray) -> np.ndarray:
+    """Each cue's log-likelihood (cues x meter) over the beats up to the path's first change of
+    phase, for the path's places (shift 0) and for them shifted by each number of beats: how
+    much likelier bar 1's phase is than each other, and by which cue."""
+    meter = emissions[CUES[0]].shape[1]
+    steps = np.flatnonzero(places[1:] != (places[:-1] + 1) % meter)
+    end = int(steps[0]) + 1 if len(steps) else len(places)
+    rows = np.arange(end)
+    return np.array([[float(np.sum(emissions[name][rows, (places[:end] + shift) % meter])) for shift in range(meter)]
+                     for name in CUES])
+
+
+def _emissions(cues: dict[str, Cue], heard: np.ndarray, meter: int, position: np.ndarray) -> dict[str, np.ndarray]:
+    """Each cue's log-likelihood (beats x meter) of each beat being at each place in the bar (0:
+    the one): the bar's pattern of the cue (its mean at each place, where `position` puts the
+    beats) against the beat's value, in standard deviations within places; no more than BEAT_CAP
+    a beat, weighed by WEIGHTS and the cue's trust and salience."""
+    out = {}
+    for name in CUES:
+        cue, ok = cues[name], heard & np.isfinite(cues[name].values)
+        if np.count_nonzero(ok) <= meter:
+            out[name] = np.zeros((len(heard), meter))
+            continue
+        x, place = cue.values[ok], position[ok]
+        n = np.bincount(place, minlength=meter).astype(np.float64)
+        pattern = np.bincount(place, weights=x, minlength=meter) / np.maximum(n, 1.0)
+        spread = np.sqrt(np.sum((x - pattern[place]) ** 2) / max(len(x) - meter, 1))
+        spread = max(spread, 0.05 * float(np.std(x)), 1e-12)
+        values = np.where(ok, np.nan_to_num(cue.values), 0.0)
+        distance = np.minimum(((values[:, None] - pattern[None, :]) / spread) ** 2 / 2.0, BEAT_CAP)
+        gain = WEIGHTS[name] * cue.trust * _salience(cue, pattern)
+        out[name] = np.where(ok[:, None], -gain * distance, 0.0)
+    return out
+
+
+def _salience(cue: Cue, pattern: np.ndarray) -> float:
+    """How far the cue's pattern over the bar stands out, 0..1: by SALIENT of a hit of its own
+    (1 for cues without such a scale)."""
+    if cue.hit <= 0:
+        return 1.0
+    share = float(pattern.max() - pattern.min()) / cue.hit
+    return float(np.clip((share - SALIENT[0]) / (SALIENT[1] - SALIENT[0]), 0.0, 1.0))
+
+
+def _windows(heard: np.ndarray, meter: int) -> np.ndarray:
+    """Each beat's stretch: about WINDOW_BEATS beats (whole bars) from the first heard beat on."""
+    first = int(np.argmax(heard)) if np.any(heard) else len(heard)
+    width = meter * max(1, -(-WINDOW_BEATS // meter))
+    return np.asarray(np.maximum(np.arange(len(heard)) - first, 0) // width)
+
+
+def _best_paths(scores: np.ndarray, cyclic: bool = False) -> np.ndarray:
+    """totals[i, k]: the best sum of scores from row i on with state k in row i. A state goes on
+    to itself (a phase from stretch to stretch) or, `cyclic`, to the next place in the bar (beat
+    to beat); going over to any other costs SWITCH (a tracker's extra or missed beat, an odd bar)."""
+    totals = np.zeros_like(scores)
+    ahead = np.zeros(scores.shape[1])
+    for i in range(len(scores) - 1, -1, -1):
+        follow = np.roll(ahead, -1) if cyclic else ahead
+        totals[i] = scores[i] + np.maximum(follow, ahead.max() - (BEAT_SWITCH if cyclic else SWITCH))
+        ahead = totals[i]
+    return totals
+
+
+def _path(totals: np.ndarray, state: int, cyclic: bool = False) -> np.ndarray:
+    """The state in each row along the best path that starts in `state`."""
+    path = np.empty(len(totals), dtype=np.int64)
+    path[0] = state
+    for i in range(1, len(totals)):
+        follow = (path[i - 1] + 1) % totals.shape[1] if cyclic else path[i - 1]
+        cost = BEAT_SWITCH if cyclic else SWITCH
+        path[i] = follow if totals[i, follow] >= totals[i].max() - cost else int(np.argmax(totals[i]))
+    return path
+
+
+def phase_evidence(features: Features, beats: np.ndarray, meter: int, start: float,
+                   cues: dict[str, Cue] | None = None) -> dict[str, np.ndarray]:
+    """Each cue's evidence for each phase (capped standard errors; higher: likelier the one) in
+    each stretch of about WINDOW_BEATS beats from the music's start (stretches x meter)."""
+    cues = cues or beat_cues(features, beats, meter)
+    heard = beats >= start - _early(beats)
+    windows = _windows(heard, meter)
     phases = np.arange(len(beats)) % meter
-    return {name: cues[name].trust * _phase_t(cues[name], phases, heard, meter) for name in CUES}
+    count = int(windows[-1]) + 1
+    return {name: cues[name].trust * _phase_t(cues[name], phases, heard, windows, count, meter) for name in CUES}
 
 
 def beat_cues(features: Features, beats: np.ndarray, meter: int) -> dict[str, Cue]:
@@ -223,12 +334,25 @@ def _centred_mean(values: np.ndarray, width: int) -> np.ndarray:
 
 
 def _bar_pattern(rows: np.ndarray, period: int) -> np.ndarray:
-    """The mean of `rows` at each place in a `period` (rows i, i + period, ...), row by row."""
-    places = np.arange(len(rows)) % period
-    sums = np.zeros((period, rows.shape[1]))
-    np.add.at(sums, places, rows)
-    counts = np.bincount(places, minlength=period)[:, None]
-    return (sums / np.maximum(counts, 1))[places]
+    """The mean of `rows` at each place in a `period` (rows i, i + period, ...) over the
+    PATTERN_BARS periods around each, row by row: what repeats bar after bar where it is, so that a
+    section's own drum pattern, or a tracker's extra beat that shifts the places, leaves the rest
+    of the song alone."""
+    count = -(-len(rows) // period)
+    padded = np.zeros((count * period, rows.shape[1]))
+    padded[:len(rows)] = rows
+    sums = np.concatenate([np.zeros((1, period, rows.shape[1])),
+                           np.cumsum(padded.reshape(count, period, -1), axis=0)])
+    index = np.arange(count)
+    lo = np.maximum(index - PATTERN_BARS // 2, 0)
+    hi = np.minimum(index + PATTERN_BARS // 2 + 1, count)
+    counts = (hi - lo)[:, None].astype(np.float64)
+    if len(rows) % period:  # the last period's missing rows are not zeros to average in
+        last = np.zeros(period)
+        last[len(rows) % period:] = 1.0
+        counts = counts - np.clip(hi - count + 1, 0, None)[:, None] * last[None, :]
+    means = (sums[hi] - sums[lo]) / np.maximum(counts, 1.0)[:, :, None]
+    return np.asarray(means.reshape(count * period, -1)[:len(rows)])
 
 
 def _novelty(per_beat: np.ndarray, meter: int, cosine: bool) -> np.ndarray:
@@ -285,24 +409,28 @@ def _noise_trust(rises: np.ndarray) -> float:
     return float(np.clip((float(np.median(flatness)) - FLAT_TONE) / (FLAT_NOISE - FLAT_TONE), 0.0, 1.0))
 
 
-def _phase_t(cue: Cue, phases: np.ndarray, heard: np.ndarray, meter: int) -> np.ndarray:
-    """Evidence for each phase from one cue's beat values: the phase's mean over the mean of all
-    phases, in standard errors of the spread within phases; capped at +-CAP, less the CHANCE
-    share, and scaled down where the phases differ by less than SALIENT of a hit; 0 without data."""
+def _phase_t(cue: Cue, phases: np.ndarray, heard: np.ndarray, windows: np.ndarray, count: int,
+             meter: int) -> np.ndarray:
+    """Evidence for each phase in each stretch from one cue's beat values: the phase's mean over
+    the mean of all phases, in standard errors of the spread within phases; capped at +-CAP,
+    less the CHANCE share, and scaled down where the phases differ over the song by less than
+    SALIENT of a hit; 0 without data (stretches x meter)."""
     usable = heard & np.isfinite(cue.values)
-    x, p = cue.values[usable], phases[usable]
-    counts = np.bincount(p, minlength=meter).astype(np.float64)
-    if np.count_nonzero(counts) < meter or len(x) <= meter:
-        return np.zeros(meter)
-    means = np.bincount(p, weights=x, minlength=meter) / counts
-    spread = np.sqrt(np.sum((x - means[p]) ** 2) / (len(x) - meter))
-    spread = max(spread, 0.05 * float(np.std(x)), 1e-12)
-    t = np.clip((means - means.mean()) / (spread / np.sqrt(counts)), -CAP, CAP)
+    x, cell = cue.values[usable], windows[usable] * meter + phases[usable]
+    if len(x) <= meter:
+        return np.zeros((count, meter))
+    n = np.bincount(cell, minlength=count * meter).reshape(count, meter).astype(np.float64)
+    sums = np.bincount(cell, weights=x, minlength=count * meter).reshape(count, meter)
+    squares = np.bincount(cell, weights=x * x, minlength=count * meter).reshape(count, meter)
+    means = sums / np.maximum(n, 1.0)
+    inside = np.maximum(squares - sums * means, 0.0).sum(axis=1)  # squares about each phase's mean
+    dof = n.sum(axis=1) - meter
+    spread = np.sqrt(inside / np.maximum(dof, 1.0))
+    spread = np.maximum(spread, max(0.05 * float(np.std(x)), 1e-12))[:, None]
+    t = np.clip((means - means.mean(axis=1, keepdims=True)) / (spread / np.sqrt(np.maximum(n, 1.0))), -CAP, CAP)
+    t[(n.min(axis=1) == 0) | (dof <= 0)] = 0.0
     evidence = np.sign(t) * np.maximum(np.abs(t) - CHANCE, 0.0)
-    if cue.hit > 0:
-        share = float(means.max() - means.min()) / cue.hit
-        evidence = evidence * float(np.clip((share - SALIENT[0]) / (SALIENT[1] - SALIENT[0]), 0.0, 1.0))
-    return np.asarray(evidence)
+    return np.asarray(evidence * _salience(cue, sums.sum(axis=0) / np.maximum(n.sum(axis=0), 1.0)))
 
 
 def _deciders(margins: dict[str, float]) -> str:
