@@ -202,7 +202,9 @@ def explained(onsets: Onsets, period: float, meter: int, harmony: np.ndarray | N
     score = float(np.mean([_pulse_score(onsets.strength[a:a + size], onsets.snare[a:a + size], period)
                            for a in starts]))
     if harmony is not None:
-        score *= math.exp(_HARMONY_WEIGHT * _bar_match(harmony, meter * period * len(harmony) / len(onsets.strength)))
+        scale = len(harmony) / len(onsets.strength)  # chroma frames a bands frame
+        blur = 2 * _HARMONY_S * len(harmony) / (len(onsets.strength) / onsets.fps)  # chroma frames
+        score *= math.exp(_HARMONY_WEIGHT * _bar_match(harmony, meter * period * scale, period * scale, blur))
     return score
 
 
@@ -275,13 +277,16 @@ def sustained(chroma: np.ndarray, reach: int) -> np.ndarray:
     return out
 
 
-def _bar_match(change: np.ndarray, bar: float) -> float:
+def _bar_match(change: np.ndarray, bar: float, beat: float, blur: float) -> float:
     """In -1..1: how much more the chord changes repeat every `bar` chroma frames than every
-    half bar (chords change on bar lines, rarely on its middle)."""
+    half bar or every `beat` (chords change on bar lines, rarely in a bar's middle, and rarely on
+    every beat: a level whose every beat brings a new chord is the bar, counted as beats)."""
     correlation = autocorrelation(change)
     if bar >= len(correlation) - 2 or correlation[0] <= 0:
         return 0.0
     at = int(round(bar))
     at_bar = float(np.max(correlation[at - 1:at + 2]))
     half = correlation[int(round(bar / 2))] if bar >= 2 else 0.0
+    if bar - beat >= 1 and beat >= blur:  # a shorter lag lies within one change's own blur
+        half = max(half, float(np.max(correlation[max(0, int(round(beat)) - 1):int(round(beat)) + 2])))
     return float(np.clip((at_bar - half) / correlation[0], -1.0, 1.0))
