@@ -238,9 +238,10 @@ class _Extractor:
         floor = 1e-3 * float(windowed.mean(dtype=np.float64)) + 1e-12  # quiet passages: no rises out of nothing
         windowed += np.float32(floor)
         np.log(windowed, out=windowed)
-        rises = np.empty_like(windowed)
-        rises[0] = windowed[0] - np.float32(math.log(floor))
-        np.subtract(windowed[1:], windowed[:-1], out=rises[1:])
+        rises = np.empty(len(windowed) + 1, dtype=np.float32)  # value m: the samples (m-1)*hop..m*hop
+        rises[0] = 0.0
+        rises[1] = windowed[0] - np.float32(math.log(floor))
+        np.subtract(windowed[1:], windowed[:-1], out=rises[2:])
         return rises
 
 
