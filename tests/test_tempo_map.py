@@ -24,7 +24,7 @@ from choreo.live.controls import Live
 from choreo.run.session import Session
 from choreo.run.settings import RunRequest
 from choreo.show.load import load_show, load_show_bytes
-from choreo.show.model import MAX_TEMPO_BARS, Tempo
+from choreo.show.model import MAX_BPM, MAX_CUE_S, MAX_TEMPO_BARS, Tempo
 from choreo.show.plan import compile_plan
 from runlog import write_show
 
@@ -71,6 +71,20 @@ def test_one_tempo_is_the_straight_line_it_was():
     assert (tempo.seconds(2, 2.5), tempo.position(3.25), tempo.position(2.5)) == (3.25, (2, 2.5), (2, 1.0))
     assert tempo.bars == () and tempo.bar_bpm == ()
     assert hash(MAP) == hash(Tempo.of_bars((0.5, 2.5, 4.6, 6.5, 8.7)))  # frozen, hashable: a tuple
+
+
+@settings(max_examples=300, deadline=None)
+@given(bpm=st.floats(1.0, 400.0), offset=st.floats(0.0, 100.0), meter=st.integers(1, 16),
+       bar=st.integers(1, 100_000), fraction=st.floats(0.0, 0.999))
+def test_one_tempo_keeps_the_arithmetic_it_had_to_the_nanosecond(bpm, offset, meter, bar, fraction):
+    """Shows written before maps plan to the same nanosecond: the docs' formula, as it was computed."""
+    beat = 1 + fraction * meter
+    formula = round(offset + ((bar - 1) * meter + (beat - 1)) * 60.0 / bpm, 9)
+    assert Tempo(bpm, offset, meter).seconds(bar, beat) == formula
+
+
+def test_one_tempo_is_not_divided_by_its_meter_and_multiplied_back():
+    assert Tempo(120, 0.48, 14).seconds(157, 3.53349281299991) == 1093.746746407  # was 1093.746746406
 
 
 @pytest.mark.parametrize("bars", [(1.0,), (0.0, 2.0, 2.0), (0.0, 2.0, 1.0)])
@@ -151,12 +165,43 @@ def problems(tmp_path: Path, tempo: str, cue: str = "{bar: 2}") -> list[tuple[in
      "bar 3 starts at 1.5 s, not after bar 2's 2 s: each bar of the map starts later than the one before"),
     ("{bars: [0, 2, 2]}", (2, 22, "tempo.bars[2]"), "bar 3 starts at 2 s, not after bar 2's 2 s"),
     ("{bars: [0, 2], meter: 0}", (2, 30, "tempo.meter"), "must be at least 1, not 0"),
+    ("{bars: [0, 5e-324]}", (2, 19, "tempo.bars[1]"), "faster than 400 bpm: its 4 beats take 0.6 s or more"),
+    ("{meter: 3, bars: [0, 0.5, 0.6]}", (2, 34, "tempo.bars[2]"),
+     "bar 2 lasts 0.1 s (0.5 to 0.6 s), faster than 400 bpm: its 3 beats take 0.45 s or more"),
     ("{bars: [0, 2], bpn: 3}", (2, 23, "tempo.bpn"), "unknown key 'bpn': did you mean `bpm`?"),
 ])
 def test_tempo_map_mistakes_are_located(tmp_path, tempo, where, message):
     found = problems(tmp_path, tempo)
     assert any((line, column, path) == where and message in said for line, column, path, said in found), found
     assert len(found) == 1, found  # one mistake, one message: the cue says nothing more
+
+
+def test_the_fastest_bar_a_map_may_hold_is_the_fastest_tempo(tmp_path):
+    shortest = 60.0 / MAX_BPM  # meter 1
+    body = f"version: 1\ntempo: {{meter: 1, bars: [0, {shortest}, 1]}}\nsteps: [{{play: 1}}]\n"
+    show = load_show(write(tmp_path, body))
+    assert show.tempo is not None and max(show.tempo.bar_bpm) == MAX_BPM
+
+
+@pytest.mark.parametrize("tempo, bar, seconds", [
+    ("{bars: [0, 86400]}", 3, "172,800"),  # carried past the map
+    ("{bars: [0, 2]}", 100_000, "199,998"),
+    ("{bpm: 1}", 100_000, "23,999,760"),  # one tempo too: no bar cue where no seconds cue may be
+])
+def test_a_cue_in_bars_falls_within_a_day_as_a_cue_in_seconds_must(tmp_path, tempo, bar, seconds):
+    found = problems(tmp_path, tempo, f"{{bar: {bar}}}")
+    assert [(f[0], f[1], f[2], f[3]) for f in found] == [
+        (5, 9, "steps[0].at",
+         f"bar {bar} beat 1 falls {seconds} s into the show, past the 86,400 s (a day) a cue may be")]
+
+
+def test_the_schema_says_the_limits_the_code_checks():
+    schema = json.loads((Path(__file__).parents[1] / "schemas" / "show.schema.json").read_text())
+    tempo = schema["properties"]["tempo"]["properties"]
+    cue = schema["$defs"]["step"]["properties"]["at"]["anyOf"]
+    seconds = next(form for form in cue if form.get("type") == "number")
+    assert (tempo["bars"]["maxItems"], tempo["bpm"]["maximum"]) == (MAX_TEMPO_BARS, MAX_BPM)
+    assert tempo["bars"]["items"]["maximum"] == seconds["maximum"] == MAX_CUE_S
 
 
 def test_a_beat_past_the_bar_is_said_with_a_map_too(tmp_path):

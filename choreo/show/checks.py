@@ -15,7 +15,17 @@ from pathlib import Path
 from typing import Any, TypeGuard
 
 from choreo.show.build import tempo_of
-from choreo.show.model import GO, MUSIC_FORMATS, SOLO, Tempo, hidden_character, is_simulator, same_port
+from choreo.show.model import (
+    GO,
+    MAX_BPM,
+    MAX_CUE_S,
+    MUSIC_FORMATS,
+    SOLO,
+    Tempo,
+    hidden_character,
+    is_simulator,
+    same_port,
+)
 from choreo.show.report import Doc, JsonPath, Report, closest, format_path, value_text
 from choreo.userfile import problem as file_problem
 
@@ -294,7 +304,12 @@ def _beat_seconds(walk: _Walk, at: dict[str, Any], path: JsonPath) -> float | No
         walk.problem(path + ("beat",), f"beat {value_text(at.get('beat'))}: a bar has {tempo.meter} beats "
                                        f"(tempo.meter), so beats run from 1 to below {tempo.meter + 1}")
         return None
-    return tempo.seconds(int(bar), float(beat))
+    seconds = tempo.seconds(int(bar), float(beat))
+    if seconds > MAX_CUE_S:  # a slow tempo or a short map carried far: a cue no seconds cue could be
+        walk.problem(path, f"bar {bar} beat {value_text(beat)} falls {seconds:,.0f} s into the show, "
+                           f"past the {MAX_CUE_S:,.0f} s (a day) a cue may be")
+        return None
+    return seconds
 
 
 def _checked_tempo(walk: _Walk) -> Tempo | None:
@@ -303,22 +318,31 @@ def _checked_tempo(walk: _Walk) -> Tempo | None:
     if not isinstance(tempo, dict) or not walk.ok(("tempo",)) or not all(walk.ok(("tempo", key)) for key in tempo):
         return None
     bars = tempo.get("bars")
-    if bars is not None and not _check_bars(walk, bars):
+    if bars is not None and not _check_bars(walk, bars, tempo.get("meter", 4)):
         return None
     return tempo_of(tempo)
 
 
-def _check_bars(walk: _Walk, bars: list[Any]) -> bool:
+def _check_bars(walk: _Walk, bars: list[Any], meter: int) -> bool:
     """A tempo map's bars are numbers (the schema's to say) that go forward in time: a bar that
-    starts no later than the one before would run the music backwards or stop it."""
+    starts no later than the one before would run the music backwards or stop it. No bar is
+    faster than one tempo may be (`MAX_BPM`): a bar of a microsecond is a typo, and carried on
+    past the map it would pile every later cue onto one instant."""
     path = ("tempo", "bars")
     if not all(walk.ok(path + (index,)) for index in range(len(bars))):
         return False
+    shortest = meter * 60.0 / MAX_BPM
     for index in range(1, len(bars)):
-        if bars[index] <= bars[index - 1]:
-            walk.problem(path + (index,), f"bar {index + 1} starts at {value_text(bars[index])} s, not after bar "
-                                          f"{index}'s {value_text(bars[index - 1])} s: each bar of the map "
+        start, end = bars[index - 1], bars[index]
+        if end <= start:
+            walk.problem(path + (index,), f"bar {index + 1} starts at {value_text(end)} s, not after bar "
+                                          f"{index}'s {value_text(start)} s: each bar of the map "
                                           "starts later than the one before")
+            return False
+        if end - start < shortest:
+            walk.problem(path + (index,), f"bar {index} lasts {end - start:.3g} s ({value_text(start)} to "
+                                          f"{value_text(end)} s), faster than {MAX_BPM:g} bpm: its {meter} "
+                                          f"beats take {shortest:g} s or more")
             return False
     return True
 

@@ -146,6 +146,8 @@ class Repeat:
 
 
 MAX_TEMPO_BARS = 100_000  # entries of a tempo map (`tempo.bars`); the schema's `maxItems` says the same
+MAX_BPM = 400.0  # `tempo.bpm`'s maximum in the schema, and the fastest bar of a tempo map
+MAX_CUE_S = 86400.0  # a day: the latest cue, in seconds (`at`'s maximum in the schema) or in bars and beats
 
 
 @dataclass(frozen=True)
@@ -178,10 +180,13 @@ class Tempo:
         return cls(round(median, 3), bars[0], meter, tuple(bars))
 
     def seconds(self, bar: int, beat: float = 1.0) -> float:
-        """Bar and beat (counted from 1) on the show clock, to the nanosecond."""
-        where = (bar - 1) + (beat - 1) / self.meter  # in bars from bar 1's downbeat
+        """Bar and beat (counted from 1) on the show clock, to the nanosecond. One tempo keeps
+        its own arithmetic, operation for operation: a show written before maps existed gets
+        the very same cue times (dividing by the meter and multiplying back moves one in a
+        hundred thousand by a nanosecond)."""
         if not self.bars:
-            return round(self.offset + where * self.meter * 60.0 / self.bpm, 9)
+            return round(self.offset + ((bar - 1) * self.meter + (beat - 1)) * 60.0 / self.bpm, 9)
+        where = (bar - 1) + (beat - 1) / self.meter  # in bars from bar 1's downbeat
         index = min(max(math.floor(where), 0), len(self.bars) - 2)  # the bar whose length counts
         start, end = self.bars[index], self.bars[index + 1]
         return round(start + (where - index) * (end - start), 9)
