@@ -1,20 +1,25 @@
 """How fast a song's beat goes: onset strength by band, and the tempo level that explains it.
 
 A tempo tracker goes wrong by a level far more often than by a few percent: a ballad's eighth-note
-hi-hats double it, house's off-beat open hats pull it to 2/3, a 6/8's eighths triple it. So the
-tempo is chosen in two steps:
+hi-hats double it, house's off-beat open hats pull it to 2/3, a 6/8's eighths triple it, a funk
+kick every three sixteenths suggests 4/3. So the tempo is chosen in two steps:
 
 1. the autocorrelation of the onset strength, summed over multiples of each lag (a beat repeats
-   at 2, 3, 4 periods too) and weighed by a broad log-normal prior around 110 bpm, gives the best
-   period; then
-2. that period's levels (x1/3 .. x3) that lie in the search range are compared by how well each
-   explains the music: onsets on its beats against onsets between them, in the bands that carry
-   the beat (kick and snare count more than hats), and whether its bars are as long as the
-   chords last (chords change on bar lines), each under the same prior.
+   at 2, 3, 4 periods too) and weighed by a broad log-normal prior around 120 bpm (Ellis 2007's
+   centre), gives the comb's best few peaks; then
+2. their levels (x1/3 .. x3) that lie in the search range (a range's edge or a level folded into
+   it is a candidate too, so `--bpm-range` never refuses a tempo the song supports) are compared
+   by how well each explains the music, stretch by stretch at each stretch's own phase: onsets on
+   its beats against onsets between them (halfway and at the thirds), whether successive beats
+   are alike (every other beat much weaker: a subdivision), a snare on every other beat (the
+   backbeat popular music is counted by), and whether its bars, of the meter the user gave, last
+   as long as the chords do (chords change on bar lines, not on every beat nor mid-bar); all
+   under the same prior.
 
 Onset strength is the positive log-spectral flux of `Features.bands`, in three groups (the kick
 below 150 Hz, the snare and everything pitched up to 5 kHz, the hats above), each normalised so
-that a quiet kick counts as much as a loud pad, and weighed by what carries a beat.
+that a quiet kick counts as much as a loud pad, and weighed by what carries a beat: the kick most,
+hats least.
 """
 
 from __future__ import annotations

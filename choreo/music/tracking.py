@@ -2,9 +2,11 @@
 on a local tempo).
 
 1. Local tempo: the onset strength's autocorrelation over windows of `WINDOW_S` every `STEP_S`
-   (a tempogram), at lags around the chosen period, and the likeliest path through it (Viterbi:
-   a change of tempo costs by its size, so a live band's 1 % drift, a ritardando and a sudden
-   change are followed, but one bar's fill does not move the tempo).
+   (a tempogram, each lag summed with its double), at lags around the chosen period and pulled
+   towards it, and the likeliest path through it (Viterbi: a change of tempo costs by its size,
+   so a live band's 1 % drift, a ritardando and a sudden change are followed, but one bar's fill
+   does not move the tempo). A path that stays far from the chosen period has locked onto a
+   syncopation's period (a dembow's, a broken beat's) and is not used.
 2. Beats: each frame's best score is its onset strength plus the best score of a frame one local
    period or so earlier, less a cost for the interval's departure from that period; the best end
    traced back gives every beat, through breakdowns and quiet intros alike (the cost keeps the
