@@ -109,6 +109,32 @@ def test_position_is_the_inverse_of_seconds(start, lengths, meter, bar, fraction
     assert found_bar * meter + found_beat == pytest.approx(bar * meter + beat, abs=1e-6)
 
 
+tempi = st.one_of(
+    st.builds(lambda bpm, offset, meter: Tempo(bpm, offset, meter),
+              st.floats(1.0, 400.0), st.floats(0.0, 100.0), st.integers(1, 16)),
+    st.builds(lambda start, lengths, meter: Tempo.of_bars(tuple(start + sum(lengths[:k])
+                                                                for k in range(len(lengths) + 1)), meter),
+              st.floats(0.0, 100.0), st.lists(st.floats(2.4, 60.0), min_size=1, max_size=40), st.integers(1, 16)))
+
+
+@settings(max_examples=400, deadline=None)
+@given(tempo=tempi, bar=st.integers(-20, 5000), eighths=st.integers(0, 127), thousandths=st.integers(0, 999))
+def test_a_cues_own_time_reads_back_as_the_very_bar_and_beat_written(tempo, bar, eighths, thousandths):
+    """Before bar 1, on and around the anchors, far past the map: `position(seconds(...))` is
+    the bar and beat as written (2.75, 4.999), never a hair before it nor the bar before."""
+    for beat in (1 + eighths % (8 * tempo.meter) / 8, round(1 + (eighths % tempo.meter) + thousandths / 1000, 3)):
+        assert tempo.position(tempo.seconds(bar, beat)) == (bar, beat)
+
+
+@settings(max_examples=400, deadline=None)
+@given(tempo=tempi, seconds=st.floats(-100.0, 5000.0))
+def test_seconds_undoes_position_to_a_millionth_of_a_beat(tempo, seconds):
+    bar, beat = tempo.position(seconds)
+    assert 1 <= beat < tempo.meter + 1
+    beat_s = (tempo.seconds(bar + 1) - tempo.seconds(bar)) / tempo.meter  # this bar's beats are even
+    assert tempo.seconds(bar, beat) == pytest.approx(seconds, abs=1e-6 * beat_s + 2e-9)
+
+
 @settings(max_examples=200, deadline=None)
 @given(lengths=bar_lengths, meter=st.integers(1, 16), bar=st.integers(1, 50))
 def test_the_map_goes_forward_beat_by_beat_and_meets_every_anchor(lengths, meter, bar):
