@@ -270,6 +270,15 @@ def test_validate_and_plan_say_the_map_and_its_cues(tmp_path, capsys, monkeypatc
     assert any("11.450 s (at 11.45 = bar 6 beat 2, past the tempo map)" in line for line in out)
 
 
+def test_plan_never_rounds_a_beat_up_to_one_the_bar_has_not(tmp_path, capsys, monkeypatch):
+    path = write(tmp_path, "version: 1\ntempo: {bars: [0, 2, 4]}\nsteps:\n"
+                           "  - play: 1\n    at: {bar: 2, beat: 4.9999999}\n  - play: 1\n    at: {bar: 3, beat: 2.5}\n")
+    monkeypatch.setenv("COLUMNS", "200")
+    assert main(["plan", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "= bar 2 beat 4.9999999)" in out and "= bar 3 beat 2.5, past the tempo map)" in out
+
+
 def test_plan_and_validate_json_carry_the_map(tmp_path, capsys):
     path = write(tmp_path, MAP_SHOW)
     tempo = {"bpm": 117.143, "offset": 0.5, "meter": 4, "bars": [0.5, 2.5, 4.6, 6.5, 8.7]}
