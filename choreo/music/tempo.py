@@ -10,7 +10,7 @@ kick every three sixteenths suggests 4/3. So the tempo is chosen in two steps:
 2. their levels (x1/3 .. x3) that lie in the search range (a range's edge or a level folded into
    it is a candidate too, so `--bpm-range` never refuses a tempo the song supports) are compared
    by how well each explains the music, stretch by stretch at each stretch's own phase: onsets on
-   its beats against onsets between them (halfway and at the thirds), whether successive beats
+   its beats against the strongest between them, whether successive beats
    are alike (every other beat much weaker: a subdivision), a snare on every other beat (the
    backbeat popular music is counted by), and whether its bars, of the meter the user gave, last
    as long as the chords do (chords change on bar lines, not on every beat nor mid-bar); all
@@ -40,6 +40,7 @@ PRIOR_OCTAVES = 0.9  # its width (one standard deviation), in octaves
 LEVELS = (1.0, 0.5, 2.0, 2.0 / 3.0, 1.5, 1.0 / 3.0, 3.0)  # tempo ratios to the best period's
 _LOCAL_MEAN_S = 0.4  # the onset strength less its mean over this: a crescendo is no onset
 BACKBEAT_WEIGHT = 3.0  # how much a snare on 2 and 4 counts for a level
+OFF_BEAT_SHARE = 0.7  # how much the strongest onsets off the beats count against it
 EVENNESS_POWER = 0.5  # how much unlike successive beats count against a level
 SEGMENT_BEATS = 24  # a level is judged on stretches of this many of its beats, each at its own phase
 MAX_SEGMENTS = 24  # and on this many stretches at most, spread over the song (an hour needs no more)
@@ -214,13 +215,14 @@ def explained(onsets: Onsets, period: float, meter: int, harmony: np.ndarray | N
 
 
 def _pulse_score(strength: np.ndarray, snare: np.ndarray, period: float) -> float:
-    """The weighed onset strength on the beats (at their best phase) less that between them
-    (halfway, and at the thirds), times how alike successive beats are and a snare backbeat."""
+    """The weighed onset strength on the beats (at their best phase) less the strongest between
+    them, times how alike successive beats are and a snare backbeat. The strongest, not the
+    halfway point's: a kick on every sixteenth folded on five sixteenths leaves the halfway point
+    empty, and would explain that period as well as the beat."""
     histogram = folded(strength, period)
     bins = len(histogram)
     peak = int(np.argmax(histogram))
-    between = max(histogram[(peak + bins // 2) % bins],
-                  0.5 * (histogram[(peak + bins // 3) % bins] + histogram[(peak + 2 * bins // 3) % bins]))
+    between = float(np.roll(histogram, -peak)[bins // 6: bins - bins // 6].max())  # a sixth of a beat off or more
     alike = min(evenness(strength, period, 2), evenness(strength, period, 3)) ** EVENNESS_POWER
     score = max(float(histogram[peak] - between), 1e-9) * alike
     return score * (1.0 + BACKBEAT_WEIGHT * backbeat(snare, period, peak / bins))
