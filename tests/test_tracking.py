@@ -17,6 +17,8 @@ from choreo.errors import UsageError  # noqa: E402
 from choreo.music.beats import estimate, onset_strength  # noqa: E402
 from choreo.music.features import Features, features_of  # noqa: E402
 
+from dataclasses import replace  # noqa: E402
+
 from bench.songs import CASES, Song, make_song  # noqa: E402
 
 CASE = {case.name: case for case in CASES}
@@ -59,6 +61,27 @@ def test_a_tempo_change_is_followed_bar_by_bar():
     assert n >= len(true) - 1 and np.max(np.abs(bars[:n] - true[:n])) < 0.03
     lengths = np.diff(bars)
     assert abs(lengths[0] / lengths[-2] - song.curve[-1] / song.curve[0]) < 0.02  # the two tempi
+
+
+POP = CASE["pop/rock"]
+HARD = {  # kinds of song beyond the bench's, each a principle of the level choice
+    # a kick on every sixteenth says nothing about the beat; the snare on 2 and 4 does
+    "double kick": replace(POP, name="double kick", bpm=(145.0, 170.0), kick="x" * 16, hat="",
+                           open_hat="x.x.x.x.x.x.x.x."),
+    # no drums, a bass on 1 and stabs on 2 and 3: the quarter note, not the bar (chords change per bar)
+    "fast waltz, no drums": replace(CASE["waltz 3/4"], name="fast waltz", bpm=(145.0, 165.0), kick="", snare="",
+                                    hat="", comp="....x...x..."),
+    # loud open hats on every eighth, swung and loosely played: the backbeat still says quarters
+    "loose boom bap": replace(CASE["hip-hop swing"], name="boom bap", swing=0.58, jitter_s=0.008,
+                              open_hat="x.x.x.x.x.x.x.x."),
+}
+
+
+@pytest.mark.parametrize("name", sorted(HARD))
+def test_the_level_is_the_beat_in_harder_kinds_of_song(name):
+    song = make_song(HARD[name], 9201)
+    found = estimate(features_of([song.samples]), meter=song.meter)
+    assert found.bpm == pytest.approx(song.median_bpm, rel=0.04)
 
 
 def test_noise_and_silence_have_no_beat():
