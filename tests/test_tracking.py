@@ -79,7 +79,7 @@ HARD = {  # kinds of song beyond the bench's, each a principle of the level choi
 
 @pytest.mark.parametrize("name", sorted(HARD))
 def test_the_level_is_the_beat_in_harder_kinds_of_song(name):
-    song = make_song(HARD[name], 9201)
+    song = make_song(HARD[name], 9202)
     found = estimate(features_of([song.samples]), meter=song.meter)
     assert found.bpm == pytest.approx(song.median_bpm, rel=0.04)
 
