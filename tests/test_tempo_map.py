@@ -57,6 +57,12 @@ def test_a_bar_and_beat_is_placed_between_its_bars_downbeats():
     assert (MAP.meter, MAP.offset, MAP.bpm) == (4, 0.5, 117.143)  # the median of the bars' tempi
 
 
+def test_a_maps_tempo_is_its_bars_median_so_one_odd_bar_does_not_move_it():
+    assert Tempo.of_bars((0, 2, 4, 6, 30)).bpm == 120.0  # a fermata's 24 s bar: 10 bpm
+    assert Tempo.of_bars((0, 2, 4, 4.6, 6.6, 8.6)).bpm == 120.0  # a 400 bpm glitch among four at 120
+    assert Tempo.of_bars((0, 2, 4.4)).bpm == 110.0  # two bars: halfway between 120 and 100
+
+
 def test_past_the_last_bar_and_before_the_first_the_nearest_bars_length_goes_on():
     assert MAP.seconds(5, 3) == pytest.approx(8.7 + 2.2 / 2)  # the last bar has no end: bar 4's length
     assert MAP.seconds(7) == pytest.approx(8.7 + 2 * 2.2)
@@ -310,6 +316,25 @@ def test_the_console_shows_bar_and_beat_through_the_map(tmp_path):
     assert screen_at(tmp_path, MAP_SHOW, 6.51).bar == (4, 1)
     assert screen_at(tmp_path, "version: 1\ntempo: {bpm: 120}\nsteps: [{play: 1}]\n", 2.6).bar == (2, 2)
     assert screen_at(tmp_path, "version: 1\nsteps: [{play: 1}]\n", 2.6).bar is None
+
+
+def test_before_bar_1_the_console_counts_in_from_bar_0():
+    """A count-in reads as a drummer counts it: bar 0's beats lead into bar 1 (at bar 1's
+    length), the bars before it -1, -2..."""
+    counted = [(bar, int(beat)) for bar, beat in map(MAP.position, (0.49, 0.0, -1.5, -1.51))]
+    assert counted == [(0, 4), (0, 4), (0, 1), (-1, 4)]
+
+
+@pytest.mark.parametrize("width", (60, 80))
+def test_eight_robots_and_a_count_in_fit_the_console(width):
+    rows = tuple(Row(f"dancer{k}", f"{k}: play 1 (wave)", "-", 1.25, 0) for k in range(8))
+    screen = Screen("eight", 0.2, "music clock", "next cue in 0.3 s", "next GO: none ahead", False, rows, (),
+                    bar=(-12, 4))
+    out = io.StringIO()
+    RichConsole(file=out, width=width, color_system=None).print(render(screen, width))
+    lines = out.getvalue().splitlines()
+    assert lines[0].endswith("show 0.2 s · bar -12.4 · music clock")
+    assert all(len(line) <= width for line in lines) and sum(line.startswith("dancer") for line in lines) == 8
 
 
 @pytest.mark.parametrize("width", (60, 80, 120))

@@ -174,7 +174,9 @@ class Tempo:
 
     @classmethod
     def of_bars(cls, bars: tuple[float, ...], meter: int = 4) -> Tempo:
-        """A tempo map from its bars' starts: its figures (median bpm, bar 1) worked out."""
+        """A tempo map from its bars' starts, with the figures shown for it: bar 1, and the
+        median of its bars' tempi, not the mean, so that one odd bar (a fermata, a beat the
+        tracker missed) does not move the tempo a plan and `--json` report."""
         tempi = sorted(60.0 * meter / (b - a) for a, b in pairwise(bars))
         middle = len(tempi) // 2
         median = tempi[middle] if len(tempi) % 2 else (tempi[middle - 1] + tempi[middle]) / 2
