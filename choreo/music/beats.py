@@ -45,10 +45,10 @@ MAP_WHEN_OFF_S = 0.02  # a straight line that puts a beat farther off than this:
 STEADY_SHARE = 0.95  # of the beats with an attack that must lie within MAP_WHEN_OFF_S of a steady tempo's line
 STRAY_S = 0.05  # and no beat farther off than this (one an attack confirms, or the tracker's guess)
 PULSE_S = 30.0  # the stretches whose repetition is measured
-MIN_PULSE = 0.1  # the onsets' autocorrelation at the beat (share of its peak) below which no beat repeats
-_LAST_BEAT = 0.2  # a beat past the last heard one with less onset than this share of the median's: gone
+MIN_PULSE = 0.1  # the onsets' autocorrelation at a beat (share of their energy) below which nothing repeats
+_LAST_BEAT = 0.2  # a last beat with less onset than this share of the median beat's is past the music
 _EARLY_S = 0.05  # an onset this much before the music's start (its first frames) still counts
-_SOUND = 0.02  # the music ends after the last frame whose its bands' sum reaches this share of the song's median sound
+_SOUND = 0.02  # the music ends after the last frame whose bands' sum reaches this share of the median frame's
 
 
 @dataclass(frozen=True)
@@ -85,6 +85,7 @@ class BeatEstimate:
     curve: tuple[tuple[float, float], ...] = ()  # (time_s, bpm) of each beat-to-beat interval
 
     def tempo(self) -> Tempo:
+        """The `tempo:` block as a show holds it: where cues by bar and beat will fall."""
         return Tempo(self.bpm, self.offset, self.meter, self.bars)
 
 
@@ -170,6 +171,8 @@ def _ending(times: np.ndarray, heard: np.ndarray, onsets: tempo_level.Onsets) ->
     """The beats up to the last one the music plays: one an attack confirms and with a fair onset
     under it. Past it a song's last notes ring out, or stop (a sound's end makes no attack, though
     its cut can splash across the spectrum)."""
+    if not len(times):
+        return times, heard
     frames = np.clip(np.round(times * onsets.fps).astype(int), 0, len(onsets.strength) - 1)
     strength = np.array([onsets.strength[max(0, f - 2):f + 3].max() for f in frames])
     weak = ~heard | (strength < _LAST_BEAT * float(np.median(strength)))
