@@ -5,10 +5,11 @@ on 1 and 3 makes beats 1 and 3 alike, dembow's kick falls on every beat, a break
 a pads-only intro has nothing but chords, a metronome has nothing but a louder click. So several
 cues each say, beat by beat, how much that beat sounds like the one:
 
-- harmony: chords change on bar lines. The pitch classes over the beat after each eighth are
-  compared with those over the beat before it (what repeats every bar taken out first); a change
-  in the half beat before a beat belongs to it: a chord anticipated by an eighth.
-- bass: the bass notes (`bass_chroma`) change on bar lines, compared the same way.
+- harmony, harmony/bar: chords change on bar lines. The pitch classes over the beat (the bar)
+  after each eighth are compared with those over the beat (the bar) before it, what repeats
+  every bar taken out first; a change in the half beat before a beat belongs to it: a chord
+  anticipated by an eighth.
+- bass, bass/bar: the bass notes (`bass_chroma`) change on bar lines, compared the same way.
 - kick: low-band onsets (kick drum, bass-note attacks) on the beat.
 - backbeat: a snare on the beat speaks against it being the one (backbeat on 2 and 4).
 - sections: the whole sound (drums coming in, a breakdown ending) changes on bar lines.
@@ -43,9 +44,9 @@ import numpy as np
 from choreo.errors import UsageError
 from choreo.music.features import Features
 
-CUES = ("harmony", "bass", "kick", "backbeat", "sections", "accent")
-WEIGHTS = {"harmony": 1.0, "bass": 1.0, "kick": 1.0, "backbeat": 1.0, "sections": 0.5, "accent": 0.5}
-CHANGE_BEATS = 1  # harmony and bass notes before and after a beat are compared over this many beats
+CUES = ("harmony", "bass", "harmony/bar", "bass/bar", "kick", "backbeat", "sections", "accent")
+WEIGHTS = {"harmony": 0.5, "bass": 0.5, "harmony/bar": 0.5, "bass/bar": 0.5, "kick": 1.0, "backbeat": 1.0,
+           "sections": 0.5, "accent": 0.5}
 # The pitch classes' spread over a song (mean cosine distance from their mean shape, a row each
 # half beat) under which they carry no harmony (a click track: 0.005) and over which they do
 # (the generated songs: 0.03 to 0.35).
@@ -57,7 +58,7 @@ HIT_PERCENTILE = 95  # a hit of a drum: this percentile of its rises over every 
 SALIENT = (0.1, 0.3)
 WINDOW_BEATS = 16  # the phase is scored in stretches of this many beats (whole bars, at least)
 SWITCH = 4.0  # what going over to another phase costs between stretches, in their evidence
-BEAT_SWITCH = 6.0  # and between beats, in their log-likelihoods
+BEAT_SWITCH = 4.0  # and between beats, in their log-likelihoods
 BEAT_CAP = 2.0  # a cue's log-likelihood for one beat's place in the bar counts up to this much
 CAP = 4.0  # a cue's evidence for a phase, in standard errors, counts up to this much
 CHANCE = 1.0  # standard errors of evidence that chance alone gives a cue: they do not count
@@ -231,8 +232,10 @@ def beat_cues(features: Features, beats: np.ndarray, meter: int) -> dict[str, Cu
     chroma_at = _frame_times(len(features.chroma), features.chroma_fps)
     band_at = _frame_times(len(features.bands), features.fps)
     return {
-        "harmony": _changes(features.chroma, chroma_at, beats, meter),
-        "bass": _changes(features.bass_chroma, chroma_at, beats, meter),
+        "harmony": _changes(features.chroma, chroma_at, beats, meter, 1),
+        "bass": _changes(features.bass_chroma, chroma_at, beats, meter, 1),
+        "harmony/bar": _changes(features.chroma, chroma_at, beats, meter, meter),
+        "bass/bar": _changes(features.bass_chroma, chroma_at, beats, meter, meter),
         **_onset_cues(features, beats),
         "sections": Cue(_novelty(_beat_means(features.bands, band_at, beats), meter, cosine=False)),
     }
@@ -290,13 +293,15 @@ def _beat_means(frames: np.ndarray, times: np.ndarray, beats: np.ndarray) -> np.
     return np.asarray(sums / (hi - lo)[:, None])
 
 
-def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray, meter: int) -> Cue:
+def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray, meter: int, span: int) -> Cue:
     """How much the pitch classes change at each beat or in the half beat before it (a chord
     anticipated by an eighth belongs to the bar line after it): the distance between their shape
-    over the CHANGE_BEATS after each eighth and over the CHANGE_BEATS before it, the larger of the
-    two eighths. What repeats every bar (a pitched kick drum, a comping pattern) is taken out
-    first: it changes at the same place in every bar, whichever place the bar starts at. Trusted
-    as far as the pitch classes vary at all (a click track's never do)."""
+    over the `span` beats after each eighth and the `span` before it, the larger of the two
+    eighths. A span of 1 is sharp (the chord's own beat); a bar's is steady under a walking bass
+    or an arpeggio, whose notes change every beat within a chord. What repeats every bar (a
+    pitched kick drum, a comping pattern) is taken out first: it changes at the same place in
+    every bar, whichever place the bar starts at. Trusted as far as the pitch classes vary at all
+    (a click track's never do)."""
     if len(beats) < 2:
         return Cue(np.full(len(beats), np.nan), 0.0)
     last = beats[-1] + (beats[-1] - beats[-2])
@@ -306,7 +311,8 @@ def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray, meter: in
     slots = _beat_means(frames, times, grid)[:-1]  # one a half beat
     loudness = _centred_mean(np.linalg.norm(slots, axis=1), 2 * meter)[:, None]
     shapes = np.divide(slots, loudness, out=np.zeros_like(slots), where=loudness > 0)
-    novelty = _novelty(shapes - _bar_pattern(shapes, 2 * meter), 2 * CHANGE_BEATS, cosine=False)  # at each eighth
+    residual = shapes - _bar_pattern(shapes, 2 * meter)
+    novelty = _novelty(residual, 2 * span, cosine=False)  # at each eighth
     on_beat = novelty[0::2][:len(beats)]
     before = np.concatenate([[np.nan], novelty[1::2]])[:len(beats)]
     return Cue(np.fmax(on_beat, before), _variety(slots))  # NaN only where both are
@@ -434,7 +440,12 @@ def _phase_t(cue: Cue, phases: np.ndarray, heard: np.ndarray, windows: np.ndarra
 
 
 def _deciders(margins: dict[str, float]) -> str:
-    """The cues that favoured the winner over the runner-up by MIN_VOTING of the margin or more."""
+    """The cues that favoured the winner over the runner-up by MIN_VOTING of the margin or more
+    (a cue's changes over a beat and over a bar, "harmony" and "harmony/bar", count as one)."""
+    kinds: dict[str, float] = {}
+    for name, margin in margins.items():
+        kinds[name.split("/")[0]] = kinds.get(name.split("/")[0], 0.0) + margin
+    margins = kinds
     total = sum(m for m in margins.values() if m > 0)
     if total <= 0:
         return ""
