@@ -148,7 +148,7 @@ def summary_lines(path: str, found: BeatEstimate) -> list[str]:
     if found.downbeat_contrast is not None:
         by = f"by {found.downbeat_by}" if found.downbeat_by else "by no cue in particular"
         if math.isfinite(found.downbeat_contrast):
-            stands = f"{found.downbeat_contrast:.1f} standard errors ahead of beat {found.other_beat}"
+            stands = f"a log-likelihood {found.downbeat_contrast:.0f} ahead of beat {found.other_beat}"
         else:
             stands = f"the only beat heard as one, beat {found.other_beat} next"
         lines.append(f"# bar 1 beat 1 at {found.offset:.3f} s, found {by}: {stands}, the next likeliest "
