@@ -198,7 +198,7 @@ def problems(tmp_path: Path, tempo: str, cue: str = "{bar: 2}") -> list[tuple[in
     ("{bars: [0, 2, 2]}", (2, 22, "tempo.bars[2]"), "bar 3 starts at 2 s, not after bar 2's 2 s"),
     ("{bars: [0, 2], meter: 0}", (2, 30, "tempo.meter"), "must be at least 1, not 0"),
     ("{bars: [0, 5e-324]}", (2, 19, "tempo.bars[1]"), "faster than 400 bpm: its 4 beats take 0.6 s or more"),
-    ("{meter: 3, bars: [0, 0.5, 0.6]}", (2, 34, "tempo.bars[2]"),
+    ("{meter: 3.0, bars: [0, 0.5, 0.6]}", (2, 36, "tempo.bars[2]"),
      "bar 2 lasts 0.1 s (0.5 to 0.6 s), faster than 400 bpm: its 3 beats take 0.45 s or more"),
     ("{bars: [0, 2], bpn: 3}", (2, 23, "tempo.bpn"), "unknown key 'bpn': did you mean `bpm`?"),
 ])

@@ -318,7 +318,7 @@ def _checked_tempo(walk: _Walk) -> Tempo | None:
     if not isinstance(tempo, dict) or not walk.ok(("tempo",)) or not all(walk.ok(("tempo", key)) for key in tempo):
         return None
     bars = tempo.get("bars")
-    if bars is not None and not _check_bars(walk, bars, tempo.get("meter", 4)):
+    if bars is not None and not _check_bars(walk, bars, int(tempo.get("meter", 4))):
         return None
     return tempo_of(tempo)
 
