@@ -99,6 +99,12 @@ def test_a_map_that_does_not_go_forward_is_no_map(bars):
         Tempo(120, 0.0, 4, bars)
 
 
+def test_a_maps_bar_1_is_its_first_entry():
+    with pytest.raises(ValueError, match=r"a tempo map's offset is its bar 1 \(0.5\), not 0.0"):
+        Tempo(120, 0.0, 4, (0.5, 2.5))
+    assert Tempo(120, 0.5, 4, (0.5, 2.5)) == Tempo.of_bars((0.5, 2.5))
+
+
 bar_lengths = st.lists(st.floats(0.2, 8.0), min_size=1, max_size=40)
 
 

@@ -169,8 +169,13 @@ class Tempo:
     bars: tuple[float, ...] = ()  # a tempo map: each bar's beat 1 in show seconds, bar 1 first; () for one tempo
 
     def __post_init__(self) -> None:
+        """A map that runs back or stops, or whose bar 1 is not its first entry, is a bug where
+        it was made (a show's mistakes are said by its checks): plans and `--json` would show
+        one bar 1 and cue by another, and two equal maps would compare unequal."""
         if self.bars and (len(self.bars) < 2 or any(b <= a for a, b in pairwise(self.bars))):
             raise ValueError("a tempo map needs two or more bars, each after the one before")
+        if self.bars and self.offset != self.bars[0]:
+            raise ValueError(f"a tempo map's offset is its bar 1 ({self.bars[0]}), not {self.offset}")
 
     @classmethod
     def of_bars(cls, bars: tuple[float, ...], meter: int = 4) -> Tempo:
