@@ -318,6 +318,7 @@ def screen_at(tmp_path: Path, body: str, show_s: float) -> Screen:
 
 def test_the_console_shows_bar_and_beat_through_the_map(tmp_path):
     assert screen_at(tmp_path, MAP_SHOW, 3.6).bar == (2, 3)  # 3.55 s is bar 2 beat 3
+    assert screen_at(tmp_path, MAP_SHOW, 1.0).cue == "next cue in 2.5 s: step 0 at 3.55 s, bar 2 beat 3"
     assert screen_at(tmp_path, MAP_SHOW, 6.49).bar == (3, 4)
     assert screen_at(tmp_path, MAP_SHOW, 6.51).bar == (4, 1)
     assert screen_at(tmp_path, "version: 1\ntempo: {bpm: 120}\nsteps: [{play: 1}]\n", 2.6).bar == (2, 2)

@@ -41,7 +41,7 @@ from choreo.cli.terminal import raw_stream, visible_stream
 from choreo.events import Command, CommandEvent, GoCue, RxEvent, StepEvent, Subscription, TxEvent
 from choreo.live.controls import HoldingShowClock, Live
 from choreo.log.format import ERROR, INFO, WARNING
-from choreo.show.model import SOLO, PlannedStep, StepKind
+from choreo.show.model import SOLO, PlannedStep, StepKind, beat_text
 
 REFRESH_S = 0.2  # five looks a second: the show time moves smoothly enough (and is drawn to 0.1 s)
 QUIET_BEFORE_S = 0.06  # no redraw starts this close before a step falls due (a cue's lead included)
@@ -434,10 +434,12 @@ class Console:
         at, name, step = min(ahead, key=lambda c: (c[0], c[2].index))
         who = f"{name}: " if self.session.settings.show.tracks else ""  # shared steps: everyone's cue
         label = f" '{step.label}'" if step.label else ""
+        where = f"at {at:g} s" if step.at_beat is None else \
+            f"at {at:g} s, bar {step.at_beat[0]} beat {beat_text(step.at_beat[1])}"  # as the show wrote it
         if show_s is None:
-            return f"next cue: {who}step {step.index}{label} at {at:g} s"
+            return f"next cue: {who}step {step.index}{label} {where}"
         left = f"in {at - show_s:.1f} s" if at >= show_s else "due now"
-        return f"next cue {left}: {who}step {step.index}{label} at {at:g} s"
+        return f"next cue {left}: {who}step {step.index}{label} {where}"
 
     def _go_line(self, waiting: list[GoCue], stopping: bool) -> tuple[str, bool]:
         """The lock is held. The GO cue waiting now, else the next one coming; before a show

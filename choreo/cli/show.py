@@ -233,21 +233,16 @@ def _start(step: PlannedStep, digits: int, tempo: Tempo | None = None) -> str:
         return f"{text} (waits for GO)"
     if step.at is None:
         return text
+    from choreo.show.model import beat_text
+
     cue = f"{step.at:g}"
     if step.at_beat is not None:
-        cue += f" = bar {step.at_beat[0]} beat {_beat(step.at_beat[1])}"
+        cue += f" = bar {step.at_beat[0]} beat {beat_text(step.at_beat[1])}"
     if step.at_beat is not None and tempo is not None and tempo.past_map(*step.at_beat):
         cue += ", past the tempo map"
     if step.planned_s > step.at + 1e-9:
         return f"{text} (at {cue}, late {step.planned_s - step.at:.3f} s)"
     return f"{text} (at {cue})"
-
-
-def _beat(beat: float) -> str:
-    """A beat as written, `3` or `2.5`; in full when six digits would round it (`4.9999999` is
-    not beat 5, which a bar of 4 does not have)."""
-    text = f"{beat:g}"
-    return text if float(text) == beat else repr(beat)
 
 
 def _past_map_note(show: Show, plans: dict[str, Plan]) -> str:

@@ -225,6 +225,13 @@ class Tempo:
         return tuple(60.0 * self.meter / (b - a) for a, b in pairwise(self.bars))
 
 
+def beat_text(beat: float) -> str:
+    """A cue's beat as written, `3` or `2.5`, for plans and the console; in full when six digits
+    would round it (`4.9999999` is not beat 5, which a bar of 4 does not have)."""
+    text = f"{beat:g}"
+    return text if float(text) == beat else repr(beat)
+
+
 MUSIC_FORMATS = (".wav", ".mp3", ".flac", ".ogg")  # what miniaudio decodes
 MUSIC_FORMATS_TEXT = ", ".join(f[1:] for f in MUSIC_FORMATS[:-1]) + " or " + MUSIC_FORMATS[-1][1:]  # in messages
 
