@@ -207,8 +207,8 @@ def explained(onsets: Onsets, period: float, meter: int, harmony: np.ndarray | N
     size = int(SEGMENT_BEATS * period)
     count = max(1, (len(onsets.strength) + size // 2) // size)
     starts = (np.linspace(0, len(onsets.strength) - size, min(count, MAX_SEGMENTS)).astype(int) if count > 1 else [0])
-    score = float(np.mean([_pulse_score(onsets.strength[a:a + size], onsets.snare[a:a + size], period)
-                           for a in starts]))
+    score = float(np.mean([_pulse_score(onsets.strength[a:a + size], onsets.groups[a:a + size, :2],
+                                        onsets.snare[a:a + size], period) for a in starts]))
     if harmony is not None:
         scale = len(harmony) / len(onsets.strength)  # chroma frames a bands frame
         blur = 2 * _HARMONY_S * len(harmony) / (len(onsets.strength) / onsets.fps)  # chroma frames
@@ -216,7 +216,7 @@ def explained(onsets: Onsets, period: float, meter: int, harmony: np.ndarray | N
     return score
 
 
-def _pulse_score(strength: np.ndarray, snare: np.ndarray, period: float) -> float:
+def _pulse_score(strength: np.ndarray, marks: np.ndarray, snare: np.ndarray, period: float) -> float:
     """The weighed onset strength on the beats (at their best phase) less the strongest between
     them, times how alike successive beats are and a snare backbeat. The strongest, not the
     halfway point's: a kick on every sixteenth folded on five sixteenths leaves the halfway point
@@ -225,18 +225,20 @@ def _pulse_score(strength: np.ndarray, snare: np.ndarray, period: float) -> floa
     bins = len(histogram)
     peak = int(np.argmax(histogram))
     between = float(np.roll(histogram, -peak)[bins // 6: bins - bins // 6].max())  # a sixth of a beat off or more
-    alike = min(evenness(strength, period, 2), evenness(strength, period, 3)) ** EVENNESS_POWER
+    alike = min(evenness(marks, period, 2), evenness(marks, period, 3)) ** EVENNESS_POWER
     score = max(float(histogram[peak] - between), 1e-9) * alike
     return score * (1.0 + BACKBEAT_WEIGHT * backbeat(snare, period, peak / bins))
 
 
-def evenness(strength: np.ndarray, period: float, group: int) -> float:
-    """How alike `group` successive beats are (the weakest one's onset strength over the
-    strongest's, at their best phase): beats every other one of which is much weaker are a
-    subdivision (eighths under a ballad's quarters), not the beat."""
+def evenness(marks: np.ndarray, period: float, group: int) -> float:
+    """How alike `group` successive beats are: the weakest one's mark over the strongest's, at
+    their best phase, a beat's mark being its strongest onset among the bands that mark beats
+    (`marks`: the kick's and the snare's, each normalised). Beats every other one of which has
+    next to nothing there are a subdivision (eighths under a ballad's quarters: hats alone on
+    the ands), not the beat; a kick on 1 and a louder snare on 2 are both beats."""
     bins = 16
-    histogram = folded(strength, group * period, bins * group)
-    beats = histogram.reshape(group, bins).T  # row: a phase, columns: the group's beats there
+    beats = np.max([folded(marks[:, g], group * period, bins * group) for g in range(marks.shape[1])], axis=0)
+    beats = beats.reshape(group, bins).T  # row: a phase, columns: the group's beats there
     strongest = beats[int(np.argmax(beats.sum(axis=1)))]
     return float(strongest.min() / max(float(strongest.max()), 1e-12))
 
