@@ -91,6 +91,14 @@ class Cue:
     values: np.ndarray
     trust: float = 1.0
     hit: float = 0.0  # what a clear hit of this cue measures in this song (0: no such scale)
+    reach: int = 0  # the beats before a beat that its value draws on (a change: the ones before it)
+
+    def usable(self, heard: np.ndarray) -> np.ndarray:
+        """The beats whose value was drawn from the music alone: the beat and the `reach` before
+        it heard, the value known (a change measured against the silence before is no change)."""
+        before = np.zeros(len(heard), dtype=bool)
+        before[self.reach:] = heard[:len(heard) - self.reach] if self.reach else heard
+        return np.asarray(before & heard & np.isfinite(self.values))
 
 
 @dataclass(frozen=True)
@@ -159,7 +167,7 @@ def _emissions(cues: dict[str, Cue], heard: np.ndarray, meter: int, position: np
     a beat, weighed by WEIGHTS and the cue's trust and salience."""
     out = {}
     for name in CUES:
-        cue, ok = cues[name], heard & np.isfinite(cues[name].values)
+        cue, ok = cues[name], cues[name].usable(heard)
         if np.count_nonzero(ok) <= meter:
             out[name] = np.zeros((len(heard), meter))
             continue
@@ -237,7 +245,7 @@ def beat_cues(features: Features, beats: np.ndarray, meter: int) -> dict[str, Cu
         "harmony/bar": _changes(features.chroma, chroma_at, beats, meter, meter),
         "bass/bar": _changes(features.bass_chroma, chroma_at, beats, meter, meter),
         **_onset_cues(features, beats),
-        "sections": Cue(_novelty(_beat_means(features.bands, band_at, beats), meter, cosine=False)),
+        "sections": Cue(_novelty(_beat_means(features.bands, band_at, beats), meter, cosine=False), reach=meter),
     }
 
 
@@ -315,7 +323,7 @@ def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray, meter: in
     novelty = _novelty(residual, 2 * span, cosine=False)  # at each eighth
     on_beat = novelty[0::2][:len(beats)]
     before = np.concatenate([[np.nan], novelty[1::2]])[:len(beats)]
-    return Cue(np.fmax(on_beat, before), _variety(slots))  # NaN only where both are
+    return Cue(np.fmax(on_beat, before), _variety(slots), reach=span + 1)  # NaN only where both are
 
 
 def _variety(rows: np.ndarray) -> float:
@@ -421,7 +429,7 @@ def _phase_t(cue: Cue, phases: np.ndarray, heard: np.ndarray, windows: np.ndarra
     the mean of all phases, in standard errors of the spread within phases; capped at +-CAP,
     less the CHANCE share, and scaled down where the phases differ over the song by less than
     SALIENT of a hit; 0 without data (stretches x meter)."""
-    usable = heard & np.isfinite(cue.values)
+    usable = cue.usable(heard)
     x, cell = cue.values[usable], windows[usable] * meter + phases[usable]
     if len(x) <= meter:
         return np.zeros((count, meter))
