@@ -290,7 +290,8 @@ def _check_cue(walk: _Walk, step: dict[str, Any], here: JsonPath, looping: bool)
 
 
 def _beat_seconds(walk: _Walk, at: dict[str, Any], path: JsonPath) -> float | None:
-    """A bar-and-beat cue in seconds; None (reported) without a usable tempo or past the bar."""
+    """A bar-and-beat cue in seconds; None (reported) without a usable tempo, past the bar, or
+    later than a cue in seconds may be (a slow tempo, or a short map carried on, reaches far)."""
     if not isinstance(walk.doc.data.get("tempo"), dict):
         walk.problem(path, "a cue in bars and beats needs the music's `tempo:` "
                            "(e.g. `tempo: {bpm: 120, offset: 0.5, meter: 4}`), or give seconds")
