@@ -93,10 +93,13 @@ def test_one_tempo_is_not_divided_by_its_meter_and_multiplied_back():
     assert Tempo(120, 0.48, 14).seconds(157, 3.53349281299991) == 1093.746746407  # was 1093.746746406
 
 
-@pytest.mark.parametrize("bars", [(1.0,), (0.0, 2.0, 2.0), (0.0, 2.0, 1.0)])
+@pytest.mark.parametrize("bars", [(), (1.0,), (0.0, 2.0, 2.0), (0.0, 2.0, 1.0)])
 def test_a_map_that_does_not_go_forward_is_no_map(bars):
+    if bars:
+        with pytest.raises(ValueError, match="two or more bars, each after the one before"):
+            Tempo(120, bars[0], 4, bars)
     with pytest.raises(ValueError, match="two or more bars, each after the one before"):
-        Tempo(120, 0.0, 4, bars)
+        Tempo.of_bars(bars)  # not an IndexError or a ZeroDivisionError on the way
 
 
 def test_a_maps_bar_1_is_its_first_entry():

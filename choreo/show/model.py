@@ -172,8 +172,8 @@ class Tempo:
         """A map that runs back or stops, or whose bar 1 is not its first entry, is a bug where
         it was made (a show's mistakes are said by its checks): plans and `--json` would show
         one bar 1 and cue by another, and two equal maps would compare unequal."""
-        if self.bars and (len(self.bars) < 2 or any(b <= a for a, b in pairwise(self.bars))):
-            raise ValueError("a tempo map needs two or more bars, each after the one before")
+        if self.bars:
+            _check_map(self.bars)
         if self.bars and self.offset != self.bars[0]:
             raise ValueError(f"a tempo map's offset is its bar 1 ({self.bars[0]}), not {self.offset}")
 
@@ -182,6 +182,7 @@ class Tempo:
         """A tempo map from its bars' starts, with the figures shown for it: bar 1, and the
         median of its bars' tempi, not the mean, so that one odd bar (a fermata, a beat the
         tracker missed) does not move the tempo a plan and `--json` report."""
+        _check_map(bars)
         tempi = sorted(60.0 * meter / (b - a) for a, b in pairwise(bars))
         middle = len(tempi) // 2
         median = tempi[middle] if len(tempi) % 2 else (tempi[middle - 1] + tempi[middle]) / 2
@@ -223,6 +224,12 @@ class Tempo:
     def bar_bpm(self) -> tuple[float, ...]:
         """The tempo of each bar of a map (the last has no end: it is not counted); () for one tempo."""
         return tuple(60.0 * self.meter / (b - a) for a, b in pairwise(self.bars))
+
+
+def _check_map(bars: tuple[float, ...]) -> None:
+    """Refuses bars no tempo could be worked out from, before a division by zero would."""
+    if len(bars) < 2 or any(b <= a for a, b in pairwise(bars)):
+        raise ValueError("a tempo map needs two or more bars, each after the one before")
 
 
 def beat_text(beat: float) -> str:
