@@ -223,6 +223,16 @@ def test_with_one_beat_a_bar_bar_1_is_the_first_beat_where_the_music_is_and_no_p
     assert result.first == 2 and result.contrast is None and result.other_first is None
 
 
+def test_a_few_beats_or_beats_outside_the_music_still_name_one_of_them():
+    samples, beats = synth(bars=3)
+    features = features_of([samples])
+    for given in (beats[:1], beats[:2], beats[:3], beats[:5], beats - 100.0, beats + 100.0):
+        for meter in (2, 3, 4, 7):
+            result = find_downbeats(features, given, meter)
+            assert 0 <= result.first < len(given) and result.contrast is not None
+            assert result.other_first is not None and 0 <= result.other_first < len(given)
+
+
 def test_no_beats_is_a_usage_error():
     samples, _ = synth(bars=2)
     with pytest.raises(UsageError, match="no beats"):

@@ -58,7 +58,10 @@ HIT_PERCENTILE = 95  # a hit of a drum: this percentile of its rises over every 
 SALIENT = (0.1, 0.3)
 WINDOW_BEATS = 16  # the phase is scored in stretches of this many beats (whole bars, at least)
 SWITCH = 4.0  # what going over to another phase costs between stretches, in their evidence
-BEAT_SWITCH = 4.0  # and between beats, in their log-likelihoods
+BEAT_SWITCH = 8.0  # and between beats, in their log-likelihoods
+BEAT_SLIP = 2.0  # and after a beat whose interval to the next is off the local beat by more than
+SLIP = 0.15  # this (natural log: 16 %), the median of SLIP_NEIGHBOURS intervals either side
+SLIP_NEIGHBOURS = 8
 BEAT_CAP = 2.0  # a cue's log-likelihood for one beat's place in the bar counts up to this much
 CAP = 4.0  # a cue's evidence for a phase, in standard errors, counts up to this much
 CHANCE = 1.0  # standard errors of evidence that chance alone gives a cue: they do not count
@@ -97,7 +100,7 @@ class Cue:
         """The beats whose value was drawn from the music alone: the beat and the `reach` before
         it heard, the value known (a change measured against the silence before is no change)."""
         before = np.zeros(len(heard), dtype=bool)
-        before[self.reach:] = heard[:len(heard) - self.reach] if self.reach else heard
+        before[self.reach:] = heard[:max(len(heard) - self.reach, 0)]
         return np.asarray(before & heard & np.isfinite(self.values))
 
 
@@ -127,10 +130,11 @@ def find_downbeats(features: Features, beat_times: np.ndarray, meter: int) -> Do
     evidence = phase_evidence(features, beats, meter, start, cues)
     scores = np.sum([WEIGHTS[name] * evidence[name] for name in CUES], axis=0)
     windows = _windows(heard, meter)
-    stretches = _best_paths(scores)
-    phase_of = _path(stretches, int(np.argmax(stretches[0])))[windows]
+    costs = np.full(len(scores), SWITCH)
+    stretches = _best_paths(scores, costs)
+    phase_of = _path(stretches, int(np.argmax(stretches[0])), costs)[windows]
     emissions = _emissions(cues, heard, meter, (np.arange(len(beats)) - phase_of) % meter)
-    places = _places(emissions, meter)
+    places = _places(emissions, _switch_costs(beats))
     sums = _rigid_sums(emissions, places)  # cue x shift of every place in the bar
     shift = 1 + int(np.argmax(sums.sum(axis=0)[1:]))  # the runner-up: the bar shifted by this
     margins = {name: float(sums[c, 0] - sums[c, shift]) for c, name in enumerate(CUES)}
@@ -139,13 +143,12 @@ def find_downbeats(features: Features, beat_times: np.ndarray, meter: int) -> Do
                      _deciders(margins), _first_from(beats, runner_up, meter, start))
 
 
-def _places(emissions: dict[str, np.ndarray], meter: int) -> np.ndarray:
+def _places(emissions: dict[str, np.ndarray], costs: np.ndarray) -> np.ndarray:
     """Each beat's place in the bar (0: the one) along the likeliest path through the beats: from
-    place to next place, beat by beat, or over to any other place for BEAT_SWITCH (a tracker's
-    extra or missed beat, an odd bar)."""
+    place to next place, beat by beat, or over to any other place at a cost (`_switch_costs`)."""
     likelihood = np.sum(list(emissions.values()), axis=0)
-    totals = _best_paths(likelihood, cyclic=True)
-    return _path(totals, int(np.argmax(totals[0])), cyclic=True)
+    totals = _best_paths(likelihood, costs, cyclic=True)
+    return _path(totals, int(np.argmax(totals[0])), costs, cyclic=True)
 
 
 def _rigid_sums(emissions: dict[str, np.ndarray], places: np.ndarray) -> np.ndarray:
@@ -199,28 +202,42 @@ def _windows(heard: np.ndarray, meter: int) -> np.ndarray:
     return np.asarray(np.maximum(np.arange(len(heard)) - first, 0) // width)
 
 
-def _best_paths(scores: np.ndarray, cyclic: bool = False) -> np.ndarray:
+def _best_paths(scores: np.ndarray, costs: np.ndarray, cyclic: bool = False) -> np.ndarray:
     """totals[i, k]: the best sum of scores from row i on with state k in row i. A state goes on
     to itself (a phase from stretch to stretch) or, `cyclic`, to the next place in the bar (beat
-    to beat); going over to any other costs SWITCH (a tracker's extra or missed beat, an odd bar)."""
+    to beat); going over to any other after row i costs costs[i] (a tracker's extra or missed
+    beat, an odd bar)."""
     totals = np.zeros_like(scores)
     ahead = np.zeros(scores.shape[1])
     for i in range(len(scores) - 1, -1, -1):
         follow = np.roll(ahead, -1) if cyclic else ahead
-        totals[i] = scores[i] + np.maximum(follow, ahead.max() - (BEAT_SWITCH if cyclic else SWITCH))
+        totals[i] = scores[i] + (np.maximum(follow, ahead.max() - costs[i]) if i < len(costs) else 0.0)
         ahead = totals[i]
     return totals
 
 
-def _path(totals: np.ndarray, state: int, cyclic: bool = False) -> np.ndarray:
+def _path(totals: np.ndarray, state: int, costs: np.ndarray, cyclic: bool = False) -> np.ndarray:
     """The state in each row along the best path that starts in `state`."""
     path = np.empty(len(totals), dtype=np.int64)
     path[0] = state
     for i in range(1, len(totals)):
         follow = (path[i - 1] + 1) % totals.shape[1] if cyclic else path[i - 1]
-        cost = BEAT_SWITCH if cyclic else SWITCH
-        path[i] = follow if totals[i, follow] >= totals[i].max() - cost else int(np.argmax(totals[i]))
+        keep = totals[i, follow] >= totals[i].max() - costs[i - 1]
+        path[i] = follow if keep else int(np.argmax(totals[i]))
     return path
+
+
+def _switch_costs(beats: np.ndarray) -> np.ndarray:
+    """What a change of place costs after each beat: BEAT_SWITCH, or BEAT_SLIP where the beat to
+    the next is off the local beat (the median of SLIP_NEIGHBOURS either side) by more than SLIP:
+    an extra beat halves an interval, a missed one doubles it."""
+    steps = np.diff(beats)
+    if len(steps) == 0:
+        return np.zeros(0)
+    padded = np.pad(steps, SLIP_NEIGHBOURS, mode="edge")
+    local = np.median(np.lib.stride_tricks.sliding_window_view(padded, 2 * SLIP_NEIGHBOURS + 1), axis=1)
+    off = np.abs(np.log(np.maximum(steps, 1e-6) / np.maximum(local, 1e-6)))
+    return np.where(off > SLIP, BEAT_SLIP, BEAT_SWITCH)
 
 
 def phase_evidence(features: Features, beats: np.ndarray, meter: int, start: float,
