@@ -23,7 +23,8 @@ each cue's evidence in standard errors (a t statistic: no cue weighs more for it
 capped, and less what chance gives, in stretches of about WINDOW_BEATS beats. That learns the
 bar's pattern of each cue over the song; then every beat's place in the bar is decided along the
 likeliest path through the beats (a hidden Markov model: from each place to the next, or over to
-another place at a cost, for a beat the tracker added or missed, or an odd bar), each beat's
+another place at a cost, for a beat the tracker added or missed, or an odd bar; cheap only where
+a beat's interval is off the local beat, as an extra or a missed beat leaves it), each beat's
 cue values against the pattern, so bar 1 is where the song's opening says, not where the
 majority of its bars would put it after a slip.
 
@@ -32,7 +33,7 @@ moment a band rises above its own noise floor, so a fade-in from silence begins 
 becomes audible at all, not where it reaches some share of the peak.
 
 The work is per beat and per feature frame, never per sample: an hour of audio is a few thousand
-beats (about 1.5 s and 25 MB).
+beats (under a second, and 25 MB besides the features).
 """
 
 from __future__ import annotations
