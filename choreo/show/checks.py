@@ -62,7 +62,10 @@ class _Walk:
 
 def check_meaning(doc: Doc, report: Report, folder: Path | None = None) -> None:
     """Report every meaning check the document fails. `folder`: where the show file is, to
-    look for its music there (None: not looked for)."""
+    look for its music there (None: not looked for). None when the schema stopped looking:
+    a value past where it stopped may be of any type."""
+    if report.stopped():
+        return
     data = doc.data
     walk = _Walk(doc, report)
     motions = data.get("motions") if isinstance(data.get("motions"), dict) else {}

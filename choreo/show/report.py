@@ -25,9 +25,16 @@ from choreo.errors import Problem
 JsonPath = tuple[Union[str, int], ...]
 Mark = tuple[int, int]  # 1-based line and column
 
+MAX_SHOWN = 50  # problems said of one file, the first in file order; the rest are counted in one line
+MAX_FOUND = 1000  # problems sought in one file: past these the schema stops looking (`Report.stop_looking`)
+
 
 class Report:
-    """Collects problems, dropping a second report of the same path at the same place."""
+    """Collects problems, dropping a second report of the same path at the same place.
+
+    A file of 256 KiB can hold 60,000 wrong list entries: saying each took 5 s and 60,000
+    lines that no one reads. The first `MAX_SHOWN` are said, in file order, and the rest
+    counted; past `MAX_FOUND` the schema stops looking, so the cost is bounded too."""
 
     def __init__(self, file: str) -> None:
         self.file = file
@@ -35,6 +42,7 @@ class Report:
         self._seen: set[tuple[int, int, str]] = set()
         self._flagged: set[JsonPath] = set()  # paths that already have a problem
         self._silenced: set[JsonPath] = set()  # values replaced by a placeholder: no schema reports below
+        self._stopped = False  # a pass stopped looking: there may be more than were found
 
     def add(self, mark: Mark, path: JsonPath | str, message: str) -> None:
         text = path if isinstance(path, str) else format_path(path)
@@ -45,6 +53,14 @@ class Report:
         if not isinstance(path, str):
             self._flagged.add(path)
         self._problems.append(Problem(self.file, mark[0], mark[1], text, message))
+
+    def stop_looking(self) -> None:
+        """A pass found `MAX_FOUND` problems and looked no further: what it did not reach is
+        unchecked, so the passes after it must not read the document (`stopped`)."""
+        self._stopped = True
+
+    def stopped(self) -> bool:
+        return self._stopped
 
     def silence(self, path: JsonPath) -> None:
         """The value at `path` was refused and read as nothing (an alias): what is said of the
@@ -65,8 +81,13 @@ class Report:
         return bool(self._problems)
 
     def problems(self) -> list[Problem]:
-        """In file order, which is how an author fixes them."""
-        return sorted(self._problems, key=lambda p: (p.line, p.column))
+        """In file order, which is how an author fixes them: the first `MAX_SHOWN`, then one
+        line (no place) that counts the rest."""
+        ordered = sorted(self._problems, key=lambda p: (p.line, p.column))
+        if len(ordered) <= MAX_SHOWN:
+            return ordered
+        more = ("at least " if self._stopped else "") + f"{len(ordered) - MAX_SHOWN:,}"
+        return [*ordered[:MAX_SHOWN], Problem(self.file, 0, 0, "", f"and {more} more problems (fix these first)")]
 
 
 def format_path(path: JsonPath) -> str:

@@ -13,12 +13,13 @@ import json
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib.resources import files
+from itertools import islice
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from choreo import SCHEMAS
 from choreo.show.model import MOTION_NAME_FORMAT, is_motion_name
-from choreo.show.report import Doc, JsonPath, Report, closest, kind_text, value_text
+from choreo.show.report import MAX_FOUND, Doc, JsonPath, Report, closest, kind_text, value_text
 from choreo.wire.protocol import MOTION_SLOTS, spell_bauds
 
 if TYPE_CHECKING:
@@ -64,8 +65,11 @@ def _is_motion_name(value: object) -> bool:
 
 
 def check_schema(doc: Doc, report: Report) -> None:
-    """Report every way the document breaks the schema, at the node (or key) concerned."""
-    errors = list(_validator().iter_errors(doc.data))
+    """Report every way the document breaks the schema, at the node (or key) concerned, up to
+    `MAX_FOUND` of them (a hostile file's 60,000 wrong entries would take seconds)."""
+    errors = list(islice(_validator().iter_errors(doc.data), MAX_FOUND))
+    if len(errors) == MAX_FOUND:
+        report.stop_looking()
     # A wrong type explains everything else wrong at the same node: report it first.
     errors.sort(key=lambda e: (e.validator != "type", len(e.absolute_path)))
     for error in errors:
