@@ -42,6 +42,7 @@ BENCHMARKS = (
     ("go", "11. GO over OSC to the wire"),
     ("go_key", "12. GO by a key on the console to the wire"),
     ("beats", "13. beat finding on songs with known beats (issue 23)"),
+    ("heldout", "14. beat finding on a held-out set, never tuned on"),
 )
 RESULTS = BENCH / "RESULTS.md"
 
