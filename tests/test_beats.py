@@ -16,7 +16,7 @@ import pytest
 import choreo.music
 from choreo.music import beats
 from choreo.music.beats import estimate
-from choreo.music.features import read_features
+from choreo.music.features import features_of, read_features
 from choreo.cli import main
 from choreo.cli.beats import MUSIC_EXTRA
 from choreo.show.load import load_show
@@ -214,3 +214,45 @@ def test_choreo_help_does_not_load_numpy_or_miniaudio():
             "print(sorted({'numpy', 'miniaudio'} & set(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True).stdout
     assert out.strip() == "[]"
+
+
+def float_wav(path: Path, samples: np.ndarray, rate: int = RATE) -> Path:
+    """A mono 32-bit float WAV (format 3), which can hold NaN and infinities."""
+    data = np.asarray(samples, dtype="<f4").tobytes()
+    header = (b"RIFF" + (36 + len(data)).to_bytes(4, "little") + b"WAVEfmt " + (16).to_bytes(4, "little")
+              + np.array([3, 1], "<u2").tobytes() + np.array([rate, 4 * rate], "<u4").tobytes()
+              + np.array([4, 32], "<u2").tobytes() + b"data" + len(data).to_bytes(4, "little"))
+    path.write_bytes(header + data)
+    return path
+
+
+def samples_of(path: Path) -> np.ndarray:
+    with wave.open(str(path)) as song:
+        return np.frombuffer(song.readframes(song.getnframes()), "<i2") / 32767.0
+
+
+def test_nan_and_infinite_samples_in_a_float_wav_are_no_sound_not_a_crash(songs, tmp_path):
+    band = samples_of(songs["band"]).astype(np.float32)
+    band[RATE * 3:RATE * 3 + 50], band[RATE * 5], band[RATE * 7] = np.nan, np.inf, -np.inf
+    found = estimate(read_features(float_wav(tmp_path / "nan.wav", band)))
+    assert abs(found.bpm - 123.7) <= 0.05 and abs(found.offset - 0.61) <= 0.005
+
+
+@pytest.mark.parametrize("before", [False, True])
+def test_minutes_of_silence_before_or_after_a_song_do_not_hide_its_beat(songs, before):
+    band = samples_of(songs["band"]).astype(np.float32)
+    silence = np.zeros(150 * RATE, dtype=np.float32)
+    found = estimate(features_of(iter([silence, band] if before else [band, silence]), RATE, "song"))
+    assert abs(found.bpm - 123.7) <= 0.05 and abs(found.offset - (0.61 + 150 * before)) <= 0.005
+
+
+@pytest.mark.parametrize("bpm_range, bpm", [((127.9, 128.1), 128.0), ((127.0, 128.0), 128.0),
+                                            ((60.0, 64.0), 64.0), ((64.0, 64.5), 64.0)])
+def test_a_range_as_narrow_as_a_frame_or_with_the_tempo_at_its_edge_is_not_refused(songs, bpm_range, bpm):
+    """A tempo read to a fraction of a frame may fall a hair past a round range's edge."""
+    assert estimate(read_features(songs["128"]), bpm_range=bpm_range).bpm == pytest.approx(bpm, abs=0.05)
+
+
+def test_a_slow_click_at_the_default_ranges_edge_is_found_at_its_own_tempo(tmp_path):
+    found = estimate(read_features(click_track(tmp_path / "slow.wav", 40, 0.5, seconds=24.0)))
+    assert found.bpm == pytest.approx(40, abs=0.05) and found.offset == pytest.approx(0.5, abs=0.005)

@@ -123,12 +123,20 @@ def _check_arguments(meter: int, bpm_range: tuple[float, float]) -> None:
 
 def _pulse(strength: np.ndarray, fps: float, bpm_range: tuple[float, float]) -> float:
     """How much the onsets repeat: in each stretch of PULSE_S, the best mean autocorrelation at a
-    period in the range and its multiples, as a share of the onsets' energy; the median stretch's.
-    Noise has onsets but nothing that repeats; a long mix of songs repeats in each song."""
-    size = int(PULSE_S * fps)
-    starts = range(0, max(1, len(strength) - size // 2), size)
-    pulses = [_stretch_pulse(strength[a:a + size], fps, bpm_range) for a in starts]
-    return float(np.median(pulses))
+    period in the range and its multiples, as a share of the onsets' energy; the median over the
+    onsets' energy (each stretch weighs by its own). Noise has onsets but nothing that repeats; a
+    long mix of songs repeats in each song; minutes of silence before or after a song have no
+    onsets, and must not outvote it."""
+    count = max(1, int(round(len(strength) / (PULSE_S * fps))))
+    edges = np.linspace(0, len(strength), count + 1).astype(int)  # every frame in one: a song at the end too
+    stretches = [strength[a:b] for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    pulses = np.array([_stretch_pulse(stretch, fps, bpm_range) for stretch in stretches])
+    energy = np.array([float(np.var(stretch)) for stretch in stretches])
+    if not np.any(energy > 0):
+        return 0.0
+    order = np.argsort(pulses)
+    share = np.cumsum(energy[order]) / energy.sum()
+    return float(pulses[order][np.searchsorted(share, 0.5)])
 
 
 def _stretch_pulse(strength: np.ndarray, fps: float, bpm_range: tuple[float, float]) -> float:

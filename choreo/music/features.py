@@ -129,6 +129,10 @@ def _decoded(stream: io.BufferedReader, name: str, sample_rate: int, channels: i
         for block in miniaudio.stream_any(_Source(stream), output_format=miniaudio.SampleFormat.FLOAT32,
                                           nchannels=channels, sample_rate=sample_rate, frames_to_read=_READ_FRAMES):
             samples = np.frombuffer(block, dtype=np.float32)
+            if not np.isfinite(samples).all() or np.abs(samples).max(initial=0.0) > 1.0:
+                # a float file's NaN is no sound and its inf or 1e30 full scale, as a sound card
+                # would play them: a NaN otherwise hangs or crashes every step after
+                samples = np.clip(np.nan_to_num(samples, nan=0.0, posinf=1.0, neginf=-1.0), -1.0, 1.0)
             total += len(samples) // channels
             if total > limit:
                 raise UsageError(f"{visible(name)}: longer than {MAX_SONG_S / 3600:g} hours: "

@@ -44,6 +44,7 @@ OFF_BEAT_SHARE = 0.7  # how much the strongest onsets off the beats count agains
 EVENNESS_POWER = 0.5  # how much unlike successive beats count against a level
 SEGMENT_BEATS = 24  # a level is judged on stretches of this many of its beats, each at its own phase
 MAX_SEGMENTS = 24  # and on this many stretches at most, spread over the song (an hour needs no more)
+EDGE = 0.02  # a level this near the search range (relative) is taken at its edge: 60 bpm read as 60.1 is in 40..60
 _PEAKS = 3  # the comb's best peaks whose levels are compared
 _MULTIPLES = 4  # lags summed in the comb: the period and its multiples up to this
 _HARMONY_S = 0.4  # chroma is averaged over this either side of a possible chord change
@@ -121,7 +122,7 @@ def best_period(onsets: Onsets, features: Features, meter: int, bpm_range: tuple
     n = len(correlation)
     lo_lag = max(2.0, fps * 60.0 / bpm_range[1])
     hi_lag = min(n / 2.0, fps * 60.0 / bpm_range[0])
-    if hi_lag <= lo_lag + 2 or correlation[0] <= 0:
+    if n / 2.0 <= lo_lag + 2 or correlation[0] <= 0:  # a narrow range is no short song: see _candidates
         raise UsageError(f"{features.path}: too short to find a beat ({features.duration_s:.1f} s)")
     # the comb over every tempo a level could reach, so that a range's edge never hides one
     lags = np.arange(max(2, int(lo_lag / 3)), int(min(n / 2, 3 * hi_lag)) + 1)
@@ -144,12 +145,18 @@ def _candidates(correlation: np.ndarray, lags: np.ndarray, scored: np.ndarray, l
         best = _refine_lag(correlation, float(lags[peak]))
         for ratio in LEVELS:
             period = _refine_lag(correlation, best / ratio)
-            if lo <= period <= hi and all(abs(period / other - 1.0) > 0.02 for other in found):
-                found.append(period)
-    if not found:  # every level lies outside the range: the range's own best lag
-        inside = np.flatnonzero((lags >= lo) & (lags <= hi))
-        found.append(_refine_lag(correlation, float(lags[inside[int(np.argmax(scored[inside]))]])))
-    return found
+            if lo / (1.0 + EDGE) <= period <= hi * (1.0 + EDGE):
+                period = float(np.clip(period, lo, hi))
+                if all(abs(period / other - 1.0) > EDGE for other in found):
+                    found.append(period)
+    if found:
+        return found
+    inside = np.flatnonzero((lags >= lo) & (lags <= hi))
+    if len(inside):  # every level lies outside the range: the range's own best lag
+        return [_refine_lag(correlation, float(lags[inside[int(np.argmax(scored[inside]))]]))]
+    # a range narrower than a frame's lag: the best peak's level nearest to it, at its edge
+    levels = [_refine_lag(correlation, float(lags[peaks[0]])) / ratio for ratio in LEVELS]
+    return [float(np.clip(min(levels, key=lambda p: abs(math.log(p / float(np.clip(p, lo, hi))))), lo, hi))]
 
 
 def _comb(correlation: np.ndarray, lags: np.ndarray) -> np.ndarray:
