@@ -92,7 +92,10 @@ def test_run_json_prints_the_result_and_the_log_path(capsys, tmp_path):
     log = tmp_path / "r.mcap"
     record = json_of(capsys, "run", "shows/minimal.yaml", "--port", FAST, "--log", str(log), "--json", "-q")
     assert record["outcome"] == "done" and record["exit"] == 0 and record["log"] == str(log)
-    assert record["steps_run"] == 2 and record["late_steps"] == 0 and record["show_s"] > 0
+    assert record["steps_run"] == 2 and record["show_s"] > 0
+    # How many steps were late depends on the machine's load; what JSON must say is the run's own
+    # count, the one its log's result records.
+    assert json_of(capsys, "log", "summary", str(log), "--json")["result"]["late_steps"] == str(record["late_steps"])
     assert record["layout"] == "seed" and record["port"] == FAST and "error" not in record
     assert log.exists()
 
