@@ -148,8 +148,8 @@ def test_the_set_covers_every_case_with_small_fast_songs_and_the_seed_alone_deci
         assert s.samples.dtype == np.float32 and float(np.max(np.abs(s.samples))) == pytest.approx(1.0)
     again = make_song(CASE[the_set[5].case], 5)  # song i of set 0 is made from seed i
     assert np.array_equal(again.samples, the_set[5].samples) and again.beats == the_set[5].beats
-    other = generate_set(1, len(CASES))
-    assert [s.case for s in other] == [s.case for s in the_set[:len(CASES)]]
+    other = generate_set(1, 3)  # a few songs of another seed say it (a whole set takes seconds)
+    assert [s.case for s in other] == [s.case for s in the_set[:3]]
     assert all(a.beats != b.beats and a.bpm != b.bpm for a, b in zip(other, the_set, strict=False))
 
 

@@ -9,10 +9,11 @@ memory bounded) in four steps, numpy alone:
 2. every beat (choreo.music.tracking): a local tempo followed through the song, dynamic
    programming over beat times on it, each beat moved onto the attack within 25 ms;
 3. bar 1: the first downbeat at or after the music's start;
-4. steady or not: a robust straight line through the beats; if it puts none more than
-   MAP_WHEN_OFF_S off, the song has one tempo (bpm to 0.01, offset to 1 ms: on clean material
-   the line through a hundred attacks is good to a millisecond), else `bars` holds each bar's
-   beat 1, a tempo map a show can follow.
+4. steady or not: a robust straight line through the beats; if it puts the attacks on them
+   within MAP_WHEN_OFF_S of it (all but a stray few in STEADY_SHARE: an attack near a beat may be
+   another sound) and no beat more than STRAY_S off, the song has one tempo (bpm to 0.01, offset
+   to 1 ms: on clean material the line through a hundred attacks is good to a millisecond), else
+   `bars` holds each bar's beat 1, a tempo map a show can follow.
 
 It is an estimate: the figures say how many beats an attack confirmed and how clearly the
 downbeats stood out, so that the author knows how much to trust them before checking by ear.
@@ -31,13 +32,13 @@ from choreo.music.downbeats import Downbeats, find_downbeats, music_start
 from choreo.music.features import FRAME, Features
 from choreo.music.tempo import onset_strength
 from choreo.music.tracking import beat_frames, local_periods, snapped
-from choreo.show.model import Tempo
+from choreo.show.model import MAX_BPM, Tempo
 
 __all__ = ["BPM_LIMITS", "BPM_RANGE", "METER_LIMITS", "MIN_BEATS", "ON_BEAT_S", "MAP_WHEN_OFF_S",
            "Beat", "BeatEstimate", "estimate", "onset_strength"]
 
-BPM_RANGE = (40.0, 240.0)  # searched by default; `tempo.bpm` itself may be up to 400
-BPM_LIMITS = (1.0, 400.0)  # what a search range may span: the show schema's bpm range
+BPM_RANGE = (40.0, 240.0)  # searched by default; `tempo.bpm` itself may be up to MAX_BPM
+BPM_LIMITS = (1.0, MAX_BPM)  # what a search range may span: the show schema's bpm range
 METER_LIMITS = (1, 16)  # beats a bar, as the show schema allows
 MIN_BEATS = 4  # beats an attack must confirm before a tempo is worth printing
 ON_BEAT_S = 0.03  # an attack farther than this from the beat does not confirm it

@@ -44,6 +44,7 @@ import numpy as np
 
 from choreo.errors import UsageError
 from choreo.music.features import Features
+from choreo.music.tempo import running_mean
 
 CUES = ("harmony", "bass", "harmony/bar", "bass/bar", "kick", "backbeat", "sections", "accent")
 WEIGHTS = {"harmony": 0.5, "bass": 0.5, "harmony/bar": 0.5, "bass/bar": 0.5, "kick": 1.0, "backbeat": 1.0,
@@ -335,7 +336,7 @@ def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray, meter: in
     grid = np.empty(2 * len(edges) - 1)
     grid[0::2], grid[1::2] = edges, (edges[:-1] + edges[1:]) / 2
     slots = _beat_means(frames, times, grid)[:-1]  # one a half beat
-    loudness = _centred_mean(np.linalg.norm(slots, axis=1), 2 * meter)[:, None]
+    loudness = running_mean(np.linalg.norm(slots, axis=1), 2 * meter)[:, None]
     shapes = np.divide(slots, loudness, out=np.zeros_like(slots), where=loudness > 0)
     residual = shapes - _bar_pattern(shapes, 2 * meter)
     novelty = _novelty(residual, 2 * span, cosine=False)  # at each eighth
@@ -355,14 +356,6 @@ def _variety(rows: np.ndarray) -> float:
     mean = shapes.mean(axis=0)
     spread = float(np.mean(1.0 - shapes @ (mean / max(float(np.linalg.norm(mean)), 1e-30))))
     return float(np.clip((spread - VARIETY[0]) / (VARIETY[1] - VARIETY[0]), 0.0, 1.0))
-
-
-def _centred_mean(values: np.ndarray, width: int) -> np.ndarray:
-    """The mean of `values` over `width` neighbours centred on each (fewer at the ends)."""
-    sums = np.concatenate([[0.0], np.cumsum(values)])
-    index = np.arange(len(values))
-    lo, hi = np.maximum(index - width // 2, 0), np.minimum(index + (width + 1) // 2, len(values))
-    return np.asarray((sums[hi] - sums[lo]) / (hi - lo))
 
 
 def _bar_pattern(rows: np.ndarray, period: int) -> np.ndarray:

@@ -40,7 +40,6 @@ PRIOR_OCTAVES = 0.9  # its width (one standard deviation), in octaves
 LEVELS = (1.0, 0.5, 2.0, 2.0 / 3.0, 1.5, 1.0 / 3.0, 3.0)  # tempo ratios to the best period's
 _LOCAL_MEAN_S = 0.4  # the onset strength less its mean over this: a crescendo is no onset
 BACKBEAT_WEIGHT = 3.0  # how much a snare on 2 and 4 counts for a level
-OFF_BEAT_SHARE = 0.7  # how much the strongest onsets off the beats count against it
 EVENNESS_POWER = 0.5  # how much unlike successive beats count against a level
 SEGMENT_BEATS = 24  # a level is judged on stretches of this many of its beats, each at its own phase
 MAX_SEGMENTS = 24  # and on this many stretches at most, spread over the song (an hour needs no more)
@@ -93,12 +92,14 @@ def onset_strength(features: Features) -> np.ndarray:
 
 
 def running_mean(values: np.ndarray, width: int) -> np.ndarray:
-    """The mean of `values` over `width` frames centred on each (fewer at the ends)."""
-    width = max(1, min(width, len(values)))
+    """The mean of `values` over `width` frames centred on each (fewer at the ends: a window
+    shifted inwards there would let a song's first beats be measured against later ones)."""
+    width = max(1, width)
     sums = np.cumsum(np.concatenate([[0.0], values.astype(np.float64)]))
-    lo = np.clip(np.arange(len(values)) - width // 2, 0, len(values))
-    hi = np.clip(lo + width, 0, len(values))
-    return (sums[hi] - sums[lo]) / np.maximum(hi - lo, 1)
+    index = np.arange(len(values))
+    lo = np.maximum(index - width // 2, 0)
+    hi = np.minimum(index + (width + 1) // 2, len(values))
+    return np.asarray((sums[hi] - sums[lo]) / np.maximum(hi - lo, 1))
 
 
 def prior(bpm: float | np.ndarray) -> np.ndarray:

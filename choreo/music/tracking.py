@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from choreo.music.features import Features
+from choreo.music.tempo import parabola
 
 WINDOW_S = 7.0  # the tempogram's window
 STEP_S = 0.5  # its step
@@ -57,7 +58,7 @@ def local_periods(strength: np.ndarray, fps: float, period: float) -> np.ndarray
                     axis=1)
     gram -= PULL * np.log(lags / period)[None, :] ** 2 * gram.max(axis=1, keepdims=True)
     path = _viterbi(gram, np.log(lags.astype(float)))
-    fine = np.array([_refined(gram[i], lag) for i, lag in enumerate(path)]) + lags[0]
+    fine = np.array([lag + _vertex(gram[i], lag) for i, lag in enumerate(path)]) + lags[0]
     if abs(math.log(float(np.median(fine)) / period)) > ASTRAY:
         return np.full(n, period)  # locked onto a syncopation's period, not the song's beat
     centres = starts + window / 2
@@ -88,12 +89,9 @@ def _viterbi(gram: np.ndarray, log_lags: np.ndarray) -> np.ndarray:
     return path
 
 
-def _refined(row: np.ndarray, i: int) -> float:
-    if 0 < i < len(row) - 1:
-        curve = row[i - 1] - 2.0 * row[i] + row[i + 1]
-        if curve < 0:
-            return i + float(np.clip(0.5 * (row[i - 1] - row[i + 1]) / curve, -0.5, 0.5))
-    return float(i)
+def _vertex(row: np.ndarray, i: int) -> float:
+    """Where the peak at `i` lies between frames (0 at either end of `row`)."""
+    return parabola(row[i - 1], row[i], row[i + 1]) if 0 < i < len(row) - 1 else 0.0
 
 
 def beat_frames(strength: np.ndarray, periods: np.ndarray) -> np.ndarray:
