@@ -14,6 +14,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+from choreo.music.beats import BeatEstimate  # noqa: E402 - after the bench folder is on sys.path
 from choreo.music.scoring import score_song  # noqa: E402
 
 from bench.songs import (  # noqa: E402
@@ -175,3 +176,17 @@ def test_the_tracker_finds_each_kind_of_song(index):
     assert bool(found.bars) == (s.case in MAPS)
     show = found.tempo()
     assert all(b.time_s == show.seconds(b.bar, b.beat) for b in found.beats)
+    assert_fields_agree(found)
+
+
+def assert_fields_agree(found: BeatEstimate) -> None:
+    """What one field says, the others say too: a map's offset is its bar 1, it has one anchor a
+    bar plus the closing one after the last beat, and the figures are the beats' own."""
+    beats = found.beats
+    assert (beats[0].bar, beats[0].beat, beats[0].time_s) == (1, 1, found.offset)
+    if found.bars:
+        assert found.offset == found.bars[0] and len(found.bars) == beats[-1].bar + 1
+        assert found.bars[-1] > beats[-1].time_s
+    heard = [b.onset_s - b.time_s for b in beats if b.onset_s is not None]
+    assert found.confirmed == len(heard) and len(found.curve) == len(beats) - 1
+    assert found.timing_rms_ms == pytest.approx(1000 * float(np.sqrt(np.mean(np.square(heard)))), abs=0.01)

@@ -263,3 +263,25 @@ def test_the_running_mean_is_centred_at_the_ends_too():
     """Onsets are measured against it: the first frames' mean must be theirs, not the next ones'."""
     means = running_mean(np.array([4.0, 0.0, 0.0, 0.0, 0.0, 8.0]), 4)
     assert means.tolist() == pytest.approx([2.0, 4 / 3, 1.0, 0.0, 2.0, 8 / 3])
+
+
+def test_a_range_below_the_songs_tempo_takes_its_half_not_its_third():
+    """40..60 on a 120-bpm song whose bass changes each bar: 60 (two beats a bar), not 40, whose
+    bars of four would each hold three of the song's and so match its chord changes too."""
+    from drumsong import beat_times, drums
+
+    song = drums(RATE, 1, 30.0, beat_times(30.0))[:, 0].astype(np.float32)
+    assert estimate(features_of([song], RATE, "song"), bpm_range=(40.0, 60.0)).bpm == pytest.approx(60.0, abs=0.05)
+
+
+def test_a_long_steady_songs_bpm_keeps_the_digits_its_last_beats_need():
+    """At 123.456 bpm, 123.46 would put the beats 6 ms late after three minutes."""
+    period = 60.0 / 123.456
+    song = np.zeros(int(180 * RATE), dtype=np.float32)
+    t = np.arange(int(0.02 * RATE)) / RATE
+    click = (0.8 * np.sin(2 * np.pi * 1000 * t) * np.exp(-t / 0.005)).astype(np.float32)
+    for at in np.round(np.arange(0.5, 179.5, period) * RATE).astype(int):
+        song[at:at + len(click)] += click
+    found = estimate(features_of([song], RATE, "long"))
+    assert found.bars == () and found.bpm == 123.456
+    assert max(abs(b.onset_s - b.time_s) for b in found.beats if b.onset_s is not None) < 0.002

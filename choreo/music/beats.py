@@ -11,8 +11,9 @@ memory bounded) in four steps, numpy alone:
 3. bar 1: the first downbeat at or after the music's start;
 4. steady or not: a robust straight line through the beats; if it puts the attacks on them
    within MAP_WHEN_OFF_S of it (all but a stray few in STEADY_SHARE: an attack near a beat may be
-   another sound) and no beat more than STRAY_S off, the song has one tempo (bpm to 0.01, offset
-   to 1 ms: on clean material the line through a hundred attacks is good to a millisecond), else
+   another sound) and no beat more than STRAY_S off, the song has one tempo (bpm to 0.01, or
+   finer where a long song needs it, offset to 1 ms: on clean material the line through a hundred
+   attacks is good to a millisecond), else
    `bars` holds each bar's beat 1, a tempo map a show can follow.
 
 It is an estimate: the figures say how many beats an attack confirmed and how clearly the
@@ -44,6 +45,7 @@ MIN_BEATS = 4  # beats an attack must confirm before a tempo is worth printing
 ON_BEAT_S = 0.03  # an attack farther than this from the beat does not confirm it
 MAP_WHEN_OFF_S = 0.02  # a straight line that puts a beat farther off than this: a tempo map
 STEADY_SHARE = 0.95  # of the beats with an attack that must lie within MAP_WHEN_OFF_S of a steady tempo's line
+ROUNDED_S = 0.001  # how far the bpm's rounding may move the last beat of a steady song
 STRAY_S = 0.05  # and no beat farther off than this (one an attack confirms, or the tracker's guess)
 PULSE_S = 30.0  # the stretches whose repetition is measured
 MIN_PULSE = 0.1  # the onsets' autocorrelation at a beat (share of their energy) below which nothing repeats
@@ -66,7 +68,7 @@ class Beat:
 class BeatEstimate:
     """The tempo block for a show, with what it rests on.
 
-    `bpm` and `offset` are rounded to what a show file needs (0.01 bpm, 1 ms); with a map,
+    `bpm` and `offset` are rounded to what a show file needs (0.01 bpm or finer, 1 ms); with a map,
     `bars` holds each bar's beat 1 (1 ms) and `bpm` the median tempo. `beats` are the times
     `tempo().seconds` gives: what `choreo plan` will show.
     """
@@ -235,9 +237,18 @@ def _show_tempo(times: np.ndarray, heard: np.ndarray, meter: int) -> Tempo:
     off = np.abs(times - (start + ks * period))
     on_line = np.count_nonzero(off[fit] <= MAP_WHEN_OFF_S) >= STEADY_SHARE * np.count_nonzero(fit)
     if on_line and float(np.max(off)) <= STRAY_S:
-        return Tempo(round(60.0 / period, 2), max(0.0, round(start, 3)), meter)
+        return _steady(start, period, len(times), meter)
     bars = _bar_anchors(times, meter)
     return Tempo(round(60.0 / float(np.median(np.diff(times))), 2), bars[0], meter, bars)
+
+
+def _steady(start: float, period: float, count: int, meter: int) -> Tempo:
+    """One tempo as a show file holds it: bar 1 to 1 ms and the bpm to 0.01, or to as many more
+    digits as keep the `count`th beat within ROUNDED_S of the line: 0.01 bpm is 30 ms by the end
+    of a quarter of an hour at 123.456 bpm, and a show cues every beat by it."""
+    bpm = 60.0 / period
+    digits = next((d for d in range(2, 7) if (count - 1) * abs(60.0 / round(bpm, d) - period) <= ROUNDED_S), 7)
+    return Tempo(round(bpm, digits), max(0.0, round(start, 3)), meter)
 
 
 def _bar_anchors(times: np.ndarray, meter: int) -> tuple[float, ...]:

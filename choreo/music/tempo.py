@@ -298,14 +298,18 @@ def sustained(chroma: np.ndarray, reach: int) -> np.ndarray:
 
 def _bar_match(change: np.ndarray, bar: float, beat: float, blur: float) -> float:
     """In -1..1: how much more the chord changes repeat every `bar` chroma frames than every
-    half bar or every `beat` (chords change on bar lines, rarely in a bar's middle, and rarely on
-    every beat: a level whose every beat brings a new chord is the bar, counted as beats)."""
+    half or third of a bar or every `beat` (chords change on bar lines, rarely in a bar's middle,
+    and rarely on every beat: a level whose every beat brings a new chord is the bar, counted as
+    beats; one whose bar holds three of the song's bars repeats its changes at a third, and a
+    half of it falls mid-bar)."""
     correlation = autocorrelation(change)
     if bar >= len(correlation) - 2 or correlation[0] <= 0:
         return 0.0
     at = int(round(bar))
     at_bar = float(np.max(correlation[at - 1:at + 2]))
     half = correlation[int(round(bar / 2))] if bar >= 2 else 0.0
+    if bar / 3 >= blur:
+        half = max(half, float(correlation[int(round(bar / 3))]))
     if bar - beat >= 1 and beat >= blur:  # a shorter lag lies within one change's own blur
         half = max(half, float(np.max(correlation[max(0, int(round(beat)) - 1):int(round(beat)) + 2])))
     return float(np.clip((at_bar - half) / correlation[0], -1.0, 1.0))
