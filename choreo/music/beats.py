@@ -29,7 +29,7 @@ import numpy as np
 
 from choreo.errors import UsageError
 from choreo.music import tempo as tempo_level
-from choreo.music.downbeats import Downbeats, find_downbeats, music_start
+from choreo.music.downbeats import EARLY_S, Downbeats, find_downbeats, music_start
 from choreo.music.features import FRAME, Features
 from choreo.music.tempo import onset_strength
 from choreo.music.tracking import beat_frames, local_periods, snapped
@@ -50,7 +50,6 @@ STRAY_S = 0.05  # and no beat farther off than this (one an attack confirms, or 
 PULSE_S = 30.0  # the stretches whose repetition is measured
 MIN_PULSE = 0.1  # the onsets' autocorrelation at a beat (share of their energy) below which nothing repeats
 _LAST_BEAT = 0.2  # a last beat with less onset than this share of the median beat's is past the music
-_EARLY_S = 0.05  # an onset this much before the music's start (its first frames) still counts
 _SOUND = 0.02  # the music ends after the last frame whose bands' sum reaches this share of the median frame's
 
 
@@ -169,7 +168,7 @@ def _beat_times(strength: np.ndarray, periods: np.ndarray, fps: float, start: fl
     goes on at the local period before the first beat the tracker placed). Before the music
     there is nothing to follow: a noise floor's flickers must not start the beats off."""
     music = strength.copy()
-    music[:max(0, int((start - _EARLY_S) * fps))] = 0.0
+    music[:max(0, int((start - EARLY_S) * fps))] = 0.0  # an attack rises a little before it is heard
     frames = beat_frames(music, periods)
     times = frames / fps
     first_period = periods[frames[0]] / fps

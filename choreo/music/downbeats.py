@@ -69,7 +69,9 @@ CAP = 4.0  # a cue's evidence for a phase, in standard errors, counts up to this
 CHANCE = 1.0  # standard errors of evidence that chance alone gives a cue: they do not count
 ONSET_REACH_S = 0.04  # an onset this near a beat is on it (a tracker's beats are ~10 ms off)
 KICK_HZ = (30.0, 150.0)  # kick drums and bass-note attacks
-SNARE_HZ = (1000.0, 5000.0)  # a snare's noise (hats sound on every beat alike)
+# A snare's noise (hats sound on every beat alike); lower than tempo.SNARE_HZ, which keeps pitched
+# sound out of its backbeat: here a tone is told from noise by its flatness (`_noise_trust`)
+BACKBEAT_HZ = (1000.0, 5000.0)
 # The spectral flatness of the rises there (geometric over arithmetic mean across the bands): a
 # tone's (a click, a piano) is about 0.4 or less, a snare's or a hat's noise 0.9 or more.
 FLAT_TONE, FLAT_NOISE = 0.5, 0.8
@@ -274,7 +276,7 @@ def _onset_cues(features: Features, beats: np.ndarray) -> dict[str, Cue]:
     as it stands out by a hit's share, so that a dembow's snare, which never falls on a beat,
     does not vote by the ringing of its off-beat hits."""
     width = np.diff(features.band_hz, axis=1)[:, 0]  # a band's rise summed over its frequencies
-    low, noise = features.band_range(*KICK_HZ), features.band_range(*SNARE_HZ)
+    low, noise = features.band_range(*KICK_HZ), features.band_range(*BACKBEAT_HZ)
 
     def values(rises: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return rises[:, low].mean(axis=1), np.median(rises[:, noise], axis=1), (rises * width).sum(axis=1)
