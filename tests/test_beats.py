@@ -259,6 +259,23 @@ def test_a_slow_click_at_the_default_ranges_edge_is_found_at_its_own_tempo(tmp_p
     assert found.bpm == pytest.approx(40, abs=0.05) and found.offset == pytest.approx(0.5, abs=0.005)
 
 
+def clicks(bpm: float, seconds: float) -> np.ndarray:
+    """The same short click on every beat from 0.5 s: no accent, no pitch change."""
+    song = np.zeros(int(seconds * RATE), dtype=np.float32)
+    t = np.arange(int(0.02 * RATE)) / RATE
+    click = (0.8 * np.sin(2 * np.pi * 1000 * t) * np.exp(-t / 0.005)).astype(np.float32)
+    for at in np.round(np.arange(0.5, seconds - 0.5, 60.0 / bpm) * RATE).astype(int):
+        song[at:at + len(click)] += click
+    return song
+
+
+def test_slow_clicks_are_not_counted_as_five_beats_each():
+    """Beats of which one in five has an onset are no beat; a slow beat's onset, folded over its
+    period, must weigh as much as a fast one's (it was spread over bins wider than a frame)."""
+    found = estimate(features_of([clicks(40, 60.0)], RATE, "slow"))
+    assert found.bpm == pytest.approx(40, abs=0.05) and found.confirmed == len(found.beats)
+
+
 def test_the_running_mean_is_centred_at_the_ends_too():
     """Onsets are measured against it: the first frames' mean must be theirs, not the next ones'."""
     means = running_mean(np.array([4.0, 0.0, 0.0, 0.0, 0.0, 8.0]), 4)
@@ -276,12 +293,6 @@ def test_a_range_below_the_songs_tempo_takes_its_half_not_its_third():
 
 def test_a_long_steady_songs_bpm_keeps_the_digits_its_last_beats_need():
     """At 123.456 bpm, 123.46 would put the beats 6 ms late after three minutes."""
-    period = 60.0 / 123.456
-    song = np.zeros(int(180 * RATE), dtype=np.float32)
-    t = np.arange(int(0.02 * RATE)) / RATE
-    click = (0.8 * np.sin(2 * np.pi * 1000 * t) * np.exp(-t / 0.005)).astype(np.float32)
-    for at in np.round(np.arange(0.5, 179.5, period) * RATE).astype(int):
-        song[at:at + len(click)] += click
-    found = estimate(features_of([song], RATE, "long"))
+    found = estimate(features_of([clicks(123.456, 180.0)], RATE, "long"))
     assert found.bars == () and found.bpm == 123.456
     assert max(abs(b.onset_s - b.time_s) for b in found.beats if b.onset_s is not None) < 0.002
