@@ -229,7 +229,8 @@ def _pulse_score(strength: np.ndarray, marks: np.ndarray, snare: np.ndarray, per
     them, times how alike successive beats are and a snare backbeat. The strongest, not the
     halfway point's: a kick on every sixteenth folded on five sixteenths leaves the halfway point
     empty, and would explain that period as well as the beat."""
-    histogram = folded(strength, period, max(48, int(round(period))))  # a bin a frame at most: a wider one dilutes a slow beat's peak
+    # a bin a frame at most: a wider one dilutes a slow beat's peak
+    histogram = folded(strength, period, max(48, int(round(period))))
     bins = len(histogram)
     peak = int(np.argmax(histogram))
     between = float(np.roll(histogram, -peak)[bins // 6: bins - bins // 6].max())  # a sixth of a beat off or more
