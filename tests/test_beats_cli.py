@@ -10,6 +10,7 @@ import errno
 import io
 import json
 import os
+import shutil
 import subprocess
 import sys
 import wave
@@ -20,13 +21,14 @@ import numpy as np
 import pytest
 
 from drumsong import BPM, START_S, beat_times, drums, write_wav
+from test_log_disk import tmpfs  # noqa: F401 the 1 MiB disk fixture, one copy for both files
 
 from choreo.cli import main
 from choreo.errors import Interrupted
 from choreo.cli.beats import CLICK_FORMAT, MAP_WIDTH, straight_line_miss, tempo_lines, text_lines
 from choreo.music import click, picture
 from choreo.music.beats import Beat, BeatEstimate, estimate
-from choreo.music.features import read_features
+from choreo.music.features import MAX_SONG_S, read_features
 from choreo.show.load import load_show_bytes
 
 RATE = 22050
@@ -140,6 +142,18 @@ def test_json_of_a_steady_song_has_no_bars(steady, capsys):
     assert "bars" not in record["tempo"] and set(record["tempo"]) == {"bpm", "offset", "meter"}
 
 
+def test_a_hostile_song_name_cannot_break_the_block_the_json_or_the_terminal(steady, tmp_path, capsys):
+    name = os.fsdecode(b"a\nsteps: []\r'\"\\u0041#{x}: [y] \x1b[31m\xff\x07\xc2\x85\xe2\x80\xa8.wav")
+    song = tmp_path / name
+    song.write_bytes(steady.read_bytes())
+    code, out, _ = run(capsys, song)
+    assert code == 0 and len(out.splitlines()) == 4 and all(line.isprintable() for line in out.splitlines())
+    assert show_with(out).tempo is not None  # comments and all, as printed
+    code, out, _ = run(capsys, song, "--json")
+    # json.dumps leaves U+0085 and U+2028 raw; choreo's stdout writes them as \\uXXXX, which JSON reads back
+    assert code == 0 and json.loads(out)["song"] == str(song) and out[:-1].isascii() and out[:-1].isprintable()
+
+
 # -- the click track ----------------------------------------------------------------------------
 
 
@@ -150,13 +164,19 @@ def read_wav(path: Path) -> tuple[int, int, np.ndarray]:
         return wav.getframerate(), wav.getnchannels(), data.reshape(-1, wav.getnchannels())
 
 
-def test_the_click_track_is_the_song_with_a_click_on_every_beat_accented_on_the_one(steady, tmp_path, capsys):
+@pytest.mark.parametrize("rate, channels", [(44100, 2), (8000, 1)])
+def test_the_click_track_is_the_song_with_a_click_on_every_beat_accented_on_the_one(tmp_path, capsys, rate,
+                                                                                   channels):
+    # a CD-rate stereo song is copied sample for sample; a 8 kHz mono one resampled: clicks on the beat in both
+    steady = write_wav(tmp_path / "song.wav", drums(rate, channels), rate)
     out_path = tmp_path / "click.wav"
     code, out, err = run(capsys, steady, "--click", out_path, "--json")
     assert code == 0 and err.startswith(f"click: {out_path}: 8.0 s with ")
     found = json.loads(out)
     rate, channels, mixed = read_wav(out_path)
     assert (rate, channels) == (click.CLICK_RATE, click.CLICK_CHANNELS)
+    heard = np.array([b["time_s"] for b in found["beats"]])
+    assert len(heard) >= 14 and np.abs(heard - beat_times()[:len(heard)]).max() < 0.002  # the song's beats
     song = np.frombuffer(miniaudio.decode_file(str(steady), miniaudio.SampleFormat.FLOAT32, 2, rate).samples,
                          dtype=np.float32).reshape(-1, 2)
     assert len(mixed) == len(song)
@@ -295,21 +315,37 @@ def test_ctrl_c_while_writing_leaves_the_old_file_and_no_part(song_copy, tmp_pat
     capsys.readouterr()
 
 
-@pytest.fixture
-def tmpfs(tmp_path):
-    """A 1 MiB tmpfs, or a skip where mounting is not permitted."""
-    mount = tmp_path / "disk"
-    mount.mkdir()
-    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(mount)], capture_output=True)
-    if done.returncode != 0:
-        pytest.skip("cannot mount a tmpfs here (needs root)")
-    try:
-        yield mount
-    finally:
-        subprocess.run(["umount", "-l", str(mount)], check=False)
+def test_an_output_folder_that_vanishes_while_writing_is_one_line(song_copy, tmp_path, capsys, monkeypatch):
+    folder = tmp_path / "out"
+    folder.mkdir()
+    write = wave.Wave_write.writeframes
+
+    def vanishing(self, data):
+        shutil.rmtree(folder, ignore_errors=True)
+        write(self, data)
+
+    monkeypatch.setattr(wave.Wave_write, "writeframes", vanishing)
+    before = {p.name for p in tmp_path.iterdir()} - {"out"}
+    assert_one_line_and_nothing_left(capsys, [song_copy, "--click", folder / "click.wav"],
+                                     f"--click {folder / 'click.wav'}: cannot write: No such file or directory",
+                                     tmp_path, before)
 
 
-def test_a_real_full_disk_is_one_line_and_leaves_nothing(song_copy, tmpfs, capsys):
+@pytest.mark.parametrize("option", ["--click", "--png"])
+def test_a_dash_is_refused_not_written_as_a_file_named_dash(song_copy, tmp_path, capsys, monkeypatch, option):
+    monkeypatch.chdir(tmp_path)
+    before = {p.name for p in tmp_path.iterdir()}
+    assert_one_line_and_nothing_left(capsys, [song_copy, option, "-"], f"{option} -: give a file name", tmp_path,
+                                     before)
+
+
+def test_the_longest_song_s_click_track_fits_a_wav_header():
+    # the wave module packs sizes as 32-bit; readers that take them as signed stop at 2 GiB
+    most = int(MAX_SONG_S * click.CLICK_RATE) * click.CLICK_CHANNELS * 2 + 44
+    assert most < 2 ** 31
+
+
+def test_a_real_full_disk_is_one_line_and_leaves_nothing(song_copy, tmpfs, capsys):  # noqa: F811 the fixture
     # the click track of 8 s is 1.4 MB: it cannot fit on a 1 MiB disk
     assert_one_line_and_nothing_left(capsys, [song_copy, "--click", tmpfs / "click.wav"],
                                      "cannot write: No space left on device", tmpfs, set())

@@ -228,6 +228,10 @@ def json_record(path: str, found: BeatEstimate) -> dict:
 def _open_outputs(args: argparse.Namespace, files: ExitStack) -> dict[str, BinaryIO]:
     """`--click` and `--png` open (as temporary files beside them) before the song is read."""
     wanted = {option: path for option, path in (("--click", args.click), ("--png", args.png)) if path}
+    for option, path in wanted.items():
+        if path == "-":  # stdout carries the tempo block, and a WAV's header is written last
+            raise UsageError(f"{option} -: give a file name (./- for a file named -); stdout is for the "
+                             "tempo block")
     if len(wanted) == 2 and _same_file(args.click, args.png):
         raise UsageError(f"--png {visible(args.png)}: the same file as --click: give each its own")
     if "--png" in wanted:
