@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from choreo.errors import UsageError
-from choreo.music.downbeats import beat_cues, find_downbeats, music_start, phase_evidence
+from choreo.music.downbeats import UNDECIDED, beat_cues, find_downbeats, music_start, phase_evidence
 from choreo.music.features import Features, features_of
 from choreo.music.scoring import bar_one_right
 
@@ -212,6 +212,19 @@ def test_a_metronome_puts_bar_1_on_its_accented_click(meter):
         assert bar_one_right(beats[0], float(given[result.first])), result
         assert result.by.split("+")[0] == "accent"
         assert not {"harmony", "bass", "kick", "backbeat"} & set(result.by.split("+"))  # none was heard
+
+
+@pytest.mark.parametrize("bpm", [40.0, 240.0])
+def test_a_metronome_without_accents_starts_bar_1_on_its_first_click(bpm):
+    """Nothing tells the bar: the music's first beat is bar 1 (it was whichever phase the noise
+    of a cue favoured, four clicks in), and the likeliest other place is still said."""
+    beats = 0.5 + 60.0 / bpm * np.arange(int(9.5 * bpm / 60.0))
+    samples = np.zeros(10 * RATE)
+    t = np.arange(int(0.02 * RATE)) / RATE
+    for at in np.round(beats * RATE).astype(int):
+        samples[at:at + len(t)] += 0.8 * np.sin(2 * np.pi * 1000 * t) * np.exp(-t / 0.005)
+    result = find_downbeats(features_of([samples.astype(np.float32)]), beats, 4)
+    assert (result.first, result.by) == (0, "") and result.contrast < UNDECIDED and result.other_first in (1, 2, 3)
 
 
 def test_chords_anticipated_by_an_eighth_still_belong_to_the_bar_line_after_them():

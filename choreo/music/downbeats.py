@@ -87,6 +87,9 @@ DEEPEST_DB = -120.0
 EARLY_BEAT = 0.4  # a downbeat up to this share of a beat before `music_start` may be bar 1
 EARLY_S = 0.05  # and at least this much before (an attack's rise, the analysis window)
 _BLOCK_BEATS = 2048  # beats whose onsets are measured at once
+# A log-likelihood under this for the likeliest phase over the next (less than one beat's
+# BEAT_CAP): no cue tells the bar (a metronome without accents), and bar 1 is the music's first beat
+UNDECIDED = 1.0
 MIN_VOTING = 0.25  # a cue is named in `by` when it gave this share of the winning margin
 
 
@@ -114,7 +117,7 @@ class Downbeats:
 
     first: int  # index in beat_times of bar 1 beat 1: the first downbeat at or after the music starts
     # The chosen phase's log-likelihood over the runner-up's (natural log) on the beats up to the
-    # first change of phase; None: meter 1
+    # first change of phase; under UNDECIDED, no cue told and bar 1 is the music's first beat; None: meter 1
     contrast: float | None
     by: str  # the cues that decided, strongest first, joined by "+" ("" when none did)
     other_first: int | None  # bar 1 at the next likeliest phase (None: meter 1)
@@ -143,8 +146,12 @@ def find_downbeats(features: Features, beat_times: np.ndarray, meter: int) -> Do
     shift = 1 + int(np.argmax(sums.sum(axis=0)[1:]))  # the runner-up: the bar shifted by this
     margins = {name: float(sums[c, 0] - sums[c, shift]) for c, name in enumerate(CUES)}
     best, runner_up = (-int(places[0])) % meter, (-int(places[0]) - shift) % meter
-    return Downbeats(_first_from(beats, best, meter, start), round(float(sum(margins.values())), 2),
-                     _deciders(margins), _first_from(beats, runner_up, meter, start))
+    first, other = _first_from(beats, best, meter, start), _first_from(beats, runner_up, meter, start)
+    contrast = float(sum(margins.values()))
+    if contrast >= UNDECIDED:
+        return Downbeats(first, round(contrast, 2), _deciders(margins), other)
+    opening = _first_from(beats, 0, 1, start)  # no cue tells: a song starts on its one
+    return Downbeats(opening, round(contrast, 2) if opening == first else 0.0, "", first if opening != first else other)
 
 
 def _places(emissions: dict[str, np.ndarray], costs: np.ndarray) -> np.ndarray:
