@@ -113,7 +113,7 @@ def test_a_slowing_song_prints_a_map_a_show_follows_beat_for_beat(slowing, capsy
     start = next(i for i, line in enumerate(lines) if line.startswith("tempo:"))
     end = next(i for i in range(start, len(lines)) if lines[i].endswith("]}")) + 1
     assert any("one tempo does not fit" in line for line in lines[:start])
-    tempo = show_with("\n".join(lines[start:end]) + "\n").tempo
+    tempo = show_with("\n".join(lines[:end]) + "\n").tempo  # pasted as printed, comments and all
     assert tempo is not None and tempo.bars == found.bars
     listed = lines[end:]
     assert len(listed) == len(found.beats)

@@ -163,8 +163,10 @@ def map_lines(found: BeatEstimate) -> list[str]:
     the tempo moves."""
     if not found.bars:
         return []
+    from choreo.show.model import Tempo
+
     miss_s, at_s = straight_line_miss(found)
-    bar_bpm = [60.0 * found.meter / (b - a) for a, b in zip(found.bars[:-1], found.bars[1:], strict=True)]
+    bar_bpm = Tempo(found.bpm, found.offset, found.meter, found.bars).bar_bpm  # as a show reads the map
     return [f"# one tempo does not fit: the straight line nearest the beats puts the beat at {at_s:.2f} s "
             f"{1000 * miss_s:.0f} ms off;",
             f"# so this is a tempo map, each bar's beat 1 ({len(found.bars)} bars), from {min(bar_bpm):.1f} "
@@ -234,11 +236,12 @@ def _open_outputs(args: argparse.Namespace, files: ExitStack) -> dict[str, Binar
                              "tempo block")
     if len(wanted) == 2 and _same_file(args.click, args.png):
         raise UsageError(f"--png {visible(args.png)}: the same file as --click: give each its own")
-    if "--png" in wanted:
+    opened = {option: files.enter_context(replacing(path, option, args.song)) for option, path in wanted.items()}
+    if "--png" in wanted:  # after the paths: a wrong one is said without the second it takes to import matplotlib
         from choreo.review.timeline import require_matplotlib
 
         require_matplotlib("beats --png", "the rest of choreo beats works without it")
-    return {option: files.enter_context(replacing(path, option, args.song)) for option, path in wanted.items()}
+    return opened
 
 
 def _write_outputs(args: argparse.Namespace, features: Features, found: BeatEstimate,
