@@ -26,7 +26,7 @@ from test_log_disk import tmpfs  # noqa: F401 the 1 MiB disk fixture, one copy f
 from choreo.cli import main
 from choreo.errors import Interrupted
 from choreo.cli.beats import CLICK_FORMAT, MAP_WIDTH, straight_line_miss, tempo_lines, text_lines
-from choreo.music import click, picture
+from choreo.music import beats, click, picture
 from choreo.music.beats import Beat, BeatEstimate, estimate
 from choreo.music.features import MAX_SONG_S, read_features
 from choreo.show.load import load_show_bytes
@@ -411,3 +411,5 @@ def test_help_says_what_the_click_track_is():
     # the help is built without numpy, so it spells the writer's figures: they must agree
     written = f"16-bit PCM WAV, {click.CLICK_RATE} Hz {'stereo' if click.CLICK_CHANNELS == 2 else 'mono'}"
     assert written == CLICK_FORMAT
+    (lo, hi), (fewest, most) = beats.BPM_RANGE, beats.METER_LIMITS
+    assert f"(default {lo:g}..{hi:g})" in done.stdout and f"{fewest}..{most} (default 4)" in done.stdout

@@ -204,6 +204,8 @@ def text_lines(path: str, found: BeatEstimate, *, with_beats: bool) -> list[str]
 
 
 def json_record(path: str, found: BeatEstimate) -> dict:
+    """`tempo` keyed as plan's and validate's --json (bars only for a map), so one reader takes
+    either; an infinite contrast (one phase alone heard) is null: JSON has no infinity."""
     downbeat = None
     if found.downbeat_contrast is not None:
         contrast = found.downbeat_contrast
@@ -334,6 +336,7 @@ def _check_target(target: Path, path: str, option: str, song: str) -> None:
 
 
 def _why(exc: OSError | ValueError) -> str:
+    """The OS's words, except where they mislead: ValueError is a name with a NUL byte."""
     if isinstance(exc, ValueError):
         return "no file can have this name"
     return "a loop of symbolic links" if exc.errno == errno.ELOOP else (exc.strerror or str(exc))

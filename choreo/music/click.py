@@ -74,4 +74,5 @@ def _mix(frames: np.ndarray, sound: np.ndarray, at: int) -> None:
 
 
 def _pcm16(frames: np.ndarray) -> bytes:
+    """Clipped first: a click on a loud peak would otherwise wrap around to the opposite sign."""
     return (np.clip(frames, -1.0, 1.0) * 32767.0).round().astype("<i2").tobytes()

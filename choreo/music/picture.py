@@ -77,6 +77,8 @@ def peaks(values: np.ndarray, fps: float, pieces: int) -> tuple[np.ndarray, np.n
 
 
 def _draw_beats(ax: Any, found: BeatEstimate) -> Drawn:  # ax: a matplotlib Axes, imported lazily
+    """Beat lines only while they stand apart; bar lines and numbers thinned by powers of two, so
+    that the bars left are still evenly spaced and their numbers easy to count on from."""
     beats = [b.time_s for b in found.beats if b.beat != 1]
     bars = [(b.time_s, b.bar) for b in found.beats if b.beat == 1]
     if len(found.beats) <= MAX_BEAT_LINES:
