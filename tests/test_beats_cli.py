@@ -101,7 +101,7 @@ def test_the_map_says_why_one_tempo_does_not_fit():
     lines = text_lines("song.wav", found, with_beats=False)
     why = [line for line in lines if "one tempo does not fit" in line or "tempo map" in line]
     assert len(why) == 2 and f"{1000 * miss_s:.0f} ms off" in why[0]
-    assert "from 92.3 to 120.0 bpm" in why[1] and "(5 bars)" in why[1]
+    assert "from 92.3 to 120.0 bpm" in why[1] and "(4 bars and where the next would begin)" in why[1]
     assert lines[0].startswith("# song.wav (11.2 s): 100 bpm (the median of the map); ")
 
 

@@ -169,8 +169,8 @@ def map_lines(found: BeatEstimate) -> list[str]:
     bar_bpm = Tempo(found.bpm, found.offset, found.meter, found.bars).bar_bpm  # as a show reads the map
     return [f"# one tempo does not fit: the straight line nearest the beats puts the beat at {at_s:.2f} s "
             f"{1000 * miss_s:.0f} ms off;",
-            f"# so this is a tempo map, each bar's beat 1 ({len(found.bars)} bars), from {min(bar_bpm):.1f} "
-            f"to {max(bar_bpm):.1f} bpm"]
+            f"# so this is a tempo map, each bar's beat 1 ({len(bar_bpm)} bars and where the next would begin), "
+            f"from {min(bar_bpm):.1f} to {max(bar_bpm):.1f} bpm"]
 
 
 def straight_line_miss(found: BeatEstimate) -> tuple[float, float]:
