@@ -13,6 +13,7 @@ tests/data/songs/ (tens of KB each), made once with ffmpeg from the same song:
 
 from __future__ import annotations
 
+import errno
 import os
 import subprocess
 import sys
@@ -25,6 +26,8 @@ import pytest
 from drumsong import BPM, START_S, drums, write_wav
 
 from choreo.cli import main
+from choreo.errors import Interrupted
+from choreo.music import features
 from choreo.music.beats import BeatEstimate, estimate
 from choreo.music.features import read_features
 
@@ -143,6 +146,44 @@ def test_a_named_pipe_with_a_writer_waiting_does_not_hang(tmp_path):
     done = subprocess.run([sys.executable, "-m", "choreo", "beats", str(pipe)], capture_output=True, text=True,
                           timeout=60)
     assert done.returncode == 2 and done.stderr == f"{pipe}: not a regular file (a named pipe): give a sound file\n"
+
+
+class FailingRead:
+    """The song's file, whose `at`th read fails with `exc`: a disk error or Ctrl-C mid-decode."""
+
+    def __init__(self, stream, exc: BaseException, at: int) -> None:
+        self.stream, self.exc, self.at, self.reads = stream, exc, at, 0
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.stream.close()
+
+    def peek(self, size: int) -> bytes:
+        return self.stream.peek(size)
+
+    def seek(self, *where) -> int:
+        return self.stream.seek(*where)
+
+    def read(self, size: int) -> bytes:
+        self.reads += 1
+        if self.reads == self.at:
+            raise self.exc
+        return self.stream.read(size)
+
+
+@pytest.mark.parametrize("at", [1, 12])  # as the decoder starts, and mid-song (drums.mp3 takes about 30 reads)
+def test_a_read_that_fails_mid_decode_is_said_as_such(monkeypatch, capsys, at):
+    # miniaudio reads from C: it said 'cannot decode ... a damaged one' for a disk error and for
+    # Ctrl-C, and cffi printed a KeyboardInterrupt and went on decoding
+    opened = features.open_input
+    for exc, code, says in [(OSError(errno.EIO, os.strerror(errno.EIO)), 2, "cannot read the sound file: "
+                             "Input/output error"), (Interrupted(), 130, ""), (KeyboardInterrupt(), 130, "")]:
+        monkeypatch.setattr(features, "open_input", lambda *args, exc=exc: FailingRead(opened(*args), exc, at))
+        assert main(["beats", str(SONGS / "drums.mp3")]) == code
+        out, err = capsys.readouterr()
+        assert out == "" and says in err and err.count("\n") == 1 and "Traceback" not in err, err
 
 
 if __name__ == "__main__":

@@ -108,26 +108,48 @@ def features_of(blocks: Iterable[np.ndarray], sample_rate: int = SAMPLE_RATE, pa
 
 
 class _Source(miniaudio.StreamableSource):
-    """A file choreo opened and checked, as miniaudio reads it."""
+    """A file choreo opened and checked, as miniaudio reads it. miniaudio calls `read` and `seek`
+    from C: it takes any exception there for a damaged file (a disk error, Ctrl-C said as 'cannot
+    decode'), cffi prints a KeyboardInterrupt and carries on, and a failed read at a block's edge
+    looks like the end of the song. So a failure is kept, the file ends there, and `failed` raises
+    it once miniaudio has returned."""
 
     def __init__(self, stream: io.BufferedReader) -> None:
         self.stream = stream
+        self.failure: BaseException | None = None
 
     def read(self, num_bytes: int) -> bytes:
-        return self.stream.read(num_bytes)
+        if self.failure is None:
+            try:
+                return self.stream.read(num_bytes)
+            except BaseException as exc:  # noqa: BLE001 kept and raised by `failed`, outside C
+                self.failure = exc
+        return b""
 
     def seek(self, offset: int, origin: miniaudio.SeekOrigin) -> bool:
-        self.stream.seek(offset, os.SEEK_CUR if origin == miniaudio.SeekOrigin.CURRENT else os.SEEK_SET)
-        return True
+        if self.failure is None:
+            try:
+                self.stream.seek(offset, os.SEEK_CUR if origin == miniaudio.SeekOrigin.CURRENT else os.SEEK_SET)
+                return True
+            except BaseException as exc:  # noqa: BLE001 kept and raised by `failed`, outside C
+                self.failure = exc
+        return False
+
+    def failed(self) -> None:
+        """Raise what a read or seek raised, if one did."""
+        if self.failure is not None:
+            raise self.failure
 
 
 def _decoded(stream: io.BufferedReader, name: str, sample_rate: int, channels: int = 1) -> Iterator[np.ndarray]:
     """The file's audio as float32 blocks at `sample_rate`, `channels` interleaved."""
     limit = int(MAX_SONG_S * sample_rate)
     total = 0
+    source = _Source(stream)
     try:
-        for block in miniaudio.stream_any(_Source(stream), output_format=miniaudio.SampleFormat.FLOAT32,
+        for block in miniaudio.stream_any(source, output_format=miniaudio.SampleFormat.FLOAT32,
                                           nchannels=channels, sample_rate=sample_rate, frames_to_read=_READ_FRAMES):
+            source.failed()
             samples = np.frombuffer(block, dtype=np.float32)
             if not np.isfinite(samples).all() or np.abs(samples).max(initial=0.0) > 1.0:
                 # a float file's NaN is no sound and its inf or 1e30 full scale, as a sound card
@@ -139,8 +161,10 @@ def _decoded(stream: io.BufferedReader, name: str, sample_rate: int, channels: i
                                  "give a shorter song (cut it where the show needs it)")
             yield samples
     except miniaudio.DecodeError as exc:
+        source.failed()
         raise UsageError(f"{visible(name)}: cannot decode: not a {MUSIC_FORMATS_TEXT} file, or a damaged one "
                          f"(miniaudio: {exc.args[0] if exc.args else exc})") from None
+    source.failed()
     if total == 0:
         raise UsageError(f"{visible(name)}: no audio in it (0 samples)")
 
