@@ -389,6 +389,12 @@ def test_an_hour_is_drawn_with_bounded_lines_and_points():
     assert len(times) <= picture.MAX_POINTS and values.max() == 1.0 and times[-1] < hour + 1
 
 
+def test_a_song_name_with_dollars_is_drawn_as_written_not_as_tex():
+    # matplotlib reads $...$ in a text as mathtext: this name stopped --png with a traceback
+    drawn = picture.render_png(np.ones(100), 10.0, a_map((1.0, 3.0, 5.0)), "x$\\foo{$y.wav: 120 bpm", io.BytesIO())
+    assert drawn.bars == 2
+
+
 def test_peaks_keep_a_lone_onset_at_its_height():
     values = np.zeros(10_001)
     values[5_000] = 3.0

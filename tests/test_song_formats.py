@@ -148,6 +148,13 @@ def test_a_named_pipe_with_a_writer_waiting_does_not_hang(tmp_path):
     assert done.returncode == 2 and done.stderr == f"{pipe}: not a regular file (a named pipe): give a sound file\n"
 
 
+def test_a_song_over_the_length_limit_is_one_line(monkeypatch, capsys):
+    monkeypatch.setattr(features, "MAX_SONG_S", 7.2)  # drums.flac is 8 s: the limit counts decoded frames
+    assert main(["beats", str(SONGS / "drums.flac")]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and "longer than 0.002 hours: give a shorter song" in err, err
+
+
 class FailingRead:
     """The song's file, whose `at`th read fails with `exc`: a disk error or Ctrl-C mid-decode."""
 

@@ -58,7 +58,7 @@ def render_png(strength: np.ndarray, fps: float, found: BeatEstimate, title: str
     ax.set_xlabel("song time (s)")
     ax.set_ylabel("onset strength")
     _draw_tempo(ax, found)
-    ax.set_title(title, fontsize="medium")
+    ax.set_title(title, fontsize="medium", parse_math=False)  # a song named `$\x{$.wav` is a name, not TeX
     fig.tight_layout()
     fig.savefig(out, format="png")
     return drawn
