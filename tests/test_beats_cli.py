@@ -241,6 +241,7 @@ def test_outputs_that_are_not_files_are_one_line(song_copy, tmp_path, capsys, op
     for target, says in [(tmp_path / "fifo.wav", "cannot write: it is a named pipe, not a file"),
                          (tmp_path / "folder", "cannot write: it is a folder, not a file"),
                          (tmp_path / "nowhere" / "out.wav", "does not exist (create it first)"),
+                         (f"{tmp_path}/new/", "that names a folder (it ends with a slash)"),
                          (tmp_path / "song.wav" / "out.wav", "is not a folder")]:
         err = assert_one_line_and_nothing_left(capsys, [song_copy, option, target], says, tmp_path, before)
         assert err.startswith(f"{option} {target}: ")

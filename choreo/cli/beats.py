@@ -288,6 +288,9 @@ def replacing(path: str, option: str, song: str) -> Iterator[BinaryIO]:
     an error; every failure one line (exit 2) and the temporary file removed."""
     from choreo.run.settings import check_output_folder
 
+    if path.endswith(tuple(filter(None, (os.sep, os.altsep)))):  # Path() drops the slash: `new/` wrote a file `new`
+        raise UsageError(f"{option} {visible(path)}: cannot write: that names a folder (it ends with a slash): "
+                         "give a file name")
     check_output_folder(Path(path), option)
     target = Path(os.path.realpath(path))  # a link is followed: the file it names is replaced
     _check_target(target, path, option, song)
