@@ -14,8 +14,9 @@ import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
-from choreo.music.beats import BeatEstimate  # noqa: E402 - after the bench folder is on sys.path
+from choreo.music.beats import BeatEstimate, _bar_anchors  # noqa: E402 - after the bench folder is on sys.path
 from choreo.music.scoring import score_song  # noqa: E402
+from choreo.show.model import Tempo  # noqa: E402
 
 from bench.songs import (  # noqa: E402
     CASE_NAMES,
@@ -186,7 +187,17 @@ def assert_fields_agree(found: BeatEstimate) -> None:
     assert (beats[0].bar, beats[0].beat, beats[0].time_s) == (1, 1, found.offset)
     if found.bars:
         assert found.offset == found.bars[0] and len(found.bars) == beats[-1].bar + 1
+        assert found.tempo() == Tempo.of_bars(found.bars, found.meter)  # the bpm `choreo plan` shows too
         assert found.bars[-1] > beats[-1].time_s
     heard = [b.onset_s - b.time_s for b in beats if b.onset_s is not None]
     assert found.confirmed == len(heard) and len(found.curve) == len(beats) - 1
     assert found.timing_rms_ms == pytest.approx(1000 * float(np.sqrt(np.mean(np.square(heard)))), abs=0.01)
+
+
+def test_a_map_never_starts_before_the_songs_first_sample():
+    # A bar 1 heard half a millisecond early (an attack's rounding) would print `bars: [-0.0, ...`
+    # or `[-0.001, ...`, a block the show refuses; a steady offset is held at 0 the same way.
+    anchors = _bar_anchors(np.array([-0.0006, 0.5, 1.0, 1.5, 2.0, 2.49]), 2)
+    assert anchors[0] == 0.0 and anchors[1:] == (1.0, 2.0, 2.98)
+    Tempo.of_bars(anchors, 2)  # loads as a show's map
+

@@ -237,8 +237,7 @@ def _show_tempo(times: np.ndarray, heard: np.ndarray, meter: int) -> Tempo:
     on_line = np.count_nonzero(off[fit] <= MAP_WHEN_OFF_S) >= STEADY_SHARE * np.count_nonzero(fit)
     if on_line and float(np.max(off)) <= STRAY_S:
         return _steady(start, period, len(times), meter)
-    bars = _bar_anchors(times, meter)
-    return Tempo(round(60.0 / float(np.median(np.diff(times))), 2), bars[0], meter, bars)
+    return Tempo.of_bars(_bar_anchors(times, meter), meter)  # its bpm figured where plan's is
 
 
 def _steady(start: float, period: float, count: int, meter: int) -> Tempo:
@@ -257,4 +256,6 @@ def _bar_anchors(times: np.ndarray, meter: int) -> tuple[float, ...]:
     last = len(times) - 1
     interval = float(times[-1] - times[-2])
     closing = times[-1] + (meter - last % meter) * interval
-    return tuple(round(float(t), 3) for t in np.concatenate([firsts, [closing]]))
+    anchors = [round(float(t), 3) for t in np.concatenate([firsts, [closing]])]
+    anchors[0] = max(0.0, anchors[0])  # a bar 1 heard a hair before the first sample is at 0 s, as a steady offset is
+    return tuple(anchors)
