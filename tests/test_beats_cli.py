@@ -25,9 +25,9 @@ from test_log_disk import tmpfs  # noqa: F401 the 1 MiB disk fixture, one copy f
 
 from choreo.cli import main
 from choreo.errors import Interrupted
-from choreo.cli.beats import CLICK_FORMAT, MAP_WIDTH, straight_line_miss, tempo_lines, text_lines
+from choreo.cli.beats import CLICK_FORMAT, MAP_WIDTH, tempo_lines, text_lines
 from choreo.music import beats, click, picture
-from choreo.music.beats import Beat, BeatEstimate, estimate
+from choreo.music.beats import Beat, BeatEstimate, estimate, one_tempo_miss
 from choreo.music.features import MAX_SONG_S, read_features
 from choreo.show.load import load_show_bytes
 
@@ -96,7 +96,7 @@ def test_a_long_map_is_wrapped_under_100_columns_and_loads_bar_for_bar():
 
 def test_the_map_says_why_one_tempo_does_not_fit():
     found = a_map((1.0, 3.0, 5.2, 7.6, 10.2))  # 120 bpm slowing to about 92
-    miss_s, at_s = straight_line_miss(found)
+    miss_s, at_s = one_tempo_miss(found)
     assert 0.05 < miss_s < 0.5 and at_s in (1.0, found.beats[-1].time_s)
     lines = text_lines("song.wav", found, with_beats=False)
     why = [line for line in lines if "one tempo does not fit" in line or "tempo map" in line]

@@ -163,29 +163,15 @@ def map_lines(found: BeatEstimate) -> list[str]:
     the tempo moves."""
     if not found.bars:
         return []
+    from choreo.music.beats import one_tempo_miss
     from choreo.show.model import Tempo
 
-    miss_s, at_s = straight_line_miss(found)
+    miss_s, at_s = one_tempo_miss(found)
     bar_bpm = Tempo(found.bpm, found.offset, found.meter, found.bars).bar_bpm  # as a show reads the map
     return [f"# one tempo does not fit: the straight line nearest the beats puts the beat at {at_s:.2f} s "
             f"{1000 * miss_s:.0f} ms off;",
             f"# so this is a tempo map, each bar's beat 1 ({len(bar_bpm)} bars and where the next would begin), "
             f"from {min(bar_bpm):.1f} to {max(bar_bpm):.1f} bpm"]
-
-
-def straight_line_miss(found: BeatEstimate) -> tuple[float, float]:
-    """The largest distance (s) from a beat to the least-squares line through all of them
-    (beat number against time), and where that beat is: what one tempo would get wrong."""
-    import numpy as np
-
-    count = np.array([(b.bar - 1) * found.meter + b.beat - 1 for b in found.beats], dtype=np.float64)
-    times = np.array([b.time_s for b in found.beats], dtype=np.float64)
-    if len(times) < 2:
-        return 0.0, times[0] if len(times) else 0.0
-    slope, start = np.polyfit(count, times, 1)
-    misses = np.abs(times - (start + slope * count))
-    worst = int(np.argmax(misses))
-    return float(misses[worst]), float(times[worst])
 
 
 def beat_line(beat: Beat) -> str:

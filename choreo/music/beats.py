@@ -259,3 +259,17 @@ def _bar_anchors(times: np.ndarray, meter: int) -> tuple[float, ...]:
     anchors = [round(float(t), 3) for t in np.concatenate([firsts, [closing]])]
     anchors[0] = max(0.0, anchors[0])  # a bar 1 heard a hair before the first sample is at 0 s, as a steady offset is
     return tuple(anchors)
+
+
+def one_tempo_miss(found: BeatEstimate) -> tuple[float, float]:
+    """The largest distance (s) from a beat to the least-squares line through all of them
+    (beat number against time), and where that beat is: what one tempo would get wrong, said
+    beside a map so that its reader knows why it is one."""
+    count = np.array([(b.bar - 1) * found.meter + b.beat - 1 for b in found.beats], dtype=np.float64)
+    times = np.array([b.time_s for b in found.beats], dtype=np.float64)
+    if len(times) < 2:
+        return 0.0, float(times[0]) if len(times) else 0.0
+    slope, start = np.polyfit(count, times, 1)
+    misses = np.abs(times - (start + slope * count))
+    worst = int(np.argmax(misses))
+    return float(misses[worst]), float(times[worst])
