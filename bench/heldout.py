@@ -23,7 +23,6 @@ import argparse
 import sys
 from collections.abc import Callable
 import tempfile
-import time
 import wave
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,11 +34,12 @@ for path in (ROOT, ROOT / "bench"):
     if str(path) not in sys.path:
         sys.path.insert(0, str(path))
 
+from beats import score, table  # noqa: E402
 from common import row  # noqa: E402
 from songs import Song  # noqa: E402
 
 from choreo.errors import UsageError  # noqa: E402
-from choreo.music import beats  # noqa: E402
+from choreo.music import beats as choreo_beats  # noqa: E402
 from choreo.music.features import read_features  # noqa: E402
 from choreo.music.scoring import (  # noqa: E402
     GOAL_BAR_ONE_SHARE,
@@ -48,7 +48,6 @@ from choreo.music.scoring import (  # noqa: E402
     GOAL_LEVEL_SHARE,
     SetScore,
     score_set,
-    score_song,
 )
 
 RATE = 44100
@@ -280,28 +279,26 @@ def write_wav(path: Path, samples: np.ndarray) -> None:
 
 
 def measure(seed: int, count: int, echo: bool = False) -> SetScore:
-    """Every song of the held-out set written to a WAV file and found as `choreo beats` finds it."""
-    scores = []
+    """Every song of the held-out set written to a WAV file and found as `choreo beats` finds it,
+    scored as benchmark 13 scores its own (`beats.score`)."""
+    results = []
     with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "song.wav"
         for i in range(count):
             song = make(STYLES[i % len(STYLES)], 7919 * seed + i)
-            path = Path(folder) / "song.wav"
             write_wav(path, song.samples)
-            began = time.perf_counter()
-            try:
-                found, error = beats.estimate(read_features(path), meter=song.meter), None
-            except UsageError as exc:
-                found, error = None, str(exc)
-            took = time.perf_counter() - began
-            times = [b.time_s for b in found.beats] if found else []
-            downs = [b.time_s for b in found.beats if b.beat == 1] if found else []
-            scored = score_song(song.beats, song.downbeats, song.median_bpm, times, downs, found.bpm if found else None)
-            scores.append(scored)
-            if echo:
-                print(f"{song.name:28} {song.median_bpm:7.2f} {found.bpm if found else float('nan'):7.2f} "
-                      f"{scored.tempo.level:>6} {'right' if scored.bar_one_right else 'WRONG':>5} "
-                      f"{scored.beats.f:5.3f} {scored.downbeats.f:5.3f} {took:6.3f}" + (f"  {error}" if error else ""))
-    return score_set(scores)
+            results.append(score(song, lambda played: from_file(path, played.meter)))
+    if echo:
+        print("\n".join(table(results)))
+    return score_set([r.score for r in results])
+
+
+def from_file(path: Path, meter: int) -> tuple[choreo_beats.BeatEstimate | None, str | None]:
+    """What `choreo beats FILE --meter M` finds, or its one-line refusal."""
+    try:
+        return choreo_beats.estimate(read_features(path), meter=meter), None
+    except UsageError as exc:
+        return None, str(exc)
 
 
 def run(quick: bool = False) -> list[dict]:
