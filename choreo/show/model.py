@@ -10,6 +10,7 @@ from __future__ import annotations
 import bisect
 import math
 import os
+import statistics
 import unicodedata
 from dataclasses import dataclass, field
 from enum import Enum
@@ -183,10 +184,7 @@ class Tempo:
         median of its bars' tempi, not the mean, so that one odd bar (a fermata, a beat the
         tracker missed) does not move the tempo a plan and `--json` report."""
         _check_map(bars)
-        tempi = sorted(60.0 * meter / (b - a) for a, b in pairwise(bars))
-        middle = len(tempi) // 2
-        median = tempi[middle] if len(tempi) % 2 else (tempi[middle - 1] + tempi[middle]) / 2
-        return cls(round(median, 3), bars[0], meter, tuple(bars))
+        return cls(round(statistics.median(_bar_tempi(bars, meter)), 3), bars[0], meter, tuple(bars))
 
     def seconds(self, bar: int, beat: float = 1.0) -> float:
         """Bar and beat (counted from 1) on the show clock, to the nanosecond. One tempo keeps
@@ -223,7 +221,11 @@ class Tempo:
     @property
     def bar_bpm(self) -> tuple[float, ...]:
         """The tempo of each bar of a map (the last has no end: it is not counted); () for one tempo."""
-        return tuple(60.0 * self.meter / (b - a) for a, b in pairwise(self.bars))
+        return _bar_tempi(self.bars, self.meter)
+
+
+def _bar_tempi(bars: tuple[float, ...], meter: int) -> tuple[float, ...]:
+    return tuple(60.0 * meter / (b - a) for a, b in pairwise(bars))
 
 
 def _check_map(bars: tuple[float, ...]) -> None:
