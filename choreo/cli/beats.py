@@ -19,7 +19,6 @@ import errno
 import json
 import math
 import os
-import secrets
 import stat
 import sys
 from collections.abc import Iterator
@@ -272,6 +271,8 @@ def _same_file(one: str, other: str) -> bool:
 def replacing(path: str, option: str, song: str) -> Iterator[BinaryIO]:
     """A new file for `path`, written beside it and renamed over it when the block ends without
     an error; every failure one line (exit 2) and the temporary file removed."""
+    import secrets  # here, not at the top: its hmac and OpenSSL would slow every `choreo --help`
+
     from choreo.run.settings import check_output_folder
 
     if path.endswith(tuple(filter(None, (os.sep, os.altsep)))):  # Path() drops the slash: `new/` wrote a file `new`
