@@ -163,10 +163,9 @@ def map_lines(found: BeatEstimate) -> list[str]:
     if not found.bars:
         return []
     from choreo.music.beats import one_tempo_miss
-    from choreo.show.model import Tempo
 
     miss_s, at_s = one_tempo_miss(found)
-    bar_bpm = Tempo(found.bpm, found.offset, found.meter, found.bars).bar_bpm  # as a show reads the map
+    bar_bpm = found.tempo().bar_bpm  # as a show reads the map
     return [f"# one tempo does not fit: the straight line nearest the beats puts the beat at {at_s:.2f} s "
             f"{1000 * miss_s:.0f} ms off;",
             f"# so this is a tempo map, each bar's beat 1 ({len(bar_bpm)} bars and where the next would begin), "
