@@ -58,7 +58,6 @@ class Onsets:
     groups: np.ndarray
     strength: np.ndarray
     fps: float
-    scales: np.ndarray  # each group's loud onsets before it was normalised (its 99th percentile)
     snare: np.ndarray  # the flux of the bands a snare's noise fills and pitched sound rarely (SNARE_HZ)
 
 
@@ -83,7 +82,7 @@ def onsets_of(features: Features) -> Onsets:
     for i in range(groups.shape[1]):
         groups[:, i] = np.maximum(groups[:, i] - running_mean(groups[:, i], width), 0.0)
     strength = groups @ np.asarray(GROUP_WEIGHTS, dtype=np.float32)
-    return Onsets(groups, strength, features.fps, scales, snare)
+    return Onsets(groups, strength, features.fps, snare)
 
 
 def onset_strength(features: Features) -> np.ndarray:
