@@ -273,7 +273,7 @@ def beat_cues(features: Features, beats: np.ndarray, meter: int) -> dict[str, Cu
         "harmony/bar": _changes(features.chroma, chroma_at, beats, meter, meter),
         "bass/bar": _changes(features.bass_chroma, chroma_at, beats, meter, meter),
         **_onset_cues(features, beats),
-        "sections": Cue(_novelty(_beat_means(features.bands, band_at, beats), meter, cosine=False), reach=meter),
+        "sections": Cue(_novelty(_beat_means(features.bands, band_at, beats), meter), reach=meter),
     }
 
 
@@ -348,7 +348,7 @@ def _changes(frames: np.ndarray, times: np.ndarray, beats: np.ndarray, meter: in
     loudness = running_mean(np.linalg.norm(slots, axis=1), 2 * meter)[:, None]
     shapes = np.divide(slots, loudness, out=np.zeros_like(slots), where=loudness > 0)
     residual = shapes - _bar_pattern(shapes, 2 * meter)
-    novelty = _novelty(residual, 2 * span, cosine=False)  # at each eighth
+    novelty = _novelty(residual, 2 * span)  # at each eighth
     on_beat = novelty[0::2][:len(beats)]
     before = np.concatenate([[np.nan], novelty[1::2]])[:len(beats)]
     return Cue(np.fmax(on_beat, before), _variety(slots), reach=span + 1)  # NaN only where both are
@@ -389,9 +389,9 @@ def _bar_pattern(rows: np.ndarray, period: int) -> np.ndarray:
     return np.asarray(means.reshape(count * period, -1)[:len(rows)])
 
 
-def _novelty(per_beat: np.ndarray, meter: int, cosine: bool) -> np.ndarray:
-    """How different the bar after each beat sounds from the bar before it (NaN where either bar
-    runs past the beats)."""
+def _novelty(per_beat: np.ndarray, meter: int) -> np.ndarray:
+    """How different the bar after each beat sounds from the bar before it: the distance between
+    their means (NaN where either bar runs past the beats)."""
     count = len(per_beat)
     out = np.full(count, np.nan)
     if count < 2 * meter:
@@ -399,13 +399,7 @@ def _novelty(per_beat: np.ndarray, meter: int, cosine: bool) -> np.ndarray:
     sums = np.concatenate([np.zeros((1, per_beat.shape[1])), np.cumsum(per_beat, axis=0)])
     bars = (sums[meter:] - sums[:-meter]) / meter  # bars[i]: the bar from beat i on
     after, before = bars[meter:], bars[:-meter]  # the bars after and before beats meter..count-meter
-    if cosine:
-        dot = np.sum(after * before, axis=1)
-        norms = np.linalg.norm(after, axis=1) * np.linalg.norm(before, axis=1)
-        change = np.where(norms > 0, 1.0 - dot / np.maximum(norms, 1e-30), np.nan)
-    else:
-        change = np.linalg.norm(after - before, axis=1)
-    out[meter:count - meter + 1] = change
+    out[meter:count - meter + 1] = np.linalg.norm(after - before, axis=1)
     return out
 
 
