@@ -20,7 +20,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 # The last stretch before a cue is spun, not slept: sleep() on a loaded machine overshoots by
 # up to a millisecond or more, and a cue's first byte must leave within 1 ms of its time.
@@ -403,6 +403,26 @@ class ShowClock(Protocol):
 
     def show_at(self, mono: float) -> float:
         """The show time at monotonic time `mono`."""
+
+
+RUNNING, HELD, PAUSED = "running", "held", "paused"  # a show clock's states (the log's /choreo/clock `state`)
+
+
+@runtime_checkable
+class PausableShowClock(ShowClock, Protocol):
+    """A show clock the operator can pause (`p`, `/choreo/pause`): the machine's, which also
+    holds at a GO cue, and the music's, whose song pauses with it. While paused, show time
+    stands still; on resume it goes on from where it stood, the pause taken out of the show."""
+
+    @property
+    def state(self) -> str:
+        """RUNNING, HELD (at a GO cue: the machine's clock only) or PAUSED."""
+
+    def pause(self) -> float:
+        """Stand still now; the show time it stands at. Twice is harmless."""
+
+    def resume(self) -> None:
+        """Go on from where it stood (a GO cue still waiting keeps the machine's clock held)."""
 
 
 @dataclass(frozen=True)

@@ -327,6 +327,7 @@ class StepRecord(_Record):
     start_s: float | None = None  # end of a play: when the frame that started the motion was written
     lead_ms: float | None = None  # end of a cued play: how far ahead of its cue the first frame was due
     go: bool | None = None  # a GO cue (`at: go`): it waited for the operator's GO
+    cue_number: str | None = None  # a cued step: its number in the cue list (`1`, `12.5`)
 
     @property
     def ref(self) -> str:
@@ -365,6 +366,7 @@ class ClockRecord(_Record):
     show_s: float
     monotonic_ns: int
     source: str = "machine"  # machine | music: what keeps the show clock
+    state: str | None = None  # running | held (a GO cue waits) | paused; absent: running (logs before pause)
 
 
 @dataclass(frozen=True, slots=True)

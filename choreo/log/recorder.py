@@ -183,7 +183,8 @@ def step_record(event: StepEvent) -> StepRecord:
                       round(event.planned_s, 6), round(step.planned_s, 6), round(event.late_ms, 3),
                       step.path, step.label, step.motion, step.at, event.outcome, event.robot,
                       None if event.start_s is None else round(event.start_s, 6),
-                      round(event.lead_ms, 3) if event.lead_ms else None, True if step.go else None)
+                      round(event.lead_ms, 3) if event.lead_ms else None, True if step.go else None,
+                      step.cue)
 
 
 def _step_message(event: StepEvent) -> dict:

@@ -124,6 +124,7 @@ class Step:
     at: float | None = None  # the cue, if the step has one (seconds, bars and beats resolved)
     at_beat: tuple[int, float] | None = None  # the cue as written in bars and beats, if it was
     go: bool = False  # `at: go`: waits for the operator's GO
+    cue: str | None = None  # `cue: 12.5`: the cue's number as written (a cued step; None: numbered in show order)
     motion: int | None = None  # PLAY: the slot
     motion_name: str | None = None  # PLAY: the name it was played by, if any
     seconds: float | None = None  # WAIT: how long; WAIT_DONE: the timeout
@@ -143,6 +144,7 @@ class Repeat:
     at: float | None = None  # cues the first step of the first iteration
     at_beat: tuple[int, float] | None = None  # that cue as written in bars and beats, if it was
     go: bool = False  # `at: go`: the first step of the first iteration waits for GO
+    cue: str | None = None  # `cue:`: the number of that cue, as written
     robots: tuple[str, ...] | None = None  # the robots its steps are for, unless a step says
 
 
@@ -325,6 +327,7 @@ class PlannedStep:
     at: float | None = None  # the cue: not before this many seconds after the show's start
     at_beat: tuple[int, float] | None = None  # the cue as written in bars and beats, if it was
     go: bool = False  # `at: go`: waits for the operator's GO (planned as if it came at once)
+    cue: str | None = None  # a cued step (`at:`): its cue number, `1`, `12.5` (show/cues numbers them)
     planned_s: float = 0.0
     expected_s: float = 0.0  # how long the step is expected to take (WAIT_DONE: the motion's rest)
     frames: tuple[Frame, ...] = ()  # what it sends (WAIT_DONE: one status query, repeated)

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from choreo.wire import protocol
 from choreo.wire.layouts import DEFAULT_LAYOUT, Layout, layout_named
+from choreo.show.cues import numbered
 from choreo.show.load import load_show
 from choreo.show.model import DEFAULT_MOTION_S, Plan, PlannedStep, Repeat, Show, Step, StepKind
 
@@ -68,9 +69,9 @@ def compile_plans(show: Show, layouts: Mapping[str, Layout] | None = None,
                     bauds.get(name) or settings.baud or protocol.DEFAULT_BAUD)
              for name, settings in show.cast.items()}
     if show.tracks:
-        return {name: _compile(show, _flatten(show.tracks[name]), {name: links[name]}, unison=False)[name]
-                for name in show.cast}
-    return _compile(show, _flatten(show.steps), links, unison=show.ensemble)
+        return numbered({name: _compile(show, _flatten(show.tracks[name]), {name: links[name]}, unison=False)[name]
+                         for name in show.cast})
+    return numbered(_compile(show, _flatten(show.steps), links, unison=show.ensemble))
 
 
 def _compile(show: Show, flats: list[_Flat], links: dict[str, tuple[Layout, int]], unison: bool) -> dict[str, Plan]:

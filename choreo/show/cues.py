@@ -1,0 +1,163 @@
+"""The show's cue list, as a stage manager reads it: every cued step (a GO cue, a timed cue)
+numbered, QLab style, in show order.
+
+A cue is a step with `at:` (a time, a bar and beat, or `go`). Its number is the one the show
+file gives (`cue: 12.5`) or, for the others, the next whole number after the cue before it that
+no cue of the show has taken: `1, 2, 3` in a show that gives none, `1, 2, 2.5, 3` when one is
+put between. Numbers are text (`12.5` is not `12.50`), compared as written; labels name cues too.
+
+Pure: plans in, numbered plans and a cue list out; the live controls, the console, OSC, the
+plan's text and the reviews all read numbers from here, so a cue has one number everywhere.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, replace
+from decimal import Decimal
+
+from choreo.errors import ChoreoError
+from choreo.show.model import Plan, PlannedStep
+
+NUMBER_RE = re.compile(r"[0-9]+(\.[0-9]+)?")  # a cue number that counts: `12`, `12.5`
+MAX_NUMBER_CHARS = 16  # the longest cue number a show may give (the schema's `maxLength` says the same)
+
+
+class CueNotFound(ChoreoError):
+    """A cue named (by number or label) that the show does not have, or a label two cues share."""
+
+
+@dataclass(frozen=True)
+class Cue:
+    """One cue of the list: its number, label, who it is for and when the plan puts it.
+
+    `steps`: the step each robot starts at it, `(robot, index)`; a shared step (`steps:` of a
+    show for one robot or several) is one index for every robot, a track's cue is one robot's."""
+
+    number: str
+    label: str | None
+    robots: tuple[str, ...]
+    planned_s: float
+    go: bool  # waits for the operator's GO; else timed (`at` seconds, bars and beats resolved)
+    at: float | None = None
+    at_beat: tuple[int, float] | None = None
+    steps: tuple[tuple[str, int], ...] = ()
+
+    @property
+    def name(self) -> str:
+        """How messages name it: `cue 3 'bow'`, `cue 3`."""
+        return f"cue {self.number}" + (f" '{self.label}'" if self.label else "")
+
+    def starts(self, robot: str, index: int) -> bool:
+        """Is step `index` of `robot`'s plan where this cue starts?"""
+        return (robot, index) in self.steps
+
+
+@dataclass(frozen=True)
+class CueList:
+    """Every cue of a show, in show order; see the module's docstring."""
+
+    cues: tuple[Cue, ...] = ()
+
+    def __iter__(self) -> Iterator[Cue]:
+        return iter(self.cues)
+
+    def __len__(self) -> int:
+        return len(self.cues)
+
+    def position(self, cue: Cue) -> int:
+        return self.cues.index(cue)
+
+    def of_step(self, robot: str, index: int) -> Cue | None:
+        """The cue `robot`'s step `index` starts, if it starts one."""
+        return next((cue for cue in self.cues if cue.starts(robot, index)), None)
+
+    def find(self, ref: str) -> Cue:
+        """The cue `ref` names: a number as the list writes it, a number of the same value
+        (`12.50` for `12.5`), else a label. CueNotFound, with what there is, otherwise."""
+        for cue in self.cues:
+            if cue.number == ref:
+                return cue
+        value = _value(ref)
+        if value is not None:
+            for cue in self.cues:
+                if _value(cue.number) == value:
+                    return cue
+        named = [cue for cue in self.cues if cue.label == ref]
+        if len(named) > 1:
+            numbers = ", ".join(cue.number for cue in named)
+            raise CueNotFound(f"cue {ref!r} is ambiguous: cues {numbers} are all labelled so; give the number")
+        if named:
+            return named[0]
+        known = ", ".join(cue.number for cue in self.cues[:12]) + (", ..." if len(self.cues) > 12 else "")
+        raise CueNotFound(f"no cue {ref!r} in this show (cues: {known or 'none'})")
+
+
+def _value(number: str) -> Decimal | None:
+    return Decimal(number) if NUMBER_RE.fullmatch(number) else None
+
+
+def _shared(plans: Mapping[str, Plan]) -> bool:
+    """One step list for every robot (`steps:`): a step index is the same cue in every plan."""
+    return len(plans) == 1 or any(plan.unison for plan in plans.values())
+
+
+def _cued(plans: Mapping[str, Plan]) -> list[tuple[PlannedStep, tuple[tuple[str, int], ...], tuple[str, ...]]]:
+    """Each cued step once, in show order, with the (robot, index) pairs it starts and its robots."""
+    names = list(plans)
+    if _shared(plans):
+        first = plans[names[0]]
+        out = []
+        for step in first.steps:
+            if step.at is None and not step.go:
+                continue
+            robots = tuple(name for name in names if step.is_for(name))
+            out.append((step, tuple((name, step.index) for name in robots), robots))
+        return out
+    tracked = [(step.planned_s, names.index(name), step.index, name, step)
+               for name, plan in plans.items() for step in plan.steps if step.at is not None or step.go]
+    tracked.sort(key=lambda item: item[:3])
+    return [(step, ((name, step.index),), (name,)) for _, _, _, name, step in tracked]
+
+
+def _numbers(given: list[str | None]) -> list[str]:
+    """Each cue's number: the one given, else the next whole number after the cue before that
+    no cue has taken (see the module's docstring)."""
+    taken = {number for number in given if number is not None}
+    out: list[str] = []
+    last = Decimal(0)
+    for number in given:
+        if number is None:
+            candidate = int(last) + 1
+            while str(candidate) in taken:
+                candidate += 1
+            number = str(candidate)
+            taken.add(number)
+        value = _value(number)
+        if value is not None:
+            last = value
+        out.append(number)
+    return out
+
+
+def numbered(plans: Mapping[str, Plan]) -> dict[str, Plan]:
+    """The plans with every cued step's `cue` set to its number (the show's own, or its place)."""
+    cued = _cued(plans)
+    numbers = _numbers([step.cue for step, _, _ in cued])
+    by_step: dict[tuple[str, int], str] = {}
+    for (_, steps, _), number in zip(cued, numbers, strict=True):
+        for key in steps:
+            by_step[key] = number
+    return {name: replace(plan, steps=tuple(replace(step, cue=by_step[(name, step.index)])
+                                            if (name, step.index) in by_step else step for step in plan.steps))
+            for name, plan in plans.items()}
+
+
+def cue_list(plans: Mapping[str, Plan]) -> CueList:
+    """The cue list of numbered plans (`numbered`), in show order."""
+    cues = []
+    for step, steps, robots in _cued(plans):
+        assert step.cue is not None, "cue_list reads numbered plans"
+        cues.append(Cue(step.cue, step.label, robots, step.planned_s, step.go, step.at, step.at_beat, steps))
+    return CueList(tuple(cues))
