@@ -495,7 +495,7 @@ def test_unknown_keys_are_located_at_the_key_with_a_suggestion(tmp_path):
     assert located(found) == [(2, 16, "robots.port"), (4, 5, "steps[0].plya"), (6, 5, "steps[1].lable")]
     assert found[0].message.startswith("robot 'port': expected its settings as a mapping")
     assert found[0].message.endswith("a show for one robot says `robot:`")
-    assert found[1].message.startswith("unknown key 'plya': did you mean `play`? expected one of at, label, play")
+    assert found[1].message.startswith("unknown key 'plya': did you mean `play`? expected one of at, cue, label, play")
     assert found[2].message.startswith("unknown key 'lable': did you mean `label`?")
 
 
@@ -925,7 +925,7 @@ def test_every_problem_is_reported_in_file_order_each_once(tmp_path):
         f"{path}:8:11: steps[2].wait: wait takes more than 0 seconds, not -1",
         f"{path}:9:11: steps[3].play: unknown motion 'wav': did you mean 'wave'? the show's motions are wave",
         f"{path}:10:5: steps[4].bogus: unknown key 'bogus': "
-        "expected one of at, label, play, repeat, robots, steps, timeout, wait",
+        "expected one of at, cue, label, play, repeat, robots, steps, timeout, wait",
     ]
     assert info.value.exit_code == 2
 

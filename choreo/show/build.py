@@ -91,6 +91,7 @@ class _Common(TypedDict):
     at: float | None
     at_beat: tuple[int, float] | None
     go: bool
+    cue: str | None
     robots: tuple[str, ...] | None
 
 
@@ -123,8 +124,9 @@ class _Steps:
         line, column = self.doc.mark(here)
         go = step.get("at") == GO
         at, at_beat = self._cue(None if go else step.get("at"))
-        return _Common(path=format_path(here), line=line, column=column, label=step.get("label"),
-                       at=at, at_beat=at_beat, go=go, robots=tuple(step["robots"]) if "robots" in step else None)
+        cue = cue_text(self.doc, step["cue"], here + ("cue",)) if "cue" in step else None
+        return _Common(path=format_path(here), line=line, column=column, label=step.get("label"), at=at,
+                       at_beat=at_beat, go=go, cue=cue, robots=tuple(step["robots"]) if "robots" in step else None)
 
     def _cue(self, at: Any) -> tuple[float | None, tuple[int, float] | None]:
         """A cue as seconds, and as bar and beat if it was written so (checked: tempo exists)."""
@@ -133,6 +135,14 @@ class _Steps:
             assert self.tempo is not None, "a bar-and-beat cue without a tempo passed the checks"
             return self.tempo.seconds(bar, beat), (bar, beat)
         return _seconds(at), None
+
+
+def cue_text(doc: Doc, value: str | int | float, path: JsonPath) -> str:
+    """A cue number as the file wrote it: text as it is, a number as its digits were typed
+    (`12.50`, which YAML reads as the float 12.5), so the operator calls it by what they wrote."""
+    if isinstance(value, str):
+        return value
+    return doc.text(path) or str(value)
 
 
 def _motion_number(ref: int | float | str, motions: dict[str, Motion]) -> int:

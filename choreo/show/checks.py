@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import unicodedata
 from dataclasses import dataclass, field
+from decimal import Decimal
 from pathlib import Path
 from typing import Any, TypeGuard
 
-from choreo.show.build import tempo_of
+from choreo.show.build import cue_text, tempo_of
+from choreo.show.cues import MAX_NUMBER_CHARS, NUMBER_RE, number_key
 from choreo.show.model import (
     GO,
     MAX_BPM,
@@ -40,6 +42,7 @@ class _Walk:
     report: Report
     motions: dict[str, Any] = field(default_factory=dict)  # name -> entry, the well-formed ones
     labels: dict[str, JsonPath] = field(default_factory=dict)
+    cues: dict[Decimal | str, tuple[str, JsonPath]] = field(default_factory=dict)  # cue numbers given: text, where
     last_cue: tuple[float, JsonPath] | None = None
     played: set[str] = field(default_factory=set)  # robots that have played a motion so far
     robots: tuple[str, ...] = (SOLO,)  # the robots of the step list being walked
@@ -244,6 +247,7 @@ def _check_step(walk: _Walk, step: Any, here: JsonPath, looping: bool) -> int:
     if not isinstance(step, dict) or not walk.ok(here):
         return 1
     _check_cue(walk, step, here, looping)
+    _check_cue_number(walk, step, here, looping)
     _check_label(walk, step, here)
     robots = _step_robots(walk, step, here)
     if "play" in step:
@@ -267,6 +271,7 @@ def _check_repeat(walk: _Walk, step: dict[str, Any], here: JsonPath, robots: tup
     outer, walk.robots = walk.robots, robots
     inner = _check_steps(walk, step["steps"], here + ("steps",), looping or count > 1)
     walk.robots = outer
+    _check_repeat_cue(walk, step, here)
     return min(count * inner, MAX_PLAN_STEPS + 1)
 
 
@@ -290,6 +295,67 @@ def _check_cue(walk: _Walk, step: dict[str, Any], here: JsonPath, looping: bool)
                            f"line {line}): cues must not go back in time")
         return
     walk.last_cue = (at, path)
+
+
+def _check_cue_number(walk: _Walk, step: dict[str, Any], here: JsonPath, looping: bool) -> None:
+    """`cue:` numbers a cue: on a step with `at:`, written as digits (`12.5`) or short text,
+    once in the show (`12.50` is `12.5`), and not on a step every pass of a repeat runs."""
+    path = here + ("cue",)
+    if "cue" not in step or not walk.ok(path):
+        return
+    value = step["cue"]
+    text = cue_text(walk.doc, value, path)
+    if "at" not in step:
+        walk.key_problem(path, f"`cue: {_shown(text)}` numbers a cue, and this step is none: add `at:` "
+                               "(seconds, a bar and beat, or `go`)")
+        return
+    problem = _cue_number_problem(value, text, looping)
+    if problem is not None:
+        walk.problem(path, problem)
+        return
+    first = walk.cues.setdefault(number_key(text), (text, path))
+    if first[1] != path:
+        same = "" if first[0] == text else f" (the same number as {first[0]})"
+        line = walk.doc.mark(first[1])[0]
+        walk.problem(path, f"cue {text} is already the cue of {format_path(first[1][:-1])} (line {line}){same}: "
+                           "cue numbers must be unique in the show")
+
+
+def _cue_number_problem(value: Any, text: str, looping: bool) -> str | None:
+    """What is wrong with the cue number of a cued step that passed the schema, if anything."""
+    if not isinstance(value, str) and not NUMBER_RE.fullmatch(text):
+        return (f"cue number {_shown(text)} is a number YAML reads as {value_text(value)}: write digits with at "
+                "most one `.` (`12.5`), or put it in quotes to mean text")
+    if len(text) > MAX_NUMBER_CHARS:
+        return f"cue number {_shown(text)} is {len(text)} characters long: at most {MAX_NUMBER_CHARS}"
+    if looping:
+        return ("`cue:` inside a repeat that runs more than once would number every pass alike: put `at:` and "
+                "`cue:` on the repeat step (its first pass is the cue), or leave `cue:` out (each pass is "
+                "numbered in show order)")
+    return None
+
+
+def _shown(text: str) -> str:
+    """A cue number as messages show it: cut past twice the longest (a number has no hidden characters)."""
+    return text if len(text) <= 2 * MAX_NUMBER_CHARS else text[:2 * MAX_NUMBER_CHARS] + "…"
+
+
+def _check_repeat_cue(walk: _Walk, step: dict[str, Any], here: JsonPath) -> None:
+    """A repeat's cue number numbers its first plan step, which cannot carry a second one
+    (checked after its steps: a number they refused already is not said twice)."""
+    if "cue" not in step or not walk.ok(here + ("cue",)):
+        return
+    inner, path = step, here
+    while isinstance(inner.get("steps"), list) and inner["steps"] and isinstance(inner["steps"][0], dict):
+        inner, path = inner["steps"][0], path + ("steps", 0)
+        if "cue" in inner and walk.ok(path + ("cue",)):
+            line = walk.doc.mark(here + ("cue",))[0]
+            mine = cue_text(walk.doc, step["cue"], here + ("cue",))
+            walk.problem(path + ("cue",), f"this cue number and the repeat's `cue: {mine}` (line {line}) would "
+                                          "number the same step: keep one")
+            return
+        if "repeat" not in inner:
+            return
 
 
 def _beat_seconds(walk: _Walk, at: dict[str, Any], path: JsonPath) -> float | None:

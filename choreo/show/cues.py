@@ -86,16 +86,33 @@ class CueList:
                     return cue
         named = [cue for cue in self.cues if cue.label == ref]
         if len(named) > 1:
-            numbers = ", ".join(cue.number for cue in named)
-            raise CueNotFound(f"cue {ref!r} is ambiguous: cues {numbers} are all labelled so; give the number")
+            numbers = ", ".join(cue.number for cue in named[:12]) + (", ..." if len(named) > 12 else "")
+            raise CueNotFound(f"cue {_shown(ref)} is ambiguous: cues {numbers} are all labelled so; give the number")
         if named:
             return named[0]
         known = ", ".join(cue.number for cue in self.cues[:12]) + (", ..." if len(self.cues) > 12 else "")
-        raise CueNotFound(f"no cue {ref!r} in this show (cues: {known or 'none'})")
+        raise CueNotFound(f"no cue {_shown(ref)} in this show (cues: {known or 'none'})")
+
+
+def _shown(ref: str) -> str:
+    """A reference as a message quotes it: escaped (`repr`) and cut, since it was typed or sent."""
+    return repr(ref) if len(ref) <= _SHOWN_CHARS else repr(ref[:_SHOWN_CHARS]) + "…"
+
+
+_SHOWN_CHARS = 40
 
 
 def _value(number: str) -> Decimal | None:
-    return Decimal(number) if NUMBER_RE.fullmatch(number) else None
+    """A number that counts as its value (`12.50` is `12.5`); None for text (`A3`), and for a
+    reference longer than any cue number (a typed or sent one may be anything)."""
+    return Decimal(number) if len(number) <= MAX_NUMBER_CHARS and NUMBER_RE.fullmatch(number) else None
+
+
+def number_key(number: str) -> Decimal | str:
+    """What makes two cue numbers the same: a number's value (`12.5`, `12.50`), text as written.
+    The show's checks refuse a second cue by this key, and numbering never takes one."""
+    value = _value(number)
+    return number if value is None else value
 
 
 def _shared(plans: Mapping[str, Plan]) -> bool:
@@ -124,16 +141,16 @@ def _cued(plans: Mapping[str, Plan]) -> list[tuple[PlannedStep, tuple[tuple[str,
 def _numbers(given: list[str | None]) -> list[str]:
     """Each cue's number: the one given, else the next whole number after the cue before that
     no cue has taken (see the module's docstring)."""
-    taken = {number for number in given if number is not None}
+    taken = {number_key(number) for number in given if number is not None}
     out: list[str] = []
     last = Decimal(0)
     for number in given:
         if number is None:
             candidate = int(last) + 1
-            while str(candidate) in taken:
+            while Decimal(candidate) in taken:
                 candidate += 1
             number = str(candidate)
-            taken.add(number)
+            taken.add(Decimal(candidate))
         value = _value(number)
         if value is not None:
             last = value

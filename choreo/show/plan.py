@@ -40,6 +40,7 @@ class _Flat:
     robots: tuple[str, ...] | None = None  # who does it (a repeat's robots pass to its steps)
     at_beat: tuple[int, float] | None = None  # the cue in bars and beats, as written
     go: bool = False  # waits for the operator's GO
+    cue: str | None = None  # the cue number the show gives it (`cue:`), if any
 
 
 def compile_plan(show: Show, layout: Layout | None = None, baud: int | None = None) -> Plan:
@@ -92,7 +93,7 @@ def _compile(show: Show, flats: list[_Flat], links: dict[str, tuple[Layout, int]
             steps[name].append(PlannedStep(
                 index=index, path=flat.path, kind=step.kind, line=step.line, label=flat.label, motion=motion,
                 motion_name=step.motion_name if step.kind is StepKind.PLAY else _name_of(show, motion),
-                seconds=step.seconds, at=flat.at, at_beat=flat.at_beat, go=flat.go, planned_s=start,
+                seconds=step.seconds, at=flat.at, at_beat=flat.at_beat, go=flat.go, cue=flat.cue, planned_s=start,
                 expected_s=expected, frames=frames.of(name, step) if name in who else (),
                 robots=flat.robots if unison else None))
         clock = max(start, _round(start + expected))  # rounding never moves time backwards
@@ -173,16 +174,16 @@ def _flatten(steps: tuple[Step | Repeat, ...], prefix: str = "", marks: str = ""
         path = prefix + _local(item.path)
         who = item.robots or robots
         if isinstance(item, Step):
-            out.append(_Flat(item, path, _label(item.label, marks), item.at, who, item.at_beat, item.go))
+            out.append(_Flat(item, path, _label(item.label, marks), item.at, who, item.at_beat, item.go, item.cue))
             continue
         for k in range(1, item.count + 1):
             inner = _flatten(item.steps, f"{path}#{k}.", marks + f"#{k}", who)
-            if k == 1 and inner and (item.at is not None or item.label is not None or item.go):
+            if k == 1 and inner and (item.at is not None or item.label is not None or item.go or item.cue):
                 first = inner[0]
                 cues = [(a, b) for a, b in ((item.at, item.at_beat), (first.at, first.at_beat)) if a is not None]
                 at, at_beat = max(cues, key=lambda cue: cue[0]) if cues else (None, None)
                 inner[0] = _Flat(first.step, first.path, first.label or _label(item.label, marks), at,
-                                 first.robots, at_beat, first.go or item.go)
+                                 first.robots, at_beat, first.go or item.go, first.cue or item.cue)
             out.extend(inner)
     return out
 

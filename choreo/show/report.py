@@ -110,6 +110,7 @@ class Where:
     value: Mark
     key: Mark | None = None
     empty: bool = False  # `key:` with nothing after it: point at the key
+    text: str | None = None  # a number as written (`12.50`, `1e3`): a cue number keeps its text
 
 
 @dataclass
@@ -127,6 +128,12 @@ class Doc:
         if where is None:
             return (1, 1)
         return where.key if where.empty and where.key else where.value
+
+    def text(self, path: JsonPath) -> str | None:
+        """The number at `path` as the file wrote it (None: not a number): `12.50` is read as
+        the float 12.5, but a cue number is text, compared and shown as written."""
+        where = self.where.get(path)
+        return where.text if where is not None else None
 
     def key_mark(self, path: JsonPath) -> Mark:
         where = self.where.get(path)

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from choreo import SCHEMAS
+from choreo.show.cues import MAX_NUMBER_CHARS
 from choreo.show.model import MOTION_NAME_FORMAT, is_motion_name
 from choreo.show.report import MAX_FOUND, Doc, JsonPath, Report, closest, kind_text, value_text
 from choreo.wire.protocol import MOTION_SLOTS, spell_bauds
@@ -209,6 +210,8 @@ def _one_of_forms(error: _Error, data: Any) -> list[_Said] | None:
         return None
     if error.leaf == "at":
         return [_cue_problem(error)]
+    if error.leaf == "cue":
+        return [(error.path, _cue_number_problem(error), False)]
     return [(error.path, _either_problem(error), False)]
 
 
@@ -232,6 +235,24 @@ def _cue_problem(error: _Error) -> _Said:
             return path, _simple_problem(path, e.validator, e.instance, e.expected), False
     return path, (f"expected seconds (a number) or a bar and beat (`{{bar: 12, beat: 3}}`), "
                   f"not {kind_text(instance)}"), False
+
+
+def _cue_number_problem(error: _Error) -> str:
+    """`cue:` is a number as written or short text: say which rule the value breaks."""
+    instance = error.instance
+    kinds = {e.validator for e in error.context}
+    if isinstance(instance, str):
+        shown = repr(instance) if len(instance) <= 24 else repr(instance[:24]) + "…"
+        if "maxLength" in kinds:
+            return f"cue number {shown} is longer than {MAX_NUMBER_CHARS} characters: name the cue with `label:`"
+        if "minLength" in kinds:
+            return "the cue number is empty: give one (`12.5`, `A3`) or leave `cue:` out"
+        return (f"cue number {shown} may hold only letters, digits, `.`, `-` and `_`, starting with a letter "
+                "or digit: name the cue with `label:`")
+    if isinstance(instance, (int, float)) and not isinstance(instance, bool):
+        return f"a cue number is 0 or more, not {value_text(instance)}"
+    hint = _quote_hint(instance) if isinstance(instance, bool) else ""
+    return f"expected a cue number (`12.5`) or short text (`A3`), not {kind_text(instance)}{hint}"
 
 
 def _beat_cue_problem(path: JsonPath, cue: dict[str, Any], e: _Error) -> _Said | None:
@@ -403,7 +424,7 @@ _TYPE_WORDS = {
 }
 
 _STEP_KINDS = ("play", "wait", "repeat")
-_STEP_KEYS = frozenset(("play", "wait", "timeout", "repeat", "steps", "at", "label", "robots"))
+_STEP_KEYS = frozenset(("play", "wait", "timeout", "repeat", "steps", "at", "cue", "label", "robots"))
 
 _REQUIRED = {
     "version": "missing: add `version: 1` (the show format's version)",

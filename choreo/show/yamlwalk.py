@@ -100,11 +100,14 @@ class YamlWalk:
             return
         mark = mark_of(event)
         value: Any = None
+        text: str | None = None
         if isinstance(event, yaml.AliasEvent):
             self._alias(event, mark, path)
         elif isinstance(event, yaml.ScalarEvent):
             value = self.scalars.value(event, path, mark)
-        self._attach(path, value, mark, empty=_is_empty(event))
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                text = event.value  # as written: `12.50` is the float 12.5 (a cue number keeps its text)
+        self._attach(path, value, mark, empty=_is_empty(event), text=text)
 
     def _alias(self, event: yaml.AliasEvent, mark: Mark, path: JsonPath) -> None:
         """Refused: reported once at the first, counted after it (a bomb holds thousands)."""
@@ -172,19 +175,19 @@ class YamlWalk:
         elif isinstance(parent.container, list):
             parent.container.append(frame.container)
 
-    def _attach(self, path: JsonPath, value: Any, mark: Mark, empty: bool) -> None:
+    def _attach(self, path: JsonPath, value: Any, mark: Mark, empty: bool, text: str | None = None) -> None:
         parent: _Frame | None = self.stack[-1] if self.stack else None
         if parent is None:
             self.root, self.root_mark = value, mark
             self.where[path] = Where(mark)
             return
         if isinstance(parent.container, dict):
-            self.where[path] = Where(mark, parent.key_mark, empty)
+            self.where[path] = Where(mark, parent.key_mark, empty, text)
             parent.container[parent.key] = value
             parent.expect_key = True
         else:
             assert isinstance(parent.container, list)
-            self.where[path] = Where(mark)
+            self.where[path] = Where(mark, text=text)
             parent.container.append(value)
 
 
