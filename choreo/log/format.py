@@ -18,6 +18,7 @@ from functools import lru_cache
 from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Any, ClassVar
 
+from choreo.clock import HELD, PAUSED, RUNNING
 from choreo.events import RunResult
 from choreo.numtext import whole_number
 from choreo.wire.framewords import describe_frame, describe_reply, is_slot
@@ -29,6 +30,7 @@ STEP_TOPIC = "/choreo/step"
 LOG_TOPIC = "/choreo/log"
 CLOCK_TOPIC = "/choreo/clock"
 CLOCK_EVERY_S = 0.5  # how often (show time) /choreo/clock samples the show clock
+CLOCK_STATES = (RUNNING, HELD, PAUSED)  # a /choreo/clock sample's `state`
 COMMAND_TOPIC = "/choreo/command"
 # topic -> (schema name, schema file under schemas/)
 CHANNELS = {
@@ -367,6 +369,13 @@ class ClockRecord(_Record):
     monotonic_ns: int
     source: str = "machine"  # machine | music: what keeps the show clock
     state: str | None = None  # running | held (a GO cue waits) | paused; absent: running (logs before pause)
+
+    def _checked(self) -> Any:
+        """As every record's, and a state that is one of the clock's (a review places time by it)."""
+        _Record._checked(self)
+        if self.state is not None and self.state not in CLOCK_STATES:
+            raise ValueError(f"field 'state' holds {self.state!r:.40}, none of {', '.join(CLOCK_STATES)}")
+        return self
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,4 +1,5 @@
-"""Log times (wall-clock ns) to show time, as every review reads them.
+"""Log times (wall-clock ns) to show time, as every review reads them: the one definition of
+a show's duration, its holds and pauses, its wall time and every moment's show time.
 
 A show's zero is not in the metadata (the run's `start_ns` is taken when the run is prepared,
 before the ports open), but the log says where the show clock stood from the moment it started:
@@ -9,18 +10,34 @@ before a review places any frame: those frames fall before zero, at negative sho
 order they were sent. Only a log with neither (a run stopped before its show started) falls back
 on the metadata's start.
 
-Show time does not always move with the wall clock: it stops while a GO cue waits (live
-control), and on the music's clock it drifts with the sound card. The clock samples say where
-it stood: a sample the mapping so far does not predict (to a millisecond) starts a new piece, so
-the pieces are few (a hold's end, a loop's next pass) and memory stays bounded.
+Show time does not always move with the wall clock: it stands still while a GO cue waits
+(`held`) and while the operator pauses (`paused`), and on the music's clock it drifts with the
+sound card. `ShowTimes.of` reads every clock sample before a review places anything (a second,
+clock-only read of the log), so a frame or a command during a hold is placed at the show time
+the clock stood at, not where the clock would have been had it run on:
+- a sample's `state` says when the clock stopped and went on (the run writes one at each change);
+- an older log's samples have no state: on the machine's clock (which never drifts) a sample
+  behind the time the one before predicts, and not before it, marks a hold that ended there,
+  as long as it was short of the prediction (a new --loop pass goes back before it: no hold);
+- a sample the mapping so far does not predict (to a millisecond) starts a new piece (a hold's
+  end, a loop's next pass, the music's drift), so the pieces are few and memory stays bounded.
+A sample earlier than the one before it (a damaged or hostile log) is counted and passed over:
+inserting it would cost a reviewer time growing with the square of the samples.
+
+Besides show time, a review may draw on `elapsed`: show time with the time the clock stood
+still put back in. It moves with the wall clock (less the music's drift), so a motion that ran
+through a hold has its real length there, and with no hold it is show time itself.
 """
 
 from __future__ import annotations
 
 import math
 from bisect import bisect_right
+from collections.abc import Mapping
+from dataclasses import dataclass
 
-from choreo.log.format import CLOCK_TOPIC, STEP_TOPIC, ClockRecord, StepRecord, parse
+from choreo.clock import HELD, PAUSED, RUNNING
+from choreo.log.format import CLOCK_TOPIC, STEP_TOPIC, ClockRecord, Result, StepRecord, parse
 from choreo.log.reader import LogReader
 
 BREAK_S = 0.001  # a clock sample this far from the mapping's prediction starts a new piece
@@ -28,11 +45,27 @@ BREAK_S = 0.001  # a clock sample this far from the mapping's prediction starts 
 # run sends and says before its show starts (a few frames and log lines a robot), so a log with
 # more has no start to find and the reading ahead costs a bounded time.
 LOOKAHEAD_MESSAGES = 10_000
+MACHINE = "machine"  # the clock source that holds at a GO cue and never drifts
 
 
 def show_zero_ns(reader: LogReader) -> int | None:
     """The run's start as the metadata gives it (wall-clock ns), before a step says better."""
     return reader.info.start_ns
+
+
+@dataclass(frozen=True)
+class Stand:
+    """A time the show clock stood still: held at a GO cue, or paused by the operator."""
+
+    kind: str  # held | paused
+    show_s: float  # where show time stood
+    start_ns: int  # log time it stopped
+    end_ns: int | None  # log time it went on (None: it never did, the log ends held or paused)
+
+    def seconds(self, end_ns: int | None) -> float:
+        """How long it stood (an open one: up to `end_ns`, the log's last message)."""
+        end = self.end_ns if self.end_ns is not None else end_ns
+        return max(0.0, ((end if end is not None else self.start_ns) - self.start_ns) / 1e9)
 
 
 class ShowTimes:
@@ -41,14 +74,22 @@ class ShowTimes:
     def __init__(self, zero_ns: int | None) -> None:
         self.zero_ns = zero_ns
         self.anchored = False  # the zero comes from the show clock (a sample or a step), not the metadata
+        self.complete = False  # every clock sample is read (`of`): later samples change nothing
+        self.disordered = 0  # clock samples earlier than the one before them, passed over
+        self.stands: list[Stand] = []
         self._break_ns: list[int] = []  # where a piece begins (log time)
         self._break_s: list[float] = []  # and the show time there
+        self._last: tuple[int, float] | None = None  # the last sample: log time, show time
+        self._stood: list[float] = [0.0]  # time stood still before each stand began (prefix sums)
 
     @classmethod
     def of(cls, reader: LogReader) -> ShowTimes:
-        """The log's show times, anchored before any frame is placed (see the module's docstring)."""
+        """The log's show times, anchored and with every clock sample read before any frame is
+        placed (see the module's docstring). A sample that is not a clock sample is ValueError,
+        KeyError or TypeError, as from `parse`, raised as the reader's one line."""
         times = cls(show_zero_ns(reader))
         times.anchor(reader)
+        times.read_clock(reader)
         return times
 
     def anchor(self, reader: LogReader) -> None:
@@ -65,16 +106,29 @@ class ShowTimes:
                     continue
                 try:
                     record = parse(topic, data)
-                    if isinstance(record, ClockRecord):
-                        self.see_clock(log_time, record)
-                    elif isinstance(record, StepRecord):
-                        self.see_step(log_time, record)
                 except (KeyError, TypeError, ValueError, AttributeError):
                     continue
+                if isinstance(record, StepRecord):
+                    self.see_step(log_time, record)
+                elif isinstance(record, ClockRecord):
+                    self.see_start(log_time, record.show_s)
                 if self.anchored:
                     return
         finally:
             messages.close()
+
+    def read_clock(self, reader: LogReader) -> None:
+        """Every clock sample, in one pass over the clock topic (the reader skips the others).
+        A sample that does not parse is passed over here: the review's own pass reports it as
+        the one line it makes of any message that is not choreo's."""
+        for _, log_time, data in reader.messages((CLOCK_TOPIC,)):
+            try:
+                sample = parse(CLOCK_TOPIC, data)
+                if isinstance(sample, ClockRecord):
+                    self.see_clock(log_time, sample)
+            except (KeyError, TypeError, ValueError, AttributeError):
+                continue
+        self.complete = True
 
     def see_step(self, log_time: int, step: StepRecord) -> None:
         if step.event == "start":
@@ -90,19 +144,147 @@ class ShowTimes:
 
     def see_clock(self, log_time: int, sample: ClockRecord) -> None:
         """A /choreo/clock sample: where show time really stood at `log_time`."""
+        if self.complete:
+            return
+        if self._last is not None and log_time < self._last[0]:
+            self.disordered += 1
+            return
         self.see_start(log_time, sample.show_s)
-        predicted = self.seconds(log_time) if (self._break_ns or self.zero_ns is not None) else None
+        predicted = self._piece_seconds(log_time) if (self._break_ns or self.zero_ns is not None) else None
+        self._see_state(log_time, sample, predicted)
         if predicted is None or abs(predicted - sample.show_s) > BREAK_S:
-            at = bisect_right(self._break_ns, log_time)
-            self._break_ns.insert(at, log_time)
-            self._break_s.insert(at, sample.show_s)
+            self._break_ns.append(log_time)
+            self._break_s.append(sample.show_s)
+        self._last = (log_time, sample.show_s)
+
+    def _see_state(self, log_time: int, sample: ClockRecord, predicted: float | None) -> None:
+        """A stand begins or ends here: as the sample's state says, or (an older log's
+        machine clock) as a sample behind the prediction, and not before the last, tells."""
+        open_stand = self.stands[-1] if self.stands and self.stands[-1].end_ns is None else None
+        state = sample.state
+        if state is None:
+            if open_stand is not None:
+                self._close(log_time)
+            behind = (predicted - sample.show_s) if predicted is not None else 0.0
+            last_s = self._last[1] if self._last is not None else -math.inf
+            if sample.source == MACHINE and behind > BREAK_S and sample.show_s >= last_s - BREAK_S:
+                start = log_time - round(behind * 1e9)
+                self._open(Stand(HELD, sample.show_s, max(start, self._last[0] if self._last else start), log_time))
+            return
+        if open_stand is not None and open_stand.kind != state:
+            self._close(log_time)
+            open_stand = None
+        if state != RUNNING and open_stand is None:
+            self._open(Stand(state, sample.show_s, log_time, None))
+
+    def _open(self, stand: Stand) -> None:
+        before = self.stands[-1].seconds(stand.start_ns) if self.stands else 0.0
+        if self.stands:
+            self._stood.append(self._stood[-1] + before)
+        self.stands.append(stand)
+
+    def _close(self, log_time: int) -> None:
+        last = self.stands[-1]
+        self.stands[-1] = Stand(last.kind, last.show_s, last.start_ns, log_time)
+
+    def _stand_at(self, log_time: int) -> int:
+        """The index of the last stand begun at or before `log_time` (-1: none)."""
+        low, high = 0, len(self.stands)
+        while low < high:
+            mid = (low + high) // 2
+            if self.stands[mid].start_ns <= log_time:
+                low = mid + 1
+            else:
+                high = mid
+        return low - 1
 
     def seconds(self, log_time: int | None) -> float | None:
+        """Show time at `log_time`: where the clock stood, during a stand."""
         if log_time is None:
             return None
+        at = self._stand_at(log_time)
+        if at >= 0:
+            stand = self.stands[at]
+            if stand.end_ns is None or log_time < stand.end_ns:
+                return stand.show_s
+        return self._piece_seconds(log_time)
+
+    def _piece_seconds(self, log_time: int) -> float:
+        """Show time by the pieces alone: as if the clock ran on from the last sample."""
         piece = bisect_right(self._break_ns, log_time) - 1
         if piece >= 0:
             return self._break_s[piece] + (log_time - self._break_ns[piece]) / 1e9
         if self.zero_ns is None:
             self.zero_ns = log_time  # no metadata, no step, no sample: the first message is zero
         return (log_time - self.zero_ns) / 1e9
+
+    def stood_s(self, log_time: int | None) -> float:
+        """How long the clock had stood still (held or paused) up to `log_time`."""
+        if log_time is None:
+            return 0.0
+        at = self._stand_at(log_time)
+        if at < 0:
+            return 0.0
+        stand = self.stands[at]
+        until = log_time if stand.end_ns is None else min(log_time, stand.end_ns)
+        return self._stood[at] + max(0, until - stand.start_ns) / 1e9
+
+    def elapsed(self, log_time: int | None) -> float | None:
+        """Show time with the time stood still put back in: the axis a timeline draws on."""
+        show_s = self.seconds(log_time)
+        return None if show_s is None else show_s + self.stood_s(log_time)
+
+    def elapsed_of_show(self, show_s: float, end_ns: int | None = None) -> float:
+        """Where a show time falls on the `elapsed` axis: after the stands at show times up to
+        it (a planned time that no log time places: a play the run never reached); `end_ns`:
+        the log's end, where a stand that never ended ends."""
+        stood = 0.0
+        for stand in self.stands:
+            if stand.show_s > show_s:
+                break
+            stood += stand.seconds(end_ns)
+        return show_s + stood
+
+
+@dataclass(frozen=True)
+class Durations:
+    """The one figure of each of a show's lengths every review prints (seconds)."""
+
+    show_s: float | None  # on the show clock: holds and pauses not counted
+    held_s: float  # stood still at GO cues
+    paused_s: float  # stood still, paused by the operator
+    holds: int
+    pauses: int
+    wall_s: float | None  # from show time 0 to the end, on the wall clock (elapsed)
+
+    def to_json(self) -> dict:
+        return {"show_s": _ms(self.show_s), "held_s": _ms(self.held_s), "paused_s": _ms(self.paused_s),
+                "holds": self.holds, "pauses": self.pauses, "wall_s": _ms(self.wall_s)}
+
+
+def durations(times: ShowTimes, result: Mapping[str, str] | None, last_ns: int | None) -> Durations:
+    """The show's lengths: on the show clock, the run's own figure (its result) where it closed
+    its log, else the show time of the log's last message; the stands up to that message."""
+    show_s = result_show_s(result)
+    if show_s is None and last_ns is not None:
+        show_s = times.seconds(last_ns)
+    held = [s.seconds(last_ns) for s in times.stands if s.kind == HELD]
+    paused = [s.seconds(last_ns) for s in times.stands if s.kind == PAUSED]
+    wall = None if show_s is None else show_s + sum(held) + sum(paused)
+    return Durations(show_s, sum(held), sum(paused), len(held), len(paused), wall)
+
+
+def result_show_s(result: Mapping[str, str] | None) -> float | None:
+    """The run's show time at its end, as its result says (None: missing or damaged: metadata
+    carries no CRC)."""
+    text = (result or {}).get(Result.SHOW_S)
+    try:
+        value = float(text) if text else None
+    except ValueError:
+        return None
+    return value if value is not None and math.isfinite(value) and abs(value) < 1e9 else None
+
+
+def _ms(seconds: float | None) -> float | None:
+    """Rounded to the millisecond every review agrees to."""
+    return None if seconds is None else round(seconds, 3)

@@ -9,7 +9,6 @@ from its motion tracker, the one the timeline uses too.
 
 from __future__ import annotations
 
-import math
 
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,7 +18,7 @@ from choreo.log.format import (CHOREO_TOPICS, ERROR, WARNING, ClockRecord, Comma
                                Info, MotionPlay, MotionTracker, Record, Result, RxRecord, StepRecord, TxRecord,
                                is_late, parse, robot_key, slipped)
 from choreo.log.reader import Cut, LogReader
-from choreo.review.showtime import ShowTimes
+from choreo.review.showtime import Durations, ShowTimes, Stand, durations
 from choreo.wire.protocol import FrameKind, ReplyKind
 # counted (and shown) even at 0: the frames every run sends, and every reply (the wire's names)
 FRAME_KINDS = tuple(kind.value for kind in (FrameKind.STOP, FrameKind.PLAY, FrameKind.RESTORE, FrameKind.STATUS))
@@ -27,6 +26,7 @@ REPLY_KINDS = tuple(kind.value for kind in ReplyKind)
 LISTED_PLAYS = 30  # plays listed one by one; past this, per motion slot only
 LISTED_LOG_LINES = 10
 LISTED_COMMANDS = 20
+LISTED_STANDS = 20
 
 
 class Distribution:
@@ -132,19 +132,29 @@ class ClockSpan:
     samples: int
     first: ClockRecord
     last: ClockRecord
+    first_ns: int = 0  # their log times
+    last_ns: int = 0
+    stood_s: float = 0.0  # of the span, the time the show clock stood still (held, paused)
 
-    def add(self, sample: ClockRecord) -> None:
+    def add(self, sample: ClockRecord, log_time: int = 0) -> None:
         self.samples += 1
         self.last = sample
+        self.last_ns = log_time
 
     @property
     def span_s(self) -> float:
         return (self.last.monotonic_ns - self.first.monotonic_ns) / 1e9
 
     @property
+    def ran_s(self) -> float:
+        """Of the span, the time the show clock ran: drift is over this time only."""
+        return max(0.0, self.span_s - self.stood_s)
+
+    @property
     def drift_ms(self) -> float:
-        """How far the show clock ran ahead of the machine's over the span (ms)."""
-        return ((self.last.show_s - self.first.show_s) - self.span_s) * 1e3
+        """How far the show clock ran ahead of the machine's while it ran (ms): a hold or a
+        pause is no drift."""
+        return ((self.last.show_s - self.first.show_s) - self.ran_s) * 1e3
 
 
 @dataclass
@@ -158,6 +168,9 @@ class Summary:
     cut: Cut | None
     messages: int = 0
     duration_s: float | None = None  # show clock at the last message (or the result's, if closed)
+    lengths: Durations | None = None  # the duration, holds, pauses, wall time: `showtime.durations`
+    stands: list[Stand] = field(default_factory=list)  # the holds and pauses, the first LISTED_STANDS
+    clock_disordered: int = 0  # clock samples earlier than the one before, passed over
     steps_run: int = 0
     steps_done: int = 0
     steps_late: int = 0  # play steps late on stage, counted once each as the runner counts them:
@@ -218,6 +231,9 @@ def summary_record(summary: Summary) -> dict:
         "run": summary.run,
         "result": summary.result,
         "duration_s": summary.duration_s,
+        "lengths": summary.lengths.to_json() if summary.lengths else None,
+        "stands": [{"kind": s.kind, "show_s": round(s.show_s, 3), "seconds": round(s.seconds(None), 3),
+                    "ended": s.end_ns is not None} for s in summary.stands],
         "steps": {"run": summary.steps_run, "done": summary.steps_done, "late": summary.steps_late,
                   "late_by_retries": summary.steps_late_by_retries, "failed": summary.steps_failed,
                   "aborted": summary.steps_aborted, "unfinished": summary.steps_unfinished},
@@ -228,7 +244,8 @@ def summary_record(summary: Summary) -> dict:
         "motion_start_vs_cue": spread(summary.motion_starts),
         "clock": None if summary.clock is None else {
             "source": summary.clock.source, "samples": summary.clock.samples, "span_s": round(summary.clock.span_s, 6),
-            "drift_ms": round(summary.clock.drift_ms, 3),
+            "ran_s": round(summary.clock.ran_s, 6), "drift_ms": round(summary.clock.drift_ms, 3),
+            "disordered": summary.clock_disordered,
             Result.SHOW_ZERO_MONOTONIC_NS: _int(summary.result, Result.SHOW_ZERO_MONOTONIC_NS),
             Result.SHOW_ZERO_WALL_NS: _int(summary.result, Result.SHOW_ZERO_WALL_NS)},
         "motions": [{"motion": m.motion, "plays": m.plays, "measured": m.measured, "median_s": m.median_s}
@@ -310,12 +327,21 @@ def summarize_reader(reader: LogReader) -> Summary:
         order = [name for name in reader.robots if name in parts]
         summary.robots = {name: parts[name].summary for name in order + [n for n in parts if n not in order]}
         _gather(summary, parts, reader.info.unison)
-    result_s = _seconds((reader.result or {}).get(Result.SHOW_S))
-    if result_s is not None:
-        summary.duration_s = result_s
-    elif last_time is not None:
-        summary.duration_s = tally.times.seconds(last_time)
+    _lengths(summary, tally.times, reader, last_time)
     return summary
+
+
+def _lengths(summary: Summary, times: ShowTimes, reader: LogReader, last_time: int | None) -> None:
+    """The show's lengths by the one definition every review shares; the clock's drift over
+    the time it ran."""
+    summary.lengths = durations(times, reader.result, last_time)
+    summary.duration_s = summary.lengths.show_s
+    summary.stands = [s if s.end_ns is not None else Stand(s.kind, s.show_s, s.start_ns, last_time)
+                      for s in times.stands[:LISTED_STANDS]]
+    summary.clock_disordered = times.disordered
+    if summary.clock is not None:
+        clock = summary.clock
+        clock.stood_s = times.stood_s(clock.last_ns) - times.stood_s(clock.first_ns)
 
 
 def _see_shared(summary: Summary, tally: _Tally, record: Record, log_time: int) -> None:
@@ -323,17 +349,13 @@ def _see_shared(summary: Summary, tally: _Tally, record: Record, log_time: int) 
     if isinstance(record, LogRecord):
         tally.log_line(record, log_time, summary)
     elif isinstance(record, ClockRecord):
-        _clock_sample(summary, record)
         tally.times.see_clock(log_time, record)
+        if summary.clock is None:
+            summary.clock = ClockSpan(record.source, 1, record, record, log_time, log_time)
+        else:
+            summary.clock.add(record, log_time)
     elif isinstance(record, CommandRecord):
         _command(summary, record)
-
-
-def _clock_sample(summary: Summary, sample: ClockRecord) -> None:
-    if summary.clock is None:
-        summary.clock = ClockSpan(sample.source, 1, sample, sample)
-    else:
-        summary.clock.add(sample)
 
 
 @dataclass
@@ -489,16 +511,6 @@ class _Tally:
         summary.steps_failed = self.outcomes.get("failed", 0) + self.outcomes.get("timeout", 0)
         summary.steps_aborted = self.outcomes.get("aborted", 0)
         summary.steps_unfinished = len(self.late_at_start)
-
-
-def _seconds(text: str | None) -> float | None:
-    """A figure from the metadata, or None where it is missing or damaged (metadata records
-    carry no CRC: a flipped byte shows only here)."""
-    try:
-        value = float(text) if text else None
-    except ValueError:
-        return None
-    return value if value is not None and math.isfinite(value) else None
 
 
 def _add_plays(summary: Summary, plays: list[MotionPlay], times: ShowTimes) -> None:

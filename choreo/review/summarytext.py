@@ -11,6 +11,7 @@ from collections.abc import Iterable
 
 from choreo.log.format import COMMAND_TOPIC, ERROR, LATE_MS, Info, LogLayouts, Result
 from choreo.review.summary import FRAME_KINDS, LISTED_PLAYS, Summary
+from choreo.review.timeline import stood_text
 
 def _ms(value: float | None) -> str:
     return "-" if value is None else f"{value:.3f} ms"
@@ -20,6 +21,7 @@ def render(summary: Summary) -> Iterable[str]:
     """The summary as the lines `choreo log summary` prints."""
     yield from _render_run(summary)
     yield from _render_outcome(summary)
+    yield from _render_stands(summary)
     yield from _render_wire(summary)
     yield from _render_clock(summary)
     yield from _render_motions(summary)
@@ -62,6 +64,7 @@ def _render_run(summary: Summary) -> Iterable[str]:
 def _render_outcome(summary: Summary) -> Iterable[str]:
     """How the run ended, and what its steps came to."""
     duration = f"{summary.duration_s:.3f} s" if summary.duration_s is not None else "-"
+    duration += stood_text(summary.lengths)
     if summary.result:
         outcome = summary.result.get(Result.OUTCOME, "?")
         error = summary.result.get(Result.ERROR)
@@ -100,6 +103,19 @@ def _render_wire(summary: Summary) -> Iterable[str]:
                f"{_ms(starts.p99)}, max {_ms(starts.max)} ({len(starts)} cued plays, sent early by their lead)")
 
 
+def _render_stands(summary: Summary) -> Iterable[str]:
+    """Each time the show clock stood still: held at a GO cue, paused; hold time is no drift."""
+    lengths = summary.lengths
+    if lengths is None or not (lengths.holds or lengths.pauses):
+        return
+    for number, stand in enumerate(summary.stands):
+        head = "stood    " if number == 0 else "         "
+        yield f"{head} {stand.show_s:9.3f} s  {stand.kind} {stand.seconds(None):.3f} s"
+    listed = len(summary.stands)
+    if lengths.holds + lengths.pauses > listed:
+        yield f"  ... and {lengths.holds + lengths.pauses - listed} more"
+
+
 def _render_log_lines(summary: Summary) -> Iterable[str]:
     """The warnings and errors the run logged: counted, the first few listed."""
     yield f"log lines {summary.warnings} warnings, {summary.errors} errors"
@@ -121,9 +137,12 @@ def _render_clock(summary: Summary) -> Iterable[str]:
         kept = music + (f", on {backend})" if backend else ")")
     else:
         kept = "the machine's"
-    drift = (f"; show clock minus machine clock {clock.drift_ms:+.3f} ms over {clock.span_s:.1f} s"
+    ran = f" it ran (of {clock.span_s:.1f} s; the rest held or paused)" if clock.stood_s > 0 else ""
+    drift = (f"; show clock minus machine clock {clock.drift_ms:+.3f} ms over the {clock.ran_s:.1f} s{ran}"
              if clock.samples > 1 else "")
-    yield f"clock     {kept}: {clock.samples} samples{drift}"
+    disordered = (f"; {summary.clock_disordered} out of order, passed over"
+                  if summary.clock_disordered else "")
+    yield f"clock     {kept}: {clock.samples} samples{drift}{disordered}"
 
 
 def _render_commands(summary: Summary) -> Iterable[str]:

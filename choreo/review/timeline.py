@@ -4,7 +4,14 @@ Planned: where the compiled plan put the play step (`estimated_s`) and how long 
 the motion takes. Actual: from the restore frame that started it (once ACKed) to the first status
 query that found the board no longer executing, or to the stop frame of the next play, or to
 the end of the log. Late cues (a step starting more than 1 ms after it was due) and faults (any
-reply other than ACK or status; error lines) are marked where they happened.
+reply other than ACK or status; error lines) are marked where they happened, and so are the
+times the show clock stood still (held at a GO cue, paused), the operator's commands (GO, pause,
+skip, panic...) and the skipped cues.
+
+The figures are show times (`showtime`, the one definition every review shares). The bars are
+drawn on `elapsed` time: the show clock with its holds and pauses put back in, so a motion that
+ran through a hold is as long as it really was, and a hold is a span of its own (shaded, labelled
+with the show time it stood at). With no hold or pause, the two are the same.
 
 Text by default; `--png` draws the same with matplotlib (the optional extra `choreo[plot]`).
 """
@@ -12,15 +19,15 @@ Text by default; `--png` draws the same with matplotlib (the optional extra `cho
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, BinaryIO
 
 from choreo.errors import ChoreoError
 from choreo.review.attached import AttachedShow, attached_show
-from choreo.review.showtime import ShowTimes
-from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC,
-                               ClockRecord, LogLayouts, LogRecord, MotionPlay, MotionTracker, Record, Result,
-                               RxRecord, StepRecord, TxRecord, is_late, parse, slipped)
+from choreo.review.showtime import Durations, ShowTimes, Stand, durations
+from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC,
+                               STEP_TOPIC, TX_TOPIC, ClockRecord, CommandRecord, LogLayouts, LogRecord, MotionPlay,
+                               MotionTracker, Record, Result, RxRecord, StepRecord, TxRecord, is_late, parse, slipped)
 from choreo.log.reader import Cut, LogReader
 from choreo.textfit import fit
 
@@ -47,10 +54,25 @@ class MotionRun:
     ended_by: str  # status | stop | state read | end of log | not started
     late_ms: float = 0.0
     robot: str | None = None  # whose play, in a show for several robots
+    # where it is drawn: on `elapsed` time (the show clock with its holds and pauses put back in)
+    planned_at: float | None = None
+    start_at: float | None = None
+    end_at: float | None = None
 
     @property
     def planned_end_s(self) -> float | None:
         return None if self.planned_s is None else self.planned_s + self.expected_s
+
+    @property
+    def planned_end_at(self) -> float | None:
+        return None if self.planned_at is None else self.planned_at + self.expected_s
+
+    @property
+    def drawn_end_at(self) -> float | None:
+        """`drawn_end_s` on the drawing's axis: a motion is drawn as long as it ran."""
+        if self.start_at is None or self.end_at is None or self.measured:
+            return self.end_at
+        return min(self.end_at, self.start_at + self.expected_s)
 
     @property
     def measured(self) -> bool:
@@ -84,11 +106,22 @@ class MotionRun:
 @dataclass(frozen=True)
 class Mark:
     """A moment worth a reviewer's eye: a late play, a fault on the wire, a failed or aborted step,
-    an error line."""
+    an error line, a hold or pause, an operator's command, a skipped cue."""
 
     show_s: float
-    kind: str  # late | fault | failure | abort | error
+    kind: str  # late | fault | failure | abort | error | held | paused | command | skip
     text: str
+    at: float | None = None  # where it is drawn (`elapsed`); None: at its show time
+    length_s: float = 0.0  # a hold's or pause's length
+
+    @property
+    def drawn_at(self) -> float:
+        return self.show_s if self.at is None else self.at
+
+
+FAULT_KINDS = ("fault", "error", "failure", "abort")
+STAND_KINDS = ("held", "paused")
+COMMAND_KINDS = ("command", "skip")
 
 
 @dataclass(frozen=True)
@@ -98,10 +131,16 @@ class Cue:
     show_s: float
     step: int
     label: str | None
+    at: float | None = None  # where it is drawn (`elapsed`): where its step started
+    number: str | None = None  # its number in the cue list
 
     @property
     def name(self) -> str:
         return self.label or f"step {self.step}"
+
+    @property
+    def drawn_at(self) -> float:
+        return self.show_s if self.at is None else self.at
 
 
 @dataclass
@@ -115,6 +154,8 @@ class Timeline:
     outcome: str | None = None
     cut: Cut | None = None
     show_problem: str | None = None
+    lengths: Durations | None = None  # the show's duration, holds, pauses, wall time (`showtime`)
+    end_at: float = 0.0  # the end on the drawing's axis (`elapsed`)
 
     @property
     def late(self) -> list[Mark]:
@@ -122,12 +163,25 @@ class Timeline:
 
     @property
     def faults(self) -> list[Mark]:
-        return [m for m in self.marks if m.kind != "late"]
+        return [m for m in self.marks if m.kind in FAULT_KINDS]
+
+    @property
+    def stands(self) -> list[Mark]:
+        """The holds and pauses."""
+        return [m for m in self.marks if m.kind in STAND_KINDS]
+
+    @property
+    def commands(self) -> list[Mark]:
+        """The operator's commands and the cues skipped."""
+        return [m for m in self.marks if m.kind in COMMAND_KINDS]
 
     @property
     def span_s(self) -> float:
-        planned = (r.planned_end_s or 0.0 for r in self.runs + self.unplayed)
-        return max(self.end_s, max(planned, default=0.0), max((c.show_s for c in self.cues), default=0.0), 0.001)
+        """How far the drawing's axis runs."""
+        planned = (r.planned_end_at or 0.0 for r in self.runs + self.unplayed)
+        stands = (m.drawn_at + m.length_s for m in self.marks)
+        return max(self.end_at, self.end_s, max(planned, default=0.0), max(stands, default=0.0),
+                   max((c.drawn_at for c in self.cues), default=0.0), 0.001)
 
 
 def _tracker(trackers: dict[str | None, MotionTracker], layouts: LogLayouts, robot: str | None) -> MotionTracker:
@@ -154,7 +208,8 @@ def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
     seen = _Pass(timeline, ShowTimes.of(reader), LogLayouts.of(reader.run_info))
     topic, number = None, 0
     try:
-        for topic, log_time, data in reader.messages((STEP_TOPIC, TX_TOPIC, RX_TOPIC, LOG_TOPIC, CLOCK_TOPIC)):
+        for topic, log_time, data in reader.messages((STEP_TOPIC, TX_TOPIC, RX_TOPIC, LOG_TOPIC, CLOCK_TOPIC,
+                                                      COMMAND_TOPIC)):
             number += 1
             seen.see(parse(topic, data), log_time)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
@@ -180,71 +235,97 @@ class _Pass:
             return
         self.last_ns = log_time if self.last_ns is None else max(self.last_ns, log_time)
         marks = self.timeline.marks
+        now, at = self.clock.seconds(log_time) or 0.0, self.clock.elapsed(log_time)
         if isinstance(record, StepRecord):
             if record.event == "start":
                 self.clock.see_start(log_time, record.actual_s)
-            _see_step(self.timeline, self.steps, record, self.clock.seconds(log_time))
+            _see_step(self.timeline, self.steps, record, now, at)
         elif isinstance(record, TxRecord):
             _tracker(self.trackers, self.layouts, record.robot).tx(record, log_time)
             if record.label == ABORT_LABEL and not any(m.kind == "abort" for m in marks):
-                marks.append(Mark(self.clock.seconds(log_time) or 0.0, "abort",
-                                  f"show stopped: abort motion {record.motion} played"))
+                what = f"abort motion {record.motion} played" if record.motion is not None else "stop frames sent"
+                marks.append(Mark(now, "abort", f"show stopped: {what}", at))
         elif isinstance(record, RxRecord):
             _tracker(self.trackers, self.layouts, record.robot).rx(record, log_time)
             if not record.answered:
-                marks.append(_fault(record, self.clock.seconds(log_time)))
+                marks.append(_fault(record, now, at))
         elif isinstance(record, LogRecord) and record.level >= ERROR:
-            marks.append(Mark(self.clock.seconds(log_time) or 0.0, "error", str(record.message)))
+            marks.append(Mark(now, "error", str(record.message), at))
+        elif isinstance(record, CommandRecord) and record.count is None:
+            marks.append(Mark(now, "command", command_text(record), at))
 
     def finish(self, reader: LogReader, show: AttachedShow) -> None:
         """The runs in robot then time order, the marks in time order, what was never played."""
         timeline: Timeline = self.timeline  # this module's record, filled in by this pass
         clock = self.clock
-        timeline.end_s = (clock.seconds(self.last_ns) or 0.0) if self.last_ns is not None else 0.0
+        lengths = timeline.lengths = durations(clock, reader.result, self.last_ns)
+        timeline.end_s = lengths.show_s or 0.0
+        timeline.end_at = clock.elapsed(self.last_ns) or 0.0 if self.last_ns is not None else 0.0
+        timeline.marks.extend(_stand_mark(stand, clock, self.last_ns) for stand in clock.stands)
         order: dict[str | None, int] = {name: i for i, name in enumerate(reader.robots)}
         for robot, tracker in self.trackers.items():
             for play in tracker.finish(self.last_ns):
                 known = self.steps.get((robot, play.step)) if play.step is not None else None
                 timeline.runs.append(_run_of(play, known, show, clock, robot))
+        stood_end = self.last_ns
         timeline.runs.sort(key=lambda r: (order.get(r.robot, len(order)),
                                           r.start_s if r.start_s is not None else r.due_s or 0.0))
         timeline.marks.sort(key=lambda m: m.show_s)
         robots = list(show.plans) if show.plans else [None]
-        timeline.unplayed = [run for robot in robots for run in _unplayed(show, self.steps, robot)]
+        timeline.unplayed = [replace(run, planned_at=clock.elapsed_of_show(run.planned_s or 0.0, stood_end))
+                             for robot in robots for run in _unplayed(show, self.steps, robot)]
         timeline.cut = reader.cut
         timeline.outcome = (reader.result or {}).get(Result.OUTCOME)
         if timeline.outcome in ("aborted", "interrupted") and not any(m.kind == "abort" for m in timeline.marks):
-            timeline.marks.append(Mark(timeline.end_s, "abort", f"show {timeline.outcome}"))
+            timeline.marks.append(Mark(timeline.end_s, "abort", f"show {timeline.outcome}", timeline.end_at))
+
+
+def command_text(record: CommandRecord) -> str:
+    """`go applause from key: GO: applause` (REFUSED when it was not carried out)."""
+    what = record.command + (f" {record.label}" if record.label else "")
+    verdict = "" if record.status == "ok" else f" {str(record.status).upper()}"
+    return f"{what} from {record.source}{verdict}: {record.message}"
+
+
+def _stand_mark(stand: Stand, clock: ShowTimes, last_ns: int | None) -> Mark:
+    length = stand.seconds(last_ns)
+    went_on = "" if stand.end_ns is not None else " (to the end of the log)"
+    return Mark(stand.show_s, stand.kind, f"{stand.kind} {length:.3f} s at show time {stand.show_s:.3f} s{went_on}",
+                clock.elapsed(stand.start_ns), length)
 
 
 def _see_step(timeline: Timeline, steps: dict[tuple[str | None, int], _Step], step: StepRecord,
-              now: float | None) -> None:
-    now = now or 0.0
+              now: float, at: float | None = None) -> None:
     whose = f"{step.robot}: " if step.robot else ""
+    if step.event == "skip":
+        timeline.marks.append(Mark(now, "skip", f"{whose}{step.ref} skipped" +
+                                   (f" (cue {step.cue_number})" if step.cue_number else ""), at))
+        return
     if step.event == "start":
-        if step.cue is not None and not any(c.show_s == step.cue and c.step == step.index for c in timeline.cues):
-            timeline.cues.append(Cue(step.cue, step.index, step.label))
+        cue_s = step.cue if step.cue is not None else step.actual_s if step.go else None
+        if cue_s is not None and not any(c.show_s == cue_s and c.step == step.index for c in timeline.cues):
+            timeline.cues.append(Cue(cue_s, step.index, step.label, at, step.cue_number))
         if step.kind == "play":
             steps[(step.robot, step.index)] = _Step(step, step.late_ms if is_late(step) else 0.0)
             if is_late(step):
                 timeline.marks.append(Mark(now, "late", f"{whose}{step.ref} started {step.late_ms:.1f} ms late "
-                                                        f"(due {step.planned_s:.3f} s)"))
+                                                        f"(due {step.planned_s:.3f} s)", at))
         return
     known: _Step | None = steps.get((step.robot, step.index))
     if known is not None and slipped(step, late_at_start=known.late_ms > 0):
         known.late_ms = step.late_ms
         timeline.marks.append(Mark(now, "late", f"{whose}{step.ref}: motion {step.motion} started "
-                                                f"{step.late_ms:.1f} ms late (retries)"))
+                                                f"{step.late_ms:.1f} ms late (retries)", at))
     if step.outcome in ("failed", "timeout"):
-        timeline.marks.append(Mark(now, "failure", f"{whose}{step.ref} {step.outcome}"))
+        timeline.marks.append(Mark(now, "failure", f"{whose}{step.ref} {step.outcome}", at))
     elif step.outcome == "aborted":
-        timeline.marks.append(Mark(now, "abort", f"{whose}{step.ref} aborted: the show was stopped"))
+        timeline.marks.append(Mark(now, "abort", f"{whose}{step.ref} aborted: the show was stopped", at))
 
 
-def _fault(rx: RxRecord, now: float | None) -> Mark:
+def _fault(rx: RxRecord, now: float, at: float | None) -> Mark:
     what = rx.error or rx.kind
     whose = f"{rx.robot}: " if rx.robot else ""
-    return Mark(now or 0.0, "fault", f"{whose}{rx.kind.upper()} to frame #{rx.seq}: {what}")
+    return Mark(now, "fault", f"{whose}{rx.kind.upper()} to frame #{rx.seq}: {what}", at)
 
 
 def _run_of(play: MotionPlay, step: _Step | None, show: AttachedShow, clock: ShowTimes,
@@ -252,10 +333,25 @@ def _run_of(play: MotionPlay, step: _Step | None, show: AttachedShow, clock: Sho
     start = step.start if step is not None else None
     motion = play.motion if play.motion is not None else -1
     end_s = clock.seconds(play.end_ns) if play.start_ns is not None else None
+    end_at = clock.elapsed(play.end_ns) if play.start_ns is not None else None
+    planned = start.estimated_s if start else None
     return MotionRun(motion, show.name_of(play.motion), play.step, play.label,
-                     start.estimated_s if start else None, show.expected_s(motion),
+                     planned, show.expected_s(motion),
                      start.planned_s if start else None, clock.seconds(play.start_ns),
-                     end_s, play.ended_by, step.late_ms if step else 0.0, robot)
+                     end_s, play.ended_by, step.late_ms if step else 0.0, robot,
+                     _planned_at(planned, clock.seconds(play.start_ns), clock.elapsed(play.start_ns), clock),
+                     clock.elapsed(play.start_ns), end_at)
+
+
+def _planned_at(planned_s: float | None, start_s: float | None, start_at: float | None,
+                clock: ShowTimes) -> float | None:
+    """Where a play's planned bar is drawn: as far before (or after) its actual start as the plan
+    put it on the show clock; a play that never started, where its show time falls."""
+    if planned_s is None:
+        return None
+    if start_s is None or start_at is None:
+        return clock.elapsed_of_show(planned_s)
+    return start_at + planned_s - start_s
 
 
 def _unplayed(show: AttachedShow, steps: dict[tuple[str | None, int], _Step], robot: str | None) -> list[MotionRun]:
@@ -290,15 +386,15 @@ def _bar(run: MotionRun, scale: float, width: int) -> str:
     """'-' planned only, '#' actual only, '=' both (the plan stays visible under the actual),
     '.' an unmeasured end, '!' a late start, ':' a planned play the run never reached."""
     bar = [" "] * width
-    planned = set(_cells(run.planned_s, run.planned_end_s, scale, width))
+    planned = set(_cells(run.planned_at, run.planned_end_at, scale, width))
     for i in planned:
         bar[i] = ":" if run.ended_by == "not played" else "-"
-    for i in _cells(run.start_s, run.end_s, scale, width):
+    for i in _cells(run.start_at, run.end_at, scale, width):
         bar[i] = "."
-    for i in _cells(run.start_s, run.drawn_end_s, scale, width):
+    for i in _cells(run.start_at, run.drawn_end_at, scale, width):
         bar[i] = "=" if i in planned else "#"
     if run.started_late:
-        bar[_cells(run.start_s, run.start_s, scale, width)[0]] = "!"
+        bar[_cells(run.start_at, run.start_at, scale, width)[0]] = "!"
     return "".join(bar)
 
 
@@ -315,20 +411,17 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
     width = max(width, 8)
     span = timeline.span_s
     scale = width / span
-    outcome = f", {timeline.outcome}" if timeline.outcome else ""
-    yield f"timeline of {timeline.show}: {timeline.end_s:.3f} s on the show clock{outcome}"
-    yield f"one column = {span / width * 1000:.0f} ms"
-    yield "bars: '-' planned, '#' actual, '=' both, '!' late, ':' not played, 'v' cue"
-    if timeline.show_problem:
-        yield f"(planned lengths: {timeline.show_problem}; 1 s each assumed)"
+    yield from _head(timeline, span, width)
     end = f"{span:.1f} s"
     ruler = f"0 s{'':{max(width - 3 - len(end), 1)}}{end}"[:width]
     yield _row("step", "motion", "planned", "actual", ruler, figures)
     if timeline.cues:
         row = [" "] * width
         for cue in timeline.cues:
-            row[_cells(cue.show_s, cue.show_s, scale, width)[0]] = "v"
+            row[_cells(cue.drawn_at, cue.drawn_at, scale, width)[0]] = "v"
         yield _row("", "cues", "", "", "".join(row), figures)
+    if timeline.stands or timeline.commands:
+        yield _row("", "holds, commands", "", "", _marks_row(timeline, scale, width), figures)
     lane = object()
     for run in sorted(timeline.runs + timeline.unplayed, key=_lane_order(timeline)):
         if run.robot is not None and run.robot != lane:
@@ -349,6 +442,46 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
         yield "?: no status query saw it end (no `wait: done`, or the show stopped first): drawn"
         yield "   for its expected length, '.' up to what stopped it (the next play, or the log's end)"
     yield from _listed(timeline)
+
+
+def _head(timeline: Timeline, span: float, width: int) -> Iterator[str]:
+    """The show's lengths, the scale, the legend."""
+    outcome = f", {timeline.outcome}" if timeline.outcome else ""
+    yield (f"timeline of {timeline.show}: {timeline.end_s:.3f} s on the show clock"
+           f"{stood_text(timeline.lengths)}{outcome}")
+    stood = " (drawn with the holds and pauses in)" if timeline.stands else ""
+    yield f"one column = {span / width * 1000:.0f} ms{stood}"
+    yield "bars: '-' planned, '#' actual, '=' both, '!' late, ':' not played, 'v' cue"
+    if timeline.stands or timeline.commands:
+        yield "marks: '~' held or paused, '^' command, 'x' command refused, 's' cue skipped"
+    if timeline.show_problem:
+        yield f"(planned lengths: {timeline.show_problem}; 1 s each assumed)"
+
+
+def stood_text(lengths: Durations | None) -> str:
+    """` (held 4.6 s at 2 GO cues, paused 1.2 s; 9.851 s in all)`, or nothing: no hold, no pause."""
+    if lengths is None or not (lengths.holds or lengths.pauses):
+        return ""
+    parts = []
+    if lengths.holds:
+        parts.append(f"held {lengths.held_s:.3f} s at {counted(lengths.holds, 'GO cue')}")
+    if lengths.pauses:
+        parts.append(f"paused {lengths.paused_s:.3f} s" + (f" ({lengths.pauses} pauses)" if lengths.pauses > 1 else ""))
+    wall = f"; {lengths.wall_s:.3f} s in all" if lengths.wall_s is not None else ""
+    return f" ({', '.join(parts)}{wall})"
+
+
+def _marks_row(timeline: Timeline, scale: float, width: int) -> str:
+    """The holds and pauses as '~' spans, the commands as '^' (refused 'x'), skips as 's'."""
+    row = [" "] * width
+    for mark in timeline.stands:
+        for i in _cells(mark.drawn_at, mark.drawn_at + mark.length_s, scale, width):
+            row[i] = "~"
+    for mark in timeline.commands:
+        refused = mark.kind == "command" and (" ERROR:" in mark.text or " DENIED:" in mark.text)
+        row[_cells(mark.drawn_at, mark.drawn_at, scale, width)[0]] = "s" if mark.kind == "skip" else \
+            "x" if refused else "^"
+    return "".join(row)
 
 
 def _lane_order(timeline: Timeline) -> Callable[[MotionRun], tuple[int, int]]:
@@ -373,6 +506,11 @@ def _listed(timeline: Timeline) -> Iterator[str]:
         yield f"{title}: {len(marks) or 'none'}"
         for mark in marks:
             yield f"  {mark.show_s:9.3f} s  {mark.text}"
+    for title, marks in (("holds and pauses", timeline.stands), ("commands", timeline.commands)):
+        if marks:
+            yield f"{title}: {len(marks)}"
+            for mark in marks:
+                yield f"  {mark.show_s:9.3f} s  {mark.text}"
     if timeline.unplayed:
         robots = sorted({run.robot for run in timeline.unplayed if run.robot})
         whose = f" (robot {', '.join(robots)})" if robots else ""
