@@ -14,6 +14,17 @@ buffer choreo asks for ((periods - 1) x period, 20 ms) as the latency. Output st
 sound card (a Bluetooth speaker, a mixing desk's processing) add their own delay, which no
 computer can see; `--audio-latency` (not yet) would be the place for it.
 
+Pausing (`p`, `/choreo/pause`) stops the song and the show time with it; the device plays on,
+handed silence, so the clock's estimate is kept on the device's frames (silence included): the
+card's position does not stop, and neither does its reading. Show time is that position less
+the silence handed since the show began. Samples already handed when the pause comes are heard
+after it (up to `latency_s` and a period, 20-30 ms): the song resumes where the listener heard
+it at the pause, not where it had been handed, so the last few ms before the pause are heard
+twice. That is the faithful choice for a show: the show time stood at the heard position, and
+on resume it goes on with the music from there, every cue after it on its beat; resuming where
+the song was handed would put the show clock that far behind the music for the rest of the show,
+or make it jump forward over the cues in between.
+
 miniaudio is imported only here and only when music plays, so `choreo validate` and
 `choreo --help` do not pay for it.
 """
@@ -21,12 +32,15 @@ miniaudio is imported only here and only when music plays, so `choreo validate` 
 from __future__ import annotations
 
 import contextlib
+import math
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+from choreo.clock import PAUSED, RUNNING
 from choreo.errors import ChoreoError, UsageError
 from choreo.music import alsa
 from choreo.numtext import whole_number
@@ -46,6 +60,9 @@ LOCK_TIMEOUT_S = 2.0
 RATE_TOLERANCE = 0.05
 LEAD_IN_S = 0.25  # silence before the show's first moment: time for the clock to settle
 CHANNELS = 2
+# How far back a pause may put the song: the samples handed but not yet heard (the buffer, a
+# period, the estimate's error) are far less; the feed keeps this much of the song it handed.
+REWIND_S = 0.25
 NULL_DEVICE = "null"  # --audio-device null: miniaudio's null backend, silent, in real time
 
 
@@ -110,12 +127,32 @@ def _reason(exc: BaseException) -> str:
 # --------------------------------------------------------------------------- the clock
 
 
+@dataclass(frozen=True)
+class _Course:
+    """Where show time stands against the device's frames, swapped whole (one attribute read
+    is atomic): the runners read it without a lock, and never half of a pause or a resume."""
+
+    paused: bool = False
+    gap_s: float = 0.0  # the device's seconds of pause silence before the show's current stretch
+    floor_s: float = -math.inf  # show time never goes below the time the last pause stood at
+
+
+def _nothing() -> None:
+    pass
+
+
 @dataclass
 class MusicClock:
-    """Show time from the playing music (see the module's docstring); a `ShowClock`.
+    """Show time from the playing music (see the module's docstring); a `PausableShowClock`.
 
     `first_show_s`: the show time of the first sample handed to the device (the lead-in's
-    first, a little before the show's start)."""
+    first, a little before the show's start). `now` times a pause; `wake` (the run's time
+    source's `notify`) is called on resume, so runners dozing towards a later cue, whose time
+    was out of reach while paused, look again at once rather than a sleep slice later.
+
+    The audio thread tells `handed_over` and asks `chunk`; the operator's thread calls `pause`
+    and `resume`; the runners read `show_at` and `mono_at`. The lock is held for a few
+    sums, never while a sample is decoded: the audio callback never waits long."""
 
     sample_rate: int
     first_show_s: float
@@ -123,14 +160,22 @@ class MusicClock:
     window_s: float = WINDOW_S
     readings: int = 0
     first_mono: float | None = None  # when the device first asked
-    handed_s: float = 0.0  # the samples handed over so far, in seconds
+    handed_s: float = 0.0  # the samples handed over so far (pause silence too), in seconds
     last_mono: float | None = None  # when the device last asked
-    _zero: float | None = None  # monotonic time the first sample is heard (estimate)
+    now: Callable[[], float] = time.monotonic
+    wake: Callable[[], None] = _nothing
+    _zero: float | None = None  # monotonic time the device's first sample is heard (estimate)
     _window: deque = field(default_factory=deque)  # (mono, zero) with increasing zeros
+    _course: _Course = field(default_factory=_Course)
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    _next_frame: int = 0  # the device's frames handed, the chunk being handed included
+    _gap_frames: int = 0  # the device's frames of pause silence before the current stretch
+    _resume_frame: int = 0  # while paused: the show's frame (from the first handed) to go on from
 
     def handed_over(self, mono: float, frames_before: int) -> None:
         """The device asked for samples at `mono`, `frames_before` having been handed over
-        already: the sample handed over now is heard `latency_s` later."""
+        already (pause silence included: the device's frames): the sample handed over now is
+        heard `latency_s` later."""
         zero = mono - frames_before / self.sample_rate + self.latency_s
         if self.first_mono is None:
             self.first_mono = mono
@@ -143,6 +188,46 @@ class MusicClock:
             window.popleft()
         self._zero = window[0][1]
         self.readings += 1
+
+    def chunk(self, frames_before: int, frames: int) -> int | None:
+        """The device takes `frames` frames after `frames_before`: the show's frame (counted
+        from the first handed, the lead-in's) they begin at, or None while paused (silence)."""
+        with self._lock:
+            self._next_frame = frames_before + frames
+            return None if self._course.paused else frames_before - self._gap_frames
+
+    @property
+    def state(self) -> str:
+        """RUNNING or PAUSED: the music cannot hold for a GO cue (it plays on)."""
+        return PAUSED if self._course.paused else RUNNING
+
+    def pause(self) -> float:
+        """Stand show time still now, and the song with it from the next chunk on; the show
+        time it stands at (twice: the same). The song will go on from the frame heard now:
+        the frames handed after it still play out of the buffer, and play again on resume."""
+        with self._lock:
+            course = self._course
+            if course.paused:
+                return course.floor_s
+            show_s = self._show_at(course, self.now())
+            handed = self._next_frame - self._gap_frames  # the show's frames handed so far
+            frame = math.floor((show_s - self.first_show_s) * self.sample_rate + 1e-6)  # the one heard now
+            rewind = round(REWIND_S * self.sample_rate)
+            self._resume_frame = max(0, handed - rewind, min(frame, handed))
+            self._course = _Course(True, course.gap_s, show_s)
+            return show_s
+
+    def resume(self) -> None:
+        """The song goes on from the next chunk the device takes; show time stands until its
+        first sample is heard, then runs with it. Not paused: nothing to do (as a machine
+        clock not held)."""
+        with self._lock:
+            course = self._course
+            if not course.paused:
+                return
+            self._gap_frames = self._next_frame - self._resume_frame
+            self._course = _Course(False, self._gap_frames / self.sample_rate, course.floor_s)
+        self.wake()
 
     @property
     def locked(self) -> bool:
@@ -161,16 +246,31 @@ class MusicClock:
 
     @property
     def zero(self) -> float:
-        """The monotonic time of show time 0."""
+        """The monotonic time of show time 0 (for the show's current stretch, since the last
+        resume)."""
+        return self._zero_of(self._course)
+
+    def _zero_of(self, course: _Course) -> float:
         if self._zero is None:
             raise AudioError("the music's clock has not started")
-        return self._zero - self.first_show_s
+        return self._zero + course.gap_s - self.first_show_s
 
     def mono_at(self, show_s: float) -> float:
-        return self.zero + show_s
+        """While paused, a show time after the one it stands at never comes (+inf)."""
+        course = self._course
+        if course.paused and show_s > course.floor_s + 1e-9:
+            return math.inf
+        return self._zero_of(course) + show_s
 
     def show_at(self, mono: float) -> float:
-        return mono - self.zero
+        return self._show_at(self._course, mono)
+
+    def _show_at(self, course: _Course, mono: float) -> float:
+        """Never below where the last pause stood: after a resume, show time stands there
+        until the song's first sample after the pause is heard."""
+        if course.paused:
+            return course.floor_s
+        return max(course.floor_s, mono - self._zero_of(course))
 
 
 # --------------------------------------------------------------------------- the feed
@@ -178,7 +278,10 @@ class MusicClock:
 
 class Feed:
     """The samples the device plays: a lead-in of silence, the song from the show's first
-    moment, then silence for as long as the show runs on (its clock keeps the card's time)."""
+    moment, then silence for as long as the show runs on (its clock keeps the card's time).
+    While the clock is paused, silence that is no part of the show: `handed` counts every
+    frame the device took, `position` the show's (lead-in, song, silence after it), `paused`
+    the pause's silence."""
 
     def __init__(self, song: Song, clock: MusicClock, lead_in_s: float, skip_s: float,
                  now: Callable[[], float] = time.monotonic) -> None:
@@ -188,33 +291,78 @@ class Feed:
         self.frame_bytes = 2 * CHANNELS  # signed 16-bit, stereo
         self.lead_in = song.frames(lead_in_s)
         self.skip = song.frames(song.music.start + skip_s)  # where in the file the show starts
-        self.handed = 0  # frames handed over so far
-        self.ended_at: int | None = None  # frames handed over when the file ran out
+        self.handed = 0  # frames handed over so far, the pause's silence included
+        self.position = 0  # the show's frames handed over: the next one's, from the lead-in's first
+        self.paused = 0  # frames of the pause's silence handed over
+        self.ended_at: int | None = None  # the show's frame being handed when the file ran out
         self.problem: str | None = None  # why the file stopped decoding early
         self._source: Iterator[Any] | None = None
         self._pending = bytearray()
+        self._kept: deque[tuple[int, bytes]] = deque()  # (show frame, the song's bytes from it) of the last REWIND_S
 
     def generator(self) -> Generator[bytes, int, None]:
         """What miniaudio's device pulls from: sent a frame count, yields that many frames."""
         wanted = yield b""
         while True:
+            frames = int(wanted)
             self.clock.handed_over(self.now(), self.handed)
-            chunk = self._take(int(wanted))
-            self.handed += int(wanted)
+            start = self.clock.chunk(self.handed, frames)
+            if start is None:
+                chunk = bytes(frames * self.frame_bytes)
+                self.paused += frames
+            else:
+                chunk = self._take(frames, start)
+            self.handed += frames
             wanted = yield chunk
 
-    def _take(self, frames: int) -> bytes:
-        silence_left = max(0, self.lead_in - self.handed)
-        silent = min(frames, silence_left)
+    def _take(self, frames: int, start: int | None = None) -> bytes:
+        """The show's `frames` frames from its frame `start` (None: where the last ended)."""
+        if start is not None and start != self.position:
+            self._seek(start)
+        silent = min(frames, max(0, self.lead_in - self.position))
         out = bytearray(silent * self.frame_bytes)
-        need = (frames - silent) * self.frame_bytes
+        song = self._song(frames - silent)
+        if song:
+            self._keep(self.position + silent, song)
+        out += song
+        out += bytes((frames - silent) * self.frame_bytes - len(song))  # the file ran out
+        self.position += frames
+        return bytes(out)
+
+    def _song(self, frames: int) -> bytes:
+        """Up to `frames` of the song's next frames (fewer once the file has run out)."""
+        need = frames * self.frame_bytes
         while len(self._pending) < need and self.ended_at is None:
             self._decode_more()
         take = min(need, len(self._pending))
-        out += self._pending[:take]
+        song = bytes(self._pending[:take])
         del self._pending[:take]
-        out += bytes(need - take)
-        return bytes(out)
+        return song
+
+    def _keep(self, frame: int, song: bytes) -> None:
+        """Keep the song handed over for REWIND_S: a pause may put the song back that far."""
+        self._kept.append((frame, song))
+        oldest = frame + len(song) // self.frame_bytes - self.song.frames(REWIND_S)
+        while self._kept and self._kept[0][0] + len(self._kept[0][1]) // self.frame_bytes <= oldest:
+            self._kept.popleft()
+
+    def _seek(self, start: int) -> None:
+        """Go back to the show's frame `start` (the clock resumes where the pause was heard):
+        the song's frames handed from there are put back before those still to hand; forward
+        (never asked), the frames between are passed over."""
+        if start > self.position:
+            self._song(max(0, start - max(self.position, self.lead_in)))
+            self.position = start
+            return
+        back = bytearray()
+        while self._kept and self._kept[-1][0] + len(self._kept[-1][1]) // self.frame_bytes > start:
+            frame, song = self._kept.pop()
+            cut = max(0, start - frame) * self.frame_bytes
+            back[0:0] = song[cut:]
+            if cut:
+                self._kept.append((frame, song[:cut]))
+        self._pending[0:0] = back
+        self.position = start
 
     def _decode_more(self) -> None:
         try:
@@ -227,7 +375,7 @@ class Feed:
             self.problem = _reason(exc)
             chunk = None
         if not chunk:
-            self.ended_at = self.handed
+            self.ended_at = self.position
             return
         self._pending += memoryview(chunk).cast("B")  # miniaudio's array of samples, as its bytes
 
@@ -337,6 +485,7 @@ class Player:
     output: Output | None = None  # None: the default output, the null one if there is none
     origin: float = 0.0  # the show time the run starts at (--from's step), 0 for a whole show
     lead_in_s: float = LEAD_IN_S
+    wake: Callable[[], None] = _nothing  # the run's time source's notify: the clock calls it on resume
     clock: MusicClock | None = None
     feed: Feed | None = None
     backend: str = ""
@@ -347,7 +496,7 @@ class Player:
         """Open the output, start playing and return the clock once it is trusted."""
         import miniaudio
 
-        self.clock = MusicClock(self.song.sample_rate, self.origin - self.lead_in_s)
+        self.clock = MusicClock(self.song.sample_rate, self.origin - self.lead_in_s, wake=self.wake)
         self.feed = Feed(self.song, self.clock, self.lead_in_s, self.origin)
         self._device = self._open_device()
         try:  # what it opened, it closes if the start fails: the run has not wired its close yet
