@@ -61,15 +61,16 @@ def test_plan_prints_a_line_a_step_and_the_total(capsys):
     assert main(["plan", str(ROOT / "shows" / "dance.yaml")]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0] == f"Dance ({ROOT / 'shows' / 'dance.yaml'}), layout seed"
-    assert lines[1].split() == ["#", "path", "label", "start", "step", "frames"]
+    assert lines[1].split() == ["#", "cue", "label", "start", "step", "path", "frames"]
     assert len(lines) == 2 + 26 + 1
     first = lines[2]
-    assert first.split()[:5] == ["0", "steps[0]", "start", "0.000", "s"]
+    assert first.split()[:5] == ["0", "-", "start", "0.000", "s"]
+    assert "steps[0]" in first
     assert "play 0 (home)" in first
     assert first.endswith("13 00 02 00 00 00 21 87 fd 03 00 00 00 00 00 00 00 00 bd | 07 0c b8 0b 00 00 d6 | "
                           "09 00 02 00 00 00 23 87 b5")
     groove = lines[2 + 8]
-    assert groove.split()[:4] == ["8", "steps[8]#1.steps[0]", "groove", "6.200"]
+    assert groove.split()[:4] == ["8", "-", "groove", "6.200"] and "steps[8]#1.steps[0]" in groove
     wait_done = lines[3]
     assert "wait until motion 0 is done (timeout 60 s)" in wait_done
     assert wait_done.endswith("0a 00 20 00 00 00 00 00 02 2c")

@@ -28,7 +28,7 @@ def test_validate_json_lists_every_file_with_its_figures_or_problems(capsys, tmp
     good, broken = record["files"]
     assert record["ok"] is False
     assert good == {"path": "shows/minimal.yaml", "ok": True, "name": "minimal", "layout": "seed",
-                    "steps": 2, "motions": [1], "estimated_s": 1.0}
+                    "steps": 2, "motions": [1], "estimated_s": 1.0, "cues": []}
     assert broken["ok"] is False and broken["path"] == str(bad)
     problem = broken["problems"][0]
     assert problem["line"] == 3 and problem["path"].startswith("steps[0]") and "400" in problem["message"]

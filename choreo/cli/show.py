@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from collections.abc import Sequence
 from dataclasses import replace
@@ -41,8 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "plan",
         help="print a show's compiled timeline",
         description="Print the plan a show compiles to, repeats expanded: one line a step with its "
-        "index, path, label, planned start, what it does and the frames it sends (hex), then "
-        "the estimated total duration.",
+        "index, cue number, label, planned start, what it does, its path and the frames it sends "
+        "(hex), then the estimated total duration.",
     )
     plan.add_argument("show", metavar="SHOW", help="a show file (YAML)")
     plan.add_argument("--json", action="store_true", help="the plan as one JSON object on stdout")
@@ -65,7 +66,7 @@ def run_validate(args: argparse.Namespace) -> int:
         plans = compile_plans(show)
         if args.json:
             record = _show_record(show, *plans.values()) if not show.ensemble else _plans_record(show, plans)
-            files.append({"path": path, "ok": True, **record})
+            files.append({"path": path, "ok": True, **record, "cues": cues_record(plans)})
         else:
             print(one_line(summary_line(show, plans)), flush=True)  # a file named with a line break
     if args.json:  # its files' record says the problems; stderr as without --json
@@ -119,7 +120,7 @@ def tempo_line(tempo: Tempo) -> str:
 
 def _plan_record(show: Show, plan: Plan) -> dict[str, Any]:
     steps = [{"index": step.index, "path": step.path, "label": step.label, "kind": step.kind.value,
-              "start_s": step.planned_s, "cue": step.at,
+              "start_s": step.planned_s, "cue": step.at, "cue_number": step.cue,
               **({"cue_bar": step.at_beat[0], "cue_beat": step.at_beat[1]} if step.at_beat else {}),
               **({"go": True} if step.go else {}), "motion": step.motion,
               "motion_name": step.motion_name, "seconds": step.seconds, "text": step.describe(),
@@ -127,9 +128,42 @@ def _plan_record(show: Show, plan: Plan) -> dict[str, Any]:
     return {"path": show.path, **_show_record(show, plan), "plan": steps}
 
 
+def cues_record(plans: dict[str, Plan]) -> list[dict[str, Any]]:
+    """The show's cue list for `--json`: one record a cue, in show order, as the console lists it."""
+    from choreo.show.cues import cue_list
+
+    return [{"number": cue.number, "label": cue.label, "robots": list(cue.robots), "planned_s": cue.planned_s,
+             "go": cue.go, "at": cue.at, "bar": cue.at_beat[0] if cue.at_beat else None,
+             "beat": cue.at_beat[1] if cue.at_beat else None} for cue in cue_list(plans)]
+
+
+def cue_numbers_text(numbers: Sequence[str], most: int = 8) -> str:
+    """`5 cues (1-5)`, `4 cues (1, 2.5, A3, 4)`: runs of whole numbers one apart said as a range,
+    the first `most` parts only (a show of 10,000 cues is still one line); '' without cues."""
+    if not numbers:
+        return ""
+    runs: list[list[str]] = []
+    for number in numbers:
+        if runs and _follows(runs[-1][-1], number):
+            runs[-1].append(number)
+        else:
+            runs.append([number])
+    parts = [run[0] if len(run) == 1 else f"{run[0]}-{run[-1]}" for run in runs[:most]]
+    shown = ", ".join(parts) + (", ..." if len(runs) > most else "")
+    return f"{len(numbers)} cue{'s' if len(numbers) != 1 else ''} ({shown})"
+
+
+def _follows(before: str, number: str) -> bool:
+    """Whether `number` is the whole number after `before` (`4` after `3`; not `04`, not `3.5`)."""
+    whole = re.compile(r"[1-9][0-9]{0,15}")
+    return bool(whole.fullmatch(before) and whole.fullmatch(number)) and int(number) == int(before) + 1
+
+
 def summary_line(show: Show, plans: dict[str, Plan]) -> str:
-    """`shows/x.yaml: ok, 26 steps, motions 0 home, 1 bow, estimated 22.0 s` (with several
-    robots: `ok, 2 robots, 30 steps, ...`, steps counted per robot)."""
+    """`shows/x.yaml: ok, 26 steps, 3 cues (1-3), motions 0 home, 1 bow, estimated 22.0 s` (with
+    several robots: `ok, 2 robots, 30 steps, ...`, steps counted per robot)."""
+    from choreo.show.cues import cue_list
+
     names: dict[int, str] = {}
     for entry in show.motions.values():
         names.setdefault(entry.number, entry.name)
@@ -141,7 +175,9 @@ def summary_line(show: Show, plans: dict[str, Plan]) -> str:
     robots = f"{len(plans)} robots, " if show.ensemble else ""
     played = f"motions {motions}" if motions else "no motions"
     total = max(plan.estimated_s for plan in plans.values())
-    return f"{show.path}: ok, {robots}{steps}, {played}, estimated {_seconds(total)}{late}"
+    cues = cue_numbers_text([cue.number for cue in cue_list(plans)])
+    cues = f", {cues}" if cues else ""
+    return f"{show.path}: ok, {robots}{steps}{cues}, {played}, estimated {_seconds(total)}{late}"
 
 
 def run_plan(args: argparse.Namespace) -> int:
@@ -163,13 +199,14 @@ def run_plan(args: argparse.Namespace) -> int:
 def _plans_record(show: Show, plans: dict[str, Plan]) -> dict[str, Any]:
     """One robot: the plan as before; several: `robots`, each robot's plan by name."""
     if not show.ensemble:
-        return _plan_record(show, *plans.values())
+        return {**_plan_record(show, *plans.values()), "cues": cues_record(plans)}
     robots = {}
     for name, plan in plans.items():
         mine = replace(plan, steps=tuple(step for step in plan.steps if step.is_for(name)))
         robots[name] = {key: value for key, value in _plan_record(show, mine).items() if key not in ("path", "name")}
     return {"path": show.path, "name": show.name, "tracks": bool(show.tracks),
-            "estimated_s": max(plan.estimated_s for plan in plans.values()), **_clock_record(show), "robots": robots}
+            "estimated_s": max(plan.estimated_s for plan in plans.values()), **_clock_record(show), "robots": robots,
+            "cues": cues_record(plans)}
 
 
 def ensemble_lines(show: Show, plans: dict[str, Plan]) -> list[str]:
@@ -203,19 +240,22 @@ def _step_table(steps: Sequence[PlannedStep], shared: bool = False, tempo: Tempo
     rows = [
         (
             str(step.index),
-            step.path,
+            step.cue or "-",
             step.label or "-",
             _start(step, digits, tempo),
             step.describe() + (f" [{', '.join(step.robots)}]" if shared and step.robots else ""),
+            step.path,
             " | ".join(frame.hex for frame in step.frames) or "-",
         )
         for step in steps
     ]
-    header = ("#", "path", "label", "start", "step", "frames")
+    # the operator's columns first (cue number, label, start, what it does), so that 80 columns
+    # show them; the author's path and the frames after, cut first on a narrow terminal
+    header = ("#", "cue", "label", "start", "step", "path", "frames")
     # by the columns a terminal gives each cell (a Japanese name takes two a character), as shown
     cells = [tuple(visible(cell) for cell in row) for row in [header, *rows]]
-    widths = [max(display_width(row[i]) for row in cells) for i in range(5)]
-    return ["  ".join([row[0].rjust(widths[0])] + [pad(row[i], widths[i]) for i in range(1, 5)] + [row[5]])
+    widths = [max(display_width(row[i]) for row in cells) for i in range(6)]
+    return ["  ".join([row[0].rjust(widths[0])] + [pad(row[i], widths[i]) for i in range(1, 6)] + [row[6]])
             for row in cells]
 
 
