@@ -115,6 +115,9 @@ def _export_parser(commands: argparse._SubParsersAction) -> None:
     export.add_argument("--csv", metavar="FILE", help="write CSV to FILE")
     export.add_argument("--json", metavar="FILE", help="write a JSON array to FILE")
     export.add_argument("--jsonl", metavar="FILE", help="write JSON Lines (one object a row) to FILE")
+    export.add_argument("--cues", action="store_true",
+                        help="one row a cue a robot instead: number, label, planned and actual show time, "
+                        "lateness, how it was released (time, whose GO, skipped, not reached), bar.beat")
     export.set_defaults(handler=run_export)
 
 
@@ -300,7 +303,7 @@ def _timeline_png(log: str, png: str) -> int:
 
 
 def run_export(args: argparse.Namespace) -> int:
-    from choreo.review.export import CsvSink, JsonLinesSink, JsonSink, export
+    from choreo.review.export import CUE_COLUMNS, COLUMNS, CsvSink, JsonLinesSink, JsonSink, export, export_cues
     from choreo.log.reader import LogReader
 
     targets = [(name, value) for name, value in (("csv", args.csv), ("json", args.json),
@@ -316,13 +319,14 @@ def run_export(args: argparse.Namespace) -> int:
         for name, value in targets:
             out = sys.stdout if value == "-" else cast(TextIO, files.enter_context(  # opened in text mode
                 _output(value, f"log export --{name}")))
-            sinks.append(sink_of[name](out))
-        count = export(reader, sinks)
+            sinks.append(CsvSink(out, CUE_COLUMNS if args.cues else COLUMNS) if name == "csv" else sink_of[name](out))
+        count = export_cues(reader, sinks) if args.cues else export(reader, sinks)
         cut = reader.cut
     written = ", ".join(value for _, value in targets if value != "-")
     if written:
         note = f" (log {cut.state}: {cut.reason})" if cut else ""
-        print(f"exported {count} frames to {written}{note}", file=sys.stderr)
+        what = "cue rows" if args.cues else "frames"
+        print(f"exported {count} {what} to {written}{note}", file=sys.stderr)
     return 0
 
 

@@ -3,6 +3,10 @@
 For spreadsheets and pandas (`pandas.read_csv`, `pandas.read_json`): a flat table, times both as
 wall-clock nanoseconds (exact, as logged) and show-clock seconds (what a reviewer reads), and the
 meaning of each frame and reply in words. Written as it is read, so a long log never sits in memory.
+
+`--cues`: one row a cue a robot instead: its number, label, planned and actual show time (the
+step records' own, the times every review shows), lateness, and how it was released (`time`, the
+GO's source such as `go key` or `go osc udp 127.0.0.1:53001`, `skipped`, `not reached`).
 """
 
 from __future__ import annotations
@@ -10,11 +14,15 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Iterator
+from dataclasses import dataclass, field
 from typing import TextIO
 
-from choreo.log.format import LogLayouts, frame_meaning, reply_meaning
+from choreo.log.format import (COMMAND_TOPIC, STEP_TOPIC, CommandRecord, LogLayouts, Record, StepRecord,
+                               frame_meaning, parse, reply_meaning)
+from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import Exchange, exchanges
 from choreo.log.reader import LogReader
+from choreo.show.cues import Cue, cue_list
 
 COLUMNS = (
     "seq",
@@ -66,8 +74,8 @@ def rows(reader: LogReader) -> Iterator[dict]:
 class CsvSink:
     """CSV with a header row; empty cells for missing values, booleans as true/false."""
 
-    def __init__(self, out: TextIO) -> None:
-        self.writer = csv.DictWriter(out, fieldnames=COLUMNS, lineterminator="\n")
+    def __init__(self, out: TextIO, columns: tuple[str, ...] = COLUMNS) -> None:
+        self.writer = csv.DictWriter(out, fieldnames=columns, lineterminator="\n")
         self.writer.writeheader()
 
     def write(self, record: dict) -> None:
@@ -126,3 +134,97 @@ def export(reader: LogReader, sinks: list[CsvSink | JsonSink | JsonLinesSink]) -
     for sink in sinks:
         sink.close()
     return count
+
+
+# -- cues (`choreo log export --cues`) ---------------------------------------------------------
+
+CUE_COLUMNS = ("number", "label", "robot", "planned_s", "actual_s", "late_ms", "released", "bar_beat")
+GO_COMMANDS = ("go", "cue_go")
+
+
+@dataclass
+class _CuePass:
+    """One pass over the steps and commands: each cue's row per robot, as its step records say."""
+
+    numbers: dict[tuple[str, int], Cue] = field(default_factory=dict)  # (robot or "", index) -> its cue
+    rows: dict[tuple[str, int], dict] = field(default_factory=dict)  # in the order the run reached them
+    go_by: str | None = None  # the source of the last GO carried out
+
+    def see(self, record: Record) -> None:
+        if isinstance(record, CommandRecord):
+            if record.command in GO_COMMANDS and record.status == "ok" and record.count is None:
+                self.go_by = record.source
+            return
+        if not isinstance(record, StepRecord) or record.event not in ("start", "skip"):
+            return
+        key = (record.robot or "", record.index)
+        cue = self.numbers.get(key)
+        if key in self.rows or not (record.cue is not None or record.go or record.cue_number or cue):
+            return
+        self.rows[key] = _cue_row(record, cue, self._released(record))
+
+    def _released(self, record: StepRecord) -> str:
+        if record.event == "skip":
+            return "skipped"
+        if record.go:
+            return f"go {self.go_by}" if self.go_by else "go"
+        return "time"
+
+
+def _cue_row(record: StepRecord, cue: Cue | None, released: str) -> dict:
+    skipped = released == "skipped"
+    return {"number": record.cue_number or (cue.number if cue else None), "label": record.label,
+            "robot": record.robot, "planned_s": _ms(record.estimated_s),
+            "actual_s": None if skipped else _ms(record.actual_s),
+            "late_ms": None if skipped or record.go else round(record.late_ms, 3), "released": released,
+            "bar_beat": _bar_beat(cue)}
+
+
+def _unreached(cue: Cue, robot: str) -> dict:
+    return {"number": cue.number, "label": cue.label, "robot": robot or None, "planned_s": _ms(cue.planned_s),
+            "actual_s": None, "late_ms": None, "released": "not reached", "bar_beat": _bar_beat(cue)}
+
+
+def _bar_beat(cue: Cue | None) -> str | None:
+    """`5.1`: where a cue written in bars and beats falls (a music show with a tempo)."""
+    if cue is None or cue.at_beat is None:
+        return None
+    bar, beat = cue.at_beat
+    return f"{bar}.{beat:g}"
+
+
+def _ms(seconds: float | None) -> float | None:
+    return None if seconds is None else round(seconds, 3)
+
+
+def cue_rows(reader: LogReader, show: AttachedShow | None = None) -> list[dict]:
+    """One row a cue a robot: as the run reached it (by time, by whose GO, skipped), then the
+    attached show's cues it never reached. Numbers from the step records, or for an older log
+    from the attached show's cue list (blank without one). Held in memory: a row a cue."""
+    show = show or attached_show(reader)
+    plans = show.plans or ({"": show.plan} if show.plan is not None else {})
+    cues = cue_list(plans) if plans else None
+    seen = _CuePass({step: cue for cue in cues or () for step in cue.steps})
+    topic, number = None, 0
+    try:
+        for topic, _, data in reader.messages((STEP_TOPIC, COMMAND_TOPIC)):
+            number += 1
+            seen.see(parse(topic, data))
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise reader.not_choreo(topic, number, exc) from None
+    rows = list(seen.rows.values())
+    reached = set(seen.rows)
+    for cue in cues or ():
+        rows += [_unreached(cue, robot) for robot, index in cue.steps if (robot, index) not in reached]
+    return rows
+
+
+def export_cues(reader: LogReader, sinks: list[CsvSink | JsonSink | JsonLinesSink]) -> int:
+    """Write every cue's row to every sink; the number of rows."""
+    rows = cue_rows(reader)
+    for record in rows:
+        for sink in sinks:
+            sink.write(record)
+    for sink in sinks:
+        sink.close()
+    return len(rows)

@@ -10,7 +10,7 @@ from its motion tracker, the one the timeline uses too.
 from __future__ import annotations
 
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from choreo.numtext import whole_number
@@ -341,7 +341,7 @@ def _lengths(summary: Summary, times: ShowTimes, reader: LogReader, last_time: i
     summary.clock_disordered = times.disordered
     if summary.clock is not None:
         clock = summary.clock
-        clock.stood_s = times.stood_s(clock.last_ns) - times.stood_s(clock.first_ns)
+        summary.clock = replace(clock, stood_s=times.stood_s(clock.last_ns) - times.stood_s(clock.first_ns))
 
 
 def _see_shared(summary: Summary, tally: _Tally, record: Record, log_time: int) -> None:
