@@ -18,7 +18,7 @@ import pytest
 
 from choreo.clock import PAUSED, RUNNING, PausableShowClock
 from choreo.events import StopRequest
-from choreo.music.player import LATENCY_S, Feed, MusicClock, Song
+from choreo.music.player import LATENCY_S, REWIND_S, Feed, MusicClock, Song
 from choreo.run.session import Session
 from choreo.run.settings import RunRequest
 from choreo.show.model import Music
@@ -154,6 +154,51 @@ def test_resume_when_not_paused_does_nothing(tmp_path):
     assert clock.state == RUNNING and device.wakes == 0 and clock.show_at(device.t) == before
     device.play(20)
     assert device.out[800:2400] == list(range(1600)) and device.feed.paused == 0
+
+
+
+def test_pauses_from_another_thread_never_tear_the_song_or_the_clock(tmp_path):
+    """The operator's thread pauses and resumes at any moment while the audio thread hands
+    chunks and a runner reads show time: the song only ever goes on or steps back to where a
+    pause was heard, show time never goes back, and afterwards the clock still says what is heard."""
+    device = Device(tmp_path, seconds=3.0)
+    clock = device.clock
+    device.play(20)
+    done = threading.Event()
+    times: list[float] = []
+
+    def operator() -> None:
+        while not done.is_set():
+            clock.pause()
+            time.sleep(0.0005)
+            clock.resume()
+            time.sleep(0.0005)
+
+    def runner() -> None:
+        while not done.is_set():
+            times.append(clock.show_at(device.t))
+            time.sleep(0)
+
+    threads = [threading.Thread(target=operator), threading.Thread(target=runner)]
+    for thread in threads:
+        thread.start()
+    try:
+        for _ in range(150):
+            device.play(1)
+            time.sleep(0.0003)
+    finally:
+        done.set()
+        for thread in threads:
+            thread.join()
+    clock.resume()
+    device.play(30)
+    assert times == sorted(times) and device.wakes > 0
+    song = [frame for n, frame in enumerate(device.out) if n >= LEAD_IN and frame]  # the pause's silence out
+    steps = {after - before for before, after in zip(song, song[1:])}
+    assert all(step == 1 or -REWIND_S * RATE <= step <= 0 for step in steps), sorted(steps)
+    assert device.feed.paused > 0
+    for mono in [device.t - k * 0.0037 for k in range(20)]:
+        assert song_frame(clock.show_at(mono)) == device.out[device.heard_at(mono)]
 
 
 # --------------------------------------------------------------------------- for real
