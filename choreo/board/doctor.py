@@ -20,6 +20,7 @@ from choreo.board.probe import BoardInfo
 from choreo.board.usb import (KONDO_USB, KONDO_USB_ID, LOW_LATENCY_MS, NEW_ID_FIX, SYSFS, latency_cost, latency_fix,
                               latency_timer_ms, usb_devices)
 from choreo.show.model import SIM_URL, is_simulator
+from choreo.wire.layouts import HTH4_22, SEED, Layout
 
 OK, PROBLEM, NOTE = "ok", "problem", "note"
 OTHER_URLS = (*NETWORK_URLS, "loop://")  # pyserial ports that are no device of this machine
@@ -33,11 +34,20 @@ class Finding:
     check: str
     text: str
     fix: str | None = None
+    robot: str | None = None  # a show's robot the check is about (None: the machine, the show)
+
+    @property
+    def name(self) -> str:
+        """The check as a table names it: `board`, or `board lead` for one robot of several."""
+        return self.check if self.robot is None else f"{self.check} {self.robot}"
+
+    @property
+    def verdict(self) -> str:
+        return {OK: "ok", PROBLEM: "PROBLEM", NOTE: "note"}[self.level]
 
     def line(self) -> str:
         """One line, whatever a port's name put in it (a line break too)."""
-        mark = {OK: "ok     ", PROBLEM: "PROBLEM", NOTE: "note   "}[self.level]
-        return one_line(f"{mark} {self.check}: {self.text}" + (f" -> fix: {self.fix}" if self.fix else ""))
+        return one_line(f"{self.verdict:<7} {self.name}: {self.text}" + (f" -> fix: {self.fix}" if self.fix else ""))
 
 
 @dataclass(frozen=True)
@@ -61,7 +71,7 @@ def examine(ports: Sequence[SerialPort], port: str | None = None, *, sysfs: Path
     findings = _adapters(ports, sysfs)
     target = port or _only_kondo(ports)
     if target is not None and not is_simulator(target) and not target.lower().startswith(OTHER_URLS):
-        findings += _device(target, sysfs)
+        findings += device_checks(target, sysfs)
     if target is None:  # a show could not run either: a problem, not a note
         several = sum(1 for p in ports if p.is_kondo) > 1
         findings.append(Finding(PROBLEM, "board", "no port to check: no --port given and "
@@ -95,7 +105,7 @@ def _adapters(ports: Sequence[SerialPort], sysfs: Path) -> list[Finding]:
                     f"plug in the adapter (and check `lsusb`); {SIM_URL} runs shows without one")]
 
 
-def _device(device: str, sysfs: Path) -> list[Finding]:
+def device_checks(device: str, sysfs: Path = SYSFS) -> list[Finding]:
     """Permission on the device and its latency timer."""
     path = Path(device)
     try:
@@ -157,3 +167,82 @@ def audio_output(try_output: Callable[[], str], asked: str | None = None) -> Fin
     if backend.lower() == "null":
         return Finding(NOTE, "audio", f"{where} is the null output: music shows play silent")
     return Finding(OK, "audio", f"{where} opens ({backend})")
+
+
+# --------------------------------------------------------------------------- a show's board
+
+
+@dataclass(frozen=True)
+class BoardWanted:
+    """What a show's robot will ask of its board: the run's baud and layout, and whether anyone
+    chose that layout (`assumed`: the default, nobody did)."""
+
+    port: str
+    baud: int
+    layout: Layout
+    assumed: bool = False
+    robot: str | None = None
+
+
+def board_checks(info: BoardInfo, wanted: BoardWanted) -> list[Finding]:
+    """What the read-only probe says of the board a show will drive: it answers at the show's
+    baud, the config word a layout built from it needs was read, the counter's main loop does not
+    contradict the show's layout, and no motion is running (a board mid-motion is busy: the
+    show's first play would land on it)."""
+    return [_answers(info, wanted), _layout_check(info, wanted), _idle(info, wanted)]
+
+
+def _answers(info: BoardInfo, wanted: BoardWanted) -> Finding:
+    version = f", version {info.version!r}" if info.version else ""
+    config = f", config 0x{info.config.word:04x}" if info.config is not None else ""
+    said = f"a board answers on {wanted.port} at {info.baud} baud{version}{config}"
+    if info.baud != wanted.baud:
+        return Finding(PROBLEM, "board", f"{said}, but the show runs at {wanted.baud} baud",
+                       f"--baud {info.baud} (or robot.baud: {info.baud} in the show)", wanted.robot)
+    if wanted.layout.reads_config and info.config is None:
+        return Finding(PROBLEM, "board", f"{said}, but its config word was not read: layout {wanted.layout.name} "
+                       "builds its stop and start frames from it", f"choreo probe --port {wanted.port} says "
+                       "more; check the cable and the board's firmware", wanted.robot)
+    unread = [note.removeprefix("note: ") for note in info.notes]
+    if unread:
+        return Finding(NOTE, "board", f"{said}; {unread[0]}", None, wanted.robot)
+    return Finding(OK, "board", said, None, wanted.robot)
+
+
+def _layout_check(info: BoardInfo, wanted: BoardWanted) -> Finding:
+    """The program counter hints at a layout (docs/hardware.md, Board layouts): HTH4 1.x's main
+    loop, which the seed stop frame also writes, contradicts hth4-2.2; HTH4 2.x's fits both
+    layouts (2.0/2.1 are seed), so it only says which is whose."""
+    layout, robot = wanted.layout, wanted.robot
+    choose = "robot.layout in the show or --layout; `choreo import PROJECT.h4p` reads it from the project"
+    if info.counter is None or info.counter.in_call:
+        why = "not read" if info.counter is None else "a motion is running"
+        return Finding(NOTE, "layout", f"{layout.name}: the board's program counter cannot tell ({why})", None, robot)
+    pc = info.counter.program_counter
+    if pc == SEED.main_loop and layout is not SEED:
+        return Finding(PROBLEM, "layout", f"the show uses {layout.name} but the board's counter 0x{pc:06x} is "
+                       "HTH4 1.x's main loop, which the seed layout's stop frame also writes: the board says seed",
+                       f"if HTH4 2.2 or later wrote its motions, power the board off and on and check again; "
+                       f"else layout seed ({choose})", robot)
+    if pc == HTH4_22.main_loop and (layout is SEED or wanted.assumed):
+        said = "assumed (nobody chose it)" if wanted.assumed else "the show's"
+        return Finding(NOTE, "layout", f"{layout.name} is {said}; the board's counter 0x{pc:06x} is HTH4 2.x's main "
+                       "loop: seed fits motions written by HTH4 2.0/2.1, hth4-2.2 those by 2.2 and later",
+                       f"if HTH4 2.2 or later wrote them: layout hth4-2.2 ({choose})", robot)
+    if pc in (SEED.main_loop, HTH4_22.main_loop):
+        return Finding(OK, "layout", f"{layout.name}: the board's counter 0x{pc:06x} is the main loop it expects",
+                       None, robot)
+    return Finding(NOTE, "layout", f"{layout.name}: the board's counter 0x{pc:06x} is not a main loop choreo "
+                   "knows: no hint", None, robot)
+
+
+def _idle(info: BoardInfo, wanted: BoardWanted) -> Finding:
+    if info.counter is None:
+        return Finding(NOTE, "idle", "the program counter was not read: whether a motion runs is unknown",
+                       None, wanted.robot)
+    pc = info.counter.program_counter
+    if info.counter.in_call:
+        return Finding(PROBLEM, "idle", f"a motion is running on the board (counter 0x{pc:06x}): the show's "
+                       "first play would land on it", "wait until the robot is still (or stop its program), "
+                       "then check again", wanted.robot)
+    return Finding(OK, "idle", f"no motion is running (counter 0x{pc:06x}, not in a call)", None, wanted.robot)

@@ -1,10 +1,20 @@
-"""`choreo doctor [--port URL]`: check the adapter, driver, permission, latency timer and board."""
+"""`choreo doctor [--port URL]`: check the adapter, driver, permission, latency timer and board.
+`choreo doctor SHOW [run's options]`: everything that show needs (`choreo.run.preflight`)."""
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from choreo.board.usb import KONDO_USB_ID
+from choreo.errors import UsageError
+from choreo.textfit import visible
+from choreo.wire.layouts import LAYOUT_NAMES
+from choreo.wire.protocol import spell_bauds
+
+if TYPE_CHECKING:  # the checks load when doctor runs: `choreo --help` stays light
+    from choreo.board.doctor import Finding
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -14,22 +24,55 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=f"Check the serial ports and Kondo's USB adapter ({KONDO_USB_ID}), whether a driver "
         "serves it, permission on the device, its FTDI latency timer, whether a board answers "
         "(a read-only probe: the robot does not move), and whether the music's audio output opens. "
-        "One line a check; a problem comes with the command that fixes it. Exit 1 if there is a problem.",
+        "One line a check; a problem comes with the command that fixes it. Exit 1 if there is a problem. "
+        "With SHOW (and the options `choreo run` would get), everything that show needs: the show loads, "
+        "each robot's port opens and its board answers (baud, layout, no motion running), the music "
+        "decodes and outlasts the last cue, its output opens, the OSC port is free, the log's folder "
+        "takes the log; nothing moves.",
     )
-    parser.add_argument("--port", help="the port to check and probe (default: the one Kondo adapter "
-                        "plugged in); sim:// probes the built-in simulator")
+    parser.add_argument("show", nargs="?", help="the show file to check everything for (YAML)")
+    parser.add_argument("--port", action="append", metavar="URL|NAME=URL",
+                        help="the port to check and probe (default: the one Kondo adapter plugged in; "
+                        "with SHOW: the show's robot.port); sim:// probes the built-in simulator; with a "
+                        "show of several robots, NAME=URL for one robot (repeatable), as `choreo run`")
     parser.add_argument("--no-probe", action="store_true", help="do not talk to the board")
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout: ok, exit, and the "
                         "findings, each with level (ok, problem, note), check, text and fix")
     parser.add_argument("--audio-device", metavar="OUTPUT", help="the audio output to check (as `choreo run` "
                         "takes it; default: the system's output)")
+    _show_options(parser)
     parser.set_defaults(handler=run)
 
 
+def _show_options(parser: argparse.ArgumentParser) -> None:
+    """`choreo run`'s options that change what a show needs (with SHOW only)."""
+    show = parser.add_argument_group("with SHOW", "as `choreo run` takes them")
+    show.add_argument("--baud", type=int, help=spell_bauds("or", mark_default=True))
+    show.add_argument("--layout", choices=LAYOUT_NAMES, help="the board's memory layout (default: the "
+                      "show's robot.layout, else seed)")
+    logs = show.add_mutually_exclusive_group()
+    logs.add_argument("--log", metavar="PATH", help="the log file the run will write (default runs/...)")
+    logs.add_argument("--no-log", action="store_true", help="the run records no log")
+    show.add_argument("--no-music", action="store_true", help="the run plays no music")
+    show.add_argument("--from", dest="from_step", metavar="STEP", help="the run starts at this step")
+    show.add_argument("--loop", metavar="FROM..TO", help="the run rehearses this section")
+    show.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for a reply (default 0.2)")
+    show.add_argument("--retries", type=int, metavar="N", help="retries of a failed frame (default 2)")
+    show.add_argument("--osc", metavar="PORT", help="the OSC port the run will listen on (UDP and TCP)")
+    show.add_argument("--osc-host", metavar="HOST", default="127.0.0.1", help="the address OSC listens on")
+    show.add_argument("--osc-allow", action="append", metavar="ADDRESS", default=[],
+                      help="a sender OSC takes commands from (repeatable)")
+    show.add_argument("--osc-notify", action="append", metavar="HOST:PORT", default=[],
+                      help="where the run sends its progress (repeatable)")
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.show is not None:
+        return _show(args)
+    _machine_only(args)
     from serial.tools import list_ports
 
-    from choreo.board.doctor import PROBLEM, Finding, SerialPort, examine
+    from choreo.board.doctor import PROBLEM, SerialPort, examine
     from choreo.board.probe import BoardInfo, probe
 
     ports = [SerialPort(p.device, p.vid, p.pid) for p in list_ports.comports()]
@@ -43,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
 
         return audio_output(lambda: try_output(pick_output(args.audio_device)), args.audio_device)
 
-    findings = examine(ports, args.port, probe=None if args.no_probe else probe_port, audio=audio)
+    port = args.port[0] if args.port else None
+    findings = examine(ports, port, probe=None if args.no_probe else probe_port, audio=audio)
     code = 1 if any(f.level == PROBLEM for f in findings) else 0
     if args.json:
         from dataclasses import asdict
@@ -55,3 +99,57 @@ def run(args: argparse.Namespace) -> int:
     for finding in findings:
         print(finding.line())
     return code
+
+
+SHOW_ONLY = ("baud", "layout", "log", "no_log", "no_music", "from_step", "loop", "timeout", "retries", "osc",
+             "osc_allow", "osc_notify")
+
+
+def _machine_only(args: argparse.Namespace) -> None:
+    """Without SHOW, the options that say what a show needs have nothing to apply to."""
+    given = [name for name in SHOW_ONLY if getattr(args, name) not in (None, False, [])]
+    if args.osc_host != "127.0.0.1":
+        given.append("osc_host")
+    if given:
+        option = "--" + given[0].replace("_", "-").replace("from-step", "from")
+        raise UsageError(f"{option}: it says what a show needs: give the show too (choreo doctor SHOW {option} ...)")
+    if args.port and len(args.port) > 1:
+        raise UsageError(f"--port {args.port[1]}: one port to check without a show")
+
+
+def _show(args: argparse.Namespace) -> int:
+    """`choreo doctor SHOW`: the table (check, verdict, detail, fix), or one JSON object."""
+    from choreo.cli.run import port_arguments
+    from choreo.run.preflight import Machine, OscAsk, preflight
+    from choreo.run.settings import RunRequest
+
+    port, robot_ports = port_arguments(args.port)
+    request = RunRequest(args.show, port=port, baud=args.baud, log_path=args.log, no_log=args.no_log,
+                         from_step=args.from_step, timeout=args.timeout, retries=args.retries, layout=args.layout,
+                         robot_ports=robot_ports, no_music=args.no_music, audio_device=args.audio_device,
+                         loop=args.loop)
+    osc = OscAsk(args.osc, args.osc_host, tuple(args.osc_allow), tuple(args.osc_notify))
+    report = preflight(request, osc, Machine(time_source=args.time_source, talk=not args.no_probe))
+    if args.json:
+        from choreo.cli.jsonout import print_json
+
+        log = report.log
+        print_json({"ok": report.exit_code == 0, "exit": report.exit_code, "show": report.show,
+                    "log_estimate_bytes": log.bytes if log is not None else None,
+                    "findings": [{"level": f.level, "check": f.check, "robot": f.robot, "text": f.text,
+                                  "fix": f.fix} for f in report.findings]})
+        return report.exit_code
+    for line in table(report.findings):
+        print(line)
+    return report.exit_code
+
+
+def table(findings: Sequence[Finding]) -> list[str]:
+    """One line a check: its name, the verdict, what was found and, for a problem, the fix;
+    whatever a name from outside (a port, a file, a show) put in it is shown escaped."""
+    width = max([len("check"), *(len(visible(f.name)) for f in findings)])
+    lines = [f"{'check':<{width}}  verdict  detail -> fix"]
+    for f in findings:
+        fix = f" -> fix: {f.fix}" if f.fix else ""
+        lines.append(f"{visible(f.name):<{width}}  {f.verdict:<7}  {visible(f.text + fix)}")
+    return lines

@@ -110,10 +110,11 @@ class RunSettings:
     output: Output | None = None  # where it plays (None: the default output)
 
     @classmethod
-    def settle(cls, request: RunRequest, time_source: TimeSource | None = None) -> RunSettings:
-        """Load and check the show and settle every setting; opens nothing. A virtual
-        `time_source` refuses music (it plays in real time)."""
-        show = load_show(request.show_path)
+    def settle(cls, request: RunRequest, time_source: TimeSource | None = None, *,
+               loaded: Show | None = None) -> RunSettings:
+        """Load and check the show (unless `loaded` already) and settle every setting; opens
+        nothing. A virtual `time_source` refuses music (it plays in real time)."""
+        show = loaded if loaded is not None else load_show(request.show_path)
         _check_robot_ports(show, request)
         drafts = {name: _link_settings(name, robot, request, show.ensemble) for name, robot in show.cast.items()}
         _check_shared_ports(drafts)

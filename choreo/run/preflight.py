@@ -1,0 +1,474 @@
+"""`choreo doctor SHOW`: everything a show needs, checked before the doors open, without moving
+a robot.
+
+The show is settled as `choreo run` would settle it (the same `RunRequest`, so the same ports,
+bauds and layouts), then each thing the run will need is checked on its own, so that one
+problem does not hide the next: every robot's port opens and its board answers the read-only
+probe (`choreo.board.probe`: nothing is written to the board) at the show's baud, with no motion
+running and a program counter that does not contradict the show's layout; a real device's
+permission and USB latency timer; the music decodes (`Song.open`, what the run opens first) and
+lasts past the show's last cue; its output opens; the OSC port is free (the run's own
+`OscServer.bind`, then closed) and its allow-list parses; the log's folder takes a file and has
+room for the log the plan will write (`log_estimate`).
+
+A port that hangs (a driver stuck in open, a network port that never answers) cannot hang the
+preflight: on the machine's time each robot's port is checked on a thread of its own and
+whatever has not answered by `Machine.deadline_s` is a problem. On virtual time (the in-process
+simulator only, which cannot hang) the checks run in turn, deterministic.
+
+What the checks read of the machine (the probe, the port's open, free space, the audio output)
+comes in through `Machine`, so tests give them a machine of their own.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from choreo.board.doctor import NOTE, OK, PROBLEM, BoardWanted, Finding, audio_output, board_checks, device_checks
+from choreo.board.probe import BoardInfo
+from choreo.board.usb import SYSFS
+from choreo.clock import RunClock, TimeSource
+from choreo.errors import ChoreoError, ShowError, UsageError
+from choreo.log.format import CLOCK_EVERY_S
+from choreo.run.runner import POLL_S
+from choreo.run.settings import LinkSettings, RunRequest, RunSettings
+from choreo.show.model import Plan, Show, StepKind, is_simulator
+from choreo.show.read import MAX_BYTES
+from choreo.show.report import format_path
+from choreo.wire.protocol import BAUDS
+
+PORT_DEADLINE_S = 10.0  # every port's checks together: a probe of a dead board at 3 bauds takes ~3 s
+# What a log costs, measured on the simulator's logs (MCAP, uncompressed): a frame and its reply
+# are two records of ~90 bytes plus ~50 of record header and index each; a step event ~180 + 50;
+# a clock sample ~70 + 50; the metadata, schemas, show file and summary ~40 KiB.
+FRAME_AND_REPLY_BYTES = 300
+STEP_EVENT_BYTES = 240
+CLOCK_SAMPLE_BYTES = 120
+FIXED_LOG_BYTES = 64 * 1024
+MUSIC_FILE = format_path(("music", "file"))  # where a show's problem with its music file is
+ROOM_MARGIN = 4  # less free space than this many logs is worth a note (a held show logs on)
+
+
+@dataclass(frozen=True)
+class OscAsk:
+    """The run's OSC options as given (`--osc`, `--osc-host`, `--osc-allow`, `--osc-notify`)."""
+
+    port: str | None = None
+    host: str = "127.0.0.1"
+    allow: tuple[str, ...] = ()
+    notify: tuple[str, ...] = ()
+
+
+def _probe(url: str, bauds: Sequence[int], timeout: float, time_source: TimeSource | None) -> BoardInfo:
+    from choreo.board.probe import probe
+
+    return probe(url, bauds=bauds, timeout=timeout, time_source=time_source)
+
+
+def _open(url: str, baud: int, timeout: float, time_source: TimeSource | None) -> None:
+    from choreo.board.link import open_port
+
+    open_port(url, baud, timeout=timeout, clock=RunClock(time_source) if time_source else None).close()
+
+
+def _audio(asked: str | None) -> str:
+    from choreo.music.player import pick_output, try_output
+
+    return try_output(pick_output(asked))
+
+
+def _free(folder: Path) -> int:
+    return shutil.disk_usage(folder).free
+
+
+@dataclass(frozen=True)
+class Machine:
+    """What the checks read of the machine (tests give their own). `talk`: False leaves the
+    boards alone (`--no-probe`): no port is opened."""
+
+    time_source: TimeSource | None = None
+    talk: bool = True
+    probe: Callable[[str, Sequence[int], float, TimeSource | None], BoardInfo] = _probe
+    open_port: Callable[[str, int, float, TimeSource | None], None] = _open
+    audio: Callable[[str | None], str] = _audio
+    free_bytes: Callable[[Path], int] = _free
+    sysfs: Path = SYSFS
+    deadline_s: float = PORT_DEADLINE_S
+
+    @property
+    def virtual(self) -> bool:
+        return self.time_source is not None and self.time_source.virtual
+
+
+@dataclass(frozen=True)
+class LogEstimate:
+    """What the plan will log: its records, and their size in bytes."""
+
+    frames: int  # frames sent, each with its reply
+    step_events: int
+    clock_samples: int
+    bytes: int
+    per_minute_held: int  # a show held for GO (or paused) logs on: its clock samples
+
+    def text(self) -> str:
+        return (f"about {size(self.bytes)} ({self.frames} frames and replies, {self.step_events} step events, "
+                f"{self.clock_samples} clock samples; {size(self.per_minute_held)} more a minute held)")
+
+
+@dataclass(frozen=True)
+class Preflight:
+    """Every check's finding, in the order a user fixes things, and the log's estimate."""
+
+    show: str
+    findings: tuple[Finding, ...]
+    log: LogEstimate | None = None
+
+    @property
+    def exit_code(self) -> int:
+        """1 if anything would stop the show (notes do not)."""
+        return 1 if any(f.level == PROBLEM for f in self.findings) else 0
+
+
+def preflight(request: RunRequest, osc: OscAsk = OscAsk(), machine: Machine = Machine()) -> Preflight:
+    """Check everything the show `request` names needs (see the module's docstring)."""
+    settings, findings = _settle(request)
+    estimate = None
+    if settings is not None:
+        estimate = log_estimate(settings.plans, len(settings.show.source or ""))
+        findings += _robots(settings, machine)
+        if not any(f.check == "music" for f in findings):  # a music file not found is said already
+            findings += _music(settings, request, machine)
+    findings += _osc(osc, settings)
+    findings += _log(request, estimate, machine)
+    return Preflight(request.show_path, tuple(findings), estimate)
+
+
+def _settle(request: RunRequest) -> tuple[RunSettings | None, list[Finding]]:
+    """The show as `run` settles it, less what the other checks look at (the music, the log).
+    A show whose only problem is its music file is the music's problem: the show is settled
+    without looking for the file, so the robots are still checked."""
+    asked = replace(request, no_music=True, no_log=True, log_path=None)
+    music: list[Finding] = []
+    try:
+        settings = RunSettings.settle(asked)
+    except ShowError as exc:
+        if not exc.problems or any(p.path != MUSIC_FILE for p in exc.problems):
+            return None, [_unloaded(exc, request)]
+        music = [Finding(PROBLEM, "music", exc.lines()[0], "music.file in the show: a wav, mp3, flac or ogg "
+                         "file, its path relative to the show file")]
+        try:
+            settings = RunSettings.settle(asked, loaded=_without_music_check(request.show_path))
+        except ChoreoError as again:
+            return None, [_unloaded(again, request)]
+    except ChoreoError as exc:
+        return None, [_unloaded(exc, request)]
+    steps = sum(len(plan.steps) for plan in settings.plans.values())
+    longest = max(plan.estimated_s for plan in settings.plans.values())
+    robots = f"{len(settings.links)} robot{'s' if len(settings.links) > 1 else ''}"
+    shown = Finding(OK, "show", f"{settings.show.name!r} loads: {robots}, {steps} steps, about {longest:.1f} s")
+    return settings, [shown, *music]
+
+
+def _unloaded(exc: ChoreoError, request: RunRequest) -> Finding:
+    lines = exc.lines()
+    more = f" (and {len(lines) - 1} more)" if len(lines) > 1 else ""
+    fix = (f"choreo validate {request.show_path} lists every problem" if isinstance(exc, ShowError)
+           else "change the option or the show as the message says")
+    return Finding(PROBLEM, "show", lines[0] + more, fix)
+
+
+def _without_music_check(path: str) -> Show:
+    """The show, its music file not looked for (as a show attached to a log is loaded)."""
+    from choreo.show.load import load_show_bytes
+    from choreo.userfile import read_input
+
+    return load_show_bytes(read_input(Path(path), "show file", MAX_BYTES), path, folder=None)
+
+
+# --------------------------------------------------------------------------- robots
+
+
+def _robots(settings: RunSettings, machine: Machine) -> list[Finding]:
+    """Each robot's device (a real one's permission and latency timer), its port and board."""
+    ensemble = settings.show.ensemble
+    found: list[Finding] = []
+    talk: list[LinkSettings] = []
+    for link in settings.links.values():
+        robot = link.robot if ensemble else None
+        device = [] if _is_url(link.port) else device_checks(link.port, machine.sysfs)
+        device = [replace(f, robot=robot) for f in device]
+        found += device
+        if machine.talk and not any(f.check == "device" for f in device):  # a device that is not there
+            talk.append(link)
+    if not machine.talk:
+        found.append(Finding(NOTE, "board", "not probed (--no-probe): no port was opened"))
+    results = _each(talk, lambda link: _board(link, machine, ensemble), machine)
+    return found + [replace(f, robot=f.robot if ensemble else None) for link in talk for f in results[link.robot]]
+
+
+def _is_url(port: str) -> bool:
+    return is_simulator(port) or "://" in port
+
+
+def _board(link: LinkSettings, machine: Machine, ensemble: bool) -> list[Finding]:
+    """The port opens at the show's baud; the board answers the probe (the show's baud first)."""
+    robot = link.robot if ensemble else None
+    try:
+        machine.open_port(link.port, link.baud, link.timeout, machine.time_source)
+    except ChoreoError as exc:
+        return [Finding(PROBLEM, "port", exc.lines()[0], "choreo ports lists the serial ports; check the "
+                        "cable and that no other program holds the port", robot)]
+    found = [Finding(OK, "port", f"{link.given_port} opens at {link.baud} baud", None, robot)]
+    bauds = (link.baud, *(b for b in BAUDS if b != link.baud))
+    try:
+        info = machine.probe(link.port, bauds, link.timeout, machine.time_source)
+    except ChoreoError as exc:
+        return found + [Finding(PROBLEM, "board", exc.lines()[0], f"choreo probe --port {link.given_port} says more; "
+                                "check the board's power, the cable and its baud", robot)]
+    wanted = BoardWanted(link.given_port, link.baud, link.layout, link.layout_source == "default", robot)
+    return found + board_checks(info, wanted)
+
+
+def _each(links: list[LinkSettings], check: Callable[[LinkSettings], list[Finding]],
+          machine: Machine) -> dict[str, list[Finding]]:
+    """`check` for every link: in turn on virtual time; else each on a thread of its own, and a
+    link still at it after `machine.deadline_s` is a problem (its thread is left behind: a
+    daemon, holding only its port)."""
+    if machine.virtual:
+        return {link.robot: _guarded(check, link) for link in links}
+    done: dict[str, list[Finding]] = {}
+    lock = threading.Lock()
+
+    def work(link: LinkSettings) -> None:
+        found = _guarded(check, link)
+        with lock:
+            done[link.robot] = found
+
+    threads = [threading.Thread(target=work, args=(link,), daemon=True, name=f"doctor {link.robot}")
+               for link in links]
+    for thread in threads:
+        thread.start()
+    end = time.monotonic() + machine.deadline_s
+    for thread in threads:
+        thread.join(max(0.0, end - time.monotonic()))
+    with lock:
+        return {link.robot: done.get(link.robot) or [_hung(link, machine)] for link in links}
+
+
+def _guarded(check: Callable[[LinkSettings], list[Finding]], link: LinkSettings) -> list[Finding]:
+    """A check that fails in a way nobody foresaw (an OSError from a driver) is one finding."""
+    try:
+        return check(link)
+    except (OSError, ValueError) as exc:
+        return [Finding(PROBLEM, "port", f"{link.port}: {exc}", "choreo probe --port PORT says more", link.robot)]
+
+
+def _hung(link: LinkSettings, machine: Machine) -> Finding:
+    return Finding(PROBLEM, "port", f"{link.given_port}: no answer within {machine.deadline_s:g} s (the port "
+                   "or its driver hangs)", "unplug the adapter and plug it in again; then choreo probe --port "
+                   f"{link.given_port}", link.robot)
+
+
+# --------------------------------------------------------------------------- music
+
+
+def _music(settings: RunSettings, request: RunRequest, machine: Machine) -> list[Finding]:
+    """The song decodes and lasts past the last cue; its output opens."""
+    show = settings.show
+    if show.music is None:
+        return []
+    if request.no_music:
+        return [Finding(NOTE, "music", "not played (--no-music): the machine's clock keeps time")]
+    from choreo.music.player import Song
+
+    try:
+        song = Song.open(show.music, show.path)
+    except ChoreoError as exc:
+        return [Finding(PROBLEM, "music", exc.lines()[0], "music.file in the show: a wav, mp3, flac or ogg "
+                        "file next to it (choreo beats SONG decodes it too)")]
+    return [_song_length(settings, song.end_show_s, song.path),
+            audio_output(lambda: machine.audio(request.audio_device), request.audio_device)]
+
+
+def _song_length(settings: RunSettings, end: float, path: str) -> Finding:
+    last = last_cue(settings.plans)
+    show_end = max(plan.estimated_s for plan in settings.plans.values())
+    origin = settings.sections.origin
+    said = f"{path} decodes; it ends at {max(end, 0.0):.3f} s of show time"
+    if origin >= end - 1e-9:
+        return Finding(PROBLEM, "music", f"{said}: the run starts at {origin:.3f} s, past its end",
+                       "an earlier --from or --loop, or --no-music")
+    if last is not None and last[1] > end:
+        return Finding(PROBLEM, "music", f"{said}, before {last[0]} at {last[1]:.3f} s: that cue and the ones "
+                       "after it would play in silence", "a longer music file, or move the cues before "
+                       f"{end:.3f} s")
+    cue = f", after the last cue ({last[0]} at {last[1]:.3f} s)" if last is not None else ""
+    if show_end > end:
+        return Finding(NOTE, "music", f"{said}{cue}; the show's last motions run on to {show_end:.3f} s, in silence")
+    return Finding(OK, "music", f"{said}{cue}; the show ends at {show_end:.3f} s")
+
+
+def last_cue(plans: Mapping[str, Plan]) -> tuple[str, float] | None:
+    """The cue planned latest (its name, its show time): what the music must outlast."""
+    cued = [(step.planned_s, step) for plan in plans.values() for step in plan.steps
+            if step.at is not None or step.go]
+    if not cued:
+        return None
+    planned, step = max(cued, key=lambda pair: pair[0])
+    name = f"cue {step.cue}" if step.cue else f"step {step.name}"
+    return name + (f" {step.label!r}" if step.label and step.cue else ""), planned
+
+
+# --------------------------------------------------------------------------- OSC
+
+
+def _osc(osc: OscAsk, settings: RunSettings | None) -> list[Finding]:
+    """The OSC port binds (UDP and TCP, as the run binds it; closed at once) and the options
+    parse; without --osc, a show with GO cues needs the console to give them."""
+    if osc.port is None:
+        given = [name for name, value in (("--osc-allow", osc.allow), ("--osc-notify", osc.notify),
+                                          ("--osc-host", osc.host != "127.0.0.1")) if value]
+        if given:
+            return [Finding(PROBLEM, "osc", f"{given[0]} is for OSC, and no --osc PORT is given", "give --osc PORT")]
+        if settings is not None and last_cue_go(settings.plans):
+            return [Finding(NOTE, "osc", "no --osc: the show's GO cues come from the console only",
+                            "run on a terminal (the console), or give --osc PORT")]
+        return []
+    try:
+        server = _bound(osc)
+    except UsageError as exc:
+        check = "osc-allow" if str(exc).startswith("--osc-allow") else "osc"
+        return [Finding(PROBLEM, check, exc.lines()[0], "another --osc port (QLab itself listens on 53000; "
+                        "e.g. 53200), or stop what holds it" if check == "osc" else "an IP address or network, "
+                        "as 192.168.1.20 or 192.168.1.0/24")]
+    allowed = f"; allows {', '.join(osc.allow)}" if osc.allow else "; this machine only"
+    return [Finding(OK, "osc", f"udp and tcp port {server} on {osc.host} are free{allowed}")]
+
+
+def last_cue_go(plans: Mapping[str, Plan]) -> bool:
+    return any(step.go for plan in plans.values() for step in plan.steps)
+
+
+def _bound(osc: OscAsk) -> int | None:
+    """Bind as the run does, then close: the port the run would get (UsageError if none)."""
+    from choreo.events import StopRequest
+    from choreo.live.controls import Live
+    from choreo.live.osc import OscServer, parse_allow
+    from choreo.live.oscnotify import parse_targets, port_number
+
+    port = None if osc.port is None else port_number(osc.port, lowest=0)
+    if port is None:
+        raise UsageError(f"--osc {osc.port}: give a port number, 1..65535 (0: any free port)")
+    if not osc.host.strip():
+        raise UsageError("--osc-host '': give the address to listen on (127.0.0.1, 0.0.0.0, ::)")
+    parse_allow(osc.allow)
+    live = Live(StopRequest())
+    server = OscServer(live, port, host=osc.host, allow=osc.allow, notify=parse_targets(osc.notify))
+    try:
+        server.bind()
+        return server.port
+    finally:
+        server.close()
+        live.close()
+
+
+# --------------------------------------------------------------------------- the log
+
+
+def log_estimate(plans: Mapping[str, Plan], source_bytes: int = 0) -> LogEstimate:
+    """What a run of `plans` will log: each frame with its reply (a `wait: done` polls every
+    POLL_S for the motion's expected rest, and once more), each step's start and end, and a
+    clock sample every CLOCK_EVERY_S of the show; held time adds clock samples only."""
+    frames = events = 0
+    longest = 0.0
+    for plan in plans.values():
+        longest = max(longest, plan.estimated_s)
+        for step in plan.steps:
+            if not step.is_for(plan.robot):
+                continue
+            events += 2
+            polls = math.ceil(step.expected_s / POLL_S) + 1 if step.kind is StepKind.WAIT_DONE else 1
+            frames += len(step.frames) * polls if step.kind is not StepKind.WAIT else 0
+        frames += 4  # opening the port (an ACK check, a config read) and its close
+    samples = math.ceil(longest / CLOCK_EVERY_S) + 2
+    total = (FIXED_LOG_BYTES + source_bytes + frames * FRAME_AND_REPLY_BYTES + events * STEP_EVENT_BYTES
+             + samples * CLOCK_SAMPLE_BYTES)
+    return LogEstimate(frames, events, samples, total, round(60 / CLOCK_EVERY_S) * CLOCK_SAMPLE_BYTES)
+
+
+def _log(request: RunRequest, estimate: LogEstimate | None, machine: Machine) -> list[Finding]:
+    """The log's folder takes a file, and has room for the log."""
+    if request.no_log:
+        return [Finding(NOTE, "log", "off (--no-log): nothing of the show is recorded")]
+    named = request.log_path is not None
+    folder = Path(request.log_path).parent if request.log_path else Path(request.log_dir)
+    writable = _writable(folder, named)
+    if writable.level == PROBLEM or (named and Path(str(request.log_path)).exists()):
+        if writable.level != PROBLEM:
+            writable = Finding(PROBLEM, "log", f"{request.log_path} exists already: choreo never overwrites "
+                               "a log", "give another --log path, or leave --log out")
+        return [writable]
+    return [writable, _room(folder, estimate, machine)]
+
+
+def _writable(folder: Path, named: bool) -> Finding:
+    """A file can be made in `folder` (made and removed at once); the default folder, which
+    the run creates, need not exist: its nearest existing parent must take it."""
+    fix = "give --log PATH in a folder you can write, or free the folder"
+    try:
+        if folder.is_dir():
+            handle, name = tempfile.mkstemp(prefix=".choreo-doctor-", dir=folder)
+            os.close(handle)
+            os.unlink(name)
+            return Finding(OK, "log", f"folder {folder} takes a new file")
+        if named or folder.exists():
+            what = "is not a folder" if folder.exists() else "does not exist (create it first)"
+            return Finding(PROBLEM, "log", f"folder {folder} {what}", fix)
+        parent = _existing_parent(folder)
+        if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+            return Finding(PROBLEM, "log", f"folder {folder} cannot be made: {parent} is "
+                           f"{'not a folder' if not parent.is_dir() else 'not writable'}", fix)
+        return Finding(OK, "log", f"folder {folder} will be made in {parent}")
+    except OSError as exc:
+        return Finding(PROBLEM, "log", f"folder {folder}: {exc.strerror or exc}", fix)
+
+
+def _existing_parent(folder: Path) -> Path:
+    parent = folder.absolute()
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    return parent
+
+
+def _room(folder: Path, estimate: LogEstimate | None, machine: Machine) -> Finding:
+    where = _existing_parent(folder) if not folder.exists() else folder
+    try:
+        free = machine.free_bytes(where)
+    except OSError as exc:
+        return Finding(NOTE, "log space", f"free space on {where} not read: {exc.strerror or exc}")
+    if estimate is None:
+        return Finding(NOTE, "log space", f"{size(free)} free on {where}; the log's size is not "
+                       "estimated (the show did not load)")
+    said = f"the log needs {estimate.text()}; {size(free)} free on {where}"
+    if free < estimate.bytes:
+        return Finding(PROBLEM, "log space", said, "free some space there, or --log PATH on another disk")
+    if free < ROOM_MARGIN * estimate.bytes:
+        return Finding(NOTE, "log space", f"{said}: little to spare if the show is held", "free some space there")
+    return Finding(OK, "log space", said)
+
+
+def size(count: int) -> str:
+    """Bytes as a user reads a disk's figures: 512 B, 130 kB, 4.2 MB, 12.0 GB."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if count >= scale:
+            return f"{count / scale:.1f} {unit}" if count < 100 * scale else f"{count / scale:.0f} {unit}"
+    return f"{count} B"
+

@@ -1,0 +1,246 @@
+"""`choreo doctor SHOW`: a show's preflight against the simulator, each failure injected on its
+own (a dead port, a board that does not answer, a wrong layout, a missing or short song, an OSC
+port in use, a full or unwritable log folder, a port that hangs), the all-clear, and the CLI's
+table, JSON and exit codes."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import wave
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from choreo.board.doctor import NOTE, OK, PROBLEM, BoardWanted, board_checks
+from choreo.board.probe import BoardInfo, Counter
+from choreo.clock import VirtualTime
+from choreo.run.preflight import Machine, OscAsk, log_estimate, preflight
+from choreo.run.settings import RunRequest, RunSettings
+from choreo.wire.layouts import HTH4_22, SEED
+from runlog import vmain, write_show
+
+SHOW = """
+    version: 1
+    name: Doctor
+    robot: {layout: LAYOUT}
+    motions:
+      bow: {number: 1, duration: 1.0}
+    steps:
+      - play: bow
+        label: start
+      - wait: done
+      - play: bow
+        at: 3
+        label: late
+      - wait: done
+"""
+
+
+def show(tmp_path: Path, layout: str = "seed", music: str | None = None) -> str:
+    body = SHOW.replace("LAYOUT", layout)
+    if music is not None:
+        body = body.replace("    robot:", f"    music: {{file: {music}}}\n    robot:")
+    return str(write_show(tmp_path, body))
+
+
+def song(path: Path, seconds: float) -> Path:
+    with wave.open(str(path), "wb") as out:
+        out.setnchannels(1)
+        out.setsampwidth(2)
+        out.setframerate(8000)
+        out.writeframes(b"\0\0" * round(8000 * seconds))
+    return path
+
+
+def checks(tmp_path: Path, request: RunRequest, osc: OscAsk | None = None, **machine: Any) -> dict:
+    """The findings by check name (and `exit`), on virtual time and a silent output unless told."""
+    machine.setdefault("time_source", VirtualTime())
+    machine.setdefault("audio", lambda asked: "Null")
+    report = preflight(request, osc or OscAsk(), Machine(**machine))
+    return {f.name: f for f in report.findings} | {"exit": report.exit_code}
+
+
+def request(tmp_path: Path, path: str, **given: Any) -> RunRequest:
+    given.setdefault("log_path", str(tmp_path / "show.mcap"))
+    return RunRequest(path, **given)
+
+
+def test_all_clear_on_the_simulator(tmp_path):
+    song(tmp_path / "song.wav", 6.0)
+    found = checks(tmp_path, request(tmp_path, show(tmp_path, music="song.wav")), OscAsk("0"))
+    assert found["exit"] == 0
+    for name in ("show", "port", "board", "layout", "idle", "music", "osc", "log", "log space"):
+        assert found[name].level == OK, found[name]
+    assert found["audio"].level == NOTE  # the null output: silent
+    assert "ends at 6.000 s" in found["music"].text and "cue 1 'late' at 3.000 s" in found["music"].text
+    assert "the log needs about" in found["log space"].text and "free on" in found["log space"].text
+    assert not (tmp_path / "show.mcap").exists()  # the folder was tried with a file of its own, removed
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".choreo-doctor")]
+
+
+def test_a_port_that_does_not_exist_is_a_problem_and_not_opened(tmp_path):
+    found = checks(tmp_path, request(tmp_path, show(tmp_path), port=str(tmp_path / "ttyUSB9")))
+    assert found["exit"] == 1
+    assert found["device"].level == PROBLEM and "does not exist" in found["device"].text
+    assert "port" not in found and "board" not in found
+
+
+def test_a_board_that_does_not_answer_is_a_problem(tmp_path):
+    found = checks(tmp_path, request(tmp_path, show(tmp_path), port="sim://?drop=1"))
+    assert found["exit"] == 1 and found["port"].level == OK
+    assert found["board"].level == PROBLEM and "no answer to the ACK check" in found["board"].text
+    assert found["board"].fix.startswith("choreo probe --port sim://?drop=1")
+
+
+def test_a_wrong_layout_is_a_problem(tmp_path):
+    found = checks(tmp_path, request(tmp_path, show(tmp_path, "hth4-2.2"), port="sim://?layout=seed"))
+    assert found["exit"] == 1
+    assert found["layout"].level == PROBLEM and "the show uses hth4-2.2" in found["layout"].text
+    assert found["board"].level == OK and found["idle"].level == OK
+    # the same board with a seed show: all clear
+    assert checks(tmp_path, request(tmp_path, show(tmp_path), port="sim://?layout=seed"))["layout"].level == OK
+
+
+def test_a_board_at_another_baud_and_a_board_mid_motion(tmp_path):
+    found = checks(tmp_path, request(tmp_path, show(tmp_path), port="sim://?baud=625000"))
+    assert found["board"].level == PROBLEM and "the show runs at 115200" in found["board"].text
+    assert found["board"].fix.startswith("--baud 625000")
+    running = BoardInfo("sim://", 115200, "v", None, Counter(bytes.fromhex("b80b00" "4b0400" "0100000000")))
+    assert running.counter is not None and running.counter.in_call
+    idle = {f.check: f for f in board_checks(running, BoardWanted("sim://", 115200, HTH4_22))}["idle"]
+    assert idle.level == PROBLEM and "a motion is running" in idle.text and idle.fix
+    seed_main = BoardInfo("x", 115200, "v", None, Counter(SEED.main_loop.to_bytes(3, "little") + bytes(7)))
+    layout = {f.check: f for f in board_checks(seed_main, BoardWanted("x", 115200, SEED))}["layout"]
+    assert layout.level == OK
+    hth4_main = BoardInfo("x", 115200, "v", None, Counter(HTH4_22.main_loop.to_bytes(3, "little") + bytes(7)))
+    layout = {f.check: f for f in board_checks(hth4_main, BoardWanted("x", 115200, SEED, assumed=True))}["layout"]
+    assert layout.level == NOTE and "assumed" in layout.text  # HTH4 2.0/2.1 boards are seed: a note
+
+
+def test_a_missing_music_file_is_a_problem(tmp_path):
+    found = checks(tmp_path, request(tmp_path, show(tmp_path, music="gone.wav")))
+    assert found["exit"] == 1 and found["music"].level == PROBLEM and "gone.wav" in found["music"].text
+    assert "audio" not in found
+
+
+def test_a_song_shorter_than_the_last_cue_is_a_problem_and_one_ending_before_the_show_a_note(tmp_path):
+    song(tmp_path / "short.wav", 2.0)
+    found = checks(tmp_path, request(tmp_path, show(tmp_path, music="short.wav")))
+    assert found["exit"] == 1 and found["music"].level == PROBLEM
+    assert "ends at 2.000 s" in found["music"].text and "before cue 1 'late' at 3.000 s" in found["music"].text
+    song(tmp_path / "short.wav", 3.5)  # past the cue at 3 s, before the show's end at 4 s
+    found = checks(tmp_path, request(tmp_path, show(tmp_path, music="short.wav")))
+    assert found["exit"] == 0 and found["music"].level == NOTE and "in silence" in found["music"].text
+
+
+def test_an_osc_port_in_use_and_an_allow_list_that_does_not_parse(tmp_path):
+    path = show(tmp_path)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        found = checks(tmp_path, request(tmp_path, path), OscAsk(str(port)))
+    assert found["exit"] == 1 and found["osc"].level == PROBLEM and str(port) in found["osc"].text
+    assert "another --osc port" in found["osc"].fix
+    found = checks(tmp_path, request(tmp_path, path), OscAsk("0", allow=("192.168.1.0/24", "not-an-address")))
+    assert found["exit"] == 1 and found["osc-allow"].level == PROBLEM and "not-an-address" in found["osc-allow"].text
+    found = checks(tmp_path, request(tmp_path, path), OscAsk(None, allow=("10.0.0.1",)))
+    assert found["osc"].level == PROBLEM and "give --osc PORT" in found["osc"].fix
+
+
+def test_a_full_log_folder_is_a_problem_with_the_figures(tmp_path):
+    found = checks(tmp_path, request(tmp_path, show(tmp_path)), free_bytes=lambda folder: 1000)
+    assert found["exit"] == 1 and found["log"].level == OK
+    space = found["log space"]
+    assert space.level == PROBLEM and "1.0 kB free" in space.text and "frames and replies" in space.text
+    tight = checks(tmp_path, request(tmp_path, show(tmp_path)), free_bytes=lambda folder: 150_000)
+    assert tight["exit"] == 0 and tight["log space"].level == NOTE
+
+
+def test_an_unwritable_log_folder_is_a_problem(tmp_path):
+    (tmp_path / "afile").write_text("")
+    for log in (tmp_path / "afile" / "show.mcap", tmp_path / "nowhere" / "show.mcap"):
+        found = checks(tmp_path, request(tmp_path, show(tmp_path), log_path=str(log)))
+        assert found["exit"] == 1 and found["log"].level == PROBLEM and "log space" not in found
+    (tmp_path / "taken.mcap").write_text("")
+    found = checks(tmp_path, request(tmp_path, show(tmp_path), log_path=str(tmp_path / "taken.mcap")))
+    assert found["log"].level == PROBLEM and "never overwrites" in found["log"].text
+    # the default folder under a regular file: it could not be made
+    found = checks(tmp_path, RunRequest(show(tmp_path), log_dir=str(tmp_path / "afile" / "runs")))
+    assert found["log"].level == PROBLEM and "not a folder" in found["log"].text
+
+
+def test_a_port_that_hangs_cannot_hang_the_preflight(tmp_path):
+    release = threading.Event()
+
+    def hangs(url: str, baud: int, timeout: float, time_source: object) -> None:
+        release.wait(60)
+
+    try:
+        found = checks(tmp_path, request(tmp_path, show(tmp_path)), time_source=None, open_port=hangs, deadline_s=0.05)
+    finally:
+        release.set()
+    assert found["exit"] == 1 and found["port"].level == PROBLEM and "no answer within 0.05 s" in found["port"].text
+
+
+def test_a_show_that_does_not_load_is_one_problem_and_the_rest_is_still_checked(tmp_path):
+    bad = write_show(tmp_path, "version: 1\nname: x\nsteps: [{play: nothing}]\n")
+    found = checks(tmp_path, request(tmp_path, str(bad)))
+    assert found["exit"] == 1 and found["show"].level == PROBLEM and "choreo validate" in found["show"].fix
+    assert found["log"].level == OK and "not estimated" in found["log space"].text
+
+
+def test_the_estimate_covers_the_log_a_run_writes(tmp_path):
+    repo = Path(__file__).resolve().parent.parent
+    for name in ("dance.yaml", "canon.yaml"):
+        log = tmp_path / f"{name}.mcap"
+        assert vmain(["run", str(repo / "shows" / name), "--log", str(log), "-q"]) == 0
+        settings = RunSettings.settle(RunRequest(str(repo / "shows" / name), no_log=True))
+        estimate = log_estimate(settings.plans, len(settings.show.source))
+        assert log.stat().st_size <= estimate.bytes <= 3 * log.stat().st_size, (name, estimate)
+
+
+# --------------------------------------------------------------------------- the CLI
+
+
+def test_the_cli_table_json_and_exit_codes(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    path = show(tmp_path)
+    assert vmain(["doctor", path, "--port", "sim://"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split() == ["check", "verdict", "detail", "->", "fix"]
+    width = lines[0].index("verdict")
+    rows = {line[:width].strip(): line[width:].split()[0] for line in lines[1:]}
+    assert rows == {"show": "ok", "port": "ok", "board": "ok", "layout": "ok", "idle": "ok", "log": "ok",
+                    "log space": "ok"}
+    assert not (tmp_path / "runs").exists()  # the default folder is not made by the check
+    assert vmain(["doctor", path, "--port", "sim://?drop=1", "--json"]) == 1
+    record = json.loads(capsys.readouterr().out)
+    assert record["ok"] is False and record["exit"] == 1 and record["show"] == path
+    assert isinstance(record["log_estimate_bytes"], int)
+    board = next(f for f in record["findings"] if f["check"] == "board")
+    assert set(board) == {"level", "check", "robot", "text", "fix"} and board["level"] == "problem" and board["fix"]
+
+
+def test_the_cli_escapes_names_from_outside_and_keeps_plain_doctor(tmp_path, capsys):
+    path = show(tmp_path)
+    assert vmain(["doctor", path, "--port", str(tmp_path / "tty\x1b[31mUSB\n0"), "--no-log"]) == 1
+    out = capsys.readouterr().out
+    assert "\x1b" not in out and all(line for line in out.splitlines())
+    assert "\\x1b[31mUSB\\x0a0 does not exist" in out
+    # without SHOW, doctor is the machine's check as before; a show's options need a show
+    assert vmain(["doctor", "--port", "sim://"]) == 0
+    assert "ok      board: a board answers on sim://" in capsys.readouterr().out
+    assert vmain(["doctor", "--osc", "53200"]) == 2
+    assert "--osc: it says what a show needs" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("ensemble_port", ["lead=sim://?layout=seed"])
+def test_a_show_of_several_robots_names_each_robots_checks(capsys, ensemble_port, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    canon = str(Path(__file__).resolve().parent.parent / "shows" / "canon.yaml")
+    assert vmain(["doctor", canon, "--port", ensemble_port, "--no-log"]) == 1
+    out = capsys.readouterr().out
+    assert "layout lead    PROBLEM  the show uses hth4-2.2" in out and "layout follow  ok" in out
