@@ -377,6 +377,7 @@ def _discard(file: IO, created: Path | None) -> None:
 
 
 def run_replay(args: argparse.Namespace) -> int:
+    from choreo.review.timeline import stood_text
     from choreo.run.replay import replay
 
     say = not args.quiet and not args.json
@@ -408,6 +409,9 @@ def run_replay(args: argparse.Namespace) -> int:
               if report.excused else "")
     print(f"replayed {report.frames} frames: {report.same} same, {report.different} differ{timing}"
           f"{unmatched}; frames left up to {report.max_lag_ms:.1f} ms after their recorded time{cut}")
+    lengths = report.recorded
+    if lengths is not None and lengths.show_s is not None:
+        print(f"recorded show: {lengths.show_s:.3f} s on the show clock{stood_text(lengths)}")
     print(f"log: {report.log_path}")
     return code
 
@@ -420,4 +424,5 @@ def _replay_record(report: ReplayReport, code: int) -> dict:
             "different": report.different, "excused": report.excused, "replay_late": report.replay_late,
             "board_differences": report.board_differences, "unmatched": report.unmatched,
             "max_lag_ms": round(report.max_lag_ms, 3), "cut": cut,
-            "differences": [str(d) for d in report.differences]}
+            "differences": [str(d) for d in report.differences],
+            "recorded": report.recorded.to_json() if report.recorded is not None else None}

@@ -36,7 +36,7 @@ from choreo.log import LOG_DIR
 from choreo.log.reader import Cut, LogReader
 from choreo.log.recorder import Recorder, RobotInfo, RunInfo, default_log_path
 from choreo.review.attached import AttachedShow, attached_show
-from choreo.review.showtime import ShowTimes
+from choreo.review.showtime import Durations, ShowTimes, durations
 from choreo.run.settings import LinkSettings, check_output_folder, check_timeout, given_layout, show_durations
 from choreo.run.stage import Stage
 from choreo.show.model import SIM_URL, SOLO, is_simulator
@@ -118,6 +118,7 @@ class ReplayReport:
     cut: Cut | None = None
     show_note: str | None = None  # why the simulator runs without the show's durations
     boards: tuple[str, ...] = ()  # where the frames went: one URL a robot (empty: `port`)
+    recorded: Durations | None = None  # the recorded show's lengths, as every review gives them
 
     @property
     def board_differences(self) -> int:
@@ -201,6 +202,7 @@ def replay(source: str | Path, *, port: str | None = None, speed: float = 1.0, b
         show = attached_show(reader)
         settings = _settle(reader, show, request, clock)
         report: ReplayReport = _report(reader, show, request, settings)
+        report.recorded = _recorded(reader)
         with _stage(reader, settings, request, clock) as stage:
             report.log_path = stage.log_path
             if on_start is not None:
@@ -345,11 +347,20 @@ def _recorded_layout(reader: LogReader, robot: str | None) -> str:
     return layouts.name(robot)
 
 
+def _recorded(reader: LogReader) -> Durations:
+    """The recorded show's duration, holds and pauses (`showtime.durations`, as the reviews)."""
+    times = ShowTimes.of(reader)
+    last = None
+    for _, log_time, _ in reader.messages():
+        last = log_time
+    return durations(times, reader.result, last)
+
+
 def _first_frame_s(reader: LogReader) -> float:
     """The recorded show time of the log's first frame (negative: sent when the ports opened)."""
     times = ShowTimes.of(reader)
     for _, log_time, _ in reader.messages((TX_TOPIC,)):
-        return times.seconds(log_time) or 0.0
+        return times.elapsed(log_time) or 0.0
     return 0.0
 
 
@@ -442,7 +453,7 @@ class _FrameReplay:
         """A recorded step event, re-timed into the new log: the replay's show clock is the
         run's, from its first event if the run's started later than zero (frames the run sent
         before zero, at open, stay before it)."""
-        self._due(self.recorded_clock.seconds(log_time) or 0.0)
+        self._due(self.recorded_clock.elapsed(log_time) or 0.0)
         assert self.zero_mono is not None  # set by the first _due
         origin = max(self.first_s, 0.0)
         elapsed = self.clock.mono() - self.zero_mono + (self.first_s - origin) / self.speed
@@ -452,18 +463,19 @@ class _FrameReplay:
         """The recorded frame sent again on time; its reply held until the recorded one comes."""
         report: ReplayReport = self.report
         show_s = self.recorded_clock.seconds(log_time) or 0.0
+        at = self.recorded_clock.elapsed(log_time) or 0.0  # paced with the holds in: the board sees the same gaps
         frame = _frame(self.reader, record)
         if self.pending.pop(record.seq, None) is not None:  # its recorded reply never came: nothing to compare
             report.unmatched += 1
-        target = self._due(show_s)
+        target = self._due(at)
         reply = self.link.send(frame, record.attempt, Tag(record.step, record.label))
         report.frames += 1
         replayed = RxRecord(record.seq, reply.kind.value, reply.hex, executing=reply.executing,
                             error=reply.error, robot=record.robot)
         written = self.link.last_tx_mono  # after any wait in the link
         if frame.kind is FrameKind.RESTORE:
-            self.restored = (show_s, written)
-        late_ms = _late_ms(show_s, written, target, self.restored, self.speed)
+            self.restored = (at, written)
+        late_ms = _late_ms(at, written, target, self.restored, self.speed)
         self.pending[record.seq] = _Sent(record, replayed, show_s, late_ms)
         if len(self.pending) > 64:  # replies missing from the recording: do not hold them forever
             self.pending.pop(next(iter(self.pending)))
