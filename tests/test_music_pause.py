@@ -8,6 +8,7 @@ miniaudio's null output, paused from another thread, with bounds generous for a 
 
 from __future__ import annotations
 
+import itertools
 import math
 import random
 import threading
@@ -194,7 +195,7 @@ def test_pauses_from_another_thread_never_tear_the_song_or_the_clock(tmp_path):
     device.play(30)
     assert times == sorted(times) and device.wakes > 0
     song = [frame for n, frame in enumerate(device.out) if n >= LEAD_IN and frame]  # the pause's silence out
-    steps = {after - before for before, after in zip(song, song[1:])}
+    steps = {after - before for before, after in itertools.pairwise(song)}
     assert all(step == 1 or -REWIND_S * RATE <= step <= 0 for step in steps), sorted(steps)
     assert device.feed.paused > 0
     for mono in [device.t - k * 0.0037 for k in range(20)]:
