@@ -315,7 +315,7 @@ class StepRecord(_Record):
     topic: ClassVar[str] = STEP_TOPIC
     index: int
     kind: str
-    event: str  # start | end
+    event: str  # start | end | skip (a cue the operator skipped: the step never ran)
     actual_s: float
     planned_s: float = 0.0  # when it was due at run time
     estimated_s: float = 0.0  # where the compiled plan put it
@@ -324,7 +324,7 @@ class StepRecord(_Record):
     label: str | None = None
     motion: int | None = None
     cue: float | None = None
-    outcome: str | None = None  # end: ok | failed | aborted | timeout
+    outcome: str | None = None  # end: ok | failed | aborted | timeout; skip: skipped
     robot: str | None = None  # whose step, in a show for several robots
     start_s: float | None = None  # end of a play: when the frame that started the motion was written
     lead_ms: float | None = None  # end of a cued play: how far ahead of its cue the first frame was due
