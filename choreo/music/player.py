@@ -315,9 +315,10 @@ class Feed:
             self.handed += frames
             wanted = yield chunk
 
-    def _take(self, frames: int, start: int | None = None) -> bytes:
-        """The show's `frames` frames from its frame `start` (None: where the last ended)."""
-        if start is not None and start != self.position:
+    def _take(self, frames: int, start: int) -> bytes:
+        """The show's `frames` frames from its frame `start` (where the last ended, but after a
+        pause where it was heard)."""
+        if start != self.position:
             self._seek(start)
         silent = min(frames, max(0, self.lead_in - self.position))
         out = bytearray(silent * self.frame_bytes)
