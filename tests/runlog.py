@@ -207,7 +207,7 @@ class LiveRun:
     controls that also listen to the run (an OscServer). Real time, the in-process simulator."""
 
     def __init__(self, tmp_path: Path, body: str, *, wait_start: bool = False, lockout_s: float | None = None,
-                 attach=None, **request) -> None:  # type: ignore[no-untyped-def]
+                 attach=None, cues: bool = False, **request) -> None:  # type: ignore[no-untyped-def]
         import threading
 
         from choreo.live.controls import Live
@@ -219,6 +219,10 @@ class LiveRun:
         self.log_path = tmp_path / "run.mcap"
         self.session = Session.prepare(RunRequest(str(show), log_path=str(self.log_path), **request))
         timing = {} if lockout_s is None else {"lockout_s": lockout_s}
+        if cues:  # the show's cue list, as `choreo run` gives it (playhead, skip, cues by number)
+            from choreo.show.cues import cue_list
+
+            timing["cues"] = cue_list(self.session.settings.plans)
         self.live = Live(StopRequest(), wait_start=wait_start, **timing)
         self.listeners = attach(self.live) if attach is not None else []
         self.result = None

@@ -59,7 +59,7 @@ def test_the_machine_clock_holds_while_a_go_cue_waits(tmp_path):
     assert run.live.waiting[0].name == "applause"
     time.sleep(0.4)  # the operator takes a while: the show clock holds
     answer = run.go()
-    assert answer.ok and answer.data == {"cue": "applause", "step": 1}
+    assert answer.ok and answer.data == {"cue": "1", "label": "applause", "playhead": None}
     run.finish()
     assert run.error is None and run.result.outcome == "done"
     log = run.log()
@@ -70,8 +70,8 @@ def test_the_machine_clock_holds_while_a_go_cue_waits(tmp_path):
     assert steps["after"]["actual_s"] == pytest.approx(0.5, abs=0.02)  # generous: a loaded machine
     assert steps["after"]["late_ms"] < 20
     go = [m for m in log.topic("/choreo/command") if m["command"] == "go"]
-    assert go == [{"command": "go", "source": "test", "status": "ok", "message": "GO: applause",
-                   "label": "applause", "show_s": go[0]["show_s"], "_log_time": go[0]["_log_time"]}]
+    assert go == [{"command": "go", "source": "test", "status": "ok", "message": "GO: cue 1 'applause'",
+                   "label": "1", "show_s": go[0]["show_s"], "_log_time": go[0]["_log_time"]}]
     # on the wall clock, the cue came 0.5 - (where the GO cue was reached) after the GO
     waited = (steps["after"]["_log_time"] - go[0]["_log_time"]) / 1e9
     assert 0.35 < waited < 0.6
@@ -196,7 +196,8 @@ def test_a_go_cue_in_a_repeat_waits_on_every_pass(tmp_path):
         time.sleep(0.5)  # past the lockout
         assert run.go().ok
     run.finish()
-    assert [m["message"] for m in run.log().topic("/choreo/command")] == ["GO: bow", "GO: bow#2", "GO: bow#3"]
+    assert [m["message"] for m in run.log().topic("/choreo/command")] == ["GO: cue 1 'bow'", "GO: cue 2 'bow#2'",
+                                                                           "GO: cue 3 'bow#3'"]
 
 
 def test_loop_repeats_a_section_until_stopped(tmp_path):
@@ -243,7 +244,7 @@ def test_the_summary_lists_who_pressed_what_and_when(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "commands  2 from the operator (1 refused)" in out
     assert "cue_go nope  test ERROR: cue 'nope' is not waiting for GO (waiting: 'applause')" in out
-    assert "go applause  test: GO: applause" in out
+    assert "go 1         test: GO: cue 1 'applause'" in out
     assert main(["log", "summary", str(run.log_path), "--json"]) == 0
     record = json.loads(capsys.readouterr().out)
     assert [c["command"] for c in record["commands"]] == ["cue_go", "go"] and record["commands_total"] == 2

@@ -46,7 +46,7 @@ def _track_cues(hold_s: float, go_s: float, cues: list[float]) -> tuple[list[flo
         show.hold_at(hold_s)  # A reaches its GO cue: the clock holds for every track
         source.sleep(zero + go_s - clock.mono())
         went.append(clock.mono())
-        show.resume()  # the operator's GO
+        show.release()  # the operator's GO
         source.leave()
 
     def track_b() -> None:
@@ -124,7 +124,7 @@ class _GoInTheGap:
         due = self.show.mono_at(show_s)
         if due == float("inf") and not self.gone:
             self.gone = True
-            threading.Thread(target=self.show.resume).start()  # the operator's GO, from its own thread
+            threading.Thread(target=self.show.release).start()  # the operator's GO, from its own thread
             time_to_run = threading.Event()
             time_to_run.wait(0.05)  # real time: the GO's thread runs (virtual time stands still)
         return due

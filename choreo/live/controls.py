@@ -1,104 +1,195 @@
-"""Running a show live: the operator's commands (GO, panic, start, stop, a cue's GO), from
-whichever source gives them (the console's keys, OSC), and the GO cues that wait for them.
+"""Running a show live: the operator's commands (GO, a cue's GO, skip, the playhead, pause and
+resume, panic, start, stop), from whichever source gives them (the console's keys, OSC), and the
+GO cues that wait for them.
 
 One `Live` a run, shared by every robot's runner and every source: a command is answered the
 same way from the keyboard as from QLab, and every command, accepted or refused, is reported to
 the listeners (the log records who pressed what and when). Sources never touch the runners:
-they call `command`, which sets state the runners read (a GO cue released, the stop request).
+they call `command`, which sets state the runners read (a GO cue released, a cue skipped, the
+pause, the stop request).
+
+The cue list (`choreo.show.cues`) has a playhead, as QLab's has: the cue a GO fires. By default
+it is "auto", the earliest GO cue waiting, else the next GO cue ahead; once the operator moves
+it, it stays on that cue until the cue runs or is skipped, then it is auto again. Live hears the
+run's steps (`on_step`), so it knows which cues are ahead, waiting, running, done or skipped.
 
 The show clock holds while a GO cue waits (on the machine's clock: the steps after it are timed
 from the GO, as if it came at once); on the music's clock it cannot hold, so the music plays on
-and the step is reported against it.
+and the step is reported against it. A pause stands either clock still (the music pauses with
+it); no step starts while paused, a step under way finishes, and the steps after the resume are
+timed from it.
 """
 
 from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any, NamedTuple
 
-from choreo.clock import ShowClock
+from choreo.clock import HELD, PAUSED, RUNNING, MachineShowClock, PausableShowClock, ShowClock
 from choreo.events import (PANIC, STOPPED, Answer, Command, CommandEvent, CommandListener, GoCue, Listeners,
-                           StopRequest, Subscription, WaitingListener)
+                           StepEvent, StopRequest, Subscription, WaitingListener)
 from choreo.live.limits import LIMITS, Held, Limits, ReportGate
 from choreo.log.format import UNLOGGED
-from choreo.show.model import PlannedStep
+from choreo.show.cues import Cue, CueList, CueNotFound
+from choreo.show.model import SOLO, PlannedStep
+from choreo.textfit import fit
+
+if TYPE_CHECKING:
+    from choreo.live.status import ShowStatus
 
 LOCKOUT_S = 0.5  # a second GO this soon after one is taken for a double press, and refused
+REF_CHARS = 40  # the most of a cue reference typed or sent that an answer repeats
+NO_CUES = CueList()  # a show run without its cue list (GO still fires the earliest GO cue waiting)
+RESUME_FIRST = "paused: resume first (p or /choreo/resume)"
+
+# a cue's state (`Live.cue_state`)
+AHEAD, WAITING, ACTIVE, DONE, SKIPPED = "ahead", "waiting", "running", "done", "skipped"
+
+
+class _Stand(NamedTuple):
+    """Where the machine's show clock is: its zero, and the show times it stands at (a GO cue's
+    hold, the operator's pause; None: not standing for it). One tuple, swapped whole, so a
+    runner reading it never sees half a change."""
+
+    zero: float
+    hold: float | None
+    pause: float | None
+
+    @property
+    def at(self) -> float | None:
+        """The show time the clock stands at: the earlier of the two."""
+        if self.hold is None:
+            return self.pause
+        return self.hold if self.pause is None else min(self.hold, self.pause)
 
 
 class HoldingShowClock:
-    """The machine's show clock, which stops at a GO cue's time while the cue waits: show time
-    stands still there, and every runner's later due times move on with the hold. Times up to
-    the cue keep their places (another robot still on its way to the same cue gets there).
-    A runner asleep towards a later due time (another track's cue) dozes: `wake` (its time
-    source's `notify`) ends the doze when the clock goes on, so it sleeps again towards the due
-    time as moved by the GO, not to the end of a sleep slice."""
+    """The machine's show clock, which stops at a GO cue's time while the cue waits, and where
+    the operator pauses it: show time stands still there, and every runner's later due times
+    move on with it. Times up to that point keep their places (another robot still on its way to
+    the same cue gets there). A hold and a pause may overlap: the clock stands at the earlier,
+    and releasing one takes out of the show only the time it really stood. A runner asleep
+    towards a later due time (another track's cue) dozes: `wake` (its time source's `notify`)
+    ends the doze when the clock goes on, so it sleeps again towards the due time as moved, not
+    to the end of a sleep slice. A `PausableShowClock`."""
 
     def __init__(self, zero: float, mono: Callable[[], float], wake: Callable[[], None] = lambda: None) -> None:
-        self._zero = zero
+        self._stand = _Stand(zero, None, None)
         self._mono = mono
         self._wake = wake
-        self._hold_s: float | None = None  # the show time the clock stops at
-        self._on_resume: Listeners[Callable[[], None]] = Listeners()  # told when it goes on
+        self._lock = threading.Lock()  # changes only; readers take `_stand` whole
 
     @property
     def held(self) -> bool:
-        return self._hold_s is not None
+        """A GO cue holds it (paused or not)."""
+        return self._stand.hold is not None
+
+    @property
+    def state(self) -> str:
+        stand = self._stand
+        return PAUSED if stand.pause is not None else HELD if stand.hold is not None else RUNNING
 
     def hold_at(self, show_s: float) -> None:
-        """Stop the clock when it reaches `show_s` (at once if it has)."""
-        self._hold_s = show_s if self._hold_s is None else min(self._hold_s, show_s)
+        """Stop the clock when it reaches `show_s` (at once if it has: where it is now, never
+        back to a time it has shown already)."""
+        with self._lock:
+            stand = self._stand
+            at = max(show_s, self._show(stand, self._mono()))
+            self._stand = stand._replace(hold=at if stand.hold is None else min(stand.hold, at))
+
+    def release(self) -> None:
+        """A GO: go on from the held time (still standing if paused); the time spent holding is
+        taken out of the show."""
+        self._go_on(hold=True)
+
+    def pause(self) -> float:
+        with self._lock:
+            stand = self._stand
+            if stand.pause is None:
+                stand = self._stand = stand._replace(pause=self._show(stand, self._mono()))
+            assert stand.pause is not None
+            return stand.pause
 
     def resume(self) -> None:
-        """Go on from the held time: the time spent holding is taken out of the show."""
-        if self._hold_s is not None:
-            reached = self._zero + self._hold_s
-            now = self._mono()
-            if now > reached:
-                self._zero += now - reached
-            self._hold_s = None
-            self._wake()
-            for listener in self._on_resume:
-                listener()
+        """Go on from the pause (still held while a GO cue waits)."""
+        self._go_on(hold=False)
 
-    def on_resume(self, listener: Callable[[], None]) -> Subscription:
-        """Call `listener` each time the clock goes on after a hold (the log's clock sample
-        marks where show time goes on), until the subscription closes."""
-        return self._on_resume.subscribe(listener)
+    def _go_on(self, hold: bool) -> None:
+        with self._lock:
+            stand = self._stand
+            if (stand.hold if hold else stand.pause) is None:
+                return
+            now = self._mono()
+            stood = self._show(stand, now)
+            zero = now - stood if now - stand.zero > stood else stand.zero
+            self._stand = _Stand(zero, None if hold else stand.hold, stand.pause if hold else None)
+        self._wake()
 
     def wake(self) -> None:
         """Every runner dozing towards a due time looks again now: a stop or a panic given
-        while a GO cue holds ends the others' dozes at once, not a sleep slice later."""
+        while the clock stands ends the others' dozes at once, not a sleep slice later."""
         self._wake()
 
     def mono_at(self, show_s: float) -> float:
-        if self._hold_s is not None and show_s > self._hold_s + 1e-9:
+        stand = self._stand
+        at = stand.at
+        if at is not None and show_s > at + 1e-9:
             return float("inf")
-        return self._zero + show_s
+        return stand.zero + show_s
 
     def show_at(self, mono: float) -> float:
-        show_s = mono - self._zero
-        return show_s if self._hold_s is None else min(show_s, self._hold_s)
+        return self._show(self._stand, mono)
+
+    @staticmethod
+    def _show(stand: _Stand, mono: float) -> float:
+        at = stand.at
+        show_s = mono - stand.zero
+        return show_s if at is None else min(show_s, at)
+
+
+def _ref(text: str) -> str:
+    """A cue reference from outside, as an answer repeats it: visible and bounded."""
+    return repr(fit(text, REF_CHARS))
+
+
+def cue_json(cue: Cue) -> dict[str, Any]:
+    """A cue as `/choreo/status` and the answers give it."""
+    return {"number": cue.number, "label": cue.label, "go": cue.go, "planned_s": round(cue.planned_s, 3),
+            "robots": list(cue.robots)}
 
 
 class Live:
     """A running show's controls; see the module's docstring."""
 
-    def __init__(self, stop: StopRequest, *, wait_start: bool = False, lockout_s: float = LOCKOUT_S,
+    def __init__(self, stop: StopRequest, *, cues: CueList = NO_CUES, status: ShowStatus | None = None,
+                 wait_start: bool = False, lockout_s: float = LOCKOUT_S,
                  now: Callable[[], float] = time.monotonic, wall_ns: Callable[[], int] = time.time_ns,
                  limits: Limits = LIMITS) -> None:
         self.stop = stop
+        self.cues = cues
+        self.status_of_robots = status  # each robot's row for `status()` (None: none given)
         self.lockout_s = lockout_s
         self.listeners: Listeners[CommandListener] = Listeners()  # attached through `subscribe`
         self.show: ShowClock | None = None  # the pass's show clock (`use_clock`), once the show starts
         self._now = now
         self._wall_ns = wall_ns
         self._changed = threading.Condition()
+        self._pausing = threading.Lock()  # one pause or resume at a time, flag and clock together
+        self._clock_changes: Listeners[Callable[[], None]] = Listeners()
         self._started = not wait_start
+        self._paused = False
         self._waiting: dict[object, GoCue] = {}  # the GO cues robots wait at, by `_key`
         self._released: set[object] = set()  # GO cues already given their GO
         self._last_go: float | None = None
+        self._cue_at: dict[tuple[str, int], Cue] = {key: cue for cue in cues for key in cue.steps}
+        self._marks: dict[tuple[str, int], str] = {}  # a cue's step: its last event (start, end, skip)
+        self._skips: dict[str, Cue] = {}  # cues to skip, by number
+        self._skip_steps: frozenset[tuple[str, int]] = frozenset()  # their steps; swapped whole, read without the lock
+        self._moved: Cue | None = None  # the playhead where the operator put it (None: auto)
+        self._out: frozenset[str] = frozenset()  # cues outside the run's section (--from, --loop)
+        self._paused_robots: set[str] = set()  # runners the pause keeps from their next step
         self._reports = ReportGate(limits, now)  # what of the commands the listeners hear
         self._summing = threading.RLock()  # a summary is told whole before `close` returns
         self._over = False  # the run is over (`close`): no command is taken any more
@@ -108,9 +199,27 @@ class Live:
         every GO cue reached) until the subscription closes; whoever subscribes closes it."""
         return self.listeners.subscribe(listener)
 
+    def on_clock_change(self, listener: Callable[[], None]) -> Subscription:
+        """Call `listener` after each change of the show clock's state that goes through here (a
+        GO cue holds it, a GO releases it, a pause, a resume): the log samples the clock then."""
+        return self._clock_changes.subscribe(listener)
+
     def use_clock(self, show: ShowClock) -> None:
-        """The show clock of the pass now starting: GO cues hold it, commands are timed on it."""
-        self.show = show
+        """The show clock of the pass now starting: GO cues hold it, a pause stands it still
+        (one given before it started too), commands are timed on it."""
+        with self._pausing:
+            self.show = show
+            if self._paused and isinstance(show, PausableShowClock):
+                show.pause()
+
+    def use_section(self, starts: Mapping[str, int], ends: Mapping[str, int]) -> None:
+        """The steps this run plays, robot by robot (--from, --loop): a cue outside them will
+        not run, and the playhead never stands on it."""
+        def outside(robot: str, index: int) -> bool:
+            return index < starts.get(robot, 0) or (robot in ends and index >= ends[robot])
+
+        with self._changed:
+            self._out = frozenset(cue.number for cue in self.cues if all(outside(*key) for key in cue.steps))
 
     @property
     def panicked(self) -> bool:
@@ -121,6 +230,29 @@ class Live:
     def started(self) -> bool:
         """False until the show may start (with --wait-start, until start or GO)."""
         return self._started
+
+    @property
+    def paused(self) -> bool:
+        return self._paused
+
+    @property
+    def state(self) -> str:
+        """waiting_start | running | held (a GO cue waits) | paused | stopping | over."""
+        if self._over:
+            return "over"
+        if self.stop():
+            return "stopping"
+        if not self._started:
+            return "waiting_start"
+        if self._paused:
+            return "paused"
+        return "held" if self._waiting else "running"
+
+    @property
+    def paused_robots(self) -> tuple[str, ...]:
+        """The robots the pause keeps from starting their next step now."""
+        with self._changed:
+            return tuple(sorted(self._paused_robots))
 
     # -- what the show asks ------------------------------------------------------------------
 
@@ -133,12 +265,33 @@ class Live:
                 self._changed.wait(0.05)
         return True
 
+    def await_running(self, should_stop: Callable[[], bool], robot: str = SOLO) -> bool:
+        """Before a step starts: block while the show is paused; False if stopped meanwhile.
+        Not paused, it returns at once without a lock (the runner's path to a cue's frame)."""
+        if not self._paused:
+            return True
+        with self._changed:
+            self._paused_robots.add(robot)
+            try:
+                while self._paused:
+                    if should_stop():
+                        return False
+                    self._changed.wait(0.05)
+            finally:
+                self._paused_robots.discard(robot)
+        return not should_stop()
+
+    def skipped(self, robot: str, index: int) -> bool:
+        """Is `robot`'s step `index` a cue's the operator skipped (it must not run)? Lock-free."""
+        return (robot, index) in self._skip_steps
+
     def await_go(self, step: PlannedStep, robot: str, reached_s: float, should_stop: Callable[[], bool],
                  shared: bool = True) -> float | None:
         """`robot` has reached GO cue `step` (`shared`: a step of shared `steps:`, which every
         robot it is for waits at, released by one GO; else its own track's): hold the machine's
-        show clock and block until a GO releases it. Returns the show time it goes on from
-        (None: stopped while waiting). `reached_s`: the show time the robot reached it at."""
+        show clock and block until a GO releases it (or a skip: `skipped` says which). Returns
+        the show time it goes on from (None: stopped while waiting). `reached_s`: the show time
+        the robot reached it at."""
         show = self.show
         key = step.index if shared else (robot, step.index)
         with self._changed:
@@ -153,6 +306,8 @@ class Live:
                 show.hold_at(reached_s)
             self._changed.notify_all()
         if new:
+            if isinstance(show, HoldingShowClock):
+                self._clock_changed()  # the log marks where the clock began to hold
             for listener in self.listeners:
                 if isinstance(listener, WaitingListener):  # optional: the console, OSC notify, progress lines
                     listener.on_waiting(cue)
@@ -164,9 +319,31 @@ class Live:
         return show.show_at(self._now()) if show is not None else cue.reached_s
 
     def new_pass(self) -> None:
-        """A --loop pass begins: its GO cues wait for a GO of their own again."""
+        """A --loop pass begins: its GO cues wait for a GO of their own again, its cues are
+        ahead again (a skip not yet reached still stands)."""
         with self._changed:
             self._released.clear()
+            passed = {number for number, cue in self._skips.items() if self._passed(cue)}
+            self._marks.clear()
+            self._moved = None
+            for number in passed:
+                del self._skips[number]
+            self._skips_changed()
+
+    # -- what the run tells (a RunListener) --------------------------------------------------
+
+    def on_step(self, event: StepEvent) -> None:
+        """A cue's step started, ended or was skipped: the cue's state follows. Other steps
+        cost one dictionary look-up on the runner's path."""
+        key = (event.robot or SOLO, event.step.index)
+        if key in self._cue_at:
+            with self._changed:
+                self._marks[key] = event.event
+
+    def on_log(self, level: int, message: str, time_ns: int) -> None:
+        """Log lines say nothing the controls act on."""
+
+    # -- the cue list ------------------------------------------------------------------------
 
     @property
     def waiting(self) -> list[GoCue]:
@@ -178,14 +355,100 @@ class Live:
         """The lock is held. A cue given its GO leaves `_waiting` at once (`_release`)."""
         return sorted(self._waiting.values(), key=lambda c: (c.reached_s, c.step.planned_s, c.step.index))
 
+    def cue_state(self, cue: Cue) -> str:
+        """ahead | waiting | running | done | skipped (a cue outside the run's section: done)."""
+        with self._changed:
+            return self._state_of(cue)
+
+    @property
+    def playhead(self) -> Cue | None:
+        """The cue a GO fires: where the operator put it, else the earliest GO cue waiting, else
+        the next GO cue ahead (None: no GO cue ahead)."""
+        with self._changed:
+            return self._playhead()
+
+    def _state_of(self, cue: Cue) -> str:
+        """The lock is held."""
+        if cue.number in self._out:
+            return DONE
+        if self._waiting_for(cue) is not None:
+            return WAITING
+        marks = [self._marks.get(key) for key in cue.steps]
+        if cue.number in self._skips or "skip" in marks:
+            return SKIPPED
+        if marks and all(mark == "end" for mark in marks):
+            return DONE
+        return ACTIVE if any(marks) else AHEAD
+
+    def _open(self, cue: Cue) -> bool:
+        """Not run yet: the playhead may stand on it (a skipped cue no robot has passed too:
+        skipping it again undoes the skip). The lock is held."""
+        state = self._state_of(cue)
+        return state in (AHEAD, WAITING) or (state == SKIPPED and not self._passed(cue))
+
+    def _passed(self, cue: Cue) -> bool:
+        return any(self._marks.get(key) for key in cue.steps)
+
+    def _waiting_for(self, cue: Cue) -> GoCue | None:
+        """The GO cue waiting that is `cue` (the lock is held)."""
+        for waiting in self._waiting.values():
+            if any(cue.starts(robot, waiting.step.index) for robot in waiting.robots):
+                return waiting
+        return None
+
+    def _cue_of(self, waiting: GoCue) -> Cue:
+        """The cue of the list a waiting GO cue is (a show run without its list: one made up)."""
+        for robot in waiting.robots:
+            cue = self._cue_at.get((robot, waiting.step.index))
+            if cue is not None:
+                return cue
+        step, robots = waiting.step, tuple(sorted(waiting.robots))
+        return Cue(step.cue or f"step {step.index}", step.label, robots, step.planned_s, True,
+                   steps=tuple((robot, step.index) for robot in robots))
+
+    def _playhead(self) -> Cue | None:
+        """The lock is held."""
+        if self._moved is not None:
+            if self._open(self._moved):
+                return self._moved
+            self._moved = None  # its cue ran or was skipped: auto again
+        waiting = self._in_order()
+        if waiting:
+            return self._cue_of(waiting[0])
+        return next((cue for cue in self.cues if cue.go and self._state_of(cue) == AHEAD), None)
+
+    def _skips_changed(self) -> None:
+        """The lock is held."""
+        self._skip_steps = frozenset(key for cue in self._skips.values() for key in cue.steps)
+
+    def _data(self, cue: Cue) -> dict[str, Any]:
+        """A cue command's answer data (the lock is held)."""
+        playhead = self._playhead()
+        return {"cue": cue.number, "label": cue.label, "playhead": playhead.number if playhead else None}
+
+    def status(self) -> dict[str, Any]:
+        """The show now, JSON-ready (the `/choreo/status` reply's data)."""
+        show = self.show
+        with self._changed:
+            playhead = self._playhead()
+            waiting = [{**cue_json(self._cue_of(w)), "robots": sorted(w.robots), "reached_s": round(w.reached_s, 3)}
+                       for w in self._in_order()]
+        rows = self.status_of_robots.robots() if self.status_of_robots is not None else ()
+        return {"state": self.state,
+                "show_s": round(show.show_at(self._now()), 3) if show is not None else None,
+                "clock": "machine" if show is None or isinstance(show, (HoldingShowClock, MachineShowClock))
+                else "music",
+                "playhead": cue_json(playhead) if playhead is not None else None,
+                "waiting": waiting, "paused": self._paused,
+                "robots": {row.robot: row.to_json() for row in rows}}
+
     # -- what the operator says --------------------------------------------------------------
 
     def command(self, command: Command) -> Answer:
         """Carry out one command from any source, and tell the listeners. Once the show is
         stopping (or over) every command is refused: a GO then releases nothing, whatever still
         waits, and a stop or panic cannot change the stop under way."""
-        handler = {"go": self._go, "panic": self._panic, "start": self._start, "stop": self._stop,
-                   "cue_go": self._cue_go}.get(command.name)
+        handler = self._handlers().get(command.name)
         refusal = self._refusal()
         if refusal is not None:
             answer = refusal
@@ -193,6 +456,12 @@ class Live:
             answer = handler(command) if handler else Answer("error", f"unknown command {command.name!r}")
         self.report(command, answer)
         return answer
+
+    def _handlers(self) -> dict[str, Callable[[Command], Answer]]:
+        return {"go": self._go, "cue_go": self._cue_go, "skip": self._skip, "playhead": self._put_playhead,
+                "playhead_next": self._playhead_next, "playhead_previous": self._playhead_previous,
+                "pause": self._pause, "resume": self._resume,
+                "panic": self._panic, "start": self._start, "stop": self._stop}
 
     def _refusal(self) -> Answer | None:
         if self._over:
@@ -236,38 +505,198 @@ class Live:
         self._wake()
         self.flush_reports(force=True)
 
+    # -- GO ----------------------------------------------------------------------------------
+
     def _go(self, command: Command) -> Answer:
         with self._changed:
             now = self._now()
             if self._last_go is not None and now - self._last_go < self.lockout_s:
                 return Answer("error", f"GO ignored: {now - self._last_go:.2f} s after the last one "
                               f"(a double press? GOs {self.lockout_s:g} s apart at least)")
-            waiting = self._in_order()
-            if not waiting:
-                return Answer("error", "nothing waits for GO now" + ("" if self._started else
-                              " (the show waits for its start: /choreo/start)"))
+            if self._paused:
+                return Answer("error", f"GO refused: {RESUME_FIRST}")
+            cue = self._playhead()
+            waiting = self._waiting_for(cue) if cue is not None else None
+            if cue is None or waiting is None:
+                return Answer("error", self._why_not(cue))
             self._last_go = now
-            return self._release(waiting[0])
+            answer = self._release(waiting, cue)
+        self._clock_changed()
+        return answer
+
+    def _why_not(self, cue: Cue | None) -> str:
+        """Why a GO fires nothing: the playhead's cue is not reached yet, or timed (the lock is held)."""
+        if cue is None:
+            return "nothing waits for GO now" + ("" if self._started else
+                                                  " (the show waits for its start: /choreo/start)")
+        if not cue.go:
+            return f"{cue.name} is a timed cue (at {cue.planned_s:.3f} s): nothing to GO; move the playhead"
+        if self._state_of(cue) == SKIPPED:
+            return f"{cue.name} is skipped (skip it again to undo)"
+        others = ", ".join(self._cue_of(w).name for w in self._in_order())
+        waits = f"; waiting: {others} (move the playhead to it)" if others else ""
+        return f"nothing waits for GO now: {cue.name} is not reached yet (planned at {cue.planned_s:.3f} s){waits}"
 
     def _cue_go(self, command: Command) -> Answer:
         with self._changed:
-            waiting = list(self._waiting.values())
-            match = [c for c in waiting if c.step.label == command.label]
-            if not match:
-                at = ", ".join(repr(c.name) for c in waiting) or "no cue"
-                return Answer("error", f"cue {command.label!r} is not waiting for GO (waiting: {at})")
+            if self._paused:
+                return Answer("error", f"GO refused: {RESUME_FIRST}")
+            found = self._find(command.label)
+            if isinstance(found, Answer):
+                return found
+            waiting = self._waiting_for(found)
+            if waiting is None:
+                at = ", ".join(self._cue_of(w).name for w in self._in_order()) or "no cue"
+                return Answer("error", f"{found.name} is not waiting for GO (waiting: {at})", self._data(found))
             self._last_go = self._now()
-            return self._release(match[0])
+            answer = self._release(waiting, found)
+        self._clock_changed()
+        return answer
 
-    def _release(self, cue: GoCue) -> Answer:
-        """The lock is held."""
-        cue.release()
-        del self._waiting[cue.key]
-        self._released.add(cue.key)
-        if isinstance(self.show, HoldingShowClock) and not self._waiting:
-            self.show.resume()
+    def _find(self, ref: str | None) -> Cue | Answer:
+        """The cue `ref` names, or the answer refusing it (the lock is held). A show run without
+        its cue list finds the GO cues waiting by label or number."""
+        if not ref:
+            return Answer("error", "name a cue: its number or label")
+        try:
+            return self.cues.find(ref)
+        except CueNotFound as exc:
+            for waiting in self._waiting.values():
+                if ref in (waiting.step.label, waiting.step.cue):
+                    return self._cue_of(waiting)
+            if not self.cues:
+                at = ", ".join(repr(w.name) for w in self._in_order()) or "no cue"
+                return Answer("error", f"cue {_ref(ref)} is not waiting for GO (waiting: {at})")
+            return Answer("error", fit(str(exc), 200))
+
+    def _release(self, waiting: GoCue, cue: Cue, verb: str = "GO") -> Answer:
+        """Let the robots waiting at `waiting` go on; the machine's clock goes on from where it
+        held (the lock is held). A GO is the operator's choice to go on: another cue still
+        waiting keeps its robots waiting but no longer holds the clock."""
+        waiting.release()
+        del self._waiting[waiting.key]
+        self._released.add(waiting.key)
+        if isinstance(self.show, HoldingShowClock):
+            self.show.release()
         self._changed.notify_all()
-        return Answer("ok", f"GO: {cue.name}", {"cue": cue.name, "step": cue.step.index})
+        if self._moved == cue:
+            self._moved = None
+        return Answer("ok", f"{verb}: {cue.name}", self._data(cue))
+
+    # -- skip and the playhead ---------------------------------------------------------------
+
+    def _skip(self, command: Command) -> Answer:
+        """The playhead's cue (or the one named) will not run; again on a cue no robot has
+        passed yet, the skip is undone."""
+        with self._changed:
+            found = self._find(command.label) if command.label is not None else self._playhead()
+            if found is None:
+                return Answer("error", "nothing to skip: no cue ahead")
+            if isinstance(found, Answer):
+                return found
+            state = self._state_of(found)
+            if state in (ACTIVE, DONE) or (state == SKIPPED and self._passed(found)):
+                return Answer("error", f"{found.name} has {'run' if state != SKIPPED else 'been passed'} "
+                              "already: nothing to skip", self._data(found))
+            if state == SKIPPED:
+                del self._skips[found.number]
+                self._skips_changed()
+                return Answer("ok", f"skip undone: {found.name} will run", self._data(found))
+            was_playhead = self._playhead() == found
+            self._skips[found.number] = found
+            self._skips_changed()
+            waiting = self._waiting_for(found)
+            if waiting is not None:
+                answer = self._release(waiting, found, "skipped")
+            else:
+                answer = Answer("ok", f"skipped: {found.name} will not run", self._data(found))
+            if was_playhead and self._moved is not None:
+                self._moved = self._after(found)
+                answer = Answer(answer.status, answer.message, self._data(found))
+        if waiting is not None:
+            self._clock_changed()
+        return answer
+
+    def _after(self, cue: Cue) -> Cue | None:
+        """The next GO cue not yet run after `cue`, not skipped (None: auto). The lock is held."""
+        later = self.cues.cues[self.cues.position(cue) + 1:] if cue in self.cues.cues else ()
+        return next((c for c in later if c.go and self._state_of(c) in (AHEAD, WAITING)), None)
+
+    def _put_playhead(self, command: Command) -> Answer:
+        with self._changed:
+            found = self._find(command.label)
+            if isinstance(found, Answer):
+                return found
+            if not self._open(found):
+                return Answer("error", f"{found.name} has run already: the playhead goes on cues not yet run",
+                              self._data(found))
+            self._moved = found
+            return Answer("ok", f"playhead: {found.name}", self._data(found))
+
+    def _playhead_next(self, command: Command) -> Answer:
+        return self._step_playhead(+1)
+
+    def _playhead_previous(self, command: Command) -> Answer:
+        return self._step_playhead(-1)
+
+    def _step_playhead(self, by: int) -> Answer:
+        """Move the playhead to the next (+1) or previous (-1) cue not yet run."""
+        with self._changed:
+            open_cues = [cue for cue in self.cues if self._open(cue)]
+            here = self._playhead()
+            if not open_cues or here is None:
+                return Answer("error", "no cue ahead: the playhead has nowhere to go")
+            at = open_cues.index(here) if here in open_cues else 0
+            if not 0 <= at + by < len(open_cues):
+                return Answer("error", f"the playhead is on the {'last' if by > 0 else 'first'} cue not yet run "
+                              f"({here.name})", self._data(here))
+            self._moved = open_cues[at + by]
+            return Answer("ok", f"playhead: {self._moved.name}", self._data(self._moved))
+
+    # -- pause and resume --------------------------------------------------------------------
+
+    def _pause(self, command: Command) -> Answer:
+        if not self._started:
+            return Answer("error", "the show has not started: nothing to pause")
+        with self._pausing:
+            with self._changed:
+                if self._paused:
+                    return Answer("ok", "paused already", {"show_s": self._show_s()})
+                self._paused = True
+            show = self.show
+            if isinstance(show, PausableShowClock):
+                show.pause()
+        self._clock_changed()
+        stood = self._show_s()
+        at = f" at {stood:.3f} s" if stood is not None else ""
+        return Answer("ok", f"paused{at}: no new step starts (one under way finishes); resume: p or /choreo/resume",
+                      {"show_s": stood})
+
+    def _resume(self, command: Command) -> Answer:
+        with self._pausing:
+            if not self._paused:
+                return Answer("error", "not paused: nothing to resume")
+            show = self.show
+            if isinstance(show, PausableShowClock):
+                show.resume()
+            with self._changed:
+                self._paused = False
+                self._changed.notify_all()
+        self._clock_changed()
+        stood = self._show_s()
+        at = f" from {stood:.3f} s" if stood is not None else ""
+        return Answer("ok", f"resumed{at}", {"show_s": stood})
+
+    def _show_s(self) -> float | None:
+        show = self.show
+        return round(show.show_at(self._now()), 3) if show is not None else None
+
+    def _clock_changed(self) -> None:
+        """Tell who samples the clock that its state changed (outside the lock)."""
+        for listener in self._clock_changes:
+            listener()
+
+    # -- start and stop ----------------------------------------------------------------------
 
     def _panic(self, command: Command) -> Answer:
         self.stop.request(PANIC)

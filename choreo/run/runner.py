@@ -108,8 +108,9 @@ class Runner:
         mine = step.is_for(self.robot) if self.robot is not None else True
         end = self._run_step(step, cursor, following) if mine else None
         if self.cues is not None and self.robot is not None:
-            # a step for others takes, if none of them is left to do it, its planned time
-            idle = None if mine else cursor + step.expected_s
+            # a step for others takes, if none of them is left to do it, its planned time; a
+            # step skipped passes where the robot is
+            idle = (None if end is not None else cursor) if mine else cursor + step.expected_s
             through = self.cues.through(step.index, self.robot, end, idle)
             if through is None:
                 raise Interrupted(self.stop.reason)
@@ -148,17 +149,14 @@ class Runner:
             return 0.0
         return self.link.start_lead_s(step.motion)
 
-    def _run_step(self, step: PlannedStep, cursor: float, following: PlannedStep | None = None) -> float:
-        # A cued play goes out early by its lead, so that its start frame is written on the cue,
-        # or (a cue the show has overrun) when the step before ends: a `wait:` before a cued
-        # play ends its sleep that much early for it (`following`), so a cue on the very end of
-        # a wait is still met.
-        if step.go:
-            cursor = self._await_go(step, cursor)
+    def _run_step(self, step: PlannedStep, cursor: float, following: PlannedStep | None = None) -> float | None:
+        """Carry out `step` when it is due; the show time the next step may start at (None:
+        the operator skipped it, and the robot passes it where it is)."""
+        due = self._due(step, cursor)
+        if due is None:
+            self._pass(step, cursor)
+            return None
         lead = self._lead(step)
-        due = max(step.at, cursor) - lead if step.at is not None else cursor
-        if not self._sleep_until(due):
-            raise Interrupted(self.stop.reason)
         started = self.show_time()
         # A cue is measured against its own time: one the show has already overrun (a motion
         # ran long before it) starts at once and counts as late by the overrun.
@@ -197,6 +195,39 @@ class Runner:
             start_s = self.show.show_at(self._played.started) if self._played.started is not None else None
             self._emit(StepEvent(step, "end", planned, self.show_time(), self._now_ns(), slip_ms, outcome,
                                  self.robot, start_s, lead * 1e3))
+
+    def _due(self, step: PlannedStep, cursor: float) -> float | None:
+        """Wait until `step` may start (a GO cue: its GO first; paused: the resume); when it was
+        due (None: skipped, before or while it waited).
+
+        A cued play goes out early by its lead, so that its start frame is written on the cue,
+        or (a cue the show has overrun) when the step before ends: a `wait:` before a cued play
+        ends its sleep that much early for it (`following`), so a cue on the very end of a wait
+        is still met."""
+        if self._skipping(step):
+            return None
+        if step.go:
+            cursor = self._await_go(step, cursor)
+        due = max(step.at, cursor) - self._lead(step) if step.at is not None else cursor
+        if not self._sleep_until(due):
+            raise Interrupted(self.stop.reason)
+        if self.live is not None:  # not paused: one attribute read, and one set look-up for a cue
+            if not self.live.await_running(self.stop, self.robot or SOLO):
+                raise Interrupted(self.stop.reason)
+            if self._skipping(step):
+                return None
+        return due
+
+    def _skipping(self, step: PlannedStep) -> bool:
+        """Is `step` a cue the operator skipped?"""
+        return self.live is not None and step.cue is not None and self.live.skipped(self.robot or SOLO, step.index)
+
+    def _pass(self, step: PlannedStep, cursor: float) -> None:
+        """A skipped cue's step: one `skip` event (no start, no end), nothing sent."""
+        self._log(INFO, f"{step_ref(step)} skipped (cue {step.cue}): not run")
+        planned = step.at if step.at is not None else cursor
+        self._emit(StepEvent(step, "skip", planned, self.show_time(), self._now_ns(), outcome="skipped",
+                             robot=self.robot))
 
     def _await_go(self, step: PlannedStep, cursor: float) -> float:
         """A GO cue: reached when the step before ends, then held until the operator's GO; the

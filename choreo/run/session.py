@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 
-from choreo.clock import (MachineShowClock, RunClock, ShowClock, SystemTime, TimeSource, quick_thread_switches,
-                          sleep_until_show)
+from choreo.clock import (MachineShowClock, PausableShowClock, RunClock, ShowClock, SystemTime, TimeSource,
+                          quick_thread_switches, sleep_until_show)
 from choreo.events import PlayOutListener, RunListener, RunResult, StopRequest
 from choreo.live.controls import HoldingShowClock, Live
 from choreo.log.format import CLOCK_EVERY_S, INFO, WARNING, ClockRecord, Result, result_metadata
@@ -86,7 +86,9 @@ class Session:
             # one stop request a run: the one given would never be read (a Ctrl-C through it lost)
             raise ValueError("give the run one stop request: the live controls' own, or none")
         stop = live.stop if live is not None else stop if stop is not None else StopRequest()
-        everyone: list[RunListener] = ([self.recorder] if self.recorder else []) + list(listeners)
+        # the live controls hear the steps too: which cues ran, for the playhead and skips
+        everyone: list[RunListener] = ([self.recorder] if self.recorder else []) + list(listeners) \
+            + ([live] if live is not None else [])
         try:
             return self._run(everyone, stop, live)
         finally:  # the log's metadata names who stopped the run, however it ended (a panic then a fault)
@@ -102,6 +104,8 @@ class Session:
                 if live is not None:
                     wiring.enter_context(live.subscribe(self.recorder))
                     wiring.callback(live.flush_reports, force=True)  # held-back commands summed up while it hears
+            if live is not None:
+                live.use_section(self.settings.sections.starts, self.settings.sections.ends)
             if live is not None and not live.await_start():
                 self.result = RunResult("aborted", 0, 0, 0.0)
             else:
@@ -140,9 +144,10 @@ class Session:
                 live.use_clock(show)
             sampler = ClockSampler(self.recorder, self.clock, show, "music" if self.player else "machine") \
                 if self.recorder is not None else None
-            if sampler is not None and isinstance(show, HoldingShowClock):
-                # the log marks where show time goes on after a GO: the reviews place later frames by it
-                music.enter_context(show.on_resume(lambda: sampler.sample(force=True)))
+            if sampler is not None and live is not None:
+                # the log marks each change of the clock's state (a GO cue holds it, a GO, a pause, a
+                # resume): the reviews draw holds and pauses, and place later frames, by them
+                music.enter_context(live.on_clock_change(lambda: sampler.sample(force=True)))
             if sampler is not None:
                 sampler.sample(force=True)
             result = solo.run(show, on_idle=sampler) if ensemble is None \
@@ -275,4 +280,5 @@ class ClockSampler:
             if not force and self._last is not None and show_s - self._last < self.every_s:
                 return
             self._last = show_s
-        self.recorder.on_clock(ClockRecord(round(show_s, 6), mono_ns, self.source), self.clock.wall_ns(mono_ns))
+            state = self.show.state if isinstance(self.show, PausableShowClock) else None  # running | held | paused
+        self.recorder.on_clock(ClockRecord(round(show_s, 6), mono_ns, self.source, state), self.clock.wall_ns(mono_ns))
