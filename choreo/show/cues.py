@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from decimal import Decimal
 
 from choreo.errors import ChoreoError
@@ -56,9 +56,16 @@ class Cue:
 
 @dataclass(frozen=True)
 class CueList:
-    """Every cue of a show, in show order; see the module's docstring."""
+    """Every cue of a show, in show order; see the module's docstring.
+
+    Indexed once when made, so that a show of 10,000 cues answers `of_step` (asked at every
+    step), `find` and `position` without a walk of the list."""
 
     cues: tuple[Cue, ...] = ()
+    _index: _Index = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_index", _Index.of(self.cues))
 
     def __iter__(self) -> Iterator[Cue]:
         return iter(self.cues)
@@ -67,24 +74,27 @@ class CueList:
         return len(self.cues)
 
     def position(self, cue: Cue) -> int:
-        return self.cues.index(cue)
+        """Where `cue` is in the list (ValueError if it is not one of its cues)."""
+        found = self._index.positions.get(cue)
+        if found is None:
+            raise ValueError(f"{cue.name} is not in this cue list")
+        return found
 
     def of_step(self, robot: str, index: int) -> Cue | None:
         """The cue `robot`'s step `index` starts, if it starts one."""
-        return next((cue for cue in self.cues if cue.starts(robot, index)), None)
+        return self._index.steps.get((robot, index))
 
     def find(self, ref: str) -> Cue:
         """The cue `ref` names: a number as the list writes it, a number of the same value
         (`12.50` for `12.5`), else a label. CueNotFound, with what there is, otherwise."""
-        for cue in self.cues:
-            if cue.number == ref:
-                return cue
-        value = _value(ref)
+        index = self._index
+        found = index.numbers.get(ref)
+        value = _value(ref) if found is None else None
         if value is not None:
-            for cue in self.cues:
-                if _value(cue.number) == value:
-                    return cue
-        named = [cue for cue in self.cues if cue.label == ref]
+            found = index.values.get(value)
+        if found is not None:
+            return found
+        named = index.labels.get(ref, ())
         if len(named) > 1:
             numbers = ", ".join(cue.number for cue in named[:12]) + (", ..." if len(named) > 12 else "")
             raise CueNotFound(f"cue {_shown(ref)} is ambiguous: cues {numbers} are all labelled so; give the number")
@@ -92,6 +102,32 @@ class CueList:
             return named[0]
         known = ", ".join(cue.number for cue in self.cues[:12]) + (", ..." if len(self.cues) > 12 else "")
         raise CueNotFound(f"no cue {_shown(ref)} in this show (cues: {known or 'none'})")
+
+
+@dataclass(frozen=True)
+class _Index:
+    """A cue list's lookups; the first cue wins where two share a key (a show's checks refuse that)."""
+
+    positions: dict[Cue, int]
+    steps: dict[tuple[str, int], Cue]
+    numbers: dict[str, Cue]
+    values: dict[Decimal, Cue]
+    labels: dict[str, tuple[Cue, ...]]
+
+    @classmethod
+    def of(cls, cues: tuple[Cue, ...]) -> _Index:
+        index = cls({}, {}, {}, {}, {})
+        for position, cue in enumerate(cues):
+            index.positions.setdefault(cue, position)
+            for step in cue.steps:
+                index.steps.setdefault(step, cue)
+            index.numbers.setdefault(cue.number, cue)
+            value = _value(cue.number)
+            if value is not None:
+                index.values.setdefault(value, cue)
+            if cue.label is not None:
+                index.labels[cue.label] = (*index.labels.get(cue.label, ()), cue)
+        return index
 
 
 def _shown(ref: str) -> str:
@@ -142,13 +178,12 @@ def _numbers(given: list[str | None]) -> list[str]:
     """Each cue's number: the one given, else the next whole number after the cue before that
     no cue has taken (see the module's docstring)."""
     taken = {number_key(number) for number in given if number is not None}
+    jumps: dict[int, int] = {}  # a taken whole number -> a later one to look from
     out: list[str] = []
     last = Decimal(0)
     for number in given:
         if number is None:
-            candidate = int(last) + 1
-            while Decimal(candidate) in taken:
-                candidate += 1
+            candidate = _free(int(last) + 1, taken, jumps)
             number = str(candidate)
             taken.add(Decimal(candidate))
         value = _value(number)
@@ -156,6 +191,19 @@ def _numbers(given: list[str | None]) -> list[str]:
             last = value
         out.append(number)
     return out
+
+
+def _free(candidate: int, taken: set[Decimal | str], jumps: dict[int, int]) -> int:
+    """The first whole number from `candidate` on that no cue has taken. The numbers walked
+    past remember where the walk ended, so a run of taken numbers is crossed once, not once
+    a cue (a show of cues `1.1, ?, 1.2, ?, ...` before `2 .. 5000` would cost millions)."""
+    walked = []
+    while Decimal(candidate) in taken:
+        walked.append(candidate)
+        candidate = jumps.get(candidate, candidate + 1)
+    for number in walked:
+        jumps[number] = candidate
+    return candidate
 
 
 def numbered(plans: Mapping[str, Plan]) -> dict[str, Plan]:
