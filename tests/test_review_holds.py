@@ -1,0 +1,175 @@
+"""Reviews that tell the truth about a live show (issue 24): a show held at GO cues and panicked
+during a hold, on virtual time (the test moves the clock while the show waits, as an operator
+taking their time), and every review says the same duration, hold time and step times; hostile
+clock samples are one line or passed over, at a bounded cost."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import threading
+
+import pytest
+
+from choreo.clock import VirtualTime
+from choreo.events import Command, StopRequest
+from choreo.live.controls import Live
+from choreo.log.format import ClockRecord, parse
+from choreo.log.reader import LogReader
+from choreo.review.export import cue_rows
+from choreo.review.showtime import ShowTimes
+from choreo.review.summary import summarize, summary_record
+from choreo.review.summarytext import render
+from choreo.review.timeline import build, render_text
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
+from runlog import vmain, wait_for, write_show
+
+SHOW = """\
+version: 1
+motions:
+  wave: {number: 1, duration: 1.0}
+  bow: {number: 2, duration: 0.5}
+steps:
+  - play: wave
+  - play: bow
+    at: go
+    label: applause
+  - wait: done
+  - play: wave
+    at: 2.0
+    label: encore
+  - wait: done
+  - play: bow
+    at: go
+    label: finale
+  - wait: done
+"""
+FIRST_HOLD_S, SECOND_HOLD_S = 2.3, 1.7
+
+
+@pytest.fixture(scope="module")
+def held(tmp_path_factory):
+    """Held 2.3 s at the first GO cue (GO from the key), 1.7 s at the second, then a panic over OSC."""
+    tmp = tmp_path_factory.mktemp("held")
+    log = tmp / "run.mcap"
+    source = VirtualTime()
+    session = Session.prepare(RunRequest(str(write_show(tmp, SHOW)), log_path=str(log)), source)
+    live = Live(StopRequest(), now=source.now, wall_ns=source.wall_ns)
+    done = {}
+
+    def run() -> None:
+        with session:
+            done["result"] = session.run([], live=live)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    assert wait_for(lambda: bool(live.waiting), 20, 0.002)
+    source.advance(FIRST_HOLD_S)  # nothing else runs while the show waits: the hold is exactly this long
+    assert live.command(Command("go", "key")).ok
+    assert wait_for(lambda: bool(live.waiting) and live.waiting[0].name == "finale", 20, 0.002)
+    source.advance(SECOND_HOLD_S)
+    assert live.command(Command("panic", "osc udp 127.0.0.1:53001")).ok
+    thread.join(20)
+    assert done["result"].outcome == "aborted"
+    return log
+
+
+def test_summary_timeline_export_and_replay_agree_to_the_millisecond(held, tmp_path, capsys):
+    summary = summarize(held)
+    with LogReader(held) as reader:
+        timeline = build(reader)
+        rows = cue_rows(reader)
+    lengths = summary.lengths
+    assert lengths is not None and timeline.lengths == lengths
+    assert round(timeline.end_s, 3) == round(summary.duration_s, 3)
+    assert lengths.holds == 2 and lengths.held_s == pytest.approx(FIRST_HOLD_S + SECOND_HOLD_S, abs=0.01)
+    assert lengths.wall_s == pytest.approx(lengths.show_s + lengths.held_s)
+    # the step times: the timeline's cues and the exported rows are the step records' own
+    assert [(c.label, round(c.show_s, 3)) for c in timeline.cues] == [
+        (r["label"], r["planned_s"] if r["released"] == "time" else r["actual_s"]) for r in rows][:2]
+    assert [(r["number"], r["label"], r["released"]) for r in rows] == [
+        ("1", "applause", "go key"), ("2", "encore", "time"), ("3", "finale", "not reached")]
+    assert vmain(["replay", str(held), "--log", str(tmp_path / "replay.mcap"), "--json"]) == 0
+    replayed = json.loads(capsys.readouterr().out)
+    assert replayed["recorded"] == lengths.to_json() and replayed["different"] == 0
+    record = summary_record(summary)
+    assert record["lengths"] == lengths.to_json() and record["duration_s"] == lengths.show_s
+
+
+def test_hold_time_is_said_as_hold_time_not_drift(held):
+    summary = summarize(held)
+    text = "\n".join(render(summary))
+    assert "held 4.0" in text and "at 2 GO cues" in text
+    assert summary.clock is not None and abs(summary.clock.drift_ms) < 1.0  # the machine's clock never drifts
+    assert "minus machine clock +0.000 ms" in text
+    assert [s.kind for s in summary.stands] == ["held", "held"]
+
+
+def test_the_timeline_draws_holds_commands_and_a_motion_through_a_hold_at_its_length(held):
+    with LogReader(held) as reader:
+        timeline = build(reader)
+    through = timeline.runs[0]  # the wave, running while the show waited for the first GO
+    assert through.start_at is not None and through.drawn_end_at is not None
+    assert through.drawn_end_at - through.start_at == pytest.approx(1.0, abs=0.01)
+    assert [m.kind for m in timeline.commands] == ["command", "command"]
+    go_text, panic_text = (m.text.split(":")[0] for m in timeline.commands)
+    assert go_text.startswith("go ") and go_text.endswith(" from key")
+    assert panic_text == "panic from osc udp 127.0.0.1"
+    go = timeline.commands[0]
+    assert go.drawn_at == pytest.approx(FIRST_HOLD_S, abs=0.01) and go.show_s == pytest.approx(0.0, abs=0.01)
+    lines = list(render_text(timeline, 100))
+    row = next(line for line in lines if "holds, commands" in line)
+    assert "~" in row and "^" in row
+    assert any("held 2.3" in line and "at show time" in line for line in lines)
+
+
+def test_the_png_timeline_draws_a_held_show(held, tmp_path):
+    pytest.importorskip("matplotlib")
+    assert vmain(["log", "timeline", str(held), "--png", str(tmp_path / "t.png")]) == 0
+    assert (tmp_path / "t.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_export_cues_to_csv_from_the_command_line(held, capsys):
+    assert vmain(["log", "export", "--cues", "--csv", "-", str(held)]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert [r["released"] for r in rows] == ["go key", "time", "not reached"]
+    assert rows[1]["late_ms"] == "0.0" and rows[0]["bar_beat"] == ""
+
+
+# -- hostile clock samples ----------------------------------------------------------------------
+
+def test_a_clock_state_no_choreo_writes_is_refused_as_one_line():
+    with pytest.raises(ValueError, match="state"):
+        parse("/choreo/clock", b'{"show_s": 1.0, "monotonic_ns": 5, "state": "frozen"}')
+    assert parse("/choreo/clock", b'{"show_s": 1.0, "monotonic_ns": 5, "state": "paused"}').state == "paused"
+
+
+def _fed(samples):  # type: ignore[no-untyped-def]
+    times = ShowTimes(0)
+    for log_time, record in samples:
+        times.see_clock(log_time, record)
+    return times
+
+
+def test_stands_from_states_and_time_during_them():
+    s = 1_000_000_000
+    times = _fed([(0, ClockRecord(0.0, 0, state="running")), (s, ClockRecord(1.0, s, state="paused")),
+                  (3 * s, ClockRecord(1.0, 3 * s, state="running")), (4 * s, ClockRecord(2.0, 4 * s))])
+    assert [(x.kind, x.show_s, x.seconds(None)) for x in times.stands] == [("paused", 1.0, 2.0)]
+    assert times.seconds(2 * s) == 1.0 and times.seconds(4 * s) == pytest.approx(2.0)
+    assert times.elapsed(2 * s) == pytest.approx(2.0) and times.elapsed(4 * s) == pytest.approx(4.0)
+
+
+def test_an_older_logs_hold_is_found_where_a_sample_falls_behind_and_a_loop_pass_is_no_hold():
+    s = 1_000_000_000
+    times = _fed([(0, ClockRecord(0.0, 0)), (3 * s, ClockRecord(1.0, 3 * s)), (4 * s, ClockRecord(0.2, 4 * s))])
+    assert [(x.kind, x.show_s, x.start_ns, x.end_ns) for x in times.stands] == [("held", 1.0, s, 3 * s)]
+    assert times.seconds(2 * s) == 1.0
+
+
+def test_samples_out_of_order_are_passed_over_at_a_bounded_cost():
+    samples = [(n, ClockRecord(n / 1e9, n)) for n in range(200_000, 0, -1)]
+    times = _fed(samples)
+    assert times.disordered == len(samples) - 1 and len(times.stands) == 0
