@@ -244,3 +244,9 @@ def test_a_show_of_several_robots_names_each_robots_checks(capsys, ensemble_port
     assert vmain(["doctor", canon, "--port", ensemble_port, "--no-log"]) == 1
     out = capsys.readouterr().out
     assert "layout lead    PROBLEM  the show uses hth4-2.2" in out and "layout follow  ok" in out
+
+
+def test_an_audio_device_for_a_show_without_music_is_its_own_problem(tmp_path):
+    found = checks(tmp_path, request(tmp_path, show(tmp_path), audio_device="null"))
+    assert found["exit"] == 1 and found["audio"].level == PROBLEM and "has no `music:`" in found["audio"].text
+    assert found["show"].level == OK and found["board"].level == OK  # the rest is still checked

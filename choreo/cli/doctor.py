@@ -90,11 +90,9 @@ def run(args: argparse.Namespace) -> int:
     findings = examine(ports, port, probe=None if args.no_probe else probe_port, audio=audio)
     code = 1 if any(f.level == PROBLEM for f in findings) else 0
     if args.json:
-        from dataclasses import asdict
-
         from choreo.cli.jsonout import print_json
 
-        print_json({"ok": code == 0, "exit": code, "findings": [asdict(f) for f in findings]})
+        print_json({"ok": code == 0, "exit": code, "findings": [_record(f) for f in findings]})
         return code
     for finding in findings:
         print(finding.line())
@@ -136,12 +134,16 @@ def _show(args: argparse.Namespace) -> int:
         log = report.log
         print_json({"ok": report.exit_code == 0, "exit": report.exit_code, "show": report.show,
                     "log_estimate_bytes": log.bytes if log is not None else None,
-                    "findings": [{"level": f.level, "check": f.check, "robot": f.robot, "text": f.text,
-                                  "fix": f.fix} for f in report.findings]})
+                    "findings": [_record(f) | {"robot": f.robot} for f in report.findings]})
         return report.exit_code
     for line in table(report.findings):
         print(line)
     return report.exit_code
+
+
+def _record(finding: Finding) -> dict:
+    """A finding in `--json` (`robot` only with a show: the machine's checks have none)."""
+    return {"level": finding.level, "check": finding.check, "text": finding.text, "fix": finding.fix}
 
 
 def table(findings: Sequence[Finding]) -> list[str]:

@@ -22,6 +22,7 @@ comes in through `Machine`, so tests give them a machine of their own.
 
 from __future__ import annotations
 
+import ipaddress
 import math
 import os
 import shutil
@@ -45,7 +46,10 @@ from choreo.show.read import MAX_BYTES
 from choreo.show.report import format_path
 from choreo.wire.protocol import BAUDS
 
-PORT_DEADLINE_S = 10.0  # every port's checks together: a probe of a dead board at 3 bauds takes ~3 s
+# Every port's checks together: a probe of a dead board tries 3 bauds, 2 ACK checks of 2 tries each,
+# each try waiting the show's reply timeout, at most PROBE_TIMEOUT_S (12 s at worst; 2.4 s by default).
+PROBE_TIMEOUT_S = 1.0
+PORT_DEADLINE_S = 15.0
 # What a log costs, measured on the simulator's logs (MCAP, uncompressed): a frame and its reply
 # are two records of ~90 bytes plus ~50 of record header and index each; a step event ~180 + 50;
 # a clock sample ~70 + 50; the metadata, schemas, show file and summary ~40 KiB.
@@ -155,7 +159,7 @@ def _settle(request: RunRequest) -> tuple[RunSettings | None, list[Finding]]:
     """The show as `run` settles it, less what the other checks look at (the music, the log).
     A show whose only problem is its music file is the music's problem: the show is settled
     without looking for the file, so the robots are still checked."""
-    asked = replace(request, no_music=True, no_log=True, log_path=None)
+    asked = replace(request, no_music=True, no_log=True, log_path=None, audio_device=None)
     music: list[Finding] = []
     try:
         settings = RunSettings.settle(asked)
@@ -229,7 +233,7 @@ def _board(link: LinkSettings, machine: Machine, ensemble: bool) -> list[Finding
     found = [Finding(OK, "port", f"{link.given_port} opens at {link.baud} baud", None, robot)]
     bauds = (link.baud, *(b for b in BAUDS if b != link.baud))
     try:
-        info = machine.probe(link.port, bauds, link.timeout, machine.time_source)
+        info = machine.probe(link.port, bauds, min(link.timeout, PROBE_TIMEOUT_S), machine.time_source)
     except ChoreoError as exc:
         return found + [Finding(PROBLEM, "board", exc.lines()[0], f"choreo probe --port {link.given_port} says more; "
                                 "check the board's power, the cable and its baud", robot)]
@@ -284,7 +288,10 @@ def _music(settings: RunSettings, request: RunRequest, machine: Machine) -> list
     """The song decodes and lasts past the last cue; its output opens."""
     show = settings.show
     if show.music is None:
-        return []
+        if request.audio_device is None:
+            return []
+        return [Finding(PROBLEM, "audio", f"--audio-device {request.audio_device}: the show has no `music:` to "
+                        "play (the run refuses it)", "leave out --audio-device")]
     if request.no_music:
         return [Finding(NOTE, "music", "not played (--no-music): the machine's clock keeps time")]
     from choreo.music.player import Song
@@ -338,7 +345,7 @@ def _osc(osc: OscAsk, settings: RunSettings | None) -> list[Finding]:
                                           ("--osc-host", osc.host != "127.0.0.1")) if value]
         if given:
             return [Finding(PROBLEM, "osc", f"{given[0]} is for OSC, and no --osc PORT is given", "give --osc PORT")]
-        if settings is not None and last_cue_go(settings.plans):
+        if settings is not None and has_go_cues(settings.plans):
             return [Finding(NOTE, "osc", "no --osc: the show's GO cues come from the console only",
                             "run on a terminal (the console), or give --osc PORT")]
         return []
@@ -350,10 +357,21 @@ def _osc(osc: OscAsk, settings: RunSettings | None) -> list[Finding]:
                         "e.g. 53200), or stop what holds it" if check == "osc" else "an IP address or network, "
                         "as 192.168.1.20 or 192.168.1.0/24")]
     allowed = f"; allows {', '.join(osc.allow)}" if osc.allow else "; this machine only"
-    return [Finding(OK, "osc", f"udp and tcp port {server} on {osc.host} are free{allowed}")]
+    said = f"udp and tcp port {server} on {osc.host} are free{allowed}"
+    if osc.allow and _loopback(osc.host):
+        return [Finding(NOTE, "osc", f"{said}, but {osc.host} is reachable from this machine only",
+                        "--osc-host 0.0.0.0 (or this machine's address on the stage network)")]
+    return [Finding(OK, "osc", said)]
 
 
-def last_cue_go(plans: Mapping[str, Plan]) -> bool:
+def _loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return host.strip().lower() == "localhost"
+
+
+def has_go_cues(plans: Mapping[str, Plan]) -> bool:
     return any(step.go for plan in plans.values() for step in plan.steps)
 
 
