@@ -6,7 +6,12 @@ table, JSON and exit codes."""
 from __future__ import annotations
 
 import json
+import os
+import shlex
+import shutil
 import socket
+import subprocess
+import sys
 import threading
 import wave
 from pathlib import Path
@@ -20,7 +25,7 @@ from choreo.clock import VirtualTime
 from choreo.run.preflight import Machine, OscAsk, log_estimate, preflight
 from choreo.run.settings import RunRequest, RunSettings
 from choreo.wire.layouts import HTH4_22, SEED
-from runlog import vmain, write_show
+from runlog import REPO, vmain, write_show
 
 SHOW = """
     version: 1
@@ -250,3 +255,36 @@ def test_an_audio_device_for_a_show_without_music_is_its_own_problem(tmp_path):
     found = checks(tmp_path, request(tmp_path, show(tmp_path), audio_device="null"))
     assert found["exit"] == 1 and found["audio"].level == PROBLEM and "has no `music:`" in found["audio"].text
     assert found["show"].level == OK and found["board"].level == OK  # the rest is still checked
+
+
+def test_a_port_that_will_not_open_on_the_machines_time(tmp_path, capsys, monkeypatch):
+    """Real time: each port is checked on a thread of its own; a file that is no serial device
+    (it exists, this user may open it) does not open as a port."""
+    from choreo.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    not_a_port = tmp_path / "ttyFAKE0"
+    not_a_port.write_text("")
+    assert main(["doctor", show(tmp_path), "--port", str(not_a_port), "--no-log", "--json"]) == 1
+    found = {f["check"]: f for f in json.loads(capsys.readouterr().out)["findings"]}
+    assert found["permission"]["level"] == "ok" and found["port"]["level"] == "problem"
+    assert "cannot open" in found["port"]["text"] and "board" not in found
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or os.geteuid() != 0 or shutil.which("unshare") is None,
+                    reason="a tmpfs in a mount namespace of its own needs root on Linux")
+def test_a_really_full_log_folder_in_a_tiny_tmpfs(tmp_path):
+    """The free space as the machine measures it: a 64 KiB tmpfs, mounted in a mount namespace
+    of this test's own (the machine's mounts are left alone), holds no show's log."""
+    folder = tmp_path / "tiny"
+    folder.mkdir()
+    doctor = shlex.join([sys.executable, "-m", "choreo", "doctor", show(tmp_path), "--port", "sim://",
+                         "--log", str(folder / "show.mcap"), "--json"])
+    mount = f"mount -t tmpfs -o size=64k tmpfs {shlex.quote(str(folder))} && {doctor}"
+    done = subprocess.run(["unshare", "-m", "sh", "-c", mount], capture_output=True, text=True, timeout=60,
+                          cwd=REPO)
+    if done.returncode not in (0, 1):
+        pytest.skip(f"no mount namespace here: {done.stderr.strip()[:200]}")
+    record = json.loads(done.stdout)
+    space = next(f for f in record["findings"] if f["check"] == "log space")
+    assert done.returncode == 1 and space["level"] == "problem" and "kB free" in space["text"]
