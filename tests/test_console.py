@@ -28,11 +28,12 @@ from choreo.clock import MachineShowClock
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from choreo.cli.console import Console, _LinkWatch
-from choreo.cli.screen import LEGEND, Note, Row, Screen, render
-from choreo.cli.keys import KeyParser, KeyReader, TerminalMode
+from choreo.cli.console import Console
+from choreo.cli.screen import LEGEND, SHORT_LEGEND, Note, Row, Screen, render
+from choreo.cli.keys import ARROWS, KEYS, KeyParser, KeyReader, TerminalMode
 from choreo.events import Answer, Command, CommandEvent, RxEvent, StepEvent, StopRequest, TxEvent
 from choreo.live.controls import Live
+from choreo.show.cues import CueList, cue_list
 from choreo.log.format import WARNING
 from choreo.wire.protocol import Reply, ReplyKind
 from choreo.run.session import Session
@@ -82,8 +83,14 @@ def drawn(console: Console, width: int) -> list[str]:
 
 def prepared(tmp_path: Path, body: str) -> tuple[Console, Session, Live]:
     session = Session.prepare(RunRequest(str(write_show(tmp_path, body)), no_log=True))
-    live = Live(StopRequest())
+    live = Live(StopRequest(), cues=cue_list(session.settings.plans))
     return Console(session, live, out=io.StringIO(), keys=io.StringIO()), session, live
+
+
+def tell(console: Console, live: Live, event: StepEvent) -> None:
+    """A step event as a run tells it: to the console (its own status) and the live controls."""
+    console.on_step(event)
+    live.on_step(event)
 
 
 def started(step, robot=None, at_s: float = 0.0) -> StepEvent:  # type: ignore[no-untyped-def]
@@ -97,52 +104,56 @@ def started(step, robot=None, at_s: float = 0.0) -> StepEvent:  # type: ignore[n
 def test_every_line_fits_the_width_and_the_key_parts_stay(tmp_path, width):
     console, session, live = prepared(tmp_path, TWO_ROBOTS)
     steps = session.settings.plans["alpha"].steps
-    console.on_step(started(steps[0], "alpha"))
-    console.on_step(started(steps[0], "beta_with_a_long_name"))
+    tell(console, live, started(steps[0], "alpha"))
+    tell(console, live, started(steps[0], "beta_with_a_long_name"))
     console.on_log(WARNING, "robot alpha: step 0: NAK (04 0c 15 25) to 'play 1' (play frame, seq 3), " * 3)
     lines = drawn(console, width)
     assert all(len(line) <= width for line in lines), lines
     text = "\n".join(lines)
     assert lines[0].startswith("a show for two robots") and "show not started · machine clock" in lines[0]
-    assert "next GO: 'the-first-of-the-go-cues" in text
+    assert "next GO: cue 1 'the-first-of" in text and "(not reached yet)" in text
     assert any(line.startswith("alpha ") and "0: play 1" in line for line in lines)
     assert any(line.startswith("beta_with_a") for line in lines)
-    assert lines[-1] == LEGEND
-    assert any(line.endswith("…") for line in lines)  # cut, not wrapped
+    assert lines[-1] == (LEGEND if width >= 80 else SHORT_LEGEND)
+    assert any("…" in line for line in lines)  # cut, not wrapped
 
 
 def test_the_screen_says_where_each_robot_is_and_what_comes(tmp_path):
     console, session, live = prepared(tmp_path, GO_SHOW)
     steps = session.settings.plans["robot"].steps
-    console.on_step(started(steps[0]))
+    tell(console, live, started(steps[0]))
     screen = console.screen()
     (row,) = screen.rows
     assert (row.robot, row.now, row.next) == ("robot", "0: play 1", "GO 1 'applause': play 2 (bow)")
-    assert screen.go == "next GO: 'applause' (step 1)" and not screen.go_waiting
-    assert screen.cue == "next cue: step 3 'after' at 0.5 s"  # the clock has not started
+    assert screen.go == "next GO: cue 1 'applause' (not reached yet)" and not screen.go_waiting
+    assert screen.cue == "next cue: cue 2 'after' at 0.5 s"  # the clock has not started
     assert screen.show_s is None and screen.clock == "machine clock"
-    console.on_step(started(steps[2], at_s=0.1))
+    tell(console, live, started(steps[2], at_s=0.1))
     assert console.screen().rows[0].next == "@0.5 s 3 'after': play 3"
-    console.on_step(StepEvent(steps[4], "start", 0.6, 0.6, 0))
-    console.on_step(StepEvent(steps[4], "end", 0.6, 0.6, 0, outcome="ok"))
+    for step in (steps[1], steps[3]):
+        tell(console, live, StepEvent(step, "start", 0.6, 0.6, 0))
+        tell(console, live, StepEvent(step, "end", 0.6, 0.6, 0, outcome="ok"))
+    tell(console, live, StepEvent(steps[4], "start", 0.6, 0.6, 0))
+    tell(console, live, StepEvent(steps[4], "end", 0.6, 0.6, 0, outcome="ok"))
     screen = console.screen()
     assert screen.rows[0].now == "done" and screen.rows[0].next == "-"
     assert screen.cue == "next cue: none ahead" and screen.go == "next GO: none ahead"
+    assert [(c.number, c.state) for c in screen.cues] == [("1", "done"), ("2", "done"), ("3", "done")]
 
 
 def test_the_countdown_runs_on_the_show_clock(tmp_path):
     console, session, live = prepared(tmp_path, GO_SHOW)
-    console.on_step(started(session.settings.plans["robot"].steps[2], at_s=0.1))
+    tell(console, live, started(session.settings.plans["robot"].steps[2], at_s=0.1))
     live.use_clock(MachineShowClock(session.clock.mono() - 0.2))  # 0.2 s into the show
     screen = console.screen()
-    assert screen.cue == "next cue in 0.3 s: step 3 'after' at 0.5 s" and screen.show_s == 0.2
+    assert screen.cue == "next cue in 0.3 s: cue 2 'after' at 0.5 s" and screen.show_s == 0.2
     live.use_clock(MachineShowClock(session.clock.mono() - 0.7))  # the cue overrun
-    assert console.screen().cue == "next cue due now: step 3 'after' at 0.5 s"
+    assert console.screen().cue == "next cue due now: cue 2 'after' at 0.5 s"
 
 
 def test_redraws_keep_clear_of_a_cue_and_of_a_go_and_draw_only_changes(tmp_path, monkeypatch):
     console, session, live = prepared(tmp_path, GO_SHOW)
-    console.on_step(started(session.settings.plans["robot"].steps[2], at_s=0.1))  # the wait before the cue at 0.5 s
+    tell(console, live, started(session.settings.plans["robot"].steps[2], at_s=0.1))  # the wait before the cue at 0.5 s
     live.use_clock(MachineShowClock(session.clock.mono() - 10.0))  # both long past: nothing in the way
     assert console._quiet_left() == 0.0
     live.use_clock(MachineShowClock(session.clock.mono() - 0.48))  # the cue 20 ms from now
@@ -176,7 +187,7 @@ class HeldAt:
 
 def test_the_link_column_is_the_median_latency_and_the_retries(tmp_path):
     console, session, live = prepared(tmp_path, GO_SHOW)
-    watch = _LinkWatch(console, "robot")
+    watch = console.status.link_listener("robot")
     frame = session.settings.plans["robot"].steps[0].frames[0]
     for ms in (1.0, 2.0, 9.0):
         watch.on_rx(RxEvent(1, frame, Reply(ReplyKind.ACK), 0, ms / 1e3, None))
@@ -194,12 +205,12 @@ def test_a_waiting_go_cue_is_highlighted_and_commands_are_answered_on_screen(tmp
     # reached, then gave up
     live.await_go(session.settings.plans["robot"].steps[1], "robot", reached_s=0.0, should_stop=lambda: True)
     screen = console.screen()
-    assert screen.go_waiting and screen.go == "GO waits: 'applause': press Space or Enter"
-    assert screen.rows[0].now == "waits for GO: 'applause'"
+    assert screen.go_waiting and screen.go == "GO fires cue 1 'applause': press Space or Enter"
+    assert screen.rows[0].now == "waits for GO: cue 1 'applause'"
     live.command(Command("go", "osc udp 127.0.0.1:53001"))
     live.command(Command("go", "key"))
     notes = [note.text for note in console.screen().notes]
-    assert notes[0] == "GO: applause (osc udp 127.0.0.1:53001)"
+    assert notes[0] == "GO: cue 1 'applause' (osc udp 127.0.0.1:53001)"
     assert notes[1].startswith("GO ignored: 0.") and "a double press?" in notes[1]
 
 
@@ -232,16 +243,26 @@ class Commands:
         self.panicked = False
         self.started = True
         self.waiting: list = []
+        self.cues = CueList()
+        self.playhead = None
+        self.paused = False
+        self.labels: list[str | None] = []
+
+    def cue_state(self, cue) -> str:  # type: ignore[no-untyped-def]
+        return "ahead"
 
     def command(self, command: Command):  # type: ignore[no-untyped-def]
         assert command.source == "key"
         self.given.append(command.name)
+        self.labels.append(command.label)
+        if command.name in ("pause", "resume"):
+            self.paused = command.name == "pause"
 
 
 def test_keys_become_commands_and_q_asks_first(tmp_path):
     console, session, _ = prepared(tmp_path, GO_SHOW)
     console.live = commands = Commands()  # type: ignore[assignment]
-    for key in ("go", "q", "n", "go", "q", "escape", "q", "y", "x"):
+    for key in ("space", "q", "n", "enter", "q", "escape", "q", "y", "x"):
         console.on_key(key)
     # q then n: nothing; q then Esc: panic all the same; q then y: stop; a stray key: nothing
     assert commands.given == ["go", "go", "panic", "stop"]
@@ -255,9 +276,10 @@ def test_the_key_reader_tells_esc_from_an_arrow_key():
     reader = KeyReader(read, lambda key: (keys.append(key), got.set()))
     reader.start()
     try:
-        for sent, expected in ((b"\x1b[A", None), (b"\x1bOB", None), (b"\x1b[1;5C", None), (b"\x1b\x1b[D", None),
-                               (b"\x1b\x1bOP", None), (b"\x1b[1;3D", None), (b"\x1bq", None), (b" ", "go"),
-                               (b"\r", "go"), (b"\x1b", "escape"), (b"\x1b\x1b", "escape"), (b"q", "q"), (b"y", "y")):
+        for sent, expected in ((b"\x1b[A", "up"), (b"\x1bOB", "down"), (b"\x1b[1;5C", None), (b"\x1b\x1b[D", None),
+                               (b"\x1b\x1bOP", None), (b"\x1b[1;3D", None), (b"\x1bq", None), (b" ", "space"),
+                               (b"\r", "enter"), (b"\x1b", "escape"), (b"\x1b\x1b", "escape"), (b"q", "q"),
+                               (b"y", "y")):
             got.clear()
             os.write(write, sent)
             if expected is None:
@@ -274,7 +296,7 @@ def test_the_key_reader_tells_esc_from_an_arrow_key():
 # What terminals send for keys that are not Esc (xterm, VTE, Terminal.app, iTerm2, rxvt, tmux,
 # screen, the Linux console, PuTTY): arrows, function keys, Alt with each, replies, mouse, paste.
 NOT_ESC = [
-    b"\x1b[A", b"\x1b[B", b"\x1b[C", b"\x1b[D", b"\x1bOA", b"\x1bOD", b"\x1b[H", b"\x1b[F", b"\x1b[1~",
+    b"\x1b[C", b"\x1b[D", b"\x1bOC", b"\x1bOD", b"\x1b[H", b"\x1b[F", b"\x1b[1~",
     b"\x1b[4~", b"\x1b[5~", b"\x1b[6~", b"\x1b[2~", b"\x1b[3~", b"\x1b[Z",  # arrows, Home/End, PgUp, Ins, Del, S-Tab
     b"\x1bOP", b"\x1bOQ", b"\x1bOR", b"\x1bOS", b"\x1b[15~", b"\x1b[17~", b"\x1b[24~", b"\x1b[11~",  # F-keys
     b"\x1b[[A", b"\x1b[[E", b"\x1bO2P", b"\x1b[1;2P", b"\x1b[15;5~",  # Linux console F1/F5; modified F-keys
@@ -295,13 +317,13 @@ def test_only_a_bare_esc_panics_every_other_sequence_is_read_whole_and_ignored(s
     assert parser.feed(sequence) + parser.timeout() == []
     bytewise = KeyParser()  # the same, a byte a read
     assert [k for byte in sequence for k in bytewise.feed(bytes([byte]))] == []
-    assert bytewise.feed(b" ") == ["go"]  # and the next key is a key
+    assert bytewise.feed(b" ") == ["space"]  # and the next key is a key
     assert parser.feed(b"\x1b") == [] and parser.timeout() == ["escape"]
 
 
 def test_keys_and_bare_escs() -> None:
     parser = KeyParser()
-    assert parser.feed(b" \r\nqQyx") == ["go", "go", "go", "q", "q", "y", "x"]
+    assert parser.feed(b" \r\nqQyx") == ["space", "enter", "enter", "q", "q", "y", "x"]
     assert parser.feed(b"\x03\x00\xe3\x83\xad\t") == []  # control bytes and UTF-8 are not keys
     assert parser.feed(b"\x1b") == [] and parser.pending and parser.timeout() == ["escape"]
     assert parser.feed(b"\x1b\x1b") == [] and parser.timeout() == ["escape"]  # Esc twice in a hurry
@@ -315,13 +337,14 @@ def test_a_sequence_cut_short_ends_at_the_pause() -> None:
     for cut in (b"\x1b[1;3", b"\x1b]0;title", b"\x1b[200~abc", b"\x1b[M", b"\x1bO", b"\x1b\x1b["):
         assert parser.feed(cut) == [] and parser.pending
         assert parser.timeout() == [] and not parser.pending
-        assert parser.feed(b" ") == ["go"]
+        assert parser.feed(b" ") == ["space"]
 
 
 _final = st.integers(0x40, 0x7E).map(lambda b: bytes([b]))
 _params = st.binary(max_size=12).map(lambda raw: bytes(0x30 + b % 16 for b in raw))
-_csi = st.builds(lambda p, f: b"\x1b[" + p + f, _params, _final.filter(lambda f: f not in (b"M", b"[")))
-_ss3 = st.builds(lambda p, f: b"\x1bO" + p + f, _params, _final)
+_csi = st.builds(lambda p, f: b"\x1b[" + p + f, _params, _final.filter(lambda f: f not in (b"M", b"["))).filter(
+    lambda s: s[1:] not in ARROWS)  # Up and Down are keys
+_ss3 = st.builds(lambda p, f: b"\x1bO" + p + f, _params, _final).filter(lambda s: s[1:] not in ARROWS)
 _alt = st.integers(0x20, 0x7E).map(lambda b: b"\x1b" + bytes([b])).filter(
     lambda s: s[1:] not in (b"[", b"O", b"]", b"P", b"X", b"^", b"_"))
 _osc = st.builds(lambda text, end: b"\x1b]" + text + end, st.binary(max_size=20).map(
@@ -351,9 +374,9 @@ def test_any_run_of_key_sequences_in_any_chunks_gives_no_key(sequences: list[byt
 def test_after_any_bytes_and_a_pause_esc_and_go_work(noise: bytes) -> None:
     parser = KeyParser()
     keys = parser.feed(noise) + parser.timeout()
-    assert set(keys) <= {"go", "q", "escape"} | {chr(b) for b in range(0x21, 0x7F)}
+    assert set(keys) <= set(KEYS.values()) | {"escape", "up", "down"} | {chr(b) for b in range(0x21, 0x7F)}
     assert parser.feed(b"\x1b") == [] and parser.timeout() == ["escape"]
-    assert parser.feed(b" ") == ["go"]
+    assert parser.feed(b" ") == ["space"]
 
 
 class BrokenTerminal(io.StringIO):
@@ -471,13 +494,13 @@ def commands_in(tmp_path: Path) -> list[tuple[str, str, str]]:
 @needs_tmux
 def test_go_releases_the_waiting_cue_and_a_double_press_is_refused(tmp_path, pane):
     run = pane(GO_SHOW)
-    run.wait_for("GO waits: 'applause'")
+    run.wait_for("GO fires cue 1 'applause'")
     run.keys("Space", "Space")  # one press too many, well within the lockout
-    screen = run.wait_for("GO waits: 'encore'")
-    assert "GO: applause" in screen and "a double press?" in screen
+    screen = run.wait_for("GO fires cue 3 'encore'")
+    assert "GO: cue 1" in screen and "double press?" in screen
     run.keys("Enter")  # the encore waits 0.5 s of show after the GO: past the lockout
     assert run.exit_code() == 0
-    assert "GO: encore" in run.screen() and "the run is over; keys off" in run.screen()
+    assert "encore" in run.screen() and "the run is over; keys off" in run.screen()
     assert commands_in(tmp_path) == [("go", "key", "ok"), ("go", "key", "error"), ("go", "key", "ok")]
     assert run.terminal_restored()
 
@@ -485,7 +508,7 @@ def test_go_releases_the_waiting_cue_and_a_double_press_is_refused(tmp_path, pan
 @needs_tmux
 def test_esc_panics_every_robot_and_exits_130(tmp_path, pane):
     run = pane(TWO_ROBOTS)
-    run.wait_for("GO waits")
+    run.wait_for("GO fires")
     run.keys("Escape")
     assert run.exit_code() == 130
     assert "the show was stopped by panic" in run.screen()
@@ -501,14 +524,14 @@ def test_esc_panics_every_robot_and_exits_130(tmp_path, pane):
 @needs_tmux
 def test_q_asks_n_goes_on_y_stops(tmp_path, pane):
     run = pane(GO_SHOW)
-    run.wait_for("GO waits: 'applause'")
-    run.keys("Up")  # an arrow key's escape sequence is not Esc
+    run.wait_for("GO fires cue 1 'applause'")
+    run.keys("Left")  # an arrow key's escape sequence is not Esc
     run.keys("q")
     run.wait_for("stop the show? y/n")
     run.keys("n")
     run.wait_for("stop cancelled")
     run.keys("Space")
-    run.wait_for("GO waits: 'encore'")
+    run.wait_for("GO fires cue 3 'encore'")
     run.keys("q")
     run.wait_for("stop the show? y/n")
     run.keys("y")
@@ -521,14 +544,13 @@ def test_q_asks_n_goes_on_y_stops(tmp_path, pane):
 @needs_tmux
 def test_sixty_columns_draw_without_wrapping(tmp_path, pane):
     run = pane(TWO_ROBOTS, 60, {"COLUMNS": "132", "LINES": "50"})  # the terminal's own size wins
-    screen = run.wait_for("GO waits")
+    screen = run.wait_for("GO fires")
     lines = screen.splitlines()
     assert all(len(line) <= 60 for line in lines)
     title = [line for line in lines if "show 0.0 s · machine clock, held for GO" in line]
     assert len(title) == 1 and title[0].startswith("a show for two"), screen  # one line, drawn once
-    assert any(line.startswith("alpha ") and "waits for GO" in line for line in lines)
-    assert any(line.startswith("beta_with_a… ") for line in lines)
-    assert LEGEND in lines
+    assert any(line.startswith("alpha, beta_with_a… wait for GO: cue 1 'the-first") for line in lines), screen
+    assert SHORT_LEGEND in lines
     run.keys("Escape")
     assert run.exit_code() == 130
     assert run.terminal_restored()
@@ -537,7 +559,7 @@ def test_sixty_columns_draw_without_wrapping(tmp_path, pane):
 def _two_gos_and_nothing_else(run, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """After keys that must do nothing: Space and Enter GO the two cues, and only they were commands."""
     run.keys("Space")
-    run.wait_for("GO waits: 'encore'")
+    run.wait_for("GO fires cue 3 'encore'")
     run.keys("Enter")
     assert run.exit_code() == 0
     assert commands_in(tmp_path) == [("go", "key", "ok"), ("go", "key", "ok")]
@@ -547,7 +569,7 @@ def _two_gos_and_nothing_else(run, tmp_path: Path) -> None:  # type: ignore[no-u
 @needs_tmux
 def test_alt_arrows_and_alt_f_keys_do_not_panic(tmp_path, pane):
     run = pane(GO_SHOW)
-    run.wait_for("GO waits: 'applause'")
+    run.wait_for("GO fires cue 1 'applause'")
     run.keys("M-Left", "M-F1", "M-Up", "Left")  # tmux's own (xterm) sequences
     for raw in ("1b 1b 5b 44", "1b 1b 4f 50", "1b 1b 5b 31 35 7e", "1b 1b 5b 43"):  # ESC ESC [ D ...
         run._tmux("send-keys", "-t", "run", "-H", *raw.split())
@@ -559,7 +581,7 @@ def test_ctrl_keys_the_terminal_would_act_on_reach_the_console_and_do_nothing(tm
     """Ctrl-Z would suspend the show mid-motion, Ctrl-\\ kill it (no abort motion, no closed log),
     Ctrl-S freeze the screen: in the console each is a byte it ignores."""
     run = pane(GO_SHOW)
-    run.wait_for("GO waits: 'applause'")
+    run.wait_for("GO fires cue 1 'applause'")
     for key in ("C-z", "C-\\", "C-s", "C-y", "C-v", "C-o", "C-q", "C-d", "C-w", "C-u", "C-r", "C-t"):
         run.keys(key)
     _two_gos_and_nothing_else(run, tmp_path)
@@ -594,7 +616,7 @@ def test_a_paste_is_skipped_whatever_it_holds_in_any_chunks(text: bytes) -> None
     for cut in range(1, len(data) + 1):  # the paste's end split across reads at every byte
         parser = KeyParser()
         assert parser.feed(data[:cut]) + parser.feed(data[cut:]) == [], cut
-        assert not parser.pending and parser.feed(b"q ") == ["q", "go"]
+        assert not parser.pending and parser.feed(b"q ") == ["q", "space"]
     bytewise = KeyParser()
     assert [k for byte in data for k in bytewise.feed(bytes([byte]))] == [] and not bytewise.pending
 
@@ -604,7 +626,7 @@ def test_a_megabyte_paste_gives_no_key() -> None:
     parser = KeyParser()
     data = b"\x1b[200~" + text + b"\x1b[201~ "
     keys = [k for at in range(0, len(data), 4096) for k in parser.feed(data[at:at + 4096])]
-    assert keys == ["go"]  # only the space after the paste
+    assert keys == ["space"]  # only the space after the paste
 
 
 def test_a_pause_in_a_paste_is_not_its_end():
@@ -620,7 +642,7 @@ def test_a_pause_in_a_paste_is_not_its_end():
         got = threading.Event()
         reader.on_key = lambda key: (keys.append(key), got.set())
         os.write(write, b" ")
-        assert got.wait(5) and keys == ["go"]
+        assert got.wait(5) and keys == ["space"]
     finally:
         reader.close()
         os.close(write)
@@ -643,11 +665,11 @@ def test_the_console_asks_the_terminal_to_mark_pastes_and_stops_asking_after(tmp
 @needs_tmux
 def test_a_paste_is_no_key_in_a_run(tmp_path, pane):
     run = pane(GO_SHOW)
-    run.wait_for("GO waits: 'applause'")
+    run.wait_for("GO fires cue 1 'applause'")
     run._tmux("set-buffer", "-b", "text", "Iraqy: see you at the party, q y\n")
     run._tmux("paste-buffer", "-p", "-b", "text", "-t", "run")
     run.keys("Space")
-    run.wait_for("GO waits: 'encore'")
+    run.wait_for("GO fires cue 3 'encore'")
     run.keys("Enter")
     assert run.exit_code() == 0
     assert commands_in(tmp_path) == [("go", "key", "ok"), ("go", "key", "ok")]
@@ -681,7 +703,7 @@ def test_after_each_resize_every_line_on_the_terminal_fits_it(tmp_path, pane):
     from choreo.textfit import display_width
 
     run = pane(WIDE_NAMES, 80)
-    run.wait_for("GO waits")
+    run.wait_for("GO fires")
     for width in (25, 60, 20, 33, 100, 40):
         run._tmux("resize-window", "-t", "run", "-x", str(width))
         deadline = time.monotonic() + 5
@@ -745,15 +767,15 @@ LONG = [b"\x1b]52;c;" + b"QUJD q y " * 200 + b"\x07", b"\x1bP1+r" + b"q y " * 30
 def test_a_sequence_of_any_length_is_read_to_its_end(sequence: bytes) -> None:
     parser = KeyParser()
     assert parser.feed(sequence) == [] and not parser.pending
-    assert parser.feed(b" q") == ["go", "q"]
+    assert parser.feed(b" q") == ["space", "q"]
     bytewise = KeyParser()
-    assert [k for byte in sequence + b" " for k in bytewise.feed(bytes([byte]))] == ["go"]
+    assert [k for byte in sequence + b" " for k in bytewise.feed(bytes([byte]))] == ["space"]
 
 
 # A terminal sending 8-bit controls (VT220 and up, xterm after S8C1T): raw, or as UTF-8 (C2 9B).
-EIGHT_BIT = [b"\x9bA", b"\x9b1;5C", b"\x8fP", b"\x9b200~go q y \r\x9b201~", b"\x9bM !!", b"\x9bM  q",
+EIGHT_BIT = [b"\x9bC", b"\x9b1;5C", b"\x8fP", b"\x9b200~go q y \r\x9b201~", b"\x9bM !!", b"\x9bM  q",
              b"\x9d11;rgb:0000/0000/0000 q y\x9c", b"\x90q y $r0m\x9c", b"\x9f q y \x07",
-             b"\xc2\x9bA", b"\xc2\x9b200~ q y \xc2\x9b201~", b"\xc2\x9d0;\xe3\x80\x9c q y\xc2\x9c", b"\xc2\x9bM q "]
+             b"\xc2\x9bD", b"\xc2\x9b200~ q y \xc2\x9b201~", b"\xc2\x9d0;\xe3\x80\x9c q y\xc2\x9c", b"\xc2\x9bM q "]
 
 
 @pytest.mark.parametrize("sequence", EIGHT_BIT, ids=lambda b: b.hex(" "))
@@ -762,11 +784,11 @@ def test_a_sequence_begun_by_an_8_bit_control_is_no_key(sequence: bytes) -> None
     assert parser.feed(sequence) + parser.timeout() == []
     bytewise = KeyParser()
     assert [k for byte in sequence for k in bytewise.feed(bytes([byte]))] + bytewise.timeout() == []
-    assert parser.feed(b" q") == ["go", "q"]
+    assert parser.feed(b" q") == ["space", "q"]
 
 
 def test_utf8_text_typed_is_no_key_and_no_sequence() -> None:
     parser = KeyParser()  # 〛 and 〜 end in 9B and 9C: continuation bytes, not 8-bit controls
-    assert parser.feed("〛 q 〜 ロボ\u009c ".encode()) == ["go", "q", "go", "go", "go"]
-    assert parser.feed("\x1b〛 q".encode()) == ["go", "q"]  # Alt+〛, then keys
+    assert parser.feed("〛 q 〜 ロボ\u009c ".encode()) == ["space", "q", "space", "space", "space"]
+    assert parser.feed("\x1b〛 q".encode()) == ["space", "q"]  # Alt+〛, then keys
     assert not parser.pending

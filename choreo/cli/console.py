@@ -1,5 +1,6 @@
-"""The live console of `choreo run` on a terminal: where the show is, what comes next, how the
-links are doing, and the operator's keys (GO, panic, stop).
+"""The live console of `choreo run` on a terminal: where the show is, its cue list with the
+playhead (the cue GO fires next), how the robots and their links are doing, and the operator's
+keys (GO, playhead, skip, jump, pause, panic, stop).
 
 It is a listener like the others (the run's steps and log lines, the operator's commands, each
 link's frames and replies) and keeps only what it draws; the commands go through `Live`, so a
@@ -9,8 +10,8 @@ Two things it must never do. Delay the show: the runners call its listener metho
 own path, so those only note what happened under a short lock; drawing happens in its own
 thread, which also keeps clear of the moments a step falls due or a GO was just given (a redraw
 holds Python's lock for a few milliseconds, and a runner woken then would wait for it), and
-draws only what changed: while a GO cue waits, the clock holds and the screen stays still, so
-the GO, when it comes, finds nothing drawing.
+draws only what changed: while a GO cue waits or the show is paused, the clock holds and the
+screen stays still, so the GO, when it comes, finds nothing drawing.
 And leave the terminal unusable: the key mode (cbreak, no echo) is undone on every way out.
 
 rich lays the screen out (a table whose columns share the width, every cell cut with `…`), so
@@ -20,13 +21,11 @@ it fits any width from 60 columns; everything goes to `out` (stderr): stdout is 
 from __future__ import annotations
 
 import os
-import statistics
 import sys
 import termios
 import threading
 from collections import deque
 from contextlib import suppress
-from dataclasses import dataclass, field
 from typing import TextIO, cast
 
 from rich.console import Console as RichConsole
@@ -36,79 +35,28 @@ from rich.file_proxy import FileProxy
 from rich.live import Live as RichLive
 
 from choreo.cli.keys import PASTE_OFF, PASTE_ON, KeyReader, TerminalMode, in_foreground
-from choreo.cli.screen import LEGEND, NARROW, WAITING_STYLE, Note, Row, Screen, render
+from choreo.cli.screen import LEGEND, NARROW, STATE_STYLES, WAITING_STYLE, CueLine, Note, Row, Screen, render
 from choreo.cli.terminal import raw_stream, visible_stream
-from choreo.events import Command, CommandEvent, GoCue, RxEvent, StepEvent, Subscription, TxEvent
+from choreo.events import Command, CommandEvent, GoCue, StepEvent, Subscription
 from choreo.live.controls import HoldingShowClock, Live
+from choreo.live.status import RobotRow, ShowStatus
 from choreo.log.format import ERROR, INFO, WARNING
-from choreo.show.model import SOLO, PlannedStep, StepKind, beat_text
+from choreo.show.cues import Cue, CueList
+from choreo.show.model import PlannedStep, beat_text
+from choreo.textfit import fit
 
 REFRESH_S = 0.2  # five looks a second: the show time moves smoothly enough (and is drawn to 0.1 s)
 QUIET_BEFORE_S = 0.06  # no redraw starts this close before a step falls due (a cue's lead included)
 QUIET_AFTER_S = 0.03  # nor this soon after it, or after a GO (its frames go out then)
 MAX_POSTPONE_S = 0.5  # cues closer together than this still let the screen move
 NOTES = 5  # lines of log and answers on screen
-LATENCIES = 20  # the replies link health is the median of
+CUE_WINDOW = 9  # cues of the list on screen at most (render shows fewer on a short terminal)
+MAX_TYPED = 40  # characters a cue reference typed after `j` may have
+NAMES = 2  # robots named on a line they share (`left, right +3`)
 
 QUESTION = "stop the show? y/n"
+JUMP = "jump to cue: {typed}_  (number or label, Enter; empty Enter cancels)"
 STYLES = {ERROR: "bold red", WARNING: "yellow", INFO: ""}
-
-
-# -- what the console keeps --------------------------------------------------------------------
-
-
-@dataclass
-class _Robot:
-    """One robot as the console knows it: its steps, where it is in them, its link's replies."""
-
-    name: str
-    steps: tuple[PlannedStep, ...]  # its own steps, from where it starts
-    at: int = -1  # position in `steps` of its current step (-1: none started)
-    ended: bool = False  # the current step has ended
-    started_s: float = 0.0  # show time the current step started
-    latencies_ms: deque[float] = field(default_factory=lambda: deque(maxlen=LATENCIES))
-    retries: int = 0
-    failed: int = 0  # tries without a good reply
-
-    @property
-    def current(self) -> PlannedStep | None:
-        return self.steps[self.at] if self.at >= 0 else None
-
-    @property
-    def ahead(self) -> tuple[PlannedStep, ...]:
-        return self.steps[self.at + 1:]
-
-    @property
-    def done(self) -> bool:
-        return self.ended and self.at == len(self.steps) - 1
-
-    def moved_to(self, step: PlannedStep, show_s: float) -> None:
-        self.at = next((i for i, s in enumerate(self.steps) if s.index == step.index), self.at)
-        self.ended = False
-        self.started_s = show_s
-
-    def step_ended(self, step: PlannedStep) -> None:
-        """A step ended: its own current one (another robot's shared step is not its end)."""
-        if self.current is not None and self.current.index == step.index:
-            self.ended = True
-
-    def replied(self, latency_ms: float, ok: bool) -> None:
-        if ok:
-            self.latencies_ms.append(latency_ms)
-        else:
-            self.failed += 1
-
-    def retried(self) -> None:
-        self.retries += 1
-
-    def dues_s(self) -> list[float]:
-        """When, on the show clock, this robot's runner next wakes to send: the end of the wait
-        it is in, and its next timed cue (a step after a play goes at once: no wake-up)."""
-        step = self.current
-        dues = [s.at for s in self.ahead if s.at is not None][:1]
-        if step is not None and step.kind is StepKind.WAIT and not self.ended:
-            dues.append(self.started_s + (step.seconds or 0.0))
-        return dues
 
 
 def _step_text(step: PlannedStep) -> str:
@@ -117,19 +65,10 @@ def _step_text(step: PlannedStep) -> str:
     return f"{when}{step.index}{label}: {step.describe()}"
 
 
-@dataclass
-class _LinkWatch:
-    """A robot's link listener: reply latencies and retries, for the robot's link column."""
-
-    console: Console
-    robot: str
-
-    def on_tx(self, event: TxEvent) -> None:
-        if event.attempt > 1:
-            self.console._note_retry(self.robot)
-
-    def on_rx(self, event: RxEvent) -> None:
-        self.console._note_reply(self.robot, event.latency_s * 1e3, event.reply.ok)
+def _names(robots: list[str] | tuple[str, ...]) -> str:
+    """`left, right +3`: the first NAMES robots (each cut to 12 columns) and how many more."""
+    shown = ", ".join(fit(name, 12) for name in robots[:NAMES])
+    return shown + (f" +{len(robots) - NAMES}" if len(robots) > NAMES else "")
 
 
 # -- the console -------------------------------------------------------------------------------
@@ -139,19 +78,23 @@ class Console:
     """The live console; see the module's docstring. Created by `choreo run` when stdin and
     stderr are terminals, started once the ports are open, closed when the run is over."""
 
-    def __init__(self, session, live: Live, *, out: TextIO | None = None,
-                 keys: TextIO | None = None, width: int | None = None) -> None:
-        """`out`: where it draws (default stderr); `keys`: the terminal it reads (default
-        stdin; one that is not a terminal gives no keys); `width`: fixed, for tests."""
+    def __init__(self, session, live: Live, *, status: ShowStatus | None = None, out: TextIO | None = None,
+                 keys: TextIO | None = None, width: int | None = None, height: int | None = None) -> None:
+        """`status`: the run's robot status (None: the console keeps its own, told the steps
+        it hears and subscribed to the links at `start`); `out`: where it draws (default
+        stderr); `keys`: the terminal it reads (default stdin; one that is not a terminal
+        gives no keys); `width`, `height`: fixed, for tests."""
         out = out if out is not None else raw_stream(sys.stderr)  # it draws: its escapes are its own
         self.session = session
         self.live = live
         self.out = out
         self.keys = keys if keys is not None else sys.stdin
         self._lock = threading.Lock()
-        starts = session.settings.sections.starts
-        self._robots = {name: _Robot(name, tuple(s for s in plan.steps[starts[name]:] if s.is_for(name)))
-                        for name, plan in session.settings.plans.items()}
+        settings = session.settings
+        self._own_status = status is None  # then it is told the steps, and watches the links, itself
+        self.status = status if status is not None else ShowStatus(settings.plans, settings.sections.starts)
+        self._cues: CueList = live.cues  # the live controls keep the cue list and each cue's state
+        self._typed: str | None = None  # a cue reference being typed after `j`
         self._notes: deque[Note] = deque(maxlen=NOTES)
         self._asking = False
         self._closing = False
@@ -162,6 +105,7 @@ class Console:
         self._reader: KeyReader | None = None
         self._redraw: threading.Thread | None = None
         self._width = width  # fixed (tests); None: the terminal's, measured at each redraw
+        self._height = height
         # rich would read COLUMNS and LINES with int() (`²` or 5,000 digits: ValueError); the
         # console measures the terminal itself, so rich is given an environment without them
         environ = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
@@ -241,9 +185,12 @@ class Console:
                 mode.restore()
 
     def _watch_links(self) -> None:
+        """Its own status's links (the run's status is subscribed by whoever made it)."""
         stage = self.session.stage  # None until the session opens: no links to watch yet
-        for name, link in (stage.links.items() if stage is not None else ()):
-            self._watches.append(link.subscribe(_LinkWatch(self, name)))
+        if not self._own_status or stage is None:
+            return
+        for name, link in stage.links.items():
+            self._watches.append(link.subscribe(self.status.link_listener(name)))
 
     def _redraw_loop(self) -> None:
         """Redraw REFRESH_S apart, each put off past any moment a runner is about to send."""
@@ -263,7 +210,7 @@ class Console:
         if drawn != self._drawn:
             if self._drawn is not None and drawn[1] != self._drawn[1]:
                 self._start_afresh()
-            self._rich.update(render(screen, drawn[1]), refresh=True)
+            self._rich.update(render(screen, drawn[1], self._lines()), refresh=True)
             self._drawn = drawn
 
     def _start_afresh(self) -> None:
@@ -281,13 +228,20 @@ class Console:
     def _quiet_left(self) -> float:
         """How long until no runner is about to send (0: now), at most MAX_POSTPONE_S."""
         now = self.session.clock.mono()
+        dues = self._due_windows()
         with self._lock:
-            windows = [(self._quiet_until - QUIET_AFTER_S, self._quiet_until)] + self._due_windows()
+            windows = [(self._quiet_until - QUIET_AFTER_S, self._quiet_until)] + dues
         until = now
         for start, end in sorted(windows):
             if start <= until < end:
                 until = end
         return min(until - now, MAX_POSTPONE_S)
+
+    def _lines(self) -> int | None:
+        """The terminal's height (the screen is cut to it), if known."""
+        if self._height is not None or self._width is not None:
+            return self._height
+        return self._screen.size.height
 
     def _fit_terminal(self) -> None:
         """The terminal's own size, measured on `out`: it may be resized mid-show, and an
@@ -302,13 +256,13 @@ class Console:
             self._screen.size = (size.columns, size.lines)
 
     def _due_windows(self) -> list[tuple[float, float]]:
-        """The lock is held. Monotonic windows around each robot's next due time."""
+        """Monotonic windows around each robot's next due time."""
         show = self.live.show
         if show is None:
             return []
         windows = []
-        for robot in self._robots.values():
-            for due in robot.dues_s():
+        for robot in self.status.robots():
+            for due in robot.due_s:
                 mono = show.mono_at(due)
                 windows.append((mono - QUIET_BEFORE_S, mono + QUIET_AFTER_S))
         return windows
@@ -323,41 +277,70 @@ class Console:
             self._add(Note(f"key {key!r} failed: {exc}", "bold red", self._show_s()))
 
     def _on_key(self, key: str) -> None:
-        """Esc panics whatever else is going on; a question takes the next key as its answer;
-        Space or Enter is GO (which also starts a show loaded with --wait-start)."""
+        """Esc panics whatever else is going on; a question takes the next key as its answer,
+        a cue reference being typed (`j`) the keys up to Enter; else each key is a command."""
         if key == "escape":
             self._ask(False)
+            self._type(None)
             self.live.command(Command("panic", "key"))
             return
         with self._lock:
-            asking = self._asking
+            asking, typed = self._asking, self._typed
         if asking:
             self._ask(False)
             if key in ("y", "Y"):
                 self.live.command(Command("stop", "key"))
             else:
                 self._add(Note("stop cancelled: the show goes on", "dim", self._show_s()))
-        elif key == "go":
-            # before a show loaded with --wait-start, the operator's GO key starts it
+        elif typed is not None:
+            self._typing(key, typed)
+        else:
+            self._command_key(key)
+
+    def _command_key(self, key: str) -> None:
+        """Space or Enter is GO (which also starts a show loaded with --wait-start)."""
+        names = {"up": "playhead_previous", "down": "playhead_next", "s": "skip", "S": "skip"}
+        if key in ("space", "enter"):
             self.live.command(Command("go" if self.live.started else "start", "key"))
+        elif key in names:
+            self.live.command(Command(names[key], "key"))
+        elif key in ("p", "P"):
+            self.live.command(Command("resume" if self.live.paused else "pause", "key"))
+        elif key in ("j", "J"):
+            self._type("")
         elif key == "q":
             self._ask(True)
+
+    def _typing(self, key: str, typed: str) -> None:
+        """A key while a cue reference is typed: Enter jumps there (an empty one cancels),
+        Backspace and Ctrl-U erase, printable characters (Space too) are typed, up to MAX_TYPED."""
+        if key == "enter":
+            self._type(None)
+            if typed.strip():
+                self.live.command(Command("playhead", "key", typed.strip()))
+            else:
+                self._add(Note("jump cancelled", "dim", self._show_s()))
+        elif key == "backspace":
+            self._type(typed[:-1])
+        elif key == "ctrl-u":
+            self._type("")
+        elif len(typed) < MAX_TYPED and (key == "space" or len(key) == 1 and key.isprintable()):
+            self._type(typed + (" " if key == "space" else key))
 
     def _ask(self, asking: bool) -> None:
         with self._lock:
             self._asking = asking
 
+    def _type(self, typed: str | None) -> None:
+        with self._lock:
+            self._typed = typed
+
     # -- listeners -----------------------------------------------------------------------------
 
     def on_step(self, event: StepEvent) -> None:
-        robot = self._robots.get(event.robot or SOLO)
-        if robot is None:
-            return
-        with self._lock:
-            if event.event == "start":
-                robot.moved_to(event.step, event.actual_s)
-            else:
-                robot.step_ended(event.step)
+        """Told to its own status only: the run's status hears the run itself."""
+        if self._own_status:
+            self.status.on_step(event)
 
     def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
         if level >= INFO:
@@ -367,7 +350,7 @@ class Console:
         command, answer = event.command, event.answer
         source = "" if command.source == "key" else f" ({command.source})"
         text = f"{answer.message}{source}"
-        if answer.ok and command.name in ("go", "cue_go", "start"):
+        if answer.ok and command.name in ("go", "cue_go", "start", "resume"):
             with self._lock:  # the frames it releases go out now: no redraw in their way
                 self._quiet_until = self.session.clock.mono() + QUIET_AFTER_S
         self._add(Note(text, "green" if answer.ok else "bold red", event.show_s))
@@ -375,14 +358,6 @@ class Console:
     def on_play_out(self, end_s: float) -> None:
         self._add(Note(f"the steps are done; the music plays to its end at {end_s:.1f} s", "",
                        self._show_s()))
-
-    def _note_retry(self, robot: str) -> None:
-        with self._lock:
-            self._robots[robot].retried()
-
-    def _note_reply(self, robot: str, latency_ms: float, ok: bool) -> None:
-        with self._lock:
-            self._robots[robot].replied(latency_ms, ok)
 
     def _add(self, note: Note) -> None:
         with self._lock:
@@ -394,22 +369,57 @@ class Console:
 
     # -- drawing -------------------------------------------------------------------------------
 
-    def renderable(self, width: int = NARROW) -> RenderableType:
-        return render(self.screen(), width)
+    def renderable(self, width: int = NARROW, height: int | None = None) -> RenderableType:
+        return render(self.screen(), width, height)
 
     def screen(self) -> Screen:
-        """What to draw now."""
+        """What to draw now (the live controls and the status are asked outside the lock)."""
         stopping = self.live.stop()
         waiting = [] if stopping else self.live.waiting  # a stopped show's GO cues wait for nothing
         show_s = self._show_s()
+        robots = self.status.robots()
+        states = self._states()
+        head = None if stopping else self.live.playhead
+        window, at = self._window(head, states)
+        groups = self._groups(waiting)
+        shared = {name for names, _ in groups if len(names) > 1 for name in names}
+        rows = tuple(self._row(robot, groups) for robot in robots if robot.robot not in shared)
+        waits = tuple(f"{_names(names)} wait for GO: {name}" for names, name in groups if len(names) > 1)
+        cue = "next cue: none, the show is stopping" if stopping else self._cue_line(show_s, states)
+        go, go_waiting = self._go_line(head, states, stopping)
+        lines = tuple(self._cue_line_of(c, states.get(c, "done"), show_s) for c in window)
         with self._lock:
-            rows = tuple(self._row(robot, waiting) for robot in self._robots.values())
-            cue = "next cue: none, the show is stopping" if stopping else self._cue_line(show_s)
-            go, go_waiting = self._go_line(waiting, stopping)
+            prompt = QUESTION if self._asking else None if self._typed is None else JUMP.format(typed=self._typed)
             return Screen(self.session.settings.show.name, None if show_s is None else round(show_s, 1),
-                          self._clock_text(stopping), cue, go, go_waiting, rows, tuple(self._notes),
-                          QUESTION if self._asking else None,
-                          self._final_line() if self._closing else LEGEND, self._bar(show_s))
+                          self._clock_text(stopping), cue, go, go_waiting, rows, tuple(self._notes), prompt,
+                          self._final_line() if self._closing else LEGEND, self._bar(show_s), lines, at, waits)
+
+    def _states(self) -> dict[Cue, str]:
+        """Each cue's state, as the live controls keep it."""
+        return {cue: self.live.cue_state(cue) for cue in self._cues}
+
+    def _window(self, head: Cue | None, states: dict[Cue, str]) -> tuple[tuple[Cue, ...], int | None]:
+        """CUE_WINDOW cues around the playhead (two before it), and its place among them; with
+        no playhead, around the first cue not over yet (the last ones once all are)."""
+        cues = self._cues.cues
+        if head is not None and head in cues:
+            at = self._cues.position(head)
+        else:
+            at = next((i for i, cue in enumerate(cues) if states.get(cue) in ("ahead", "waiting", "running")),
+                      len(cues))
+        first = max(0, min(at - 2, len(cues) - CUE_WINDOW))
+        return cues[first:first + CUE_WINDOW], (at - first if head is not None and head in cues else None)
+
+    def _groups(self, waiting: list[GoCue]) -> list[tuple[tuple[str, ...], str]]:
+        """The robots waiting at each GO cue now, in cast order, and the cue's name."""
+        order = list(self.session.settings.plans)
+        groups = []
+        for go in waiting:
+            names = tuple(sorted(go.robots, key=lambda n: order.index(n) if n in order else len(order)))
+            robot = names[0] if names else ""
+            cue = self._cues.of_step(robot, go.step.index)
+            groups.append((names, cue.name if cue is not None else f"'{go.name}'"))
+        return groups
 
     def _bar(self, show_s: float | None) -> tuple[int, int] | None:
         """Bar and beat now on the show's `tempo:` (through its map, if it has one)."""
@@ -421,54 +431,71 @@ class Console:
 
     def _clock_text(self, stopping: bool) -> str:
         clock = "music" if self.session.settings.song is not None else "machine"
+        if self.live.paused and not stopping:
+            return f"{clock} clock, PAUSED"
         show = self.live.show
         held = isinstance(show, HoldingShowClock) and show.held and not stopping
         return f"{clock} clock" + (", held for GO" if held else "")
 
-    def _cue_line(self, show_s: float | None) -> str:
-        """The lock is held. The next timed cue of any robot, and how long until it."""
-        ahead = [(step.at, robot.name, step) for robot in self._robots.values()
-                 for step in robot.ahead if step.at is not None]
+    def _cue_line(self, show_s: float | None, states: dict[Cue, str]) -> str:
+        """The next timed cue ahead, and how long until it."""
+        ahead = [cue for cue in self._cues if not cue.go and states.get(cue) == "ahead" and cue.at is not None]
         if not ahead:
             return "next cue: none ahead"
-        at, name, step = min(ahead, key=lambda c: (c[0], c[2].index))
-        who = f"{name}: " if self.session.settings.show.tracks else ""  # shared steps: everyone's cue
-        label = f" '{step.label}'" if step.label else ""
-        where = f"at {at:g} s" if step.at_beat is None else \
-            f"at {at:g} s, bar {step.at_beat[0]} beat {beat_text(step.at_beat[1])}"  # as the show wrote it
+        cue = ahead[0]
+        at = cue.at or 0.0
+        who = f"{_names(cue.robots)}: " if self.session.settings.show.tracks else ""  # shared: everyone's cue
+        where = f"at {at:g} s" if cue.at_beat is None else \
+            f"at {at:g} s, bar {cue.at_beat[0]} beat {beat_text(cue.at_beat[1])}"  # as the show wrote it
         if show_s is None:
-            return f"next cue: {who}step {step.index}{label} {where}"
+            return f"next cue: {who}{cue.name} {where}"
         left = f"in {at - show_s:.1f} s" if at >= show_s else "due now"
-        return f"next cue {left}: {who}step {step.index}{label} {where}"
+        return f"next cue {left}: {who}{cue.name} {where}"
 
-    def _go_line(self, waiting: list[GoCue], stopping: bool) -> tuple[str, bool]:
-        """The lock is held. The GO cue waiting now, else the next one coming; before a show
-        run with --wait-start, the start it waits for."""
+    def _go_line(self, head: Cue | None, states: dict[Cue, str], stopping: bool) -> tuple[str, bool]:
+        """What GO does now: fire the cue under the playhead, or why not; before a show run
+        with --wait-start, the start it waits for; paused, how to go on."""
         if not self.live.started and not stopping:
             return "the show waits for its start: press Space or Enter", True
-        if waiting:
-            more = f" (+{len(waiting) - 1} more)" if len(waiting) > 1 else ""
-            return f"GO waits: '{waiting[0].name}'{more}: press Space or Enter", True
-        coming = [step for robot in self._robots.values() for step in robot.ahead if step.go]
-        if not coming or stopping:
+        if self.live.paused and not stopping:
+            return "PAUSED: press p to resume (Esc panics)", True
+        if head is None or stopping:
             return "next GO: none ahead", False
-        step = min(coming, key=lambda s: (s.planned_s, s.index))
-        return f"next GO: '{step.name}' (step {step.index})", False
+        if states.get(head) == "waiting":
+            return f"GO fires {head.name}: press Space or Enter", True
+        if not head.go:
+            return f"playhead on {head.name}: a timed cue, it runs at its time (GO does nothing)", False
+        return f"next GO: {head.name} (not reached yet)", False
 
-    def _row(self, robot: _Robot, waiting: list[GoCue]) -> Row:
-        cue = next((c for c in waiting if robot.name in c.robots), None)
-        step = robot.current
+    def _cue_line_of(self, cue: Cue, state: str, show_s: float | None) -> CueLine:
+        """A cue's line in the list: who (`all` when every robot of several), when, its state."""
+        names = list(self.session.settings.plans)
+        robots = "" if len(names) == 1 else "all" if sorted(cue.robots) == sorted(names) else _names(cue.robots)
+        when = f"GO ~{cue.planned_s:.1f} s" if cue.go else f"@{cue.at if cue.at is not None else cue.planned_s:g} s"
+        tempo = self.session.settings.show.tempo
+        if cue.at_beat is not None:
+            when += f" {cue.at_beat[0]}.{beat_text(cue.at_beat[1])}"
+        elif tempo is not None:
+            bar, beat = tempo.position(cue.planned_s)
+            when += f" {bar}.{int(beat)}"
+        shown = state
+        if state == "ahead" and not cue.go and cue.at is not None and show_s is not None and cue.at >= show_s:
+            shown = f"in {cue.at - show_s:.1f} s" if cue.at - show_s < 60 else state
+        return CueLine(cue.number, cue.label or "", robots, when, shown, STATE_STYLES.get(state, ""))
+
+    def _row(self, robot: RobotRow, groups: list[tuple[tuple[str, ...], str]]) -> Row:
+        cue = next((name for names, name in groups if robot.robot in names), None)
+        step = robot.step
         if cue is not None:
-            now, style = f"waits for GO: '{cue.name}'", WAITING_STYLE
+            now, style = f"waits for GO: {cue}", WAITING_STYLE
         elif step is None:
             now, style = "not started", "dim"
         elif robot.done:
             now, style = "done", "green"
         else:  # a step over is dim: the robot is between steps (a play's motion may still run)
             now, style = _step_text(step), "dim" if robot.ended else ""
-        following = next(iter(robot.ahead), None)
-        latency = statistics.median(robot.latencies_ms) if robot.latencies_ms else None
-        return Row(robot.name, now, _step_text(following) if following is not None else "-", latency,
+        following = robot.next_step
+        return Row(robot.robot, now, _step_text(following) if following is not None else "-", robot.latency_ms,
                    robot.retries, style, bool(robot.retries or robot.failed))
 
     def _final_line(self) -> str:
@@ -478,3 +505,4 @@ class Console:
         if stop():
             return f"the show was {stop.reason}; keys off"
         return "the run is over; keys off"
+

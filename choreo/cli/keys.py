@@ -79,7 +79,9 @@ def in_foreground(fd: int) -> bool:
         return True  # not our controlling terminal: no job control to get in the way
 
 
-KEYS = {ord(" "): "go", ord("\r"): "go", ord("\n"): "go", ord("q"): "q", ord("Q"): "q"}
+KEYS = {ord(" "): "space", ord("\r"): "enter", ord("\n"): "enter", ord("q"): "q", ord("Q"): "q",
+        0x7F: "backspace", 0x08: "backspace", 0x15: "ctrl-u"}  # Ctrl-U: clear what was typed
+ARROWS = {b"[A": "up", b"[B": "down", b"OA": "up", b"OB": "down"}  # CSI and SS3 (7- or 8-bit), no modifier
 ESC = 0x1B
 LONGEST_SEQUENCE = 256  # bytes of a sequence kept: past this, its start and its last bytes (it reads on to its end)
 PASTE_START = b"[200~"  # bracketed paste: the text between is not keys, up to an end marker
@@ -93,13 +95,15 @@ PASTE_ON, PASTE_OFF = "\x1b[?2004h", "\x1b[?2004l"  # ask the terminal to bracke
 
 
 class KeyParser:
-    """Key bytes in, key names out (`go`, `escape`, `q`, or a printable character): no I/O and
-    no clock, so every sequence a terminal sends can be tried on it.
+    """Key bytes in, key names out (`space`, `enter`, `escape`, `up`, `down`, `backspace`,
+    `ctrl-u`, `q`, or a printable character): no I/O and no clock, so every sequence a terminal
+    sends can be tried on it.
 
     Esc also starts what other keys send: arrows and function keys (CSI `ESC [ ... final`, SS3
     `ESC O ...`), Alt+key (`ESC key`), Alt+arrow and Alt+F-key (`ESC ESC [ D`, `ESC ESC O P`),
     terminal replies (`ESC ] ... BEL`, `ESC P ... ESC \\`), mouse reports and bracketed pastes.
-    Each is read whole and ignored: only a bare Esc panics, an Esc with nothing after it before
+    Each is read whole; Up and Down without a modifier (`ARROWS`) are keys, every other one is
+    ignored: only a bare Esc panics, an Esc with nothing after it before
     the reader's wait runs out (`timeout`). Esc pressed twice (`ESC ESC` and nothing) is still
     Esc, and a third Esc right after makes that pair one. A paste is text up to its end marker
     (`ESC [201~`), whatever it holds (Esc, half sequences, spaces, q and y), skipped whole and
@@ -188,7 +192,7 @@ class KeyParser:
             self._sequence.clear()
             self._in_escape = False
             self._eight_bit = 0
-            self._ended(sequence)
+            return self._ended(sequence)
         return None
 
     def _eight_bit_end(self, sequence: bytes) -> bool:
@@ -219,13 +223,17 @@ class KeyParser:
         self._eight_bit = form
         self._sequence[:] = bytes([EIGHT_BIT[byte]])
 
-    def _ended(self, sequence: bytes) -> None:
+    def _ended(self, sequence: bytes) -> str | None:
+        """A whole sequence: an arrow key's name, or nothing (what it starts is noted)."""
+        if sequence in ARROWS:
+            return ARROWS[sequence]
         if sequence == PASTE_START:
             self._pasting = True
         elif len(sequence) == 1 and sequence[0] >= 0x80:
             self._high(sequence[0])  # Alt and a non-ASCII key: the rest of its UTF-8 follows
         elif len(sequence) > 1 and sequence[-1] == ESC and not _is_string(sequence):
             self._in_escape = True  # a sequence broken off by an Esc: that Esc starts the next
+        return None
 
 
 def _is_string(sequence: bytes) -> bool:

@@ -7,6 +7,7 @@ a screen is a value, so what is drawn can be tested, and changed, without a run 
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from rich.console import Group, RenderableType
@@ -14,10 +15,14 @@ from rich.rule import Rule
 from rich.table import Table
 from rich.text import Text
 
-from choreo.textfit import visible
+from choreo.textfit import char_width, display_width, fit, visible
 
-LEGEND = "Space/Enter GO · Esc panic · q stop · Ctrl-C stop"
+LEGEND = "Space/Enter GO · ↑↓ playhead · s skip · j jump · p pause · Esc panic · q stop"
+SHORT_LEGEND = "Spc GO ↑↓ cue s skip j jump p pause Esc panic q stop"  # below NARROW columns
 WAITING_STYLE = "bold black on yellow"
+PLAYHEAD_STYLE = "bold reverse"
+STATE_STYLES = {"waiting": WAITING_STYLE, "running": "green", "done": "dim", "skipped": "dim strike"}
+MIN_QUOTED = 6  # a quoted name in a message is cut to no fewer columns than this
 
 @dataclass(frozen=True)
 class Note:
@@ -42,6 +47,18 @@ class Row:
 
 
 @dataclass(frozen=True)
+class CueLine:
+    """A cue of the list: number, label, robots, when the plan puts it, and its state."""
+
+    number: str
+    label: str
+    robots: str
+    when: str  # `GO ~12.0 s`, `@12.0 s`, `@12.0 s 5.1` (bar 5, beat 1)
+    state: str  # ahead | waiting | running | done | skipped, or a countdown (`in 3.2 s`)
+    style: str = ""
+
+
+@dataclass(frozen=True)
 class Screen:
     """Everything the console draws at one moment, taken under the lock and drawn outside it."""
 
@@ -56,27 +73,102 @@ class Screen:
     prompt: str | None = None  # a question the next key answers
     legend: str = LEGEND
     bar: tuple[int, int] | None = None  # bar and beat of the music now, in a show with `tempo:`
+    cues: tuple[CueLine, ...] = ()  # a window of the cue list around the playhead
+    playhead: int | None = None  # the playhead's place in `cues` (None: no cue under it)
+    waits: tuple[str, ...] = ()  # robots sharing a GO cue they wait at: one line for them all
 
 
 NARROW = 80  # below this many columns the link column is written short
 
 
-def render(screen: Screen, width: int = NARROW) -> RenderableType:
+def render(screen: Screen, width: int = NARROW, height: int | None = None) -> RenderableType:
     """The console as rich renderables: every line kept to one line of the terminal, whatever
-    its width (cells cut with `…`, never wrapped)."""
-    parts: list[RenderableType] = [_title(screen), _line(screen.cue),
-                                   _line(screen.go, WAITING_STYLE if screen.go_waiting else "bold"),
-                                   _robots(screen.rows, width < NARROW), Rule(style="dim")]
-    parts += [_line(_note_text(note), note.style) for note in screen.notes] or [_line("(no messages yet)", "dim")]
+    its width (cells cut with `…`, messages by `fit_message`, never wrapped), and, given the
+    terminal's `height`, as many of the cues and notes as fit under it."""
+    narrow = width < NARROW
+    fixed = 4 + len(screen.waits) + (1 + len(screen.rows) if screen.rows else 0) + 1
+    cues_n, notes_n = _shares(len(screen.cues), len(screen.notes), None if height is None else height - 1 - fixed)
+    parts: list[RenderableType] = [_title(screen), _line(screen.cue, width=width),
+                                   _line(screen.go, WAITING_STYLE if screen.go_waiting else "bold", width)]
+    if screen.cues:
+        parts.append(_cue_table(screen, cues_n, narrow))
+    parts += [_line(wait, WAITING_STYLE, width) for wait in screen.waits]
+    if screen.rows:
+        parts.append(_robots(screen.rows, narrow))
+    parts.append(Rule(style="dim"))
+    notes = screen.notes[len(screen.notes) - notes_n:] if notes_n else ()
+    parts += [_line(_note_text(note), note.style, width) for note in notes] or [_line("(no messages yet)", "dim")]
     if screen.prompt is not None:
-        parts.append(_line(screen.prompt, "bold reverse"))
+        parts.append(_line(screen.prompt, "bold reverse", width))
     else:
-        parts.append(_line(screen.legend, "dim"))
+        legend = SHORT_LEGEND if narrow and screen.legend == LEGEND else screen.legend
+        parts.append(_line(legend, "dim", width))
     return Group(*parts)
 
 
-def _line(text: str, style: str = "") -> Text:
-    return Text(visible(text), style=style, no_wrap=True, overflow="ellipsis", end="\n")
+def _shares(cues: int, notes: int, room: int | None) -> tuple[int, int]:
+    """How many cue lines and note lines fit in `room` lines (None: all); the cue list first,
+    at least 3 of it (or all it has), and a note at least."""
+    if room is None:
+        return cues, notes
+    shown_cues = min(cues, max(3, room - min(notes, 3)))
+    return max(min(cues, room - 1), min(shown_cues, 1)), max(1, min(notes, room - shown_cues))
+
+
+def _cue_table(screen: Screen, rows: int, narrow: bool) -> Table:
+    """The window of the cue list that fits, the playhead's line kept in it (with one cue
+    before it, when there is room, and as many after)."""
+    first = 0
+    if screen.playhead is not None:
+        first = max(0, min(screen.playhead - 1, len(screen.cues) - rows))
+    table = Table(expand=True, box=None, show_header=False, show_edge=False, pad_edge=False, padding=(0, 1, 0, 0))
+    table.add_column("", no_wrap=True, width=1)
+    table.add_column("cue", no_wrap=True, overflow="ellipsis", max_width=6)
+    table.add_column("label", ratio=2, no_wrap=True, overflow="ellipsis")
+    table.add_column("robots", ratio=1, no_wrap=True, overflow="ellipsis", max_width=18)
+    table.add_column("when", no_wrap=True, overflow="ellipsis", max_width=16 if narrow else 20)
+    table.add_column("state", no_wrap=True, overflow="ellipsis", max_width=9)
+    for at in range(first, min(first + rows, len(screen.cues))):
+        cue = screen.cues[at]
+        head = at == screen.playhead
+        table.add_row(_cell(">" if head else " "), _cell(cue.number), _cell(cue.label), _cell(cue.robots),
+                      _cell(cue.when), _cell(cue.state, cue.style), style=PLAYHEAD_STYLE if head else "")
+    return table
+
+
+def fit_message(text: str, width: int) -> str:
+    """`text` made visible and fitted to `width` columns, keeping what tells the operator what
+    to do: the quoted parts (a cue's label, a file's name: outside text, `'...'`) are cut
+    first, the longest first, down to MIN_QUOTED columns; if it is still too wide, its middle
+    goes (`…`), so both the start (what happened) and the end (what to do) stay."""
+    text = visible(text)
+    while display_width(text) > width:
+        quoted = [(display_width(m.group(1)), m) for m in QUOTED.finditer(text)]
+        longest = max(quoted, key=lambda q: q[0], default=None)
+        if longest is None or longest[0] <= MIN_QUOTED:
+            break
+        size, match = longest
+        keep = max(MIN_QUOTED, size - (display_width(text) - width))
+        text = text[:match.start(1)] + fit(match.group(1), keep) + text[match.end(1):]
+    if display_width(text) <= width:
+        return text
+    head = fit(text, (width + 1) // 2)
+    tail_room = width - display_width(head)
+    tail = ""
+    for char in reversed(text):
+        if display_width(tail) + char_width(char) > tail_room:
+            break
+        tail = char + tail
+    return head + tail
+
+
+QUOTED = re.compile(r"'([^']{2,})'")
+
+
+def _line(text: str, style: str = "", width: int | None = None) -> Text:
+    """A line of the screen; given its `width`, fitted by `fit_message` (else rich cuts its end)."""
+    shown = visible(text) if width is None else fit_message(text, width)
+    return Text(shown, style=style, no_wrap=True, overflow="ellipsis", end="\n")
 
 
 def _cell(text: str, style: str = "") -> Text:
