@@ -6,7 +6,7 @@ import argparse
 import signal
 import sys
 from collections.abc import Iterator
-from contextlib import closing, contextmanager, nullcontext
+from contextlib import ExitStack, closing, contextmanager, nullcontext
 from typing import TYPE_CHECKING
 
 from choreo.errors import ChoreoError, Interrupted, UsageError
@@ -19,6 +19,7 @@ if TYPE_CHECKING:  # the run's modules load when a run starts: `choreo validate`
     from choreo.events import RunResult, StopRequest
     from choreo.live.controls import Live
     from choreo.live.osc import OscServer
+    from choreo.live.status import ShowStatus
     from choreo.run.session import Session
     from choreo.run.settings import RunSettings
 
@@ -125,7 +126,7 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
     console = _wants_console(args)
     _check_go_sources(session.settings, console, args)
     stop = StopRequest()
-    live = _live(args, stop, console)
+    live, status = _live(args, stop, console, session)
     # listening (not serving yet) before a line is said or anything opens
     osc = _bound_osc(args, osc_port, notify, live)
     say = Say(sys.stderr, quiet=args.quiet)
@@ -140,8 +141,9 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
                 say(f"warning: {note}")
             # the Live closed however the run ends, while the log is open: later commands are
             # refused, and those held back by the limits summed up into it
-            with closing(live) if live is not None else nullcontext(), _console(session, live, console, listeners):
-                result = session.run([progress, *listeners], stop, live)
+            with closing(live) if live is not None else nullcontext(), _watching(session, status) as watchers, \
+                    _console(session, live, console, listeners, status):
+                result = session.run([progress, *watchers, *listeners], stop, live)
                 for listener in listeners:
                     if isinstance(listener, ResultListener):  # OSC notify: the run is over
                         listener.on_result(result)
@@ -205,14 +207,34 @@ def _check_osc_options(args: argparse.Namespace) -> tuple[int | None, tuple]:
     return port, parse_targets(args.osc_notify)
 
 
-def _live(args: argparse.Namespace, stop: StopRequest, console: bool) -> Live | None:
-    """The Live that GO cues wait on, when someone can command the show (the console, OSC);
-    None for a show run as before."""
+def _live(args: argparse.Namespace, stop: StopRequest, console: bool,
+          session: Session) -> tuple[Live | None, ShowStatus | None]:
+    """The Live that GO cues wait on, when someone can command the show (the console, OSC),
+    with the show's cue list and the one status of its robots both the console and
+    `/choreo/status` read; (None, None) for a show run as before."""
     if not console and args.osc is None:
-        return None
+        return None, None
     from choreo.live.controls import Live
+    from choreo.live.status import ShowStatus
+    from choreo.show.cues import cue_list
 
-    return Live(stop, wait_start=args.wait_start)
+    settings = session.settings
+    status = ShowStatus(settings.plans, settings.sections.starts)
+    return Live(stop, cues=cue_list(settings.plans), status=status, wait_start=args.wait_start), status
+
+
+@contextmanager
+def _watching(session: Session, status: ShowStatus | None) -> Iterator[list]:
+    """The robots' status for the run's time: a listener of the run (the listeners to add:
+    none without it) and of every link, subscribed once the session has opened them and
+    closed after."""
+    if status is None or session.stage is None:
+        yield []
+        return
+    with ExitStack() as links:
+        for robot, link in session.stage.links.items():
+            links.enter_context(link.subscribe(status.link_listener(robot)))
+        yield [status]
 
 
 def _bound_osc(args: argparse.Namespace, port: int | None, notify: tuple, live: Live | None) -> OscServer | None:
@@ -260,15 +282,16 @@ def _controls(live: Live | None, osc: OscServer | None, say: Say, progress: Prog
 
 
 @contextmanager
-def _console(session: Session, live: Live | None, console: bool, listeners: list) -> Iterator[None]:
+def _console(session: Session, live: Live | None, console: bool, listeners: list,
+             status: ShowStatus | None = None) -> Iterator[None]:
     """The console, on a terminal, for the time of the show (it draws on the terminal and reads
-    its keys: only once the session is open)."""
+    its keys: only once the session is open); it reads the robots' `status` (the run's)."""
     if not console or live is None:  # a console always has its Live (_live)
         yield
         return
     from choreo.cli.console import Console
 
-    screen = Console(session, live)
+    screen = Console(session, live, status=status)
     screen.start()
     listeners.append(screen)
     try:

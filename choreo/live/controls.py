@@ -334,11 +334,10 @@ class Live:
 
     def on_step(self, event: StepEvent) -> None:
         """A cue's step started, ended or was skipped: the cue's state follows. Other steps
-        cost one dictionary look-up on the runner's path."""
-        key = (event.robot or SOLO, event.step.index)
-        if key in self._cue_at:
+        cost one attribute read on the runner's path."""
+        if event.step.cue is not None:
             with self._changed:
-                self._marks[key] = event.event
+                self._marks[(event.robot or SOLO, event.step.index)] = event.event
 
     def on_log(self, level: int, message: str, time_ns: int) -> None:
         """Log lines say nothing the controls act on."""

@@ -198,7 +198,9 @@ class Session:
             show: ShowClock = HoldingShowClock(zero, self.clock.mono, self.clock.source.notify) if holding \
                 else MachineShowClock(zero)
         else:
-            self.player = Player(song, self.settings.output, origin, max(LEAD_IN_S, preroll + LEAD_IN_S))
+            # a resume wakes the runners dozing towards a cue at once (not a sleep slice later)
+            self.player = Player(song, self.settings.output, origin, max(LEAD_IN_S, preroll + LEAD_IN_S),
+                                 wake=self.clock.source.notify)
             show = self.player.start()
             music.callback(self._stop_music, listeners)
             # The audio thread shares the interpreter: spinning towards a cue yields to it, and
