@@ -29,8 +29,8 @@ def test_validate_prints_one_line_a_valid_file(capsys):
     assert len(lines) == len(SHOWS)
     dance = next(line for line in lines if "dance.yaml" in line)
     assert dance == (
-        f"{ROOT / 'shows' / 'dance.yaml'}: ok, 26 steps, motions 0 home, 1 bow, 4 wave_right, 5 wave_left, "
-        "10 step_left, 11 step_right, 20 clap, 30 spin, 40 pose, estimated 22.0 s"
+        f"{ROOT / 'shows' / 'dance.yaml'}: ok, 26 steps, 2 cues (1-2), motions 0 home, 1 bow, 4 wave_right, "
+        "5 wave_left, 10 step_left, 11 step_right, 20 clap, 30 spin, 40 pose, estimated 22.0 s"
     )
 
 
@@ -38,7 +38,8 @@ def test_validate_names_a_planned_late_cue(tmp_path, capsys):
     show = tmp_path / "late.yaml"
     show.write_text("version: 1\nsteps:\n  - wait: 3\n  - play: 1\n    at: 2\n    label: drop\n")
     assert main(["validate", str(show)]) == 0
-    assert capsys.readouterr().out == f"{show}: ok, 2 steps, motions 1, estimated 3.0 s; 1 cue planned late (drop)\n"
+    assert capsys.readouterr().out == (f"{show}: ok, 2 steps, 1 cue (1), motions 1, estimated 3.0 s; "
+                                       "1 cue planned late (drop)\n")
 
 
 def test_validate_reports_every_problem_of_every_file_and_exits_2(tmp_path, capsys):
