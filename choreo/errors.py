@@ -15,8 +15,15 @@ from choreo.textfit import visible
 
 def did_you_mean(given: str, known: Iterable[str]) -> str:
     """`: did you mean 'summary'?` when one of `known` is close to `given`, else ''."""
+    close = closest(given, known)
+    return f": did you mean '{close}'?" if close else ""
+
+
+def closest(given: str, known: Iterable[str]) -> str | None:
+    """The one of `known` closest to `given`, if close enough to be a slip of the fingers; the
+    caller chooses what may be suggested (OSC never offers a GO for a typo)."""
     close = difflib.get_close_matches(given, list(known), n=1, cutoff=0.6)
-    return f": did you mean '{close[0]}'?" if close else ""
+    return close[0] if close else None
 
 
 def one_line(text: str) -> str:

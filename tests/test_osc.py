@@ -101,7 +101,7 @@ class ShowRun(LiveRun):
 
     def __init__(self, tmp_path: Path, body: str = GO_SHOW, *, wait_start: bool = False,
                  **options) -> None:  # type: ignore[no-untyped-def]
-        super().__init__(tmp_path, body, wait_start=wait_start, lockout_s=0.0,
+        super().__init__(tmp_path, body, wait_start=wait_start, lockout_s=0.0, cues=True,
                          attach=lambda live: [self._serve(live, options)])
 
     def _serve(self, live: Live, options: dict) -> OscServer:
@@ -187,15 +187,16 @@ def test_an_unknown_command_is_answered_with_an_error_and_logged(transport, live
     commands = Commands()
     live.subscribe(commands)
     with client(transport, server.port) as osc:
-        _, typo = ask(osc, "/choreo/stpo")
+        _, typo = ask(osc, "/choreo/stpo")  # a typo is never answered with a command that acts on stage
         assert typo == {"address": "/choreo/stpo", "status": "error", "data": {},
-                        "message": "unknown command /choreo/stpo: did you mean '/choreo/stop'?"}
+                        "message": "unknown command /choreo/stpo (choreo takes /choreo/ followed by go, panic, "
+                                   "start, stop, pause, resume, skip, playhead/next|previous|CUE, cue/CUE/go, "
+                                   "status, thump, updates)"}
         address, qlab = ask(osc, "/cue/1/go")
         assert address == "/reply/cue/1/go"
         assert qlab["message"] == "unknown command /cue/1/go: did you mean '/choreo/cue/1/go'?"
         _, other = ask(osc, "/workspace/x/thump")
-        assert other["message"] == ("unknown command /workspace/x/thump (choreo takes /choreo/go, /choreo/panic, "
-                                    "/choreo/start, /choreo/stop, /choreo/cue/LABEL/go)")
+        assert other["message"] == "unknown command /workspace/x/thump: did you mean '/choreo/thump'?"
         # a pattern is not expanded: it could reach GO and panic at once
         _, pattern = ask(osc, "/choreo/*")
         assert pattern["status"] == "error" and "address patterns are not taken" in pattern["message"]
@@ -220,7 +221,11 @@ def test_the_addresses():
     assert command_for("/choreo/go") == ("go", None)
     assert command_for("/choreo/cue/applause/go") == ("cue_go", "applause")
     assert command_for("/choreo/cue/a b/go") == ("cue_go", "a b")
-    for address in ("/choreo/cue//go", "/choreo/cue/a/b/go", "/choreo/cue/go", "/go", "/choreo/go/"):
+    assert command_for("/choreo/cue/a%2Fb/go") == ("cue_go", "a/b")
+    assert command_for("/choreo/playhead/next") == ("playhead_next", None)
+    assert command_for("/choreo/playhead/%6Eext") == ("playhead", "next")  # a cue labelled so, escaped
+    for address in ("/choreo/cue//go", "/choreo/cue/a/b/go", "/choreo/cue/go", "/go", "/choreo/go/",
+                    "/choreo/status", "/choreo/thump", "/choreo/updates", "/choreo/playhead/", "/choreo/playhead/a/b"):
         assert command_for(address) is None
 
 
@@ -232,17 +237,17 @@ def test_go_releases_the_waiting_cue_and_the_show_goes_on(shows):
     with client("tcp", run.server.port) as tcp, client("udp", run.server.port) as udp:
         wait_until(lambda: run.waiting() == ["applause"])
         _, first = ask(tcp, "/choreo/cue/applause/go")
-        assert first == {"address": "/choreo/cue/applause/go", "status": "ok", "message": "GO: applause",
-                         "data": {"cue": "applause", "step": 1}}
+        assert first["status"] == "ok" and first["message"] == "GO: cue 1 'applause'"
+        assert first["data"]["cue"] == "1" and first["data"]["label"] == "applause"
         wait_until(lambda: run.waiting() == ["encore"])
         _, second = ask(udp, "/choreo/go")
-        assert second["status"] == "ok" and second["data"] == {"cue": "encore", "step": 2}
+        assert second["status"] == "ok" and (second["data"]["cue"], second["data"]["label"]) == ("2", "encore")
         sources = [source_of(tcp, "tcp"), source_of(udp, "udp")]
     run.finish()
     assert run.result.outcome == "done" and run.result.steps_run == 3
     log = read_log(run.log_path)
     commands = [(m["command"], m["source"], m["status"], m.get("label")) for m in log.topic("/choreo/command")]
-    assert commands == [("cue_go", sources[0], "ok", "applause"), ("go", sources[1], "ok", "encore")]
+    assert commands == [("cue_go", sources[0], "ok", "applause"), ("go", sources[1], "ok", "2")]  # as sent; GO: the number
 
 
 def test_start_begins_a_show_loaded_with_wait_start(shows):
@@ -316,7 +321,7 @@ def test_the_shows_progress_is_notified(shows, receiver):
     steps = receiver.of("step")  # robot, index, label, event, show_s, outcome
     assert steps[0][:4] == ("", 0, "", "start") and steps[1][:4] == ("", 0, "", "end") and steps[1][5] == "ok"
     assert [s[:4] for s in steps if s[1] == 1] == [("", 1, "applause", "start"), ("", 1, "applause", "end")]
-    assert ("go", source, "ok", "GO: applause", "") in receiver.of("command")
+    assert ("go", source, "ok", "GO: cue 1 'applause'", "") in receiver.of("command")
     stop = ("stop", source, "ok", "stopping: the exchange in flight, then the abort motion", "")
     assert stop in receiver.of("command")
     assert any(w[0].startswith("show stopped at") for w in receiver.of("warning"))  # the runner's own
@@ -518,7 +523,7 @@ def test_choreo_run_takes_go_over_osc(tmp_path):
     assert process.returncode == 0, err
     assert f"osc: listening on 127.0.0.1:{port} (udp and tcp), commands from this machine only" in err
     commands = read_log(log_path).topic("/choreo/command")
-    taken = {"command": "go", "source": source, "status": "ok", "message": "GO: applause"}
+    taken = {"command": "go", "source": source, "status": "ok", "message": "GO: cue 1 'applause'"}
     gos = [m for m in commands if m["command"] == "go"]  # (refusals past the log's limit are summed up)
     assert taken.items() <= gos[-1].items()
     assert all(m["message"].startswith("nothing waits for GO now") for m in gos[:-1])

@@ -20,6 +20,13 @@ whose address may be forged. So:
   socket cannot keep up with would drop it); a TCP sender past it rests unread;
 - each sender gets at most `replies_per_sender` replies, and the senders refused (not allowed)
   `refusals` replies between them (their addresses are the easiest to forge);
+- the questions (`/choreo/status`, `/choreo/thump`) are answered within `queries_per_sender`
+  of their own, not the commands' nor the replies' (a desk polling status ten times a second
+  must not take the answer to its GO); they carry nothing out and are not logged one by one,
+  only counted (a log line each at a desk's polling rate would fill the disk);
+- at most `update_subscribers` senders get the show's notifications at once (`/choreo/updates
+  1`: each one multiplies what the show sends), each until `update_expire_s` without a message
+  from it;
 - a command that is taken (`ok`) is always logged and shown; refused and ignored ones are, one
   by one, only within `reported`: the rest are counted, and every `summary_every_s` one
   `unlogged` record (the log, the terminal) carries their counts, by command, so the log's
@@ -61,6 +68,9 @@ class Limits:
     address_shown: int = 256  # characters of an OSC address logged, printed or replied; past them, cut
     senders_tracked: int = 256  # senders with a budget of their own; beyond, new ones share one
     notify_targets: int = 8  # --osc-notify given at most this many times
+    queries_per_sender: Rate = Rate(20, 10.0)  # /choreo/status and /thump answered for one sender
+    update_subscribers: int = 4  # senders subscribed to the notifications (/choreo/updates 1) at once
+    update_expire_s: float = 61.0  # a subscription ends after this long without a message from it (QLab's)
 
 
 LIMITS = Limits()
@@ -169,6 +179,7 @@ class SenderLimits:
         self._total = Budget.of(limits.commands_total, now)
         self._replies = Budgets(limits.replies_per_sender, limits.senders_tracked, now)
         self._refusals = Budget.of(limits.refusals, now)
+        self._queries = Budgets(limits.queries_per_sender, limits.senders_tracked, now)
 
     def may_read(self, host: str, allowed: bool, tokens: int = 1) -> bool:
         """May a packet from `host` be read now (`tokens`: what reading it costs, a big one
@@ -191,6 +202,11 @@ class SenderLimits:
 
     def may_reply(self, host: str) -> bool:
         return self._replies.take(host)
+
+    def may_query(self, host: str) -> bool:
+        """May a question from `host` (status, thump) be answered now? A budget apart from the
+        commands' and replies': polling spends neither."""
+        return self._queries.take(host)
 
     def may_answer_refusal(self) -> bool:
         """A reply to a sender not allowed (shared by all of them: their addresses are forged

@@ -1,7 +1,45 @@
 """OSC control of a running show, in QLab's manner, so that a QLab Network cue (or TouchOSC, Max,
-a lighting desk) can give the GO: `/choreo/go`, `/choreo/panic`, `/choreo/start`, `/choreo/stop`
-and `/choreo/cue/LABEL/go`, over UDP and over TCP framed with SLIP (OSC 1.1, as QLab sends it)
-or with a length prefix (OSC 1.0, as liblo sends it: Pure Data, SuperCollider), on one port number.
+a lighting desk) can run it as the console's keys do, over UDP and over TCP framed with SLIP (OSC
+1.1, as QLab sends it) or with a length prefix (OSC 1.0, as liblo sends it: Pure Data,
+SuperCollider), on one port number.
+
+The dictionary (every address exactly so: no patterns, no other case; CUE is a cue's number, `3`
+or `12.5`, or its label, percent-escaped as in a URL: `%20` a space, `%2F` a slash, `%25` a
+percent sign, other bytes UTF-8; a bad escape, bytes that are not UTF-8 or a control character
+such as `%00` are refused with a reply that says how to escape):
+
+    /choreo/go                  GO: the cue under the playhead, if it waits for GO
+    /choreo/cue/CUE/go          GO for that cue, if it waits (`/choreo/cue/LABEL/go` as before)
+    /choreo/skip                skip the cue under the playhead (again, ahead: the skip undone)
+    /choreo/playhead/next       the playhead to the next cue not yet run
+    /choreo/playhead/previous   the playhead to the previous cue not yet run
+    /choreo/playhead/CUE        the playhead to that cue (a cue labelled `next` or `previous`
+                                is reached by its number, or escaped: `%6Eext`)
+    /choreo/pause               the show clock stands still; no new step starts
+    /choreo/resume              on from where it stood
+    /choreo/start               start a show run with --wait-start
+    /choreo/stop                stop: the exchange in flight, then the abort motion
+    /choreo/panic               no more show frames: stop frames and every robot's abort motion
+    /choreo/status              a question: the reply's data is the show's state (`Live.status`)
+    /choreo/thump               a heartbeat: answered at once (data: whether updates go to you)
+    /choreo/updates 1|0         the notifications to you too (1), or no longer (0)
+
+A command with an argument 0 alone is a button's release (TouchOSC) and ignored, but `/updates
+0`. The questions (status, thump) are answered at once, carry nothing out and are not logged one
+by one (a desk polls them); they spend their sender's packets and a budget of questions of their
+own, not its commands nor its replies (`choreo.live.limits`). `/choreo/updates 1` subscribes the
+sender, QLab's way: a UDP sender at its address and port, a TCP sender over its own connection
+(framed as it frames), to the notifications the `--osc-notify` targets get, sent from the
+notifier's thread (`choreo.live.oscnotify`). At most `Limits.update_subscribers` at once (one
+more is refused, told why); each ends after `Limits.update_expire_s` without a message from it
+(any message renews it: `/choreo/thump` is the usual), at `/choreo/updates 0`, or when its TCP
+connection closes. A sender whose address is our own port is refused (it would loop). Subscribing
+and its end are logged as the command `updates`.
+
+An unknown address is answered with the command meant when it differs from one of ours only by
+case, a missing `/choreo` or a trailing slash (`/go`, `/cue/1/go`); otherwise only an address
+that changes nothing on stage is suggested (`/ping` and `/heartbeat`: `/choreo/thump`), never a
+GO, a panic or another command with an effect: a typo answered with a suggestion is typed again.
 
 Packets are read by choreo's own bounded decoder (`choreo.live.oscwire`), and the sockets served by
 `choreo.live.oscnet` (connection caps, timeouts; the sizes and counts are `choreo.live.osclimits`): a
@@ -36,14 +74,17 @@ from __future__ import annotations
 
 import ipaddress
 import json
+import socket
 import time
+import unicodedata
+import urllib.parse
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 
-from choreo.errors import UsageError, did_you_mean
+from choreo.errors import UsageError, closest
 from choreo.events import Answer, Command, CommandEvent, GoCue, RunResult, StepEvent
 from choreo.live.limits import LIMITS, Limits, SenderLimits
 from choreo.log.format import UNLOGGED
@@ -51,20 +92,39 @@ from choreo.live.controls import Live
 from choreo.live.oscnet import ListenFailed, OscNet
 from choreo.live.osclimits import LIMITS as WIRE_LIMITS
 from choreo.live.osclimits import OscLimits
-from choreo.live.oscnotify import Notifier, Target, show_target
+from choreo.live.oscnotify import Notifier, Subscriber, Subscriptions, Target, is_this_machine, show_target
 from choreo.live.oscwire import Message, decode_packet, encode_message
 from choreo.log.format import ERROR, WARNING
 
 # OSC addresses, not log topics (those are spelled in choreo.log.format), though both start /choreo
 ROOT = "/choreo"
-COMMANDS = {f"{ROOT}/{name}": name for name in ("go", "panic", "start", "stop")}
+PATHS = {"go": "go", "panic": "panic", "start": "start", "stop": "stop", "pause": "pause", "resume": "resume",
+         "skip": "skip", "playhead/next": "playhead_next", "playhead/previous": "playhead_previous"}
+COMMANDS = {f"{ROOT}/{path}": name for path, name in PATHS.items()}  # address: the Live command it gives
+STATUS, THUMP, UPDATES = f"{ROOT}/status", f"{ROOT}/thump", f"{ROOT}/updates"
+QUERIES = {STATUS: "status", THUMP: "thump"}  # answered at once, nothing carried out, not logged one by one
 CUE_PREFIX, CUE_SUFFIX = f"{ROOT}/cue/", "/go"
+PLAYHEAD_PREFIX = f"{ROOT}/playhead/"
+# the commands with an effect on the stage: never suggested for an address that is not theirs but
+# for its case, a missing /choreo or a trailing slash (a typo must not become a GO or a panic)
+EFFECTS = frozenset({"go", "panic", "start", "stop", "pause", "resume", "skip", "cue_go"})
+SUGGESTED = (STATUS, THUMP, UPDATES, f"{ROOT}/playhead/next", f"{ROOT}/playhead/previous")  # the rest
+# a last segment that names a question (QLab's /workspace/ID/thump), or a heartbeat's other names
+ALIASES = {"ping": THUMP, "heartbeat": THUMP, "thump": THUMP, "status": STATUS, "updates": UPDATES}
+DICTIONARY = (*COMMANDS, f"{PLAYHEAD_PREFIX}CUE", f"{CUE_PREFIX}CUE{CUE_SUFFIX}", STATUS, THUMP, UPDATES)
+KNOWN = "go, panic, start, stop, pause, resume, skip, playhead/next|previous|CUE, cue/CUE/go, status, thump, updates"
 NOTIFY = f"{ROOT}/notify"
 PATTERN_CHARS = frozenset("*?[]{}")
+HEX = frozenset("0123456789abcdefABCDEF")
+ESCAPING = ("a cue's number or label goes percent-escaped, as in a URL: %20 a space, %2F a slash, %25 a "
+            "percent sign, other bytes as UTF-8 (/choreo/cue/big%20bow/go)")
 ECHOES = ("/reply", NOTIFY)  # replies and notifications: never commands, never answered (two would loop)
 ECHO = "echo"  # the command name a reply or notification sent to us is logged under
 LOST = "lost"  # the command name datagrams the system dropped before choreo read them are counted under
 UNREAD = "unread"  # the command name a packet over its sender's rate is counted under (not read)
+UNANSWERED = "unanswered"  # status or thump over the sender's budget of questions: counted, not answered
+CUT = "…"  # ends an address cut to `Limits.address_shown` characters
+UPDATES_COMMAND = "updates"  # how the log names /choreo/updates (subscribing, ending, expiring)
 SENDERS_KNOWN = 4096  # senders whose verdict is remembered (an address's parse costs more than a refusal)
 
 Network = ipaddress.IPv4Network | ipaddress.IPv6Network
@@ -87,27 +147,139 @@ class Reply:
         return encode_message("/reply" + self.address, [json.dumps(body, ensure_ascii=False)])
 
 
-def command_for(address: str) -> tuple[str, str | None] | None:
-    """The `Live` command an address names and its cue label, or None: not one of ours."""
+class BadAddress(ValueError):
+    """An address of ours whose cue is not written as choreo reads it (a bad escape, not UTF-8, a
+    control character): the message says what is wrong and how to write it."""
+
+
+@dataclass(frozen=True)
+class Wanted:
+    """What an address asks: a `Live` command (its cue reference, unescaped, for cue_go, playhead
+    and skip), or a question (`status`, `thump`), or `updates`."""
+
+    name: str
+    cue: str | None = None
+
+
+def wanted(address: str) -> Wanted | None:
+    """What an address asks, or None: not one of ours. BadAddress for a cue badly escaped."""
     if address in COMMANDS:
-        return COMMANDS[address], None
-    if address.startswith(CUE_PREFIX) and address.endswith(CUE_SUFFIX):
-        label = address[len(CUE_PREFIX):-len(CUE_SUFFIX)]
-        if label and "/" not in label:
-            return "cue_go", label
+        return Wanted(COMMANDS[address])
+    if address in QUERIES:
+        return Wanted(QUERIES[address])
+    if address == UPDATES:
+        return Wanted("updates")
+    for prefix, suffix, name in ((CUE_PREFIX, CUE_SUFFIX, "cue_go"), (PLAYHEAD_PREFIX, "", "playhead")):
+        segment = _segment(address, prefix, suffix)
+        if segment is not None:
+            return Wanted(name, unescape(address, segment))
     return None
 
 
+def command_for(address: str) -> tuple[str, str | None] | None:
+    """The `Live` command an address gives and its cue, or None (not a command; see `wanted`)."""
+    asked = wanted(address)
+    return None if asked is None or asked.name in (*QUERIES.values(), "updates") else (asked.name, asked.cue)
+
+
+def _segment(address: str, prefix: str, suffix: str) -> str | None:
+    """The one path segment between `prefix` and `suffix` (not empty), or None."""
+    if len(address) > len(prefix) + len(suffix) and address.startswith(prefix) and address.endswith(suffix):
+        segment = address[len(prefix):len(address) - len(suffix)]
+        return None if "/" in segment else segment
+    return None
+
+
+def unescape(address: str, segment: str) -> str:
+    """A cue's number or label as sent in an address, percent-escaped (`%2F` a slash, `%20` a
+    space, `%25` a percent sign), decoded strictly: a `%` without two hex digits after it, bytes
+    that are not UTF-8, or a control character (`%00`: no label holds one) is a BadAddress."""
+    if "%" in segment:
+        first, *escaped = segment.split("%")
+        raw = bytearray(first.encode())
+        for part in escaped:
+            if len(part) < 2 or not HEX.issuperset(part[:2]):
+                raise BadAddress(f"{address}: a '%' without two hex digits after it: {ESCAPING}")
+            raw.append(int(part[:2], 16))
+            raw += part[2:].encode()
+        try:
+            segment = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            raise BadAddress(f"{address}: the escaped bytes are not UTF-8: {ESCAPING}") from None
+    if any(unicodedata.category(char) == "Cc" for char in segment):
+        raise BadAddress(f"{address}: a control character in a cue's number or label: {ESCAPING}")
+    return segment
+
+
+def escape(cue: str) -> str:
+    """A cue's number or label as an address writes it (`unescape`'s inverse): `big%20bow`."""
+    return urllib.parse.quote(cue, safe="")
+
+
 def unknown_message(address: str) -> str:
-    """Why an address is refused, with the nearest command when there is one."""
+    """Why an address is refused, with the command meant when there is one (see `suggestion`)."""
     if PATTERN_CHARS & set(address):
         return f"unknown command {address}: address patterns are not taken; send the command's own address"
-    if address.startswith("/") and command_for(ROOT + address) is not None:  # QLab's /go, /cue/1/go
-        hint = f": did you mean '{ROOT}{address}'?"
-    else:
-        hint = did_you_mean(address, COMMANDS)
-    known = ", ".join([*COMMANDS, CUE_PREFIX + "LABEL" + CUE_SUFFIX])
-    return f"unknown command {address}{hint or f' (choreo takes {known})'}"
+    meant = _loosely(address)
+    if meant is None and (address.startswith(CUE_PREFIX) and address.endswith(CUE_SUFFIX)
+                          or address.startswith(PLAYHEAD_PREFIX)):
+        return f"unknown command {address}: {ESCAPING}"  # a label's slash sent as it is
+    meant = meant or _close(address)
+    if meant is not None:
+        return f"unknown command {address}: did you mean '{meant}'?"
+    return f"unknown command {address} (choreo takes {ROOT}/ followed by {KNOWN})"
+
+
+def suggestion(address: str) -> str | None:
+    """The address meant, from choreo's own: one that differs from it only by case, a missing
+    `/choreo` or a trailing slash (any command); else, for the commands that change nothing on
+    stage (status, thump, updates, the playhead's moves), a close spelling, or a heartbeat's
+    other names (`/ping`). Never a GO, a panic or another command with a stage effect for a
+    mistyped address: a typo answered with a suggestion is typed again."""
+    return _loosely(address) or _close(address)
+
+
+def _close(address: str) -> str | None:
+    """Of the addresses with no stage effect, the one `address` is a slip for, or None."""
+    tail = address.rstrip("/").rsplit("/", 1)[-1].casefold()
+    if tail in ALIASES:
+        return ALIASES[tail]
+    given = address[len(ROOT) + 1:] if address.casefold().startswith(ROOT + "/") else address.lstrip("/")
+    meant = closest(given.casefold(), [*PATHS, "cue/CUE/go", *(known[len(ROOT) + 1:] for known in SUGGESTED)])
+    # nearer a command that acts on stage than any other (`/choreo/strat`): no suggestion at all
+    return f"{ROOT}/{meant}" if meant is not None and f"{ROOT}/{meant}" in SUGGESTED else None
+
+
+def _loosely(address: str) -> str | None:
+    """One of choreo's addresses that `address` is but for its case, a missing `/choreo`, a
+    trailing slash (the cue it names kept as written), or None."""
+    candidates = [address, address[:-1]] if address.endswith("/") else [address]
+    for candidate in candidates:
+        if not candidate.startswith("/"):
+            continue
+        parts = candidate.split("/")[1:]
+        if parts[0].casefold() != ROOT[1:]:
+            parts = [ROOT[1:], *parts]
+        fixed = _address_of(parts)
+        if fixed is not None and fixed != address:
+            return fixed
+    return None
+
+
+def _address_of(parts: list[str]) -> str | None:
+    """`choreo/...` split at its slashes, matched to an address of ours ignoring the case of all
+    but the cue, or None."""
+    folded = [part.casefold() for part in parts]
+    joined = "/".join(folded[1:])
+    if folded[0] != ROOT[1:] or not joined:
+        return None
+    if joined in PATHS or f"{ROOT}/{joined}" in (*QUERIES, UPDATES):
+        return f"{ROOT}/{joined}"
+    if len(parts) == 3 and folded[1] == "playhead" and parts[2]:
+        return PLAYHEAD_PREFIX + parts[2]
+    if len(parts) == 4 and folded[1] == "cue" and folded[3] == "go" and parts[2]:
+        return CUE_PREFIX + parts[2] + CUE_SUFFIX
+    return None
 
 
 def is_release(args: Sequence[Any]) -> bool:
@@ -166,8 +338,10 @@ class OscServer:
         self.allow_given = tuple(allow)
         self.allow = parse_allow(allow)
         self.notify = tuple(notify)
-        self._notifier = Notifier(self.notify) if self.notify else None
+        self._notifier = Notifier(self.notify, self._deliver)
         self._limits = SenderLimits(limits, now)  # what a sender's messages may cost
+        self.subscriptions = Subscriptions(limits.update_subscribers, limits.update_expire_s, now)
+        self._closing = False
         self.wire_limits = wire_limits
         self.counts: Counter[str] = Counter()  # packets refused as malformed or unread, connections dropped
         self._net: OscNet | None = None
@@ -190,19 +364,17 @@ class OscServer:
                 net.bind()
             except ListenFailed as exc:
                 raise UsageError(self._cannot_listen(exc)) from None
-            if self._notifier is not None:
-                try:
-                    self._notifier.resolve(net.port)
-                except UsageError:
-                    net.close()
-                    raise
+            try:
+                self._notifier.resolve(net.port)
+            except UsageError:
+                net.close()
+                raise
             self._net = net
 
     def start(self) -> None:
         self.bind()
         assert self._net is not None
-        if self._notifier is not None:
-            self._notifier.start()
+        self._notifier.start()
         self._net.serve()
 
     def _cannot_listen(self, exc: ListenFailed) -> str:
@@ -212,10 +384,10 @@ class OscServer:
 
     def close(self) -> None:
         """Stop listening; open connections are closed. Twice is harmless."""
+        self._closing = True  # the connections it closes end their subscriptions without a word
         if self._net is not None:
             self._net.close()
-        if self._notifier is not None:
-            self._notifier.close()
+        self._notifier.close()
 
     @property
     def listening(self) -> str:
@@ -255,11 +427,13 @@ class OscServer:
         if not allowed:
             replies = [self._refuse(host, source, "")]  # its address is not read: the reply is `/reply`
         else:
+            origin = Origin(transport, sender, host, budget, source)
+            self.subscriptions.heard(origin.key)  # any message renews its subscription
             decoded = decode_packet(data, self.wire_limits)
             if decoded.error is not None:
                 replies = [self._malformed(budget, source, decoded.error, decoded.address)]
             else:
-                replies = self._messages(transport, host, budget, source, decoded.messages)
+                replies = self._messages(origin, decoded.messages)
         return [reply.encoded() for reply in replies if reply is not None]
 
     def rest_s(self, sender: Sender) -> float:
@@ -289,8 +463,14 @@ class OscServer:
         self.counts["dropped"] += 1
         self._report(Command("dropped", f"osc {transport} {where(sender)}"), Answer("error", why))
 
-    def _messages(self, transport: str, host: str, budget: str, source: str,
-                  messages: Sequence[Message]) -> list[Reply | None]:
+    def closed(self, transport: str, sender: Sender) -> None:
+        """A TCP connection ended: a subscription over it ends too (told, unless we are closing)."""
+        subscriber = self.subscriptions.remove((transport, tuple(sender)))
+        if subscriber is not None and not self._closing:
+            self._report(Command(UPDATES_COMMAND, subscriber.source),
+                         Answer("ok", "updates off: the connection closed"))
+
+    def _messages(self, origin: Origin, messages: Sequence[Message]) -> list[Reply | None]:
         """One packet's messages in order (a bundle's, all in one call): the place to bound
         what one packet may do. Each message after the first is read within the sender's
         budget of packets as if it came alone (one bundle of 200 unknown addresses cost 7.5
@@ -298,11 +478,11 @@ class OscServer:
         are counted, not read. The sender is allowed: a refused one's packet is not read."""
         replies = []
         for index, message in enumerate(messages):
-            if index and not self._limits.may_read(budget, True):
+            if index and not self._limits.may_read(origin.budget, True):
                 self.counts[UNREAD] += len(messages) - index
-                self.live.count(UNREAD, f"osc {transport} {host}", len(messages) - index)
+                self.live.count(UNREAD, f"osc {origin.transport} {origin.host}", len(messages) - index)
                 break
-            replies.append(self._receive(host, budget, source, message.address, message.args))
+            replies.append(self._receive(origin, message.address, message.args))
         return replies
 
     def _malformed(self, budget: str, source: str, error: str, address: str | None) -> Reply | None:
@@ -316,27 +496,94 @@ class OscServer:
 
     # -- one message -------------------------------------------------------------------------
 
-    def _receive(self, host: str, budget: str, source: str, address: str, args: tuple) -> Reply | None:
+    def _receive(self, origin: Origin, address: str, args: tuple) -> Reply | None:
         """A message from an allowed sender (one of a bundle's, each counted alone): its reply
         (None: none is sent). What it may cost is bounded (`choreo.live.limits`): its commands are
         carried out and answered within its own budgets, and past them ignored (and counted)."""
+        budget, source = origin.budget, origin.source
         address = self._shown(address)
         if address.startswith(ECHOES):  # a reply or notification come back: answering it could loop
             self._report(Command(ECHO, source, address), Answer("error", echo_message(address)))
             return None
-        wanted = command_for(address)
-        if wanted is None:  # costs a reply and a log line, both bounded; a desk's fader moves spend no GO
+        if address.endswith(CUT):
+            return self._answer(budget, self._unknown(source, address, f"unknown command {address}: longer than any "
+                                                                       "address choreo takes"))
+        try:
+            asked = wanted(address)
+        except BadAddress as bad:
+            return self._answer(budget, self._unknown(source, address, str(bad)))
+        if asked is None:  # costs a reply and a log line, both bounded; a desk's fader moves spend no GO
             return self._answer(budget, self._unknown(source, address))
-        name, label = wanted
+        if asked.name in QUERIES.values():
+            return self._query(origin, address, asked.name)
         if not self._limits.admit(budget):
-            message = self._limits.over_rate(host)
-            self._report(Command(name, source, label), Answer("error", message))
+            message = self._limits.over_rate(origin.host)
+            self._report(Command(asked.name, source, asked.cue), Answer("error", message))
             return self._answer(budget, Reply(address, "error", message))
+        if asked.name == UPDATES_COMMAND:
+            return self._answer(budget, self._updates(origin, address, args))
         if is_release(args):
             release = "ignored: a button's release (argument 0) is not a command"
             return self._answer(budget, Reply(address, "ok", release, {"ignored": True}))
-        answer = self.live.command(Command(name, source, label))
+        answer = self.live.command(Command(asked.name, source, asked.cue))
         return self._answer(budget, Reply(address, answer.status, answer.message, answer.data))
+
+    def _query(self, origin: Origin, address: str, name: str) -> Reply | None:
+        """`/choreo/status`, `/choreo/thump`: answered at once within the sender's budget of
+        questions (past it, counted and not answered), never logged one by one (a desk polls)."""
+        self.counts[name] += 1
+        if not self._limits.may_query(origin.budget):
+            self.counts[UNANSWERED] += 1
+            return None
+        if name == "thump":
+            return Reply(address, "ok", "thump", {"updates": origin.key in self.subscriptions})
+        status = self.live.status()
+        return Reply(address, "ok", str(status.get("state", "")), status)
+
+    def _updates(self, origin: Origin, address: str, args: tuple) -> Reply:
+        """`/choreo/updates 1|0`: the sender gets the notifications (or no longer), logged as
+        a command."""
+        on = switch(args)
+        if on is None:
+            answer = Answer("error", "give 1 (send me the show's notifications) or 0 (stop): /choreo/updates 1")
+        elif on:
+            answer = self._subscribe(origin)
+        elif self.subscriptions.remove(origin.key) is not None:
+            answer = Answer("ok", "updates off", {"updates": False})
+        else:
+            answer = Answer("ok", "updates off already", {"updates": False})
+        self._report(Command(UPDATES_COMMAND, origin.source), answer)
+        return Reply(address, answer.status, answer.message, answer.data)
+
+    def _subscribe(self, origin: Origin) -> Answer:
+        expire = self.subscriptions.expire_s
+        if origin.transport == "udp" and loops(origin.sender, self.port):
+            return Answer("error", f"refused: {where(origin.sender)} is choreo's own port: each notification "
+                                   "would come back as a command")
+        taken, expired = self.subscriptions.add(origin.key, origin.transport, tuple(origin.sender), origin.source)
+        self._tell_expired(expired)
+        if not taken:
+            most = self.subscriptions.most
+            return Answer("error", f"refused: {most} senders get updates already (at most {most}): one must send "
+                                   f"/choreo/updates 0, or fall silent for {expire:g} s")
+        how = "on this connection" if origin.transport == "tcp" else f"to {where(origin.sender)}"
+        return Answer("ok", f"updates on: the show's notifications {how}, until /choreo/updates 0 or {expire:g} s "
+                            "without a message (send /choreo/thump)", {"updates": True, "expire_s": expire})
+
+    def _deliver(self, packet: bytes) -> None:
+        """A notification, encoded, to every subscriber (the notifier's thread calls)."""
+        net = self._net
+        if net is None or not len(self.subscriptions):
+            return
+        subscribers, expired = self.subscriptions.current()
+        self._tell_expired(expired)
+        for subscriber in subscribers:
+            net.push(subscriber.transport, subscriber.sender, packet)
+
+    def _tell_expired(self, expired: Sequence[Subscriber]) -> None:
+        for subscriber in expired:
+            self._report(Command(UPDATES_COMMAND, subscriber.source),
+                         Answer("ok", f"updates off: no message for {self.subscriptions.expire_s:g} s"))
 
     def _answer(self, budget: str, reply: Reply) -> Reply | None:
         """The reply, if the sender's reply budget allows (one packet can ask for many)."""
@@ -347,8 +594,8 @@ class OscServer:
         self._report(Command("refused", source, address or None), Answer("denied", message))
         return Reply(address, "denied", message) if self._limits.may_answer_refusal() else None
 
-    def _unknown(self, source: str, address: str) -> Reply:
-        message = unknown_message(address)
+    def _unknown(self, source: str, address: str, why: str | None = None) -> Reply:
+        message = why or unknown_message(address)
         self._report(Command("unknown", source, address), Answer("error", message))
         return Reply(address, "error", message)
 
@@ -357,7 +604,7 @@ class OscServer:
         `Limits.address_shown` characters (no command's address is that long; a 64 KB one
         would cost a 64 KB log line, and a reply three times the bytes received)."""
         most = self._limits.limits.address_shown
-        return address if len(address) <= most else address[:most] + "…"
+        return address if len(address) <= most else address[:most] + CUT
 
     def _report(self, command: Command, answer: Answer) -> None:
         """A message `Live.command` has no name for, told to its listeners (the log) as it
@@ -366,33 +613,75 @@ class OscServer:
 
     # -- listening to the show (notifications) -----------------------------------------------
 
+    @property
+    def _notifying(self) -> bool:
+        """Anyone to notify: a target given, or a sender subscribed (read on a runner's path: cheap)."""
+        return bool(self.notify) or len(self.subscriptions) > 0
+
     def on_step(self, event: StepEvent) -> None:
-        if self._notifier is not None:
+        if self._notifying:
             self._notifier.put(f"{NOTIFY}/step", event.robot or "", event.step.index, event.step.label or "",
                                event.event, round(event.actual_s, 6), event.outcome or "")
 
     def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
-        if self._notifier is not None and level >= WARNING:
+        if level >= WARNING and self._notifying:
             self._notifier.put(f"{NOTIFY}/fault" if level >= ERROR else f"{NOTIFY}/warning", message)
 
     def on_waiting(self, cue: GoCue) -> None:
         """The show reached a GO cue (from `Live`, once a cue)."""
-        if self._notifier is not None:
+        if self._notifying:
             self._notifier.put(f"{NOTIFY}/go", cue.name, cue.step.index, round(cue.reached_s, 6))
 
     def on_command(self, event: CommandEvent) -> None:
         """Every command but what came back from a notification or reply, and the summaries of
         those held back: notified, either could loop between two programs."""
-        if self._notifier is not None and event.command.name not in (ECHO, UNLOGGED):
+        if self._notifying and event.command.name not in (ECHO, UNLOGGED):
             command, answer = event.command, event.answer
             self._notifier.put(f"{NOTIFY}/command", command.name, command.source, answer.status,
                                answer.message, command.label or "")
 
     def on_result(self, result: RunResult) -> None:
         """The run is over (`done` or `aborted`): for the caller to tell after `Session.run`."""
-        if self._notifier is not None:
+        if self._notifying:
             self._notifier.put(f"{NOTIFY}/done", result.outcome, result.steps_run, result.late_steps,
                                round(result.show_s, 6))
+
+
+@dataclass(frozen=True)
+class Origin:
+    """Where a message came from: the transport, the sender's address (as the socket gives it),
+    its plain host, whose budgets it spends, and how the log names it."""
+
+    transport: str
+    sender: Sender
+    host: str
+    budget: str
+    source: str
+
+    @property
+    def key(self) -> tuple:
+        """Its subscription's key: a UDP sender's address, a TCP sender's connection (its address)."""
+        return self.transport, tuple(self.sender)
+
+
+def switch(args: Sequence[Any]) -> bool | None:
+    """`/choreo/updates`' one argument: 1 or 0 (an int, a float, true/false, or the text), else None."""
+    if len(args) != 1:
+        return None
+    value = args[0].strip() if isinstance(args[0], str) else args[0]
+    if value in (1, "1", True) and not isinstance(value, bytes):
+        return True
+    if value in (0, "0", False) and not isinstance(value, bytes):
+        return False
+    return None
+
+
+def loops(sender: Sender, own_port: int) -> bool:
+    """Would notifications sent to this UDP sender come back to us? Its address is our own port
+    on this machine (forged: a datagram cannot come from the port it is sent to), or port 0 (no
+    sender's: forged too). The checks `--osc-notify` targets get at start-up."""
+    family = socket.AF_INET6 if len(sender) == 4 else socket.AF_INET
+    return sender[1] == 0 or sender[1] == own_port and is_this_machine(str(sender[0]), family)
 
 
 def budget_key(transport: str, host: str) -> str:

@@ -26,6 +26,11 @@ memory, descriptors and time, and the operator's GO still gets through:
 - Any datagram up to 64 KB is read whole (a smaller buffer would cut it without a word).
 - Datagrams the system dropped because they came faster than choreo read them are counted
   where the system says how many (Linux's SO_RXQ_OVFL): the log's counts are what was sent.
+- Notifications to subscribed senders (`push`, from the notifier's thread) go out on the UDP
+  socket at once, or, for a TCP sender, are handed to the serving thread through a bounded
+  outbox (a connection's buffers are that thread's alone); one that would take a connection's
+  unsent bytes past `max_unsent` is dropped (counted), not queued: a subscriber that does not
+  read loses notifications, never its connection nor anyone's time.
 """
 
 from __future__ import annotations
@@ -39,7 +44,7 @@ import struct
 import sys
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from collections.abc import Hashable
@@ -59,6 +64,7 @@ UDP_BUFFER = 65536  # larger than any UDP payload: a datagram is never cut
 OUT_OF_DESCRIPTORS = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
 # Linux's SO_RXQ_OVFL (not in Python's socket module): each datagram then carries how many the
 # socket has dropped so far. 40 but on PA-RISC and SPARC; elsewhere the drops go uncounted.
+OUTBOX = 256  # notifications waiting for the serving thread to queue them to TCP subscribers
 SO_RXQ_OVFL = 40 if sys.platform.startswith("linux") and not platform.machine().startswith(("parisc", "sparc")) \
     else None
 DROPS_DATA = socket.CMSG_SPACE(4) if hasattr(socket, "CMSG_SPACE") else 0
@@ -93,6 +99,9 @@ class PacketHandler(Protocol):
 
     def lost(self, transport: str, count: int) -> None:
         """`count` datagrams the system dropped before they could be read (a flood)."""
+
+    def closed(self, transport: str, sender: Sender) -> None:
+        """A TCP connection ended (either side closed it): what was kept for it goes."""
 
 
 # -- the connections' bookkeeping (pure: times are given) -------------------------------------
@@ -233,7 +242,11 @@ class OscNet:
         self._thread: threading.Thread | None = None
         self._port: int | None = None
         self._drops_seen = 0  # the socket's count of dropped datagrams, as last told
+        self._by_sender: dict[Sender, _Connection] = {}  # the TCP connections, by their peer's address
+        self._outbox: deque[tuple[Sender, bytes]] = deque()  # notifications for TCP peers (`push`)
+        self._outbox_lock = threading.Lock()
         self.faults = 0  # events whose handling failed (a bug): counted, and serving goes on
+        self.unpushed = 0  # notifications dropped: a full outbox, a peer gone or not reading
 
     @property
     def port(self) -> int:
@@ -258,6 +271,7 @@ class OscNet:
             return
         self._wake = socket.socketpair()
         self._wake[0].setblocking(False)
+        self._wake[1].setblocking(False)  # `push` never waits: a full buffer has woken the thread already
         self._selector = selector = selectors.DefaultSelector()
         assert self._tcp is not None  # bound with the UDP socket, always
         selector.register(self._udp, selectors.EVENT_READ, "udp")
@@ -320,7 +334,47 @@ class OscNet:
     def _drain_wake(self) -> None:
         if self._wake is not None:
             with contextlib.suppress(OSError):  # nothing left to read: woken all the same
-                self._wake[0].recv(64)
+                self._wake[0].recv(4096)
+        self._deliver_outbox()
+
+    # -- notifications to subscribers ------------------------------------------------------------
+
+    def push(self, transport: str, sender: Sender, packet: bytes) -> None:
+        """Send `packet` (a notification) to a sender, from any thread, never waiting: over UDP
+        from our own port (where the sender's replies come from), over TCP on its connection."""
+        if transport == "udp":
+            udp = self._udp
+            try:
+                if udp is not None:
+                    udp.sendto(packet, sender)
+                    return
+            except (OSError, ValueError):  # a full buffer, an unreachable peer, a socket closed
+                pass
+            self.unpushed += 1
+            return
+        with self._outbox_lock:
+            if len(self._outbox) >= OUTBOX:
+                self.unpushed += 1
+                return
+            self._outbox.append((sender, packet))
+        wake = self._wake
+        if wake is not None:
+            with contextlib.suppress(OSError):  # its buffer full: the thread is woken already
+                wake[1].send(b"n")
+
+    def _deliver_outbox(self) -> None:
+        """The serving thread: queue the notifications `push` left to their connections."""
+        with self._outbox_lock:
+            waiting = list(self._outbox)
+            self._outbox.clear()
+        for sender, packet in waiting:
+            connection: _Connection | None = self._by_sender.get(sender)  # this server's own record
+            framed = connection.reader.frame(packet) if connection is not None else b""
+            if connection is None or len(connection.unsent) + len(framed) > self.limits.max_unsent:
+                self.unpushed += 1
+                continue
+            connection.unsent += framed
+            self._flush(connection)
 
     def _expire(self) -> None:
         now = self._now()
@@ -413,6 +467,7 @@ class OscNet:
         with contextlib.suppress(OSError):  # replies go out all the same, only later
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # a reply is one small write: now
         self._connections.add(connection)
+        self._by_sender[sender] = connection
         self._watch(connection)
         self._read(connection)  # a message sent with the connection (QLab's GO) proves it at once
 
@@ -494,10 +549,13 @@ class OscNet:
         self._table.remove(connection)
         if connection in self._connections:
             self._connections.discard(connection)
+            if self._by_sender.get(connection.sender) is connection:
+                del self._by_sender[connection.sender]
             if connection.watched and self._selector is not None:
                 with contextlib.suppress(KeyError, ValueError):  # the selector no longer knew it
                     self._selector.unregister(connection.sock)
                 connection.watched = 0
+            self.handler.closed("tcp", connection.sender)
         with contextlib.suppress(OSError):  # the peer went first
             connection.sock.shutdown(socket.SHUT_RDWR)
         connection.sock.close()

@@ -5,6 +5,11 @@ waits for the network and a message that cannot be sent (or queued) is dropped.
 A target that is choreo's own `--osc` port on this machine would loop (each notification
 comes back as an unknown command, which is notified again), so it is refused at start-up:
 loopback, the unspecified address, and every address of this machine's interfaces.
+
+A sender may ask for the same notifications with `/choreo/updates 1` (QLab's `/updates`):
+`Subscriptions` keeps who (at most `Limits.update_subscribers`, each until it has been silent
+`Limits.update_expire_s`), and the notifier's thread hands each notification to them too
+(`Notifier(deliver=)`), never a runner.
 """
 
 from __future__ import annotations
@@ -14,7 +19,9 @@ import ipaddress
 import queue
 import socket
 import threading
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Hashable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 
@@ -90,8 +97,9 @@ def is_this_machine(ip: str, family: int) -> bool:
 class Notifier:
     """Sends each notification to every target (see the module's docstring)."""
 
-    def __init__(self, targets: Sequence[Target]) -> None:
+    def __init__(self, targets: Sequence[Target], deliver: Callable[[bytes], object] | None = None) -> None:
         self.targets = tuple(targets)
+        self._deliver = deliver  # each notification encoded, to the subscribers (from this thread)
         self._queue: queue.Queue[tuple | None] = queue.Queue(QUEUED)
         self._sockets: dict[int, socket.socket] = {}
         self._addresses: list[tuple[int, Any]] = []  # (family, address) of each target
@@ -157,3 +165,71 @@ class Notifier:
             # nobody listening, a full buffer, closed: progress is not worth holding the show
             with contextlib.suppress(OSError, KeyError):
                 self._sockets[family].sendto(data, target)
+        if self._deliver is not None:
+            with contextlib.suppress(Exception):  # a subscriber's fault must not end the targets' notifications
+                self._deliver(data)
+
+
+@dataclass
+class Subscriber:
+    """A sender that asked for the notifications: how to reach it (its transport and address:
+    a TCP sender's is its connection), how the log names it, and when it was last heard."""
+
+    transport: str
+    sender: tuple
+    source: str
+    heard: float
+
+
+class Subscriptions:
+    """Who gets the notifications besides the --osc-notify targets (`/choreo/updates 1`): at
+    most `most`, each until `expire_s` without a message from it. Thread-safe: the OSC thread
+    adds and renews, the notifier's thread reads."""
+
+    def __init__(self, most: int = LIMITS.update_subscribers, expire_s: float = LIMITS.update_expire_s,
+                 now: Callable[[], float] = time.monotonic) -> None:
+        self.most = most
+        self.expire_s = expire_s
+        self._now = now
+        self._lock = threading.Lock()
+        self._subscribers: dict[Hashable, Subscriber] = {}
+
+    def __len__(self) -> int:
+        return len(self._subscribers)
+
+    def __contains__(self, key: Hashable) -> bool:
+        return key in self._subscribers
+
+    def add(self, key: Hashable, transport: str, sender: tuple, source: str) -> tuple[bool, list[Subscriber]]:
+        """Subscribe (or renew); False when `most` others are subscribed. And the ones found
+        expired on the way (the caller tells of them)."""
+        with self._lock:
+            expired = self._expire()
+            if key not in self._subscribers and len(self._subscribers) >= self.most:
+                return False, expired
+            self._subscribers[key] = Subscriber(transport, sender, source, self._now())
+            return True, expired
+
+    def remove(self, key: Hashable) -> Subscriber | None:
+        with self._lock:
+            return self._subscribers.pop(key, None)
+
+    def heard(self, key: Hashable) -> None:
+        """A message from `key`: its subscription (if any) goes on."""
+        if key in self._subscribers:  # most senders are not subscribed: no lock for them
+            with self._lock:
+                subscriber: Subscriber | None = self._subscribers.get(key)  # the table's own record
+                if subscriber is not None:
+                    subscriber.heard = self._now()
+
+    def current(self) -> tuple[list[Subscriber], list[Subscriber]]:
+        """The subscribers now, and those that have just expired (removed)."""
+        with self._lock:
+            expired = self._expire()
+            return list(self._subscribers.values()), expired
+
+    def _expire(self) -> list[Subscriber]:
+        """The lock is held."""
+        now = self._now()
+        late = [key for key, subscriber in self._subscribers.items() if now - subscriber.heard >= self.expire_s]
+        return [self._subscribers.pop(key) for key in late]
