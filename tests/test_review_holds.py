@@ -33,6 +33,7 @@ motions:
   bow: {number: 2, duration: 0.5}
 steps:
   - play: wave
+  - wait: 0.1
   - play: bow
     at: go
     label: applause
@@ -46,12 +47,28 @@ steps:
     label: finale
   - wait: done
 """
-FIRST_HOLD_S, SECOND_HOLD_S = 2.3, 1.7
+FIRST_HOLD_S, SECOND_HOLD_S, PAUSE_S = 2.3, 1.7, 1.2
+
+
+class PauseAfterFirstStep:
+    """The operator pauses as the first play's motion has begun (its step ended): from the
+    runner's own thread, so the pause falls at the same instant on any machine."""
+
+    def __init__(self, live: Live) -> None:
+        self.live = live
+
+    def on_step(self, event) -> None:  # type: ignore[no-untyped-def]
+        if event.step.index == 0 and event.event == "end":
+            assert self.live.command(Command("pause", "key")).ok
+
+    def on_log(self, *args) -> None:  # type: ignore[no-untyped-def]
+        pass
 
 
 @pytest.fixture(scope="module")
 def held(tmp_path_factory):
-    """Held 2.3 s at the first GO cue (GO from the key), 1.7 s at the second, then a panic over OSC."""
+    """Paused 1.2 s while the first wave runs, held 2.3 s at the first GO cue (GO from the key),
+    1.7 s at the second, then a panic over OSC."""
     tmp = tmp_path_factory.mktemp("held")
     log = tmp / "run.mcap"
     source = VirtualTime()
@@ -61,10 +78,13 @@ def held(tmp_path_factory):
 
     def run() -> None:
         with session:
-            done["result"] = session.run([], live=live)
+            done["result"] = session.run([PauseAfterFirstStep(live)], live=live)
 
     thread = threading.Thread(target=run, daemon=True)
     thread.start()
+    assert wait_for(lambda: bool(live.paused_robots), 20, 0.002)  # the runner stands before its next step
+    source.advance(PAUSE_S)
+    assert live.command(Command("resume", "osc tcp 127.0.0.1:53000")).ok
     assert wait_for(lambda: bool(live.waiting), 20, 0.002)
     source.advance(FIRST_HOLD_S)  # nothing else runs while the show waits: the hold is exactly this long
     assert live.command(Command("go", "key")).ok
@@ -85,7 +105,8 @@ def test_summary_timeline_export_and_replay_agree_to_the_millisecond(held, tmp_p
     assert lengths is not None and timeline.lengths == lengths
     assert round(timeline.end_s, 3) == round(summary.duration_s, 3)
     assert lengths.holds == 2 and lengths.held_s == pytest.approx(FIRST_HOLD_S + SECOND_HOLD_S, abs=0.01)
-    assert lengths.wall_s == pytest.approx(lengths.show_s + lengths.held_s)
+    assert lengths.pauses == 1 and lengths.paused_s == pytest.approx(PAUSE_S, abs=0.001)
+    assert lengths.wall_s == pytest.approx(lengths.show_s + lengths.held_s + lengths.paused_s)
     # the step times: the timeline's cues and the exported rows are the step records' own
     assert [(c.label, round(c.show_s, 3)) for c in timeline.cues] == [
         (r["label"], r["planned_s"] if r["released"] == "time" else r["actual_s"]) for r in rows][:2]
@@ -101,24 +122,28 @@ def test_summary_timeline_export_and_replay_agree_to_the_millisecond(held, tmp_p
 def test_hold_time_is_said_as_hold_time_not_drift(held):
     summary = summarize(held)
     text = "\n".join(render(summary))
-    assert "held 4.0" in text and "at 2 GO cues" in text
+    assert "held 4.0" in text and "at 2 GO cues, paused 1.200 s" in text
     assert summary.clock is not None and abs(summary.clock.drift_ms) < 1.0  # the machine's clock never drifts
     assert "minus machine clock +0.000 ms" in text
-    assert [s.kind for s in summary.stands] == ["held", "held"]
+    assert [s.kind for s in summary.stands] == ["paused", "held", "held"]
 
 
 def test_the_timeline_draws_holds_commands_and_a_motion_through_a_hold_at_its_length(held):
     with LogReader(held) as reader:
         timeline = build(reader)
-    through = timeline.runs[0]  # the wave, running while the show waited for the first GO
+    through = timeline.runs[0]  # the wave, running while the show was paused, then held
     assert through.start_at is not None and through.drawn_end_at is not None
     assert through.drawn_end_at - through.start_at == pytest.approx(1.0, abs=0.01)
-    assert [m.kind for m in timeline.commands] == ["command", "command"]
-    go_text, panic_text = (m.text.split(":")[0] for m in timeline.commands)
+    assert through.start_s == pytest.approx(0.004, abs=0.002)  # its show time: where the clock stood
+    assert [m.kind for m in timeline.commands] == ["command"] * 4
+    assert [m.text.split(" ")[0] for m in timeline.commands] == ["pause", "resume", "go", "panic"]
+    go_text, panic_text = (m.text.split(":")[0] for m in timeline.commands[2:])
     assert go_text.startswith("go ") and go_text.endswith(" from key")
     assert panic_text == "panic from osc udp 127.0.0.1"
-    go = timeline.commands[0]
-    assert go.drawn_at == pytest.approx(FIRST_HOLD_S, abs=0.01) and go.show_s == pytest.approx(0.0, abs=0.01)
+    go = timeline.commands[2]
+    assert go.drawn_at == pytest.approx(PAUSE_S + FIRST_HOLD_S + 0.1, abs=0.01)
+    assert go.show_s == pytest.approx(0.1, abs=0.01)
+    assert [m.kind for m in timeline.stands] == ["paused", "held", "held"]
     lines = list(render_text(timeline, 100))
     row = next(line for line in lines if "holds, commands" in line)
     assert "~" in row and "^" in row

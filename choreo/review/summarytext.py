@@ -109,7 +109,7 @@ def _render_stands(summary: Summary) -> Iterable[str]:
     if lengths is None or not (lengths.holds or lengths.pauses):
         return
     for number, stand in enumerate(summary.stands):
-        head = "stood    " if number == 0 else "         "
+        head = "holds    " if number == 0 else "         "
         yield f"{head} {stand.show_s:9.3f} s  {stand.kind} {stand.seconds(None):.3f} s"
     listed = len(summary.stands)
     if lengths.holds + lengths.pauses > listed:
