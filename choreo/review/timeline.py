@@ -554,7 +554,8 @@ def require_matplotlib(needed_by: str = "timeline --png",
 
 def render_png(timeline: Timeline, out: BinaryIO) -> None:
     """Draw the timeline as a PNG into `out`: a row a motion slot, planned bars above actual ones,
-    the plan's unplayed plays in grey, cue lines with their labels, and the marks.
+    the plan's unplayed plays in grey, cue lines with their labels, the marks, the holds and
+    pauses shaded (on `elapsed` time, as the text) and the commands on a row of their own.
 
     Takes an open file, not a path: the command opens its output before it reads the log, so a
     path it cannot write is one line at once, never a long read and then a traceback.
@@ -573,23 +574,13 @@ def render_png(timeline: Timeline, out: BinaryIO) -> None:
     try:
         for run in everything:
             _draw_run(ax, run, row[(run.robot, run.motion)])
-        fault_y = len(slots)
-        faults = timeline.faults
-        for kind, marker, colour in _MARK_STYLES:
-            at = [m.show_s for m in faults if m.kind == kind]
-            if at:
-                ax.plot(at, [fault_y] * len(at), marker=marker, color=colour, markersize=9,
-                        markeredgewidth=2, linestyle="")
-        for cue in timeline.cues:
-            ax.axvline(cue.show_s, color="#555555", linestyle="--", linewidth=0.8)
-            ax.annotate(cue.name, (cue.show_s, 1.0), xycoords=("data", "axes fraction"), rotation=90,
-                        va="top", ha="right", fontsize="x-small", color="#333333")
-        ax.set_yticks(list(range(len(slots))) + ([fault_y] if faults else []))
-        ax.set_yticklabels([names[m] for m in slots] + (["faults"] if faults else []))
-        ax.set_ylim(-0.8, fault_y + (0.8 if faults else -0.2))
+        extra = _draw_marks(ax, timeline, len(slots))
+        ax.set_yticks(list(range(len(slots) + len(extra))))
+        ax.set_yticklabels([names[m] for m in slots] + extra)
+        ax.set_ylim(-0.8, len(slots) - 1 + len(extra) + (0.8 if extra else 0.6))
         ax.invert_yaxis()
         ax.set_xlim(0, timeline.span_s * 1.02)
-        ax.set_xlabel("show clock (s)")
+        ax.set_xlabel("show clock (s), with the holds and pauses in" if timeline.stands else "show clock (s)")
         ax.grid(axis="x", color="#dddddd", linewidth=0.6)
         ax.set_axisbelow(True)
         ax.set_title(_png_title(timeline))
@@ -601,30 +592,59 @@ def render_png(timeline: Timeline, out: BinaryIO) -> None:
         plt.close(fig)
 
 
+def _draw_marks(ax: Any, timeline: Timeline, first_y: int) -> list[str]:  # ax: a matplotlib Axes
+    """The faults' and the commands' rows below the motions (their names, for the y axis), the
+    cues' lines, the holds' and pauses' shaded spans labelled with the show time they stood at."""
+    rows: list[str] = []
+    faults, commands = timeline.faults, timeline.commands
+    for name, marks, styles in (("faults", faults, _MARK_STYLES), ("commands", commands, _COMMAND_STYLES)):
+        if not marks:
+            continue
+        y = first_y + len(rows)
+        rows.append(name)
+        for kind, marker, colour in styles:
+            at = [m.drawn_at for m in marks if m.kind == kind]
+            if at:
+                ax.plot(at, [y] * len(at), marker=marker, color=colour, markersize=9, markeredgewidth=2,
+                        linestyle="")
+    for cue in timeline.cues:
+        ax.axvline(cue.drawn_at, color="#555555", linestyle="--", linewidth=0.8)
+        ax.annotate(cue.name, (cue.drawn_at, 1.0), xycoords=("data", "axes fraction"), rotation=90,
+                    va="top", ha="right", fontsize="x-small", color="#333333")
+    for stand in timeline.stands:
+        ax.axvspan(stand.drawn_at, stand.drawn_at + stand.length_s, color=STOOD, linewidth=0, zorder=0)
+        ax.annotate(f"{stand.kind} {stand.length_s:.1f} s at {stand.show_s:.3f} s", (stand.drawn_at, 0.0),
+                    xycoords=("data", "axes fraction"), va="bottom", ha="left", fontsize="x-small",
+                    color="#555555")
+    return rows
+
+
 PLANNED, UNPLAYED, MEASURED, UNMEASURED, RED = "#b8c4d6", "#dddddd", "#2f6db5", "#8c6bb1", "#d62728"
+STOOD = "#f0e0a0"  # a hold's or pause's span
+_COMMAND_STYLES = (("command", "^", "#2ca02c"), ("skip", "s", "#7f7f7f"))
 _MARK_STYLES = (("fault", "x", RED), ("error", "x", "#8b0000"), ("failure", "X", "#8b0000"),
                 ("abort", "s", "#ff7f0e"))
 
 
 def _draw_run(ax: Any, run: MotionRun, y: int) -> None:  # ax: a matplotlib Axes, imported lazily
-    if run.planned_s is not None:
+    if run.planned_at is not None:
         unplayed = run.ended_by == "not played"
-        ax.broken_barh([(run.planned_s, run.expected_s)], (y - 0.42, 0.34),
+        ax.broken_barh([(run.planned_at, run.expected_s)], (y - 0.42, 0.34),
                        facecolors=UNPLAYED if unplayed else PLANNED,
                        edgecolors="#aaaaaa" if unplayed else "#6b7a90", linewidth=0.5)
-    if run.start_s is not None and run.end_s is not None and run.drawn_end_s is not None:
+    if run.start_at is not None and run.end_at is not None and run.drawn_end_at is not None:
         colour = MEASURED if run.measured else UNMEASURED
-        ax.broken_barh([(run.start_s, max(run.drawn_end_s - run.start_s, 0.005))], (y - 0.04, 0.44),
+        ax.broken_barh([(run.start_at, max(run.drawn_end_at - run.start_at, 0.005))], (y - 0.04, 0.44),
                        facecolors=colour)
-        if not run.measured and run.end_s > run.drawn_end_s:
-            ax.hlines(y + 0.18, run.drawn_end_s, run.end_s, colors=colour, linestyles="dotted", linewidth=1.5)
+        if not run.measured and run.end_at > run.drawn_end_at:
+            ax.hlines(y + 0.18, run.drawn_end_at, run.end_at, colors=colour, linestyles="dotted", linewidth=1.5)
     if run.started_late:
-        ax.plot([run.start_s], [y - 0.04], marker="v", color=RED, markersize=9, linestyle="")
-        ax.annotate(f"{run.late_ms:.0f} ms late", (run.start_s, y - 0.1), fontsize="x-small", color=RED)
+        ax.plot([run.start_at], [y - 0.04], marker="v", color=RED, markersize=9, linestyle="")
+        ax.annotate(f"{run.late_ms:.0f} ms late", (run.start_at, y - 0.1), fontsize="x-small", color=RED)
 
 
 def _png_title(timeline: Timeline) -> str:
-    title = f"{timeline.show}: {timeline.end_s:.2f} s"
+    title = f"{timeline.show}: {timeline.end_s:.2f} s{stood_text(timeline.lengths)}"
     if timeline.outcome:
         title += f", {timeline.outcome}"
     if timeline.cut is not None:
@@ -644,4 +664,7 @@ def _legend() -> list:
             Line2D([], [], marker="v", color=RED, linestyle="", label="late play"),
             Line2D([], [], marker="x", color=RED, linestyle="", markeredgewidth=2, label="fault"),
             Line2D([], [], marker="X", color="#8b0000", linestyle="", label="failed step"),
-            Line2D([], [], marker="s", color="#ff7f0e", linestyle="", label="aborted")]
+            Line2D([], [], marker="s", color="#ff7f0e", linestyle="", label="aborted"),
+            Patch(facecolor=STOOD, label="held / paused"),
+            Line2D([], [], marker="^", color="#2ca02c", linestyle="", label="command"),
+            Line2D([], [], marker="s", color="#7f7f7f", linestyle="", label="cue skipped")]
