@@ -185,6 +185,7 @@ class Live:
         self._last_go: float | None = None
         self._cue_at: dict[tuple[str, int], Cue] = {key: cue for cue in cues for key in cue.steps}
         self._marks: dict[tuple[str, int], str] = {}  # a cue's step: its last event (start, end, skip)
+        self._gone: set[str] = set()  # cues given their GO this pass, by number (running until their steps say)
         self._skips: dict[str, Cue] = {}  # cues to skip, by number
         self._skip_steps: frozenset[tuple[str, int]] = frozenset()  # their steps; swapped whole, read without the lock
         self._moved: Cue | None = None  # the playhead where the operator put it (None: auto)
@@ -323,6 +324,7 @@ class Live:
         ahead again (a skip not yet reached still stands)."""
         with self._changed:
             self._released.clear()
+            self._gone.clear()
             passed = {number for number, cue in self._skips.items() if self._passed(cue)}
             self._marks.clear()
             self._moved = None
@@ -377,7 +379,7 @@ class Live:
             return SKIPPED
         if marks and all(mark == "end" for mark in marks):
             return DONE
-        return ACTIVE if any(marks) else AHEAD
+        return ACTIVE if any(marks) or cue.number in self._gone else AHEAD
 
     def _open(self, cue: Cue) -> bool:
         """Not run yet: the playhead may stand on it (a skipped cue no robot has passed too:
@@ -578,6 +580,8 @@ class Live:
         if isinstance(self.show, HoldingShowClock):
             self.show.release()
         self._changed.notify_all()
+        if verb == "GO":
+            self._gone.add(cue.number)
         if self._moved == cue:
             self._moved = None
         return Answer("ok", f"{verb}: {cue.name}", self._data(cue))
