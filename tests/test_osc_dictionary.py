@@ -519,7 +519,8 @@ def test_status_says_each_state_of_a_show(transport, real_shows):
                                        "planned_s": waiting["playhead"]["planned_s"], "robots": ["robot"]}
         assert ask(peer, "/choreo/start")[1]["status"] == "ok"
         held = until_state(peer, "held")
-        assert [(cue["number"], cue["label"], cue["robots"]) for cue in held["waiting"]] == [("1", "big bow", ["robot"])]
+        waits = [(cue["number"], cue["label"], cue["robots"]) for cue in held["waiting"]]
+        assert waits == [("1", "big bow", ["robot"])]
         assert ask(peer, "/choreo/pause")[1]["status"] == "ok"
         paused = status_of(peer)
         assert paused["state"] == "paused" and paused["paused"] is True
