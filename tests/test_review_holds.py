@@ -198,3 +198,50 @@ def test_samples_out_of_order_are_passed_over_at_a_bounded_cost():
     samples = [(n, ClockRecord(n / 1e9, n)) for n in range(200_000, 0, -1)]
     times = _fed(samples)
     assert times.disordered == len(samples) - 1 and len(times.stands) == 0
+
+
+def _clock_log(path, samples):  # type: ignore[no-untyped-def]
+    """A log of clock samples (log time, record) as a recorder writes them, with a step between."""
+    from choreo.log.format import StepRecord
+    from choreo.log.recorder import Recorder, RunInfo
+
+    recorder = Recorder(path, RunInfo("show.yaml", "x", b"version: 1\n", "sim://", 115200, 10**18, "hth4-2.2"))
+    recorder.on_step_record(StepRecord(0, "wait", "start", 0.0), 10**18)
+    for log_time, record in samples:
+        recorder.on_clock(record, log_time)
+    recorder.close({"outcome": "done"})
+    return path
+
+
+REVIEWS = (["summary"], ["timeline"], ["frames"], ["export", "--csv", "-"], ["export", "--cues", "--json", "-"])
+
+
+@pytest.mark.parametrize("state", ["frozen", "", "x" * 10_000, "HELD"])
+def test_a_log_with_a_clock_state_no_choreo_writes_is_one_line_in_every_review(tmp_path, capsys, state):
+    good = ClockRecord(0.0, 0, state="running")
+    log = _clock_log(tmp_path / "bad.mcap", [(10**18, good), (10**18 + 10**9, ClockRecord(1.0, 10**9, state=state))])
+    for review in REVIEWS:
+        if review[0] == "export" and "--cues" in review:
+            continue  # the cue rows read steps and commands, not the clock
+        code = vmain(["log", review[0], str(log), *review[1:]])
+        err = capsys.readouterr().err
+        assert code == 2 and len(err.strip().splitlines()) == 1 and "state" in err, (review, err)
+        assert len(err) < 400  # the hostile value is cut, not printed whole
+
+
+def test_samples_out_of_order_and_states_that_change_are_reviewed_and_counted(tmp_path, capsys):
+    s = 10**9
+    samples = [(10**18, ClockRecord(0.0, 0, state="running")), (10**18 + s, ClockRecord(1.0, s, state="held")),
+               (10**18 + s // 2, ClockRecord(0.5, s // 2, state="running")),  # earlier than the one before
+               (10**18 + 2 * s, ClockRecord(1.0, 2 * s, state="paused")),  # held, then paused at once
+               (10**18 + 3 * s, ClockRecord(1.0, 3 * s, state="running")),
+               (10**18 + 4 * s, ClockRecord(2.0, 4 * s, state="running"))]
+    log = _clock_log(tmp_path / "odd.mcap", samples)
+    summary = summarize(log)
+    assert summary.lengths is not None and summary.clock_disordered == 1
+    assert (summary.lengths.held_s, summary.lengths.paused_s) == (1.0, 1.0)
+    assert summary.clock is not None and abs(summary.clock.drift_ms) < 1e-6  # ran 2 s of 4, and drifted none
+    assert vmain(["log", "summary", str(log)]) == 0
+    assert "1 out of order, passed over" in capsys.readouterr().out
+    for review in REVIEWS:
+        assert vmain(["log", review[0], str(log), *review[1:]]) == 0, review
