@@ -27,8 +27,8 @@ from choreo.live.osc import (COMMANDS, DICTIONARY, EFFECTS, BadAddress, OscServe
                              unknown_message, wanted)
 from choreo.live.oscwire import decode_packet, encode_message
 from choreo.log.format import WARNING
-from runlog import wait_for
-from test_osc import GO_SHOW, ShowRun
+from runlog import ended_if_left, read_log, start_choreo, wait_for, write_show
+from test_osc import GO_SHOW, ONE_GO_SHOW, ShowRun, free_port
 from test_osc_limits import Peer
 
 TIMEOUT_S = 5.0
@@ -472,7 +472,7 @@ LONG_SHOW = """\
       - play: 1
       - play: bow
         at: go
-        label: big bow
+        label: big bow/2
       - play: long
     """
 
@@ -515,18 +515,18 @@ def test_status_says_each_state_of_a_show(transport, real_shows):
     try:
         waiting = status_of(peer)
         assert waiting["state"] == "waiting_start" and waiting["show_s"] is None and waiting["clock"] == "machine"
-        assert waiting["playhead"] == {"number": "1", "label": "big bow", "go": True,
+        assert waiting["playhead"] == {"number": "1", "label": "big bow/2", "go": True,
                                        "planned_s": waiting["playhead"]["planned_s"], "robots": ["robot"]}
         assert ask(peer, "/choreo/start")[1]["status"] == "ok"
         held = until_state(peer, "held")
         waits = [(cue["number"], cue["label"], cue["robots"]) for cue in held["waiting"]]
-        assert waits == [("1", "big bow", ["robot"])]
+        assert waits == [("1", "big bow/2", ["robot"])]
         assert ask(peer, "/choreo/pause")[1]["status"] == "ok"
         paused = status_of(peer)
         assert paused["state"] == "paused" and paused["paused"] is True
         assert ask(peer, "/choreo/resume")[1]["status"] == "ok"
         assert status_of(peer)["state"] == "held"
-        assert ask(peer, "/choreo/cue/big%20bow/go")[1]["message"] == "GO: cue 1 'big bow'"
+        assert ask(peer, "/choreo/cue/big%20bow%2F2/go")[1]["message"] == "GO: cue 1 'big bow/2'"  # its label
         running = until_state(peer, "running")
         assert running["waiting"] == [] and running["show_s"] >= held["show_s"]
         assert ask(peer, "/choreo/stop")[1]["status"] == "ok"
@@ -559,3 +559,45 @@ def test_the_playhead_and_skip_over_osc(transport, real_shows):
     finally:
         peer.close()
     assert run.result.outcome == "done" and run.result.steps_run == 2  # encore skipped, never waited for
+
+
+def test_choreo_run_answers_status_with_its_robots_and_sends_updates_to_a_subscriber(tmp_path):
+    """The whole wiring of `choreo run --osc`: the status names each robot's step and link, a
+    subscriber gets the show's progress, and the log records the subscription as a command."""
+    show = write_show(tmp_path, ONE_GO_SHOW)
+    log_path = tmp_path / "run.mcap"
+    port = free_port()
+    process = start_choreo("run", str(show), "--osc", str(port), "--log", str(log_path))
+    with ended_if_left(process):
+        peer = Peer("udp", port)
+        try:
+            held = until_listening_and(peer, "held")
+            (row,) = held["robots"].values()
+            assert row["robot"] == "robot" and row["state"] == "between" and row["next"]["label"] == "applause"
+            assert ask(peer, "/choreo/updates", 1)[1]["status"] == "ok"
+            assert ask(peer, "/choreo/go")[1]["message"] == "GO: cue 1 'applause'"
+            assert notified(peer, "/choreo/notify/done", "done", 2, 0, pytest.approx(0.0, abs=60))
+        finally:
+            peer.close()
+        _, err = process.communicate(timeout=30)
+    assert process.returncode == 0, err
+    commands = [(m["command"], m["status"]) for m in read_log(log_path).topic("/choreo/command")]
+    assert commands == [("updates", "ok"), ("go", "ok")]
+
+
+def until_listening_and(peer: Peer, state: str) -> dict:
+    """Status asked until choreo listens and the show is in `state` (a UDP question sent before
+    choreo listens is lost: asked again)."""
+    seen: list[dict] = []
+
+    def in_state() -> bool:
+        peer.send(encode_message("/choreo/status"))
+        peer.sock.settimeout(0.1)
+        try:
+            seen.append(reply(peer.sock.recv(65536))[1]["data"])
+        except (TimeoutError, socket.timeout, ConnectionRefusedError):
+            return False
+        return seen[-1]["state"] == state
+
+    assert wait_for(in_state, 30, every=0.05), seen[-1:]
+    return seen[-1]
