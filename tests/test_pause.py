@@ -263,3 +263,32 @@ def test_pause_with_several_robots_holds_every_runner(tmp_path):
         robot_steps = [m for m in log.topic(f"/choreo/{robot}/step") if m["event"] == "start"]
         assert not [m for m in robot_steps if paused < m["_log_time"] < resumed]
         assert len(robot_steps) == 3
+
+
+def test_pause_in_a_music_show_pauses_the_song_and_the_next_cue_keeps_its_place(tmp_path):
+    """Real time, the null output: `pause` from the live controls stands the music's clock
+    still (the song pauses), the log's clock samples say so, and the cue after the resume
+    lands on its place in the music."""
+    from runlog import started_on_cue
+    from test_music import write_song
+
+    write_song(tmp_path / "song.wav", 1.5)
+    body = ("version: 1\nmusic: {file: song.wav}\nsteps:\n  - play: 1\n    at: 0.1\n    label: first\n"
+            "  - play: 2\n    at: 0.5\n    label: after\n")
+    run = LiveRun(tmp_path, body, cues=True, audio_device="null",
+                  attach=lambda live: [OnStep(live, {(0, "start"): ["pause"]})])
+    assert wait_for(lambda: run.live.paused, 10, 0.001)
+    assert run.live.show is not None and run.live.show.state == PAUSED and run.live.state == "paused"
+    stood = run.live.status()["show_s"]
+    time.sleep(0.3)
+    assert run.live.status()["show_s"] == stood  # the song's clock stands still
+    assert run.go("resume").ok
+    run.finish()
+    assert run.error is None and run.result.outcome == "done"
+    log = run.log()
+    samples = log.topic("/choreo/clock")
+    assert {m["source"] for m in samples} == {"music"} and "paused" in [m.get("state") for m in samples]
+    steps = log.topic("/choreo/step")
+    after = next(m for m in steps if m["event"] == "end" and m["label"] == "after")
+    assert started_on_cue(steps, after), steps
+    assert command_time(log, "resume") < after["_log_time"]

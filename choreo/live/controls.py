@@ -27,7 +27,7 @@ import time
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, NamedTuple
 
-from choreo.clock import HELD, PAUSED, RUNNING, MachineShowClock, PausableShowClock, ShowClock
+from choreo.clock import HELD, PAUSED, RUNNING, PausableShowClock, ShowClock
 from choreo.events import (PANIC, STOPPED, Answer, Command, CommandEvent, CommandListener, GoCue, Listeners,
                            StepEvent, StopRequest, Subscription, WaitingListener)
 from choreo.live.limits import LIMITS, Held, Limits, ReportGate
@@ -164,12 +164,13 @@ class Live:
     """A running show's controls; see the module's docstring."""
 
     def __init__(self, stop: StopRequest, *, cues: CueList = NO_CUES, status: ShowStatus | None = None,
-                 wait_start: bool = False, lockout_s: float = LOCKOUT_S,
+                 clock: str = "machine", wait_start: bool = False, lockout_s: float = LOCKOUT_S,
                  now: Callable[[], float] = time.monotonic, wall_ns: Callable[[], int] = time.time_ns,
                  limits: Limits = LIMITS) -> None:
         self.stop = stop
         self.cues = cues
         self.status_of_robots = status  # each robot's row for `status()` (None: none given)
+        self.clock = clock  # what keeps the show clock: machine | music (`status()`, before it starts too)
         self.lockout_s = lockout_s
         self.listeners: Listeners[CommandListener] = Listeners()  # attached through `subscribe`
         self.show: ShowClock | None = None  # the pass's show clock (`use_clock`), once the show starts
@@ -437,8 +438,7 @@ class Live:
         rows = self.status_of_robots.robots() if self.status_of_robots is not None else ()
         return {"state": self.state,
                 "show_s": round(show.show_at(self._now()), 3) if show is not None else None,
-                "clock": "machine" if show is None or isinstance(show, (HoldingShowClock, MachineShowClock))
-                else "music",
+                "clock": self.clock,
                 "playhead": cue_json(playhead) if playhead is not None else None,
                 "waiting": waiting, "paused": self._paused,
                 "robots": {row.robot: row.to_json() for row in rows}}
@@ -521,9 +521,10 @@ class Live:
             if cue is None or waiting is None:
                 return Answer("error", self._why_not(cue))
             self._last_go = now
-            answer = self._release(waiting, cue)
+            self._release(waiting, cue)
+        # the answer, and the sample of the clock going on, once the runners are free to go
         self._clock_changed()
-        return answer
+        return self._answer(f"GO: {cue.name}", cue)
 
     def _why_not(self, cue: Cue | None) -> str:
         """Why a GO fires nothing: the playhead's cue is not reached yet, or timed (the lock is held)."""
@@ -550,9 +551,9 @@ class Live:
                 at = ", ".join(self._cue_of(w).name for w in self._in_order()) or "no cue"
                 return Answer("error", f"{found.name} is not waiting for GO (waiting: {at})", self._data(found))
             self._last_go = self._now()
-            answer = self._release(waiting, found)
+            self._release(waiting, found)
         self._clock_changed()
-        return answer
+        return self._answer(f"GO: {found.name}", found)
 
     def _find(self, ref: str | None) -> Cue | Answer:
         """The cue `ref` names, or the answer refusing it (the lock is held). A show run without
@@ -570,21 +571,25 @@ class Live:
                 return Answer("error", f"cue {_ref(ref)} is not waiting for GO (waiting: {at})")
             return Answer("error", fit(str(exc), 200))
 
-    def _release(self, waiting: GoCue, cue: Cue, verb: str = "GO") -> Answer:
-        """Let the robots waiting at `waiting` go on; the machine's clock goes on from where it
-        held (the lock is held). A GO is the operator's choice to go on: another cue still
-        waiting keeps its robots waiting but no longer holds the clock."""
+    def _answer(self, message: str, cue: Cue) -> Answer:
+        with self._changed:
+            return Answer("ok", message, self._data(cue))
+
+    def _release(self, waiting: GoCue, cue: Cue, go: bool = True) -> None:
+        """Let the robots waiting at `waiting` go on (`go`: given its GO, else skipped); the
+        machine's clock goes on from where it held (the lock is held). A GO is the operator's
+        choice to go on: another cue still waiting keeps its robots waiting but no longer holds
+        the clock."""
         waiting.release()
         del self._waiting[waiting.key]
         self._released.add(waiting.key)
         if isinstance(self.show, HoldingShowClock):
             self.show.release()
         self._changed.notify_all()
-        if verb == "GO":
+        if go:
             self._gone.add(cue.number)
         if self._moved == cue:
             self._moved = None
-        return Answer("ok", f"{verb}: {cue.name}", self._data(cue))
 
     # -- skip and the playhead ---------------------------------------------------------------
 
@@ -610,12 +615,11 @@ class Live:
             self._skips_changed()
             waiting = self._waiting_for(found)
             if waiting is not None:
-                answer = self._release(waiting, found, "skipped")
-            else:
-                answer = Answer("ok", f"skipped: {found.name} will not run", self._data(found))
+                self._release(waiting, found, go=False)
             if was_playhead and self._moved is not None:
                 self._moved = self._after(found)
-                answer = Answer(answer.status, answer.message, self._data(found))
+            answer = Answer("ok", f"skipped: {found.name}" + ("" if waiting is not None else " will not run"),
+                            self._data(found))
         if waiting is not None:
             self._clock_changed()
         return answer
