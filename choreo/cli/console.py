@@ -399,16 +399,19 @@ class Console:
         return {cue: self.live.cue_state(cue) for cue in self._cues}
 
     def _window(self, head: Cue | None, states: dict[Cue, str]) -> tuple[tuple[Cue, ...], int | None]:
-        """CUE_WINDOW cues around the playhead (two before it), and its place among them; with
-        no playhead, around the first cue not over yet (the last ones once all are)."""
+        """CUE_WINDOW cues from the one before the first not over yet (the last ones once all
+        are), moved on if the playhead would fall past it; and the playhead's place in them."""
         cues = self._cues.cues
-        if head is not None and head in cues:
-            at = self._cues.position(head)
-        else:
-            at = next((i for i, cue in enumerate(cues) if states.get(cue) in ("ahead", "waiting", "running")),
+        active = next((i for i, cue in enumerate(cues) if states.get(cue) in ("ahead", "waiting", "running")),
                       len(cues))
-        first = max(0, min(at - 2, len(cues) - CUE_WINDOW))
-        return cues[first:first + CUE_WINDOW], (at - first if head is not None and head in cues else None)
+        first = max(0, active - 1)
+        at = self._cues.position(head) if head is not None and head in cues else None
+        if at is not None:
+            first = min(first, at - 1) if at >= 1 else 0
+            if at - first >= CUE_WINDOW - 1:
+                first = at - 2
+        first = max(0, min(first, len(cues) - CUE_WINDOW))
+        return cues[first:first + CUE_WINDOW], None if at is None else at - first
 
     def _groups(self, waiting: list[GoCue]) -> list[tuple[tuple[str, ...], str]]:
         """The robots waiting at each GO cue now, in cast order, and the cue's name."""

@@ -116,11 +116,11 @@ def _shares(cues: int, notes: int, room: int | None) -> tuple[int, int]:
 
 
 def _cue_table(screen: Screen, rows: int, narrow: bool) -> Table:
-    """The window of the cue list that fits, the playhead's line kept in it (with one cue
-    before it, when there is room, and as many after)."""
+    """The first cues of the window that fit, moved on if the playhead's line would fall
+    past them (one cue after it shown then, when there is one)."""
     first = 0
-    if screen.playhead is not None:
-        first = max(0, min(screen.playhead - 1, len(screen.cues) - rows))
+    if screen.playhead is not None and screen.playhead >= rows - 1:  # kept in, with one after it
+        first = max(0, min(screen.playhead - rows + 2, len(screen.cues) - rows))
     table = Table(expand=True, box=None, show_header=False, show_edge=False, pad_edge=False, padding=(0, 1, 0, 0))
     table.add_column("", no_wrap=True, width=1)
     table.add_column("cue", no_wrap=True, overflow="ellipsis", max_width=6)
