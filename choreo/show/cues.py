@@ -116,18 +116,22 @@ class _Index:
 
     @classmethod
     def of(cls, cues: tuple[Cue, ...]) -> _Index:
-        index = cls({}, {}, {}, {}, {})
+        positions: dict[Cue, int] = {}
+        steps: dict[tuple[str, int], Cue] = {}
+        numbers: dict[str, Cue] = {}
+        values: dict[Decimal, Cue] = {}
+        labels: dict[str, tuple[Cue, ...]] = {}
         for position, cue in enumerate(cues):
-            index.positions.setdefault(cue, position)
+            positions.setdefault(cue, position)
             for step in cue.steps:
-                index.steps.setdefault(step, cue)
-            index.numbers.setdefault(cue.number, cue)
+                steps.setdefault(step, cue)
+            numbers.setdefault(cue.number, cue)
             value = _value(cue.number)
             if value is not None:
-                index.values.setdefault(value, cue)
+                values.setdefault(value, cue)
             if cue.label is not None:
-                index.labels[cue.label] = (*index.labels.get(cue.label, ()), cue)
-        return index
+                labels[cue.label] = (*labels.get(cue.label, ()), cue)
+        return cls(positions, steps, numbers, values, labels)
 
 
 def _shown(ref: str) -> str:
