@@ -155,8 +155,10 @@ def cue_numbers_text(numbers: Sequence[str], most: int = 8) -> str:
 
 def _follows(before: str, number: str) -> bool:
     """Whether `number` is the whole number after `before` (`4` after `3`; not `04`, not `3.5`)."""
-    whole = re.compile(r"[1-9][0-9]{0,15}")
-    return bool(whole.fullmatch(before) and whole.fullmatch(number)) and int(number) == int(before) + 1
+    return bool(_WHOLE.fullmatch(before) and _WHOLE.fullmatch(number)) and int(number) == int(before) + 1
+
+
+_WHOLE = re.compile(r"[1-9][0-9]{0,15}")  # a whole cue number as numbering writes one
 
 
 def summary_line(show: Show, plans: dict[str, Plan]) -> str:
