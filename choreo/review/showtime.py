@@ -37,7 +37,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from choreo.clock import HELD, PAUSED, RUNNING
-from choreo.log.format import CLOCK_TOPIC, STEP_TOPIC, ClockRecord, Result, StepRecord, parse
+from choreo.log.format import CLOCK_TOPIC, STEP_TOPIC, ClockRecord, CommandRecord, Result, StepRecord, parse
 from choreo.log.reader import LogReader
 
 BREAK_S = 0.001  # a clock sample this far from the mapping's prediction starts a new piece
@@ -187,7 +187,7 @@ class ShowTimes:
         last = self.stands[-1]
         self.stands[-1] = Stand(last.kind, last.show_s, last.start_ns, log_time)
 
-    def _stand_at(self, log_time: int) -> int:
+    def stand_at(self, log_time: int) -> int:
         """The index of the last stand begun at or before `log_time` (-1: none)."""
         low, high = 0, len(self.stands)
         while low < high:
@@ -202,7 +202,7 @@ class ShowTimes:
         """Show time at `log_time`: where the clock stood, during a stand."""
         if log_time is None:
             return None
-        at = self._stand_at(log_time)
+        at = self.stand_at(log_time)
         if at >= 0:
             stand = self.stands[at]
             if stand.end_ns is None or log_time < stand.end_ns:
@@ -222,7 +222,7 @@ class ShowTimes:
         """How long the clock had stood still (held or paused) up to `log_time`."""
         if log_time is None:
             return 0.0
-        at = self._stand_at(log_time)
+        at = self.stand_at(log_time)
         if at < 0:
             return 0.0
         stand = self.stands[at]
@@ -288,3 +288,56 @@ def result_show_s(result: Mapping[str, str] | None) -> float | None:
 def _ms(seconds: float | None) -> float | None:
     """Rounded to the millisecond every review agrees to."""
     return None if seconds is None else round(seconds, 3)
+
+
+RELEASE_SLACK_NS = 100_000_000  # a GO's step starts, and its command is logged, this soon after the hold ends
+
+
+@dataclass
+class StandNote:
+    """What a review says of one stand: the cue it held at, and the command that ended it."""
+
+    stand: Stand
+    cue: str | None = None  # `cue 1 'applause'`: the GO cue a hold waited at
+    by: str | None = None  # `go from key`, `resume from osc udp 127.0.0.1:53001`, `panic from key`
+
+    def text(self, end_ns: int | None) -> str:
+        """`held 2.300 s at cue 1 'applause', go from key`."""
+        at = f" at {self.cue}" if self.cue else ""
+        by = f", {self.by}" if self.by else "" if self.stand.end_ns is not None else ", to the end of the log"
+        return f"{self.stand.kind} {self.stand.seconds(end_ns):.3f} s{at}{by}"
+
+
+class StandNotes:
+    """Each stand's cue and release, from the step starts and commands a review's pass sees
+    (`see`, in log order): the commands given while it stood (the last one carried out ended
+    it), the GO cue whose step started as a hold ended. `limit`: how many stands are noted."""
+
+    def __init__(self, times: ShowTimes, limit: int | None = None) -> None:
+        self.times = times
+        self.notes = [StandNote(stand) for stand in times.stands[:limit]]
+
+    def see(self, log_time: int, command: str | None = None, source: str = "", step_ref: str | None = None) -> None:
+        """A command carried out (`command`, from `source`) or a GO cue's step start (`step_ref`)."""
+        at = self.times.stand_at(log_time)
+        if at < 0 or at >= len(self.notes):
+            return
+        note = self.notes[at]
+        stand = note.stand
+        end = stand.end_ns
+        if command is not None and (end is None or log_time <= end + RELEASE_SLACK_NS):
+            note.by = f"{command} from {source}"
+        elif step_ref is not None and stand.kind == HELD and note.cue is None and end is not None \
+                and end <= log_time <= end + RELEASE_SLACK_NS:
+            note.cue = step_ref
+
+
+def see_for_stands(notes: StandNotes, record: object, log_time: int) -> None:
+    """Hand `notes` what it reads from a record of a review's pass: a command carried out (one
+    by one: not a sum of those not logged), a GO cue's step start."""
+    if isinstance(record, CommandRecord):
+        if record.status == "ok" and record.count is None:
+            notes.see(log_time, command=str(record.command), source=str(record.source))
+    elif isinstance(record, StepRecord) and record.event == "start" and record.go:
+        number = f"cue {record.cue_number}" if record.cue_number else record.ref
+        notes.see(log_time, step_ref=number + (f" '{record.label}'" if record.cue_number and record.label else ""))

@@ -18,7 +18,7 @@ from choreo.log.format import (CHOREO_TOPICS, ERROR, WARNING, ClockRecord, Comma
                                Info, MotionPlay, MotionTracker, Record, Result, RxRecord, StepRecord, TxRecord,
                                is_late, parse, robot_key, slipped)
 from choreo.log.reader import Cut, LogReader
-from choreo.review.showtime import Durations, ShowTimes, Stand, durations
+from choreo.review.showtime import Durations, ShowTimes, StandNote, StandNotes, durations, see_for_stands
 from choreo.wire.protocol import FrameKind, ReplyKind
 # counted (and shown) even at 0: the frames every run sends, and every reply (the wire's names)
 FRAME_KINDS = tuple(kind.value for kind in (FrameKind.STOP, FrameKind.PLAY, FrameKind.RESTORE, FrameKind.STATUS))
@@ -169,7 +169,8 @@ class Summary:
     messages: int = 0
     duration_s: float | None = None  # show clock at the last message (or the result's, if closed)
     lengths: Durations | None = None  # the duration, holds, pauses, wall time: `showtime.durations`
-    stands: list[Stand] = field(default_factory=list)  # the holds and pauses, the first LISTED_STANDS
+    stands: list[StandNote] = field(default_factory=list)  # the holds and pauses, the first LISTED_STANDS
+    end_ns: int | None = None  # the log time of its last message (where a stand that never ended ends)
     clock_disordered: int = 0  # clock samples earlier than the one before, passed over
     steps_run: int = 0
     steps_done: int = 0
@@ -232,8 +233,9 @@ def summary_record(summary: Summary) -> dict:
         "result": summary.result,
         "duration_s": summary.duration_s,
         "lengths": summary.lengths.to_json() if summary.lengths else None,
-        "stands": [{"kind": s.kind, "show_s": round(s.show_s, 3), "seconds": round(s.seconds(None), 3),
-                    "ended": s.end_ns is not None} for s in summary.stands],
+        "stands": [{"kind": n.stand.kind, "show_s": round(n.stand.show_s, 3),
+                    "seconds": round(n.stand.seconds(summary.end_ns), 3), "ended": n.stand.end_ns is not None,
+                    "cue": n.cue, "by": n.by} for n in summary.stands],
         "steps": {"run": summary.steps_run, "done": summary.steps_done, "late": summary.steps_late,
                   "late_by_retries": summary.steps_late_by_retries, "failed": summary.steps_failed,
                   "aborted": summary.steps_aborted, "unfinished": summary.steps_unfinished},
@@ -297,6 +299,7 @@ def summarize(path: str | Path) -> Summary:
 def summarize_reader(reader: LogReader) -> Summary:
     summary = Summary(reader.path, dict(reader.run_info), None, False, None)
     tally = _Tally(ShowTimes.of(reader))
+    notes = StandNotes(tally.times, LISTED_STANDS)
     parts: dict[str, _Part] = {}  # a show for several robots: each robot's own tally and tracker
     solo = _Part(summary, tally, MotionTracker(LogLayouts.of(reader.run_info).layout(None)))
     topic, count, last_time = None, 0, None
@@ -307,6 +310,7 @@ def summarize_reader(reader: LogReader) -> Summary:
             if topic not in CHOREO_TOPICS:
                 continue
             record = parse(topic, data)
+            see_for_stands(notes, record, log_time)
             if isinstance(record, (TxRecord, RxRecord, StepRecord)):
                 robot = record.robot
                 part = solo if robot is None else parts.get(robot) or parts.setdefault(
@@ -328,6 +332,7 @@ def summarize_reader(reader: LogReader) -> Summary:
         summary.robots = {name: parts[name].summary for name in order + [n for n in parts if n not in order]}
         _gather(summary, parts, reader.info.unison)
     _lengths(summary, tally.times, reader, last_time)
+    summary.stands = notes.notes
     return summary
 
 
@@ -336,8 +341,7 @@ def _lengths(summary: Summary, times: ShowTimes, reader: LogReader, last_time: i
     the time it ran."""
     summary.lengths = durations(times, reader.result, last_time)
     summary.duration_s = summary.lengths.show_s
-    summary.stands = [s if s.end_ns is not None else Stand(s.kind, s.show_s, s.start_ns, last_time)
-                      for s in times.stands[:LISTED_STANDS]]
+    summary.end_ns = last_time
     summary.clock_disordered = times.disordered
     if summary.clock is not None:
         clock = summary.clock

@@ -110,7 +110,7 @@ def _render_stands(summary: Summary) -> Iterable[str]:
         return
     for number, stand in enumerate(summary.stands):
         head = "holds    " if number == 0 else "         "
-        yield f"{head} {stand.show_s:9.3f} s  {stand.kind} {stand.seconds(None):.3f} s"
+        yield f"{head} {stand.stand.show_s:9.3f} s  {stand.text(summary.end_ns)}"
     listed = len(summary.stands)
     if lengths.holds + lengths.pauses > listed:
         yield f"  ... and {lengths.holds + lengths.pauses - listed} more"

@@ -24,7 +24,7 @@ from typing import Any, BinaryIO
 
 from choreo.errors import ChoreoError
 from choreo.review.attached import AttachedShow, attached_show
-from choreo.review.showtime import Durations, ShowTimes, Stand, durations
+from choreo.review.showtime import Durations, ShowTimes, StandNote, StandNotes, durations, see_for_stands
 from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC,
                                STEP_TOPIC, TX_TOPIC, ClockRecord, CommandRecord, LogLayouts, LogRecord, MotionPlay,
                                MotionTracker, Record, Result, RxRecord, StepRecord, TxRecord, is_late, parse, slipped)
@@ -228,12 +228,18 @@ class _Pass:
     trackers: dict[str | None, MotionTracker] = field(default_factory=dict)  # by robot: motions are each one's own
     steps: dict[tuple[str | None, int], _Step] = field(default_factory=dict)
     last_ns: int | None = None
+    notes: StandNotes | None = None  # each hold's cue and each stand's release, as the pass sees them
+
+    def __post_init__(self) -> None:
+        self.notes = StandNotes(self.clock)
 
     def see(self, record: Record, log_time: int) -> None:
         if isinstance(record, ClockRecord):
             self.clock.see_clock(log_time, record)
             return
         self.last_ns = log_time if self.last_ns is None else max(self.last_ns, log_time)
+        assert self.notes is not None  # made with the pass
+        see_for_stands(self.notes, record, log_time)
         marks = self.timeline.marks
         now, at = self.clock.seconds(log_time) or 0.0, self.clock.elapsed(log_time)
         if isinstance(record, StepRecord):
@@ -261,7 +267,8 @@ class _Pass:
         lengths = timeline.lengths = durations(clock, reader.result, self.last_ns)
         timeline.end_s = lengths.show_s or 0.0
         timeline.end_at = clock.elapsed(self.last_ns) or 0.0 if self.last_ns is not None else 0.0
-        timeline.marks.extend(_stand_mark(stand, clock, self.last_ns) for stand in clock.stands)
+        notes = self.notes.notes if self.notes is not None else [StandNote(stand) for stand in clock.stands]
+        timeline.marks.extend(_stand_mark(note, clock, self.last_ns) for note in notes)
         order: dict[str | None, int] = {name: i for i, name in enumerate(reader.robots)}
         for robot, tracker in self.trackers.items():
             for play in tracker.finish(self.last_ns):
@@ -287,11 +294,9 @@ def command_text(record: CommandRecord) -> str:
     return f"{what} from {record.source}{verdict}: {record.message}"
 
 
-def _stand_mark(stand: Stand, clock: ShowTimes, last_ns: int | None) -> Mark:
-    length = stand.seconds(last_ns)
-    went_on = "" if stand.end_ns is not None else " (to the end of the log)"
-    return Mark(stand.show_s, stand.kind, f"{stand.kind} {length:.3f} s at show time {stand.show_s:.3f} s{went_on}",
-                clock.elapsed(stand.start_ns), length)
+def _stand_mark(note: StandNote, clock: ShowTimes, last_ns: int | None) -> Mark:
+    stand = note.stand
+    return Mark(stand.show_s, stand.kind, note.text(last_ns), clock.elapsed(stand.start_ns), stand.seconds(last_ns))
 
 
 def _see_step(timeline: Timeline, steps: dict[tuple[str | None, int], _Step], step: StepRecord,
