@@ -434,7 +434,10 @@ def _log(request: RunRequest, estimate: LogEstimate | None, machine: Machine) ->
             writable = Finding(PROBLEM, "log", f"{request.log_path} exists already: choreo never overwrites "
                                "a log", "give another --log path, or leave --log out")
         return [writable]
-    return [writable, _room(folder, estimate, machine)]
+    room = _room(folder, estimate, machine)
+    if request.loop is not None and estimate is not None:  # a rehearsal loops until stopped
+        room = replace(room, text=f"{room.text}; --loop: the whole show's estimate, each pass logs about as much")
+    return [writable, room]
 
 
 def _writable(folder: Path, named: bool) -> Finding:
