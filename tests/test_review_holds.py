@@ -24,6 +24,7 @@ from choreo.review.summarytext import render
 from choreo.review.timeline import build, render_text
 from choreo.run.session import Session
 from choreo.run.settings import RunRequest
+from choreo.show.cues import cue_list
 from runlog import vmain, wait_for, write_show
 
 SHOW = """\
@@ -42,6 +43,9 @@ steps:
     at: 2.0
     label: encore
   - wait: done
+  - play: bow
+    at: 3.0
+    label: extra
   - play: bow
     at: go
     label: finale
@@ -73,7 +77,7 @@ def held(tmp_path_factory):
     log = tmp / "run.mcap"
     source = VirtualTime()
     session = Session.prepare(RunRequest(str(write_show(tmp, SHOW)), log_path=str(log)), source)
-    live = Live(StopRequest(), now=source.now, wall_ns=source.wall_ns)
+    live = Live(StopRequest(), cues=cue_list(session.settings.plans), now=source.now, wall_ns=source.wall_ns)
     done = {}
 
     def run() -> None:
@@ -84,6 +88,7 @@ def held(tmp_path_factory):
     thread.start()
     assert wait_for(lambda: bool(live.paused_robots), 20, 0.002)  # the runner stands before its next step
     source.advance(PAUSE_S)
+    assert live.command(Command("skip", "key", label="extra")).ok  # a timed cue ahead: passed, never run
     assert live.command(Command("resume", "osc tcp 127.0.0.1:53000")).ok
     assert wait_for(lambda: bool(live.waiting), 20, 0.002)
     source.advance(FIRST_HOLD_S)  # nothing else runs while the show waits: the hold is exactly this long
@@ -111,7 +116,7 @@ def test_summary_timeline_export_and_replay_agree_to_the_millisecond(held, tmp_p
     assert [(c.label, round(c.show_s, 3)) for c in timeline.cues] == [
         (r["label"], r["planned_s"] if r["released"] == "time" else r["actual_s"]) for r in rows][:2]
     assert [(r["number"], r["label"], r["released"]) for r in rows] == [
-        ("1", "applause", "go key"), ("2", "encore", "time"), ("3", "finale", "not reached")]
+        ("1", "applause", "go key"), ("2", "encore", "time"), ("3", "extra", "skipped"), ("4", "finale", "not reached")]
     assert vmain(["replay", str(held), "--log", str(tmp_path / "replay.mcap"), "--json"]) == 0
     replayed = json.loads(capsys.readouterr().out)
     assert replayed["recorded"] == lengths.to_json() and replayed["different"] == 0
@@ -138,18 +143,19 @@ def test_the_timeline_draws_holds_commands_and_a_motion_through_a_hold_at_its_le
     assert through.start_at is not None and through.drawn_end_at is not None
     assert through.drawn_end_at - through.start_at == pytest.approx(1.0, abs=0.01)
     assert through.start_s == pytest.approx(0.004, abs=0.002)  # its show time: where the clock stood
-    assert [m.kind for m in timeline.commands] == ["command"] * 4
-    assert [m.text.split(" ")[0] for m in timeline.commands] == ["pause", "resume", "go", "panic"]
-    go_text, panic_text = (m.text.split(":")[0] for m in timeline.commands[2:])
+    assert [m.kind for m in timeline.commands] == ["command"] * 3 + ["command", "skip", "command"]
+    assert [m.text.split(" ")[0] for m in timeline.commands] == ["pause", "skip", "resume", "go", "step", "panic"]
+    assert timeline.commands[4].text == "step 6 'extra' skipped (cue 3)"
+    go_text, panic_text = (m.text.split(":")[0] for m in timeline.commands[3::2])
     assert go_text.startswith("go ") and go_text.endswith(" from key")
     assert panic_text == "panic from osc udp 127.0.0.1"
-    go = timeline.commands[2]
+    go = timeline.commands[3]
     assert go.drawn_at == pytest.approx(PAUSE_S + FIRST_HOLD_S + 0.1, abs=0.01)
     assert go.show_s == pytest.approx(0.1, abs=0.01)
     assert [m.kind for m in timeline.stands] == ["paused", "held", "held"]
     lines = list(render_text(timeline, 100))
     row = next(line for line in lines if "holds, commands" in line)
-    assert "~" in row and "^" in row
+    assert "~" in row and "^" in row and "s" in row
     assert any(line.strip().startswith("0.100 s  held 2.300 s at cue 1 'applause', go from key") for line in lines)
 
 
@@ -162,7 +168,7 @@ def test_the_png_timeline_draws_a_held_show(held, tmp_path):
 def test_export_cues_to_csv_from_the_command_line(held, capsys):
     assert vmain(["log", "export", "--cues", "--csv", "-", str(held)]) == 0
     rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
-    assert [r["released"] for r in rows] == ["go key", "time", "not reached"]
+    assert [r["released"] for r in rows] == ["go key", "time", "skipped", "not reached"]
     assert rows[1]["late_ms"] == "0.0" and rows[0]["bar_beat"] == ""
 
 
