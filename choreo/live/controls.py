@@ -149,6 +149,11 @@ class HoldingShowClock:
         return show_s if at is None else min(show_s, at)
 
 
+def _order(cue: GoCue) -> tuple[float, float, int]:
+    """GO cues waiting, the earliest first: by when they were reached, then as planned."""
+    return cue.reached_s, cue.step.planned_s, cue.step.index
+
+
 def _ref(text: str) -> str:
     """A cue reference from outside, as an answer repeats it: visible and bounded."""
     return repr(fit(text, REF_CHARS))
@@ -174,6 +179,7 @@ class Live:
         self.lockout_s = lockout_s
         self.listeners: Listeners[CommandListener] = Listeners()  # attached through `subscribe`
         self.show: ShowClock | None = None  # the pass's show clock (`use_clock`), once the show starts
+        self._pausable: PausableShowClock | None = None  # the same, if it can pause
         self._now = now
         self._wall_ns = wall_ns
         self._changed = threading.Condition()
@@ -186,7 +192,8 @@ class Live:
         self._last_go: float | None = None
         self._cue_at: dict[tuple[str, int], Cue] = {key: cue for cue in cues for key in cue.steps}
         self._marks: dict[tuple[str, int], str] = {}  # a cue's step: its last event (start, end, skip)
-        self._gone: set[str] = set()  # cues given their GO this pass, by number (running until their steps say)
+        self._gone: set[object] = set()  # GO cues given their GO this pass, by key (running until their steps say)
+        self._made: dict[object, Cue] = {}  # cues made up for GO cues a show without its cue list waits at
         self._skips: dict[str, Cue] = {}  # cues to skip, by number
         self._skip_steps: frozenset[tuple[str, int]] = frozenset()  # their steps; swapped whole, read without the lock
         self._moved: Cue | None = None  # the playhead where the operator put it (None: auto)
@@ -195,6 +202,7 @@ class Live:
         self._reports = ReportGate(limits, now)  # what of the commands the listeners hear
         self._summing = threading.RLock()  # a summary is told whole before `close` returns
         self._over = False  # the run is over (`close`): no command is taken any more
+        self._handlers = self._handlers_by_name()
 
     def subscribe(self, listener: CommandListener) -> Subscription:
         """Tell `listener` every command and its answer (and, if it is a `WaitingListener`,
@@ -211,8 +219,9 @@ class Live:
         (one given before it started too), commands are timed on it."""
         with self._pausing:
             self.show = show
-            if self._paused and isinstance(show, PausableShowClock):
-                show.pause()
+            self._pausable = show if isinstance(show, PausableShowClock) else None  # asked once: it is slow
+            if self._paused and self._pausable is not None:
+                self._pausable.pause()
 
     def use_section(self, starts: Mapping[str, int], ends: Mapping[str, int]) -> None:
         """The steps this run plays, robot by robot (--from, --loop): a cue outside them will
@@ -355,7 +364,7 @@ class Live:
 
     def _in_order(self) -> list[GoCue]:
         """The lock is held. A cue given its GO leaves `_waiting` at once (`_release`)."""
-        return sorted(self._waiting.values(), key=lambda c: (c.reached_s, c.step.planned_s, c.step.index))
+        return sorted(self._waiting.values(), key=_order)
 
     def cue_state(self, cue: Cue) -> str:
         """ahead | waiting | running | done | skipped (a cue outside the run's section: done)."""
@@ -380,7 +389,12 @@ class Live:
             return SKIPPED
         if marks and all(mark == "end" for mark in marks):
             return DONE
-        return ACTIVE if any(marks) or cue.number in self._gone else AHEAD
+        return ACTIVE if any(marks) or self._gone_on(cue) else AHEAD
+
+    def _gone_on(self, cue: Cue) -> bool:
+        """Was `cue` given its GO this pass (its steps may not have started yet)? The lock is held."""
+        gone = self._gone
+        return bool(gone) and any(key in gone or key[1] in gone for key in cue.steps)
 
     def _open(self, cue: Cue) -> bool:
         """Not run yet: the playhead may stand on it (a skipped cue no robot has passed too:
@@ -404,9 +418,12 @@ class Live:
             cue = self._cue_at.get((robot, waiting.step.index))
             if cue is not None:
                 return cue
-        step, robots = waiting.step, tuple(sorted(waiting.robots))
-        return Cue(step.cue or f"step {step.index}", step.label, robots, step.planned_s, True,
-                   steps=tuple((robot, step.index) for robot in robots))
+        made = self._made.get(waiting.key)
+        if made is None or len(made.robots) != len(waiting.robots):
+            step, robots = waiting.step, tuple(sorted(waiting.robots))
+            made = self._made[waiting.key] = Cue(step.cue or f"step {step.index}", step.label, robots,
+                                                 step.planned_s, True, steps=tuple((r, step.index) for r in robots))
+        return made
 
     def _playhead(self) -> Cue | None:
         """The lock is held."""
@@ -449,7 +466,7 @@ class Live:
         """Carry out one command from any source, and tell the listeners. Once the show is
         stopping (or over) every command is refused: a GO then releases nothing, whatever still
         waits, and a stop or panic cannot change the stop under way."""
-        handler = self._handlers().get(command.name)
+        handler = self._handlers.get(command.name)
         refusal = self._refusal()
         if refusal is not None:
             answer = refusal
@@ -458,7 +475,7 @@ class Live:
         self.report(command, answer)
         return answer
 
-    def _handlers(self) -> dict[str, Callable[[Command], Answer]]:
+    def _handlers_by_name(self) -> dict[str, Callable[[Command], Answer]]:
         return {"go": self._go, "cue_go": self._cue_go, "skip": self._skip, "playhead": self._put_playhead,
                 "playhead_next": self._playhead_next, "playhead_previous": self._playhead_previous,
                 "pause": self._pause, "resume": self._resume,
@@ -516,15 +533,23 @@ class Live:
                               f"(a double press? GOs {self.lockout_s:g} s apart at least)")
             if self._paused:
                 return Answer("error", f"GO refused: {RESUME_FIRST}")
-            cue = self._playhead()
-            waiting = self._waiting_for(cue) if cue is not None else None
-            if cue is None or waiting is None:
-                return Answer("error", self._why_not(cue))
+            waiting = self._under_playhead()
+            if waiting is None:
+                return Answer("error", self._why_not(self._playhead()))
             self._last_go = now
-            self._release(waiting, cue)
+            self._release(waiting)
         # the answer, and the sample of the clock going on, once the runners are free to go
         self._clock_changed()
-        return self._answer(f"GO: {cue.name}", cue)
+        return self._answer("GO", waiting)
+
+    def _under_playhead(self) -> GoCue | None:
+        """The GO cue waiting under the playhead, if one is: the runner's path to a GO's first
+        frame, so the auto playhead's (the earliest waiting) is found without the cue list."""
+        moved = self._moved
+        if moved is not None and self._open(moved):
+            return self._waiting_for(moved)
+        self._moved = None
+        return min(self._waiting.values(), key=_order, default=None)
 
     def _why_not(self, cue: Cue | None) -> str:
         """Why a GO fires nothing: the playhead's cue is not reached yet, or timed (the lock is held)."""
@@ -551,9 +576,9 @@ class Live:
                 at = ", ".join(self._cue_of(w).name for w in self._in_order()) or "no cue"
                 return Answer("error", f"{found.name} is not waiting for GO (waiting: {at})", self._data(found))
             self._last_go = self._now()
-            self._release(waiting, found)
+            self._release(waiting)
         self._clock_changed()
-        return self._answer(f"GO: {found.name}", found)
+        return self._answer("GO", waiting)
 
     def _find(self, ref: str | None) -> Cue | Answer:
         """The cue `ref` names, or the answer refusing it (the lock is held). A show run without
@@ -571,11 +596,12 @@ class Live:
                 return Answer("error", f"cue {_ref(ref)} is not waiting for GO (waiting: {at})")
             return Answer("error", fit(str(exc), 200))
 
-    def _answer(self, message: str, cue: Cue) -> Answer:
+    def _answer(self, verb: str, waiting: GoCue) -> Answer:
         with self._changed:
-            return Answer("ok", message, self._data(cue))
+            cue = self._cue_of(waiting)
+            return Answer("ok", f"{verb}: {cue.name}", self._data(cue))
 
-    def _release(self, waiting: GoCue, cue: Cue, go: bool = True) -> None:
+    def _release(self, waiting: GoCue, go: bool = True) -> None:
         """Let the robots waiting at `waiting` go on (`go`: given its GO, else skipped); the
         machine's clock goes on from where it held (the lock is held). A GO is the operator's
         choice to go on: another cue still waiting keeps its robots waiting but no longer holds
@@ -587,9 +613,7 @@ class Live:
             self.show.release()
         self._changed.notify_all()
         if go:
-            self._gone.add(cue.number)
-        if self._moved == cue:
-            self._moved = None
+            self._gone.add(waiting.key)
 
     # -- skip and the playhead ---------------------------------------------------------------
 
@@ -615,7 +639,7 @@ class Live:
             self._skips_changed()
             waiting = self._waiting_for(found)
             if waiting is not None:
-                self._release(waiting, found, go=False)
+                self._release(waiting, go=False)
             if was_playhead and self._moved is not None:
                 self._moved = self._after(found)
             answer = Answer("ok", f"skipped: {found.name}" + ("" if waiting is not None else " will not run"),
@@ -670,9 +694,8 @@ class Live:
                 if self._paused:
                     return Answer("ok", "paused already", {"show_s": self._show_s()})
                 self._paused = True
-            show = self.show
-            if isinstance(show, PausableShowClock):
-                show.pause()
+            if self._pausable is not None:
+                self._pausable.pause()
         self._clock_changed()
         stood = self._show_s()
         at = f" at {stood:.3f} s" if stood is not None else ""
@@ -683,9 +706,8 @@ class Live:
         with self._pausing:
             if not self._paused:
                 return Answer("error", "not paused: nothing to resume")
-            show = self.show
-            if isinstance(show, PausableShowClock):
-                show.resume()
+            if self._pausable is not None:
+                self._pausable.resume()
             with self._changed:
                 self._paused = False
                 self._changed.notify_all()

@@ -270,6 +270,9 @@ class ClockSampler:
         self.every_s = every_s
         self._last: float | None = None
         self._lock = threading.Lock()
+        # asked once: a runtime-checkable protocol's isinstance costs tens of microseconds, and a
+        # forced sample is taken as a GO releases the runners
+        self._pausable = show if isinstance(show, PausableShowClock) else None
 
     def __call__(self) -> None:
         self.sample()
@@ -282,5 +285,5 @@ class ClockSampler:
             if not force and self._last is not None and show_s - self._last < self.every_s:
                 return
             self._last = show_s
-            state = self.show.state if isinstance(self.show, PausableShowClock) else None  # running | held | paused
+            state = self._pausable.state if self._pausable is not None else None  # running | held | paused
         self.recorder.on_clock(ClockRecord(round(show_s, 6), mono_ns, self.source, state), self.clock.wall_ns(mono_ns))
