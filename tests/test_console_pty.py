@@ -1,0 +1,161 @@
+"""The console's cue keys on a real terminal (issue 24): `choreo run` on a sim:// show inside tmux,
+keys in with send-keys, the screen out with capture-pane, and the log read after: Up/Down then GO
+fires the moved cue, `s` skips (a cue waiting and one ahead), `j` and a cue jumps the playhead,
+`p` pauses and resumes, Esc panics while paused. Each waits for screen text with a generous
+deadline (Pane.wait_for) and asserts what happened, never how long it took."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from runlog import read_log
+from test_console import Pane, commands_in, needs_tmux, pane  # noqa: F401 - pane: the fixture
+
+TWO_TRACKS = """\
+version: 1
+name: two tracks
+robots:
+  left: {}
+  right: {}
+tracks:
+  left:
+    - play: 1
+      at: go
+      label: left-go
+    - play: 3
+  right:
+    - play: 2
+      at: go
+      label: right-go
+    - wait: 0.6
+    - play: 4
+      label: right-after
+"""
+
+THREE_GOS = """\
+version: 1
+name: three GO cues
+steps:
+  - play: 1
+    at: go
+    label: one
+  - play: 2
+    at: go
+    label: two
+  - play: 3
+    at: go
+    label: three
+"""
+
+LONG_WAIT = """\
+version: 1
+name: a long wait
+steps:
+  - play: 1
+    label: first
+  - wait: 60
+    label: the-long-wait
+  - play: 2
+"""
+
+
+def played(tmp_path: Path, robot: str | None = None) -> list[int]:
+    """The motions a robot was told to play, in order (the log's tx records)."""
+    topic = f"/rcb4/{robot}/tx" if robot else "/rcb4/tx"
+    return [m["motion"] for m in read_log(tmp_path / "run.mcap").topic(topic) if m["kind"] == "play"]
+
+
+def starts_s(tmp_path: Path) -> dict[str, float]:
+    """Each robot's first step's start on the show clock."""
+    log = read_log(tmp_path / "run.mcap")
+    return {robot: next(m["actual_s"] for m in log.topic(f"/choreo/{robot}/step") if m["event"] == "start")
+            for robot in ("left", "right")}
+
+
+@needs_tmux
+def test_down_then_go_fires_the_moved_cue_not_the_earliest_waiting(tmp_path, pane):  # noqa: F811 - the fixture
+    run: Pane = pane(TWO_TRACKS)
+    run.wait_for("waits for GO: cue 2 ")
+    run.wait_for("waits for GO: cue 1 ")  # both wait (which the playhead takes first: who came first)
+    run.keys("j", "1", "Enter")
+    run.wait_for("GO fires cue 1 'left-go'")
+    run.keys("Down")
+    run.wait_for("GO fires cue 2 'right-go'")
+    run.keys("Up")
+    run.wait_for("GO fires cue 1 'left-go'")
+    run.keys("Down")
+    run.wait_for("GO fires cue 2 'right-go'")
+    run.keys("Space")
+    run.wait_for("right done")  # right went on (0.6 s of show after its GO: past the lockout)
+    screen = run.wait_for("GO fires cue 1 'left-go'")  # the playhead back on the one still waiting
+    assert "waits for GO: cue 1 " in screen
+    run.keys("Enter")
+    assert run.exit_code() == 0
+    assert commands_in(tmp_path) == [("playhead", "key", "ok"), ("playhead_next", "key", "ok"),
+                                     ("playhead_previous", "key", "ok"), ("playhead_next", "key", "ok"),
+                                     ("go", "key", "ok"), ("go", "key", "ok")]
+    starts = starts_s(tmp_path)
+    assert starts["right"] < starts["left"]  # cue 2 ran first, cue 1 at the second GO
+    assert run.terminal_restored()
+
+
+@needs_tmux
+def test_s_skips_the_cue_waiting_and_one_ahead(tmp_path, pane):  # noqa: F811 - the fixture
+    run: Pane = pane(THREE_GOS)
+    run.wait_for("GO fires cue 1 'one'")
+    run.keys("s")  # the cue waiting: released as skipped, the robot goes on to the next
+    run.wait_for("GO fires cue 2 'two'")
+    run.keys("Down")
+    run.wait_for("next GO: cue 3 'three' (not reached yet)")
+    run.keys("s")  # the cue ahead: the robot will pass it
+    run.wait_for("skipped: cue 3 'three'")
+    run.wait_for("GO fires cue 2 'two'")  # the playhead goes on past it: the cue waiting
+    run.keys("Space")
+    assert run.exit_code() == 0
+    assert commands_in(tmp_path) == [("skip", "key", "ok"), ("playhead_next", "key", "ok"), ("skip", "key", "ok"),
+                                     ("go", "key", "ok")]
+    assert played(tmp_path) == [2]  # one and three never ran
+    events = [(m["index"], m["event"]) for m in read_log(tmp_path / "run.mcap").steps]
+    assert (0, "skip") in events and (2, "skip") in events and (0, "start") not in events
+    assert run.terminal_restored()
+
+
+@needs_tmux
+def test_j_and_a_number_or_a_label_then_enter_jumps_the_playhead(tmp_path, pane):  # noqa: F811 - the fixture
+    run: Pane = pane(THREE_GOS)
+    run.wait_for("GO fires cue 1 'one'")
+    run.keys("j", "3")
+    run.wait_for("jump to cue: 3_")
+    run.keys("Enter")
+    screen = run.wait_for("next GO: cue 3 'three' (not reached yet)")
+    assert any(line.startswith("> 3 ") for line in screen.splitlines()), screen
+    run.keys("j", "x", "BSpace", "o", "n", "e", "Enter")  # Backspace erases; a label is a cue too
+    run.wait_for("playhead: cue 1 'one'")
+    run.wait_for("GO fires cue 1 'one'")
+    run.keys("j", "Enter")  # an empty Enter cancels: no command
+    run.wait_for("jump cancelled")
+    run.keys("Escape")
+    assert run.exit_code() == 130
+    assert commands_in(tmp_path) == [("playhead", "key", "ok"), ("playhead", "key", "ok"), ("panic", "key", "ok")]
+    assert played(tmp_path)[:1] != [1]  # the GO was never given: motion 1 never started
+    assert run.terminal_restored()
+
+
+@needs_tmux
+def test_p_pauses_p_resumes_and_esc_panics_while_paused(tmp_path, pane):  # noqa: F811 - the fixture
+    run: Pane = pane(LONG_WAIT)
+    run.wait_for("1 'the-long-wait'")
+    run.keys("p")
+    screen = run.wait_for("PAUSED: press p to resume")
+    assert "machine clock, PAUSED" in screen
+    run.keys("p")
+    run.wait_for("resumed")
+    run.keys("p")
+    run.wait_for("PAUSED: press p to resume")
+    run.keys("Escape")
+    assert run.exit_code() == 130
+    assert "the show was stopped by panic" in run.screen()
+    assert commands_in(tmp_path) == [("pause", "key", "ok"), ("resume", "key", "ok"), ("pause", "key", "ok"),
+                                     ("panic", "key", "ok")]
+    assert played(tmp_path)[:1] == [1] and 2 not in played(tmp_path)  # the step after the wait never started
+    assert run.terminal_restored()
