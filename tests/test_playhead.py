@@ -306,3 +306,31 @@ def test_cue_go_in_a_run_by_number_and_label(tmp_path, ref):
     assert run.go("cue_go", label=ref).message == "GO: cue 2 'bow'"
     run.finish()
     assert run.result.outcome == "done"
+
+
+def test_run_gives_the_live_the_cue_list_and_one_status_that_hears_every_link_for_the_run(tmp_path):
+    """`choreo run`'s wiring: one ShowStatus, a listener of the run and of each link from the
+    session's opening to the run's end, read by `Live.status()`."""
+    from argparse import Namespace
+
+    from choreo.cli.run import _live, _watching
+    from runlog import prepare
+
+    body = "version: 1\nrobots: {a: {}, b: {}}\nsteps:\n  - play: 1\n  - play: 2\n    at: 0.3\n"
+    session = prepare(RunRequest(str(write_show(tmp_path, body)), no_log=True))
+    live, status = _live(Namespace(osc="0", wait_start=False), StopRequest(), False, session)
+    assert live is not None and status is not None and live.status_of_robots is status
+    assert [c.number for c in live.cues] == ["1"] and live.status()["clock"] == "machine"
+    with session:
+        assert session.stage is not None
+        links = session.stage.links
+        before = {name: list(link.listeners) for name, link in links.items()}
+        with _watching(session, status) as watchers:
+            assert watchers == [status]
+            assert all(len(list(link.listeners)) == len(before[name]) + 1 for name, link in links.items())
+            assert session.run(watchers, live=live).outcome == "done"
+        assert {name: list(link.listeners) for name, link in links.items()} == before
+    robots = live.status()["robots"]
+    assert set(robots) == {"a", "b"} and all(r["state"] == "done" and r["latency_ms"] is not None
+                                             for r in robots.values())
+    assert live.cue_state(live.cues.cues[0]) == "done" and live.playhead is None
