@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import TextIO
@@ -23,6 +24,7 @@ from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import Exchange, exchanges
 from choreo.log.reader import LogReader
 from choreo.show.cues import Cue, cue_list
+from choreo.show.model import Tempo, beat_text
 
 COLUMNS = (
     "seq",
@@ -147,6 +149,7 @@ class _CuePass:
     """One pass over the steps and commands: each cue's row per robot, as its step records say."""
 
     numbers: dict[tuple[str, int], Cue] = field(default_factory=dict)  # (robot or "", index) -> its cue
+    tempo: Tempo | None = None  # the attached show's: each cue's bar.beat
     rows: dict[tuple[str, int], dict] = field(default_factory=dict)  # in the order the run reached them
     go_by: str | None = None  # the source of the last GO carried out
 
@@ -161,7 +164,7 @@ class _CuePass:
         cue = self.numbers.get(key)
         if key in self.rows or not (record.cue is not None or record.go or record.cue_number or cue):
             return
-        self.rows[key] = _cue_row(record, cue, self._released(record))
+        self.rows[key] = _cue_row(record, cue, self._released(record), self.tempo)
 
     def _released(self, record: StepRecord) -> str:
         if record.event == "skip":
@@ -171,26 +174,32 @@ class _CuePass:
         return "time"
 
 
-def _cue_row(record: StepRecord, cue: Cue | None, released: str) -> dict:
+def _cue_row(record: StepRecord, cue: Cue | None, released: str, tempo: Tempo | None) -> dict:
     skipped = released == "skipped"
     return {"number": record.cue_number or (cue.number if cue else None), "label": record.label,
             "robot": record.robot, "planned_s": _ms(record.estimated_s),
             "actual_s": None if skipped else _ms(record.actual_s),
             "late_ms": None if skipped or record.go else round(record.late_ms, 3), "released": released,
-            "bar_beat": _bar_beat(cue)}
+            "bar_beat": _bar_beat(cue, tempo, record.estimated_s)}
 
 
-def _unreached(cue: Cue, robot: str) -> dict:
+def _unreached(cue: Cue, robot: str, tempo: Tempo | None) -> dict:
     return {"number": cue.number, "label": cue.label, "robot": robot or None, "planned_s": _ms(cue.planned_s),
-            "actual_s": None, "late_ms": None, "released": "not reached", "bar_beat": _bar_beat(cue)}
+            "actual_s": None, "late_ms": None, "released": "not reached",
+            "bar_beat": _bar_beat(cue, tempo, cue.planned_s)}
 
 
-def _bar_beat(cue: Cue | None) -> str | None:
-    """`5.1`: where a cue written in bars and beats falls (a music show with a tempo)."""
-    if cue is None or cue.at_beat is None:
+def _bar_beat(cue: Cue | None, tempo: Tempo | None, planned_s: float) -> str | None:
+    """`5.1`: the bar and beat of the cue's planned time in a show with a tempo (as written, for
+    a cue written in bars and beats), else nothing."""
+    if cue is not None and cue.at_beat is not None:
+        bar, beat = cue.at_beat
+    elif tempo is not None and isinstance(planned_s, (int, float)) and math.isfinite(planned_s):
+        bar, beat = tempo.position(planned_s)
+        beat = round(beat, 3)
+    else:
         return None
-    bar, beat = cue.at_beat
-    return f"{bar}.{beat:g}"
+    return f"{bar}.{beat_text(beat)}"
 
 
 def _ms(seconds: float | None) -> float | None:
@@ -204,7 +213,8 @@ def cue_rows(reader: LogReader, show: AttachedShow | None = None) -> list[dict]:
     show = show or attached_show(reader)
     plans = show.plans or ({"": show.plan} if show.plan is not None else {})
     cues = cue_list(plans) if plans else None
-    seen = _CuePass({step: cue for cue in cues or () for step in cue.steps})
+    tempo = show.show.tempo if show.show is not None else None
+    seen = _CuePass({step: cue for cue in cues or () for step in cue.steps}, tempo)
     topic, number = None, 0
     try:
         for topic, _, data in reader.messages((STEP_TOPIC, COMMAND_TOPIC)):
@@ -215,7 +225,7 @@ def cue_rows(reader: LogReader, show: AttachedShow | None = None) -> list[dict]:
     rows = list(seen.rows.values())
     reached = set(seen.rows)
     for cue in cues or ():
-        rows += [_unreached(cue, robot) for robot, index in cue.steps if (robot, index) not in reached]
+        rows += [_unreached(cue, robot, tempo) for robot, index in cue.steps if (robot, index) not in reached]
     return rows
 
 

@@ -1,0 +1,65 @@
+"""`choreo log export --cues` (issue 24): a row a cue a robot, numbered as the show's cue list
+numbers it; bar.beat in a show with a tempo; an older log's cues numbered from its attached show."""
+
+from __future__ import annotations
+
+import json
+
+from choreo.log.format import StepRecord
+from choreo.log.reader import LogReader
+from choreo.log.recorder import Recorder, RunInfo
+from choreo.review.export import cue_rows
+from runlog import vmain, write_show
+
+TEMPO_SHOW = """\
+version: 1
+tempo: {bpm: 120}
+motions:
+  bow: {number: 2, duration: 0.2}
+steps:
+  - play: bow
+    at: {bar: 2, beat: 1}
+    label: down
+  - play: bow
+    at: 2.25
+    label: off
+    cue: 7.5
+"""
+
+
+def test_a_show_with_a_tempo_gives_each_cue_its_bar_and_beat(tmp_path, capsys):
+    log = tmp_path / "run.mcap"
+    assert vmain(["run", str(write_show(tmp_path, TEMPO_SHOW)), "--log", str(log), "-q"]) == 0
+    assert vmain(["log", "export", "--cues", "--jsonl", "-", str(log)]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [(r["number"], r["label"], r["planned_s"], r["released"], r["bar_beat"]) for r in rows] == [
+        ("1", "down", 2.0, "time", "2.1"), ("7.5", "off", 2.25, "time", "2.1.5")]
+    assert all(r["late_ms"] is not None and r["actual_s"] is not None for r in rows)
+
+
+def test_an_older_logs_cues_are_numbered_from_the_attached_show_or_left_blank(tmp_path):
+    def logged(name: str, show: bytes) -> LogReader:
+        path = tmp_path / name
+        recorder = Recorder(path, RunInfo("show.yaml", "x", show, "sim://", 115200, 10**18, "hth4-2.2"))
+        for index, at in ((0, 1.0), (1, 2.0)):  # written before step records carried cue numbers
+            recorder.on_step_record(StepRecord(index, "play", "start", at, at, at, cue=at, motion=2), 10**18 + index)
+        recorder.close({"outcome": "done"})
+        return LogReader(path)
+
+    show = (b"version: 1\nsteps:\n  - play: 2\n    at: 1.0\n  - play: 2\n    at: 2.0\n    cue: 4\n"
+            b"  - play: 3\n    at: 3\n")
+    with logged("old.mcap", show) as reader:
+        rows = cue_rows(reader)
+    assert [(r["number"], r["released"]) for r in rows] == [("1", "time"), ("4", "time"), ("5", "not reached")]
+    with logged("bare.mcap", b"not: [a show") as reader:
+        rows = cue_rows(reader)
+    assert [(r["number"], r["released"], r["planned_s"]) for r in rows] == [(None, "time", 1.0), (None, "time", 2.0)]
+
+
+def test_a_cue_export_to_a_file_says_how_many_rows(tmp_path, capsys):
+    log = tmp_path / "run.mcap"
+    assert vmain(["run", str(write_show(tmp_path, TEMPO_SHOW)), "--log", str(log), "-q"]) == 0
+    out = tmp_path / "cues.csv"
+    assert vmain(["log", "export", "--cues", "--csv", str(out), str(log)]) == 0
+    assert "exported 2 cue rows to " in capsys.readouterr().err
+    assert out.read_text().splitlines()[0] == "number,label,robot,planned_s,actual_s,late_ms,released,bar_beat"
