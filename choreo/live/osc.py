@@ -176,6 +176,14 @@ def wanted(address: str) -> Wanted | None:
     return None
 
 
+def wanted_or_none(address: str) -> Wanted | None:
+    """`wanted`, with a cue badly escaped as None."""
+    try:
+        return wanted(address)
+    except BadAddress:
+        return None
+
+
 def command_for(address: str) -> tuple[str, str | None] | None:
     """The `Live` command an address gives and its cue, or None (not a command; see `wanted`)."""
     asked = wanted(address)
@@ -261,7 +269,7 @@ def _loosely(address: str) -> str | None:
         if parts[0].casefold() != ROOT[1:]:
             parts = [ROOT[1:], *parts]
         fixed = _address_of(parts)
-        if fixed is not None and fixed != address:
+        if fixed is not None and fixed != address and wanted_or_none(fixed) is not None:  # its cue read too
             return fixed
     return None
 
@@ -565,10 +573,10 @@ class OscServer:
         if not taken:
             most = self.subscriptions.most
             return Answer("error", f"refused: {most} senders get updates already (at most {most}): one must send "
-                                   f"/choreo/updates 0, or fall silent for {expire:g} s")
+                                   f"{UPDATES} 0, or fall silent for {expire:g} s")
         how = "on this connection" if origin.transport == "tcp" else f"to {where(origin.sender)}"
-        return Answer("ok", f"updates on: the show's notifications {how}, until /choreo/updates 0 or {expire:g} s "
-                            "without a message (send /choreo/thump)", {"updates": True, "expire_s": expire})
+        return Answer("ok", f"updates on: the show's notifications {how}, until {UPDATES} 0 or {expire:g} s "
+                            f"without a message (send {THUMP})", {"updates": True, "expire_s": expire})
 
     def _deliver(self, packet: bytes) -> None:
         """A notification, encoded, to every subscriber (the notifier's thread calls)."""
