@@ -24,6 +24,7 @@ from choreo.live.controls import Live
 from choreo.live.limits import LIMITS, Limits, Rate
 from choreo.live.osc import (COMMANDS, DICTIONARY, EFFECTS, BadAddress, OscServer, escape, loops, suggestion,
                              unknown_message, wanted)
+from choreo.live.oscnotify import Subscriptions
 from choreo.live.oscwire import decode_packet, encode_message
 from choreo.log.format import WARNING
 from runlog import ended_if_left, read_log, start_choreo, wait_for, write_show
@@ -601,3 +602,20 @@ def until_listening_and(peer: Peer, state: str) -> dict:
 
     assert wait_for(in_state, 30, every=0.05), seen[-1:]
     return seen[-1]
+
+
+def test_subscriptions_are_bounded_and_expire_on_the_clock_given():
+    clock = VirtualTime()
+    table = Subscriptions(most=2, expire_s=61.0, now=clock.now)
+    assert table.add("a", "udp", ("127.0.0.1", 1), "a") == (True, [])
+    assert table.add("b", "tcp", ("127.0.0.1", 2), "b") == (True, [])
+    assert table.add("c", "udp", ("127.0.0.1", 3), "c") == (False, [])
+    clock.sleep(60.9)
+    table.heard("a")
+    assert table.add("a", "udp", ("127.0.0.1", 1), "a")[0]  # one subscribed already: renewed, not refused
+    clock.sleep(0.1)
+    taken, expired = table.add("c", "udp", ("127.0.0.1", 3), "c")  # b was silent 61 s: its place is free
+    assert taken and [s.source for s in expired] == ["b"]
+    current, _ = table.current()
+    assert sorted(s.source for s in current) == ["a", "c"] and "b" not in table
+    assert table.remove("a") is not None and table.remove("a") is None and len(table) == 1
