@@ -16,6 +16,7 @@ from choreo.cli.keys import KeyParser
 from choreo.cli.screen import LEGEND, SHORT_LEGEND, CueLine, Note, Row, Screen, fit_message, render
 from choreo.events import Command, StepEvent, StopRequest
 from choreo.live.controls import Live
+from choreo.log.format import WARNING
 from choreo.run.session import Session
 from choreo.run.settings import RunRequest
 from choreo.show.cues import cue_list
@@ -63,8 +64,11 @@ def everyone_waits(console: Console, session: Session, live: Live) -> None:
 @pytest.mark.parametrize("width", (60, 72, 80))
 def test_eight_robots_and_the_cue_list_fit_an_80x24_terminal_at_any_width(tmp_path, width):
     console, session, live = prepared(tmp_path, eight_robots())
+    for n in range(8):
+        console.on_log(WARNING, f"robot d4: step {n}: NAK to 'play 1', retried")
     lines = drawn(console, width)
     assert len(lines) <= 23, lines  # a line left for the cursor: nothing scrolls
+    assert sum("NAK to 'play 1'" in line for line in lines) >= 1
     assert all(display_width(line) <= width for line in lines), lines
     assert lines[-1] == (LEGEND if width >= 80 else SHORT_LEGEND)
     playhead = [line for line in lines if line.startswith(">")]

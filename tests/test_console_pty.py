@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from runlog import read_log
 from test_console import Pane, commands_in, needs_tmux, pane  # noqa: F401 - pane: the fixture
 
@@ -159,3 +161,35 @@ def test_p_pauses_p_resumes_and_esc_panics_while_paused(tmp_path, pane):  # noqa
                                      ("panic", "key", "ok")]
     assert played(tmp_path)[:1] == [1] and 2 not in played(tmp_path)  # the step after the wait never started
     assert run.terminal_restored()
+
+
+EIGHT = ["left", "right", "centre", "d4", "e5", "f6", "g7", "h8"]
+EIGHT_ROBOTS = ("version: 1\nname: eight robots\nrobots:\n" + "".join(f"  {name}: {{}}\n" for name in EIGHT)
+                + "steps:\n" + "".join(f"  - play: 1\n    at: {'go' if i % 3 == 0 else i}\n"
+                                       f"    label: cue-{i}-of-the-show\n" for i in range(12)))
+
+
+def fits(screen: str, width: int) -> list[str]:
+    """The console's lines, checked whole on the terminal: its top line still there (nothing
+    scrolled off), the legend at the bottom, the playhead's line between, every line in width."""
+    lines = [line.rstrip() for line in screen.splitlines()]
+    title = [at for at, line in enumerate(lines) if line.startswith("eight robots ")]
+    assert len(title) == 1, screen
+    legend = [at for at, line in enumerate(lines) if line.startswith(("Space/Enter GO", "Spc GO"))]
+    assert len(legend) == 1 and legend[0] > title[0], screen
+    assert any(line.startswith("> ") for line in lines[title[0]:]), screen
+    assert all(len(line) <= width for line in lines)
+    return lines[title[0]:legend[0] + 1]
+
+
+@needs_tmux
+@pytest.mark.parametrize("width", (60, 80))
+def test_eight_robots_and_the_cue_list_fit_a_24_line_terminal(tmp_path, pane, width):  # noqa: F811 - the fixture
+    run: Pane = pane(EIGHT_ROBOTS, width)
+    fits(run.wait_for("left, right +6 wait for GO: cue 1 'cue-0-of-the-show'"), width)
+    run.keys("Space")
+    console = fits(run.wait_for("next GO: cue 4 "), width)  # every robot on a row of its own now
+    assert [line.split()[0] for line in console if line.split()[0] in EIGHT] == EIGHT
+    assert any("GO: cue 1 'cue-0-of-the-show'" in line for line in console)  # and a message still fits
+    run.keys("Escape")
+    assert run.exit_code() == 130

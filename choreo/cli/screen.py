@@ -111,8 +111,8 @@ def _shares(cues: int, notes: int, room: int | None) -> tuple[int, int]:
     at least 3 of it (or all it has), and a note at least."""
     if room is None:
         return cues, notes
-    shown_cues = min(cues, max(3, room - min(notes, 3)))
-    return max(min(cues, room - 1), min(shown_cues, 1)), max(1, min(notes, room - shown_cues))
+    shown = min(cues, max(3, room - min(notes, 3)))
+    return shown, max(1, min(notes, room - shown))
 
 
 def _cue_table(screen: Screen, rows: int, narrow: bool) -> Table:
