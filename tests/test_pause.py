@@ -272,7 +272,7 @@ def test_pause_in_a_music_show_pauses_the_song_and_the_next_cue_keeps_its_place(
     from runlog import started_on_cue
     from test_music import write_song
 
-    write_song(tmp_path / "song.wav", 1.5)
+    write_song(tmp_path / "song.wav", 0.8)
     body = ("version: 1\nmusic: {file: song.wav}\nsteps:\n  - play: 1\n    at: 0.1\n    label: first\n"
             "  - play: 2\n    at: 0.5\n    label: after\n")
     run = LiveRun(tmp_path, body, cues=True, audio_device="null",

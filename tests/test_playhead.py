@@ -119,7 +119,7 @@ def test_the_playhead_is_auto_then_moves_among_the_cues_not_yet_run(tmp_path):
     ran(live, settings, 1, "start", "end")
     assert live.cue_state(cues.cues[0]) == "done" and live.playhead == cues.cues[2]
     refused = say(live, "playhead", "1")
-    assert not refused.ok and "cue 1 'bow' has run already" in refused.message
+    assert not refused.ok and refused.message.startswith("cue 1 'bow' has run already: the playhead goes on")
     ran(live, settings, 3, "start")
     assert live.cue_state(cues.cues[2]) == "running" and live.playhead == cues.cues[3]  # auto again
     assert say(live, "playhead_previous").data["playhead"] == "2"  # a timed cue ahead: the playhead may stand on it
@@ -186,7 +186,9 @@ def test_skip_ahead_undo_and_a_cue_already_run(tmp_path):
     ran(live, settings, 1, "skip")  # the runner passed it
     refused = say(live, "skip", "1")
     assert not refused.ok and refused.message == "cue 1 'bow' has been passed already: nothing to skip"
-    ran(live, settings, 2, "start", "end")
+    ran(live, settings, 2, "start")
+    assert say(live, "skip", "2").message == "cue 2 is running: nothing to skip"
+    ran(live, settings, 2, "end")
     assert say(live, "skip", "2").message == "cue 2 has run already: nothing to skip"
 
 
@@ -334,3 +336,13 @@ def test_run_gives_the_live_the_cue_list_and_one_status_that_hears_every_link_fo
     assert set(robots) == {"a", "b"} and all(r["state"] == "done" and r["latency_ms"] is not None
                                              for r in robots.values())
     assert live.cue_state(live.cues.cues[0]) == "done" and live.playhead is None
+
+
+def test_with_only_timed_cues_ahead_the_playhead_moves_onto_the_first_and_a_section_bounds_it(tmp_path):
+    live, cues, settings = live_of(tmp_path, "version: 1\nsteps:\n  - play: 1\n    at: 1\n  - play: 2\n    at: 2\n"
+                                             "  - play: 3\n    at: go\n")
+    live.use_section({"robot": 1}, {"robot": 2})  # --loop 1..1: cues 1 and 3 are not in this run
+    assert [live.cue_state(c) for c in cues] == ["done", "ahead", "done"] and live.playhead is None
+    assert say(live, "playhead_next").data == {"cue": "2", "label": None, "playhead": "2"}
+    assert say(live, "playhead", "3").message.startswith("cue 3 is not in this run (--from, --loop)")
+    assert say(live, "go").message == "cue 2 is a timed cue (at 2.000 s): nothing to GO; move the playhead"

@@ -628,8 +628,7 @@ class Live:
                 return found
             state = self._state_of(found)
             if state in (ACTIVE, DONE) or (state == SKIPPED and self._passed(found)):
-                return Answer("error", f"{found.name} has {'run' if state != SKIPPED else 'been passed'} "
-                              "already: nothing to skip", self._data(found))
+                return Answer("error", f"{self._gone_by(found, state)}: nothing to skip", self._data(found))
             if state == SKIPPED:
                 del self._skips[found.number]
                 self._skips_changed()
@@ -648,6 +647,14 @@ class Live:
             self._clock_changed()
         return answer
 
+    def _gone_by(self, cue: Cue, state: str) -> str:
+        """Why a cue can no longer be skipped or stood on (the lock is held)."""
+        if cue.number in self._out:
+            return f"{cue.name} is not in this run (--from, --loop)"
+        if state == ACTIVE:
+            return f"{cue.name} is running"
+        return f"{cue.name} has {'been passed' if state == SKIPPED else 'run'} already"
+
     def _after(self, cue: Cue) -> Cue | None:
         """The next GO cue not yet run after `cue`, not skipped (None: auto). The lock is held."""
         later = self.cues.cues[self.cues.position(cue) + 1:] if cue in self.cues.cues else ()
@@ -659,8 +666,8 @@ class Live:
             if isinstance(found, Answer):
                 return found
             if not self._open(found):
-                return Answer("error", f"{found.name} has run already: the playhead goes on cues not yet run",
-                              self._data(found))
+                return Answer("error", f"{self._gone_by(found, self._state_of(found))}: the playhead goes on "
+                              "cues not yet run", self._data(found))
             self._moved = found
             return Answer("ok", f"playhead: {found.name}", self._data(found))
 
@@ -675,9 +682,12 @@ class Live:
         with self._changed:
             open_cues = [cue for cue in self.cues if self._open(cue)]
             here = self._playhead()
-            if not open_cues or here is None:
+            if not open_cues:
                 return Answer("error", "no cue ahead: the playhead has nowhere to go")
-            at = open_cues.index(here) if here in open_cues else 0
+            if here is None or here not in open_cues:  # only timed cues ahead: onto the first
+                self._moved = open_cues[0]
+                return Answer("ok", f"playhead: {self._moved.name}", self._data(self._moved))
+            at = open_cues.index(here)
             if not 0 <= at + by < len(open_cues):
                 return Answer("error", f"the playhead is on the {'last' if by > 0 else 'first'} cue not yet run "
                               f"({here.name})", self._data(here))
