@@ -15,7 +15,7 @@ from choreo.cli.console import MAX_TYPED, Console
 from choreo.cli.keys import KeyParser
 from choreo.cli.screen import LEGEND, SHORT_LEGEND, CueLine, Note, Row, Screen, fit_message, render
 from choreo.events import Command, StepEvent, StopRequest
-from choreo.live.controls import Live
+from choreo.live.controls import HoldingShowClock, Live
 from choreo.log.format import WARNING
 from choreo.run.session import Session
 from choreo.run.settings import RunRequest
@@ -279,3 +279,29 @@ def test_other_arrows_and_arrows_in_a_paste_are_no_key(sequence: bytes) -> None:
 
 def test_editing_keys() -> None:
     assert KeyParser().feed(b"\x7f\x08\x15j3\r") == ["backspace", "backspace", "ctrl-u", "j", "3", "enter"]
+
+
+def test_a_paused_show_keeps_the_screen_still_and_clear_of_redraws(tmp_path, monkeypatch):
+    """Paused, the show clock stands: what is drawn does not change however long the pause
+    lasts (no redraw while nothing happens), and no due time calls for a quiet window."""
+    console, session, live = prepared(tmp_path, eight_robots())
+    now = [100.0]
+    monkeypatch.setattr(session.clock, "mono", lambda: now[0])
+    live.use_clock(HoldingShowClock(99.0, lambda: now[0]))  # 1 s into the show
+    steps = session.settings.plans["left"].steps
+    for name in ROBOTS:
+        event = StepEvent(steps[1], "start", 1.0, 1.0, 0, robot=name)
+        console.on_step(event)
+        live.on_step(event)
+    assert console.screen().cue == "next cue in 1.0 s: cue 3 'cue-2' at 2 s"
+    assert live.command(Command("pause", "key")).ok
+    paused = console.screen()
+    now[0] += 30.0  # half a minute of pause
+    assert console.screen() == paused and paused.show_s == 1.0
+    assert console._quiet_left() == 0.0  # nothing falls due while paused: draw (nothing) at once
+    updates = []
+    monkeypatch.setattr(console._rich, "update", lambda renderable, refresh: updates.append(renderable))
+    console._draw()
+    now[0] += 5.0
+    console._draw()
+    assert len(updates) == 1
