@@ -346,10 +346,11 @@ class Live:
 
     def on_step(self, event: StepEvent) -> None:
         """A cue's step started, ended or was skipped: the cue's state follows. Other steps
-        cost one attribute read on the runner's path."""
+        cost one attribute read on the runner's path; a cue's, one dictionary store without the
+        lock (atomic, and read under it): a cue's start comes just before its first frame, which
+        must not wait behind a command's answer."""
         if event.step.cue is not None:
-            with self._changed:
-                self._marks[(event.robot or SOLO, event.step.index)] = event.event
+            self._marks[(event.robot or SOLO, event.step.index)] = event.event
 
     def on_log(self, level: int, message: str, time_ns: int) -> None:
         """Log lines say nothing the controls act on."""
