@@ -23,6 +23,7 @@ from choreo.events import StopRequest
 from choreo.live.controls import Live
 from choreo.run.session import Session
 from choreo.run.settings import RunRequest
+from choreo.show.cues import cue_list
 from choreo.show.load import load_show, load_show_bytes
 from choreo.show.model import MAX_BPM, MAX_CUE_S, MAX_TEMPO_BARS, Tempo
 from choreo.show.plan import compile_plan
@@ -314,7 +315,7 @@ def test_plan_and_validate_json_carry_the_map(tmp_path, capsys):
 
 def screen_at(tmp_path: Path, body: str, show_s: float) -> Screen:
     session = Session.prepare(RunRequest(str(write(tmp_path, body)), no_log=True))
-    live = Live(StopRequest())
+    live = Live(StopRequest(), cues=cue_list(session.settings.plans))
     console = Console(session, live, out=io.StringIO(), keys=io.StringIO())
     live.use_clock(MachineShowClock(session.clock.mono() - show_s))
     return console.screen()
@@ -322,7 +323,7 @@ def screen_at(tmp_path: Path, body: str, show_s: float) -> Screen:
 
 def test_the_console_shows_bar_and_beat_through_the_map(tmp_path):
     assert screen_at(tmp_path, MAP_SHOW, 3.6).bar == (2, 3)  # 3.55 s is bar 2 beat 3
-    assert screen_at(tmp_path, MAP_SHOW, 1.0).cue == "next cue in 2.5 s: step 0 at 3.55 s, bar 2 beat 3"
+    assert screen_at(tmp_path, MAP_SHOW, 1.0).cue == "next cue in 2.5 s: cue 1 at 3.55 s, bar 2 beat 3"
     assert screen_at(tmp_path, MAP_SHOW, 6.49).bar == (3, 4)
     assert screen_at(tmp_path, MAP_SHOW, 6.51).bar == (4, 1)
     assert screen_at(tmp_path, "version: 1\ntempo: {bpm: 120}\nsteps: [{play: 1}]\n", 2.6).bar == (2, 2)
