@@ -221,8 +221,8 @@ def test_pause_resume_and_what_they_refuse(tmp_path):
     assert paused.ok and paused.message.startswith("paused at ") and live.paused and clock.state == "paused"
     assert say(live, "pause").message == "paused already"
     bow = Waiter(live, settings, 1)
-    assert say(live, "go").message == "GO refused: paused: resume first (p or /choreo/resume)"
-    assert say(live, "cue_go", "bow").message == "GO refused: paused: resume first (p or /choreo/resume)"
+    assert say(live, "go").message == "paused: resume first (p or /choreo/resume)"
+    assert say(live, "cue_go", "bow").message == "paused: resume first (p or /choreo/resume)"
     assert live.state == "paused" and clock.state == "paused" and bow.went == []
     assert say(live, "resume").ok and not live.paused and clock.state == "held"  # the GO cue still holds it
     assert say(live, "go").ok and bow.gone() and clock.state == "running"

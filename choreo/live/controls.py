@@ -533,7 +533,7 @@ class Live:
                 return Answer("error", f"GO ignored: {now - self._last_go:.2f} s after the last one "
                               f"(a double press? GOs {self.lockout_s:g} s apart at least)")
             if self._paused:
-                return Answer("error", f"GO refused: {RESUME_FIRST}")
+                return Answer("error", RESUME_FIRST)
             waiting = self._under_playhead()
             if waiting is None:
                 return Answer("error", self._why_not(self._playhead()))
@@ -568,7 +568,7 @@ class Live:
     def _cue_go(self, command: Command) -> Answer:
         with self._changed:
             if self._paused:
-                return Answer("error", f"GO refused: {RESUME_FIRST}")
+                return Answer("error", RESUME_FIRST)
             found = self._find(command.label)
             if isinstance(found, Answer):
                 return found
