@@ -171,6 +171,22 @@ def test_a_go_under_a_moved_playhead_fires_that_robots_cue_first(tmp_path):
     assert say(live, "go").ok and still.gone()
 
 
+def test_a_go_lets_the_machine_clock_go_on_while_another_tracks_cue_still_waits(tmp_path):
+    """The robot given its GO goes on at once on a running clock; the other waits without
+    holding the show (its steps are timed from its own GO when it comes)."""
+    live, cues, settings = live_of(tmp_path, TRACKS)
+    now = [100.0]
+    clock = HoldingShowClock(100.0, lambda: now[0])
+    live.use_clock(clock)
+    now[0] = 100.5
+    a = Waiter(live, settings, 1, "a", shared=False)
+    b = Waiter(live, settings, 1, "b", shared=False)
+    assert clock.state == "held" and clock.show_at(101.0) == 0.5  # reached at 0.5 s: it stands there
+    now[0] = 102.0
+    assert say(live, "cue_go", "b-go").ok and b.gone() and a.went == []
+    assert clock.state == "running" and clock.show_at(102.25) == 0.75  # from where it stood, at once
+
+
 # -- skips ----------------------------------------------------------------------------------------
 
 
