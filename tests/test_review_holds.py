@@ -134,6 +134,7 @@ def test_hold_time_is_said_as_hold_time_not_drift(held):
         ("paused", None, "resume from osc tcp 127.0.0.1:53000"), ("held", "cue 1 'applause'", "go from key"),
         ("held", None, "panic from osc udp 127.0.0.1:53001")]
     assert "held 2.300 s at cue 1 'applause', go from key" in text
+    assert summary.steps_skipped == 1 and ", 1 skipped" in text
 
 
 def test_the_timeline_draws_holds_commands_and_a_motion_through_a_hold_at_its_length(held):

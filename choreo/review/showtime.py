@@ -301,6 +301,12 @@ class StandNote:
     cue: str | None = None  # `cue 1 'applause'`: the GO cue a hold waited at
     by: str | None = None  # `go from key`, `resume from osc udp 127.0.0.1:53001`, `panic from key`
 
+    def ended_by(self, command: str) -> None:
+        self.by = command
+
+    def held_at(self, cue: str) -> None:
+        self.cue = cue
+
     def text(self, end_ns: int | None) -> str:
         """`held 2.300 s at cue 1 'applause', go from key`."""
         at = f" at {self.cue}" if self.cue else ""
@@ -326,10 +332,10 @@ class StandNotes:
         stand = note.stand
         end = stand.end_ns
         if command is not None and (end is None or log_time <= end + RELEASE_SLACK_NS):
-            note.by = f"{command} from {source}"
+            note.ended_by(f"{command} from {source}")
         elif step_ref is not None and stand.kind == HELD and note.cue is None and end is not None \
                 and end <= log_time <= end + RELEASE_SLACK_NS:
-            note.cue = step_ref
+            note.held_at(step_ref)
 
 
 def see_for_stands(notes: StandNotes, record: object, log_time: int) -> None:

@@ -180,6 +180,7 @@ class Summary:
     steps_failed: int = 0
     steps_aborted: int = 0
     steps_unfinished: int = 0
+    steps_skipped: int = 0  # cues the operator skipped: their steps never ran
     frames: dict[str, int] = field(default_factory=dict)  # tx kind -> count
     retries: int = 0  # frames sent again (attempt > 1)
     replies: dict[str, int] = field(default_factory=dict)  # rx kind -> count
@@ -238,7 +239,8 @@ def summary_record(summary: Summary) -> dict:
                     "cue": n.cue, "by": n.by} for n in summary.stands],
         "steps": {"run": summary.steps_run, "done": summary.steps_done, "late": summary.steps_late,
                   "late_by_retries": summary.steps_late_by_retries, "failed": summary.steps_failed,
-                  "aborted": summary.steps_aborted, "unfinished": summary.steps_unfinished},
+                  "aborted": summary.steps_aborted, "unfinished": summary.steps_unfinished,
+                  "skipped": summary.steps_skipped},
         "frames": {**summary.frames, "retries": summary.retries},
         "replies": {**summary.replies, "stale": summary.stale, "unanswered": summary.unanswered},
         "latency": spread(summary.latency),
@@ -443,7 +445,7 @@ class _Tally:
         self.motion_starts = Distribution()
         self.late_at_start: dict[tuple[str | None, int], bool] = {}  # (robot, step) started and not ended
         self.retried: set[tuple[str | None, int]] = set()  # open (robot, step)s with a frame sent again
-        self.outcomes = {"ok": 0, "failed": 0, "timeout": 0, "aborted": 0}
+        self.outcomes = {"ok": 0, "failed": 0, "timeout": 0, "aborted": 0, "skipped": 0}
         self.retries = self.late = self.late_by_retries = self.started = self.stale = 0
         self.pending_seq = -1  # the frame waiting for its reply
 
@@ -514,6 +516,7 @@ class _Tally:
         summary.steps_done = self.outcomes.get("ok", 0)
         summary.steps_failed = self.outcomes.get("failed", 0) + self.outcomes.get("timeout", 0)
         summary.steps_aborted = self.outcomes.get("aborted", 0)
+        summary.steps_skipped = self.outcomes.get("skipped", 0)
         summary.steps_unfinished = len(self.late_at_start)
 
 

@@ -81,6 +81,8 @@ def _render_outcome(summary: Summary) -> Iterable[str]:
         steps += f", {summary.steps_aborted} aborted"
     if summary.steps_unfinished:
         steps += f", {summary.steps_unfinished} unfinished"
+    if summary.steps_skipped:
+        steps += f", {summary.steps_skipped} skipped"
     yield steps
 
 

@@ -234,10 +234,10 @@ class _Pass:
         self.notes = StandNotes(self.clock)
 
     def see(self, record: Record, log_time: int) -> None:
+        self.last_ns = log_time if self.last_ns is None else max(self.last_ns, log_time)  # as the summary's
         if isinstance(record, ClockRecord):
             self.clock.see_clock(log_time, record)
             return
-        self.last_ns = log_time if self.last_ns is None else max(self.last_ns, log_time)
         assert self.notes is not None  # made with the pass
         see_for_stands(self.notes, record, log_time)
         marks = self.timeline.marks
