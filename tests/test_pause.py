@@ -34,10 +34,12 @@ class OnStep:
         self.commands = commands
         self.robot = robot
         self.answers: list = []
+        self.seen: list[tuple[int, str]] = []  # (step index, event) heard, in order
 
     def on_step(self, event: StepEvent) -> None:
         if self.robot is not None and event.robot != self.robot:
             return
+        self.seen.append((event.step.index, event.event))
         for name in self.commands.pop((event.step.index, event.event), []):
             label = None
             if " " in name:
@@ -212,6 +214,21 @@ def test_pause_during_a_motion_finishes_the_play_and_times_the_rest_from_the_res
     after = next(m for m in samples if m["_log_time"] >= resumed)
     assert after["state"] == "running" and after["show_s"] == pytest.approx(stood, abs=1e-6)
     assert log.metadata["choreo.result"]["outcome"] == "done"
+
+
+def test_a_wait_done_under_way_when_paused_polls_to_the_motions_end(tmp_path):
+    run = VirtualRun(tmp_path, WALK, at={(1, "start"): ["pause"]})  # paused as `wait: done` starts
+    assert wait_for(lambda: (1, "end") in run.hook.seen, 10, 0.001)  # it ended while paused
+    assert run.live.paused and (2, "start") not in run.hook.seen
+    assert run.say("resume").ok
+    log = run.finish()
+    resumed = command_time(log, "resume")
+    done = next(m for m in log.steps if m.get("label") == "done" and m["event"] == "end")
+    assert done["outcome"] == "ok" and done["_log_time"] < resumed
+    polls = [m for m in log.tx if m["kind"] == "status" and m["_log_time"] < resumed]
+    assert len(polls) >= 2  # it went on polling while paused, until the board said the motion was over
+    later = next(m for m in log.steps if m.get("label") == "later" and m["event"] == "end")
+    assert later["start_s"] == pytest.approx(2.0, abs=1e-3) and later["_log_time"] > resumed
 
 
 @pytest.mark.parametrize("command", ["panic", "stop"])
