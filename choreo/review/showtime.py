@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_right
+from itertools import accumulate
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -81,6 +82,8 @@ class ShowTimes:
         self._break_s: list[float] = []  # and the show time there
         self._last: tuple[int, float] | None = None  # the last sample: log time, show time
         self._stood: list[float] = [0.0]  # time stood still before each stand began (prefix sums)
+        # `elapsed_of_show`'s table, made once: (end_ns, stands' show times in order, time stood up to each)
+        self._by_show: tuple[int | None, list[float], list[float]] | None = None
 
     @classmethod
     def of(cls, reader: LogReader) -> ShowTimes:
@@ -238,12 +241,12 @@ class ShowTimes:
         """Where a show time falls on the `elapsed` axis: after the stands at show times up to
         it (a planned time that no log time places: a play the run never reached); `end_ns`:
         the log's end, where a stand that never ended ends."""
-        stood = 0.0
-        for stand in self.stands:
-            if stand.show_s > show_s:
-                break
-            stood += stand.seconds(end_ns)
-        return show_s + stood
+        if self._by_show is None or self._by_show[0] != end_ns:
+            ordered = sorted(self.stands, key=lambda stand: stand.show_s)
+            stood = list(accumulate((stand.seconds(end_ns) for stand in ordered), initial=0.0))
+            self._by_show = (end_ns, [stand.show_s for stand in ordered], stood)
+        _, shows, stood = self._by_show
+        return show_s + stood[bisect_right(shows, show_s)]
 
 
 @dataclass(frozen=True)
