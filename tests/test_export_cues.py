@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from choreo.log.format import StepRecord
 from choreo.log.reader import LogReader
 from choreo.log.recorder import Recorder, RunInfo
@@ -63,3 +65,57 @@ def test_a_cue_export_to_a_file_says_how_many_rows(tmp_path, capsys):
     assert vmain(["log", "export", "--cues", "--csv", str(out), str(log)]) == 0
     assert "exported 2 cue rows to " in capsys.readouterr().err
     assert out.read_text().splitlines()[0] == "number,label,robot,planned_s,actual_s,late_ms,released,bar_beat"
+
+
+ENSEMBLE = """\
+version: 1
+robots:
+  a: {}
+  b: {}
+motions:
+  wave: {number: 1, duration: 1.0}
+steps:
+  - play: wave
+  - play: 2
+    at: go
+    label: applause
+  - wait: done
+  - play: wave
+    at: 2.0
+    label: encore
+  - wait: done
+"""
+
+
+def test_a_cue_of_two_robots_is_a_row_each_in_cue_order_released_by_the_one_go(tmp_path):
+    import threading
+
+    from choreo.clock import VirtualTime
+    from choreo.events import Command, StopRequest
+    from choreo.live.controls import Live
+    from choreo.run.session import Session
+    from choreo.run.settings import RunRequest
+    from choreo.show.cues import cue_list
+    from runlog import wait_for
+
+    log = tmp_path / "run.mcap"
+    source = VirtualTime()
+    session = Session.prepare(RunRequest(str(write_show(tmp_path, ENSEMBLE)), log_path=str(log)), source)
+    live = Live(StopRequest(), cues=cue_list(session.settings.plans), now=source.now, wall_ns=source.wall_ns)
+
+    def run() -> None:
+        with session:
+            session.run([], live=live)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    assert wait_for(lambda: bool(live.waiting) and len(live.waiting[0].robots) == 2, 20, 0.002)
+    source.advance(1.5)
+    assert live.command(Command("go", "osc udp 127.0.0.1:53001")).ok
+    thread.join(20)
+    with LogReader(log) as reader:
+        rows = cue_rows(reader)
+    assert [(r["number"], r["robot"], r["released"]) for r in rows] == [
+        ("1", "a", "go osc udp 127.0.0.1:53001"), ("1", "b", "go osc udp 127.0.0.1:53001"),
+        ("2", "a", "time"), ("2", "b", "time")]
+    assert rows[2]["actual_s"] == rows[3]["actual_s"] == pytest.approx(1.994, abs=0.01)  # the hold is not in it

@@ -23,7 +23,7 @@ from choreo.log.format import (COMMAND_TOPIC, STEP_TOPIC, CommandRecord, LogLayo
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import Exchange, exchanges
 from choreo.log.reader import LogReader
-from choreo.show.cues import Cue, cue_list
+from choreo.show.cues import Cue, CueList, cue_list
 from choreo.show.model import Tempo, beat_text
 
 COLUMNS = (
@@ -226,7 +226,20 @@ def cue_rows(reader: LogReader, show: AttachedShow | None = None) -> list[dict]:
     reached = set(seen.rows)
     for cue in cues or ():
         rows += [_unreached(cue, robot, tempo) for robot, index in cue.steps if (robot, index) not in reached]
-    return rows
+    return _in_cue_order(rows, cues, reader.robots)
+
+
+def _in_cue_order(rows: list[dict], cues: CueList | None, robots: list[str]) -> list[dict]:
+    """Rows in the cue list's order, each cue's robots in the show's (a row the list does not
+    know keeps its place after the cue before it: sorting is stable)."""
+    position = {cue.number: at for at, cue in enumerate(cues or ())}
+    robot_at = {name: at for at, name in enumerate(robots)}
+    last = -1
+    keyed = []
+    for row in rows:
+        last = position.get(row["number"], last)
+        keyed.append(((last, robot_at.get(row["robot"], len(robot_at))), row))
+    return [row for _, row in sorted(keyed, key=lambda pair: pair[0])]
 
 
 def export_cues(reader: LogReader, sinks: list[CsvSink | JsonSink | JsonLinesSink]) -> int:

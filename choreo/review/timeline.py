@@ -506,7 +506,7 @@ def _row(step: str, title: str, planned: str, actual: str, bar: str, figures: bo
 
 def _listed(timeline: Timeline) -> Iterator[str]:
     if timeline.cues:
-        yield "cues: " + ", ".join(f"{c.name} at {c.show_s:g} s" for c in timeline.cues)
+        yield "cues: " + ", ".join(f"{c.name} at {round(c.show_s, 3):g} s" for c in timeline.cues)
     for title, marks in (("late plays", timeline.late), ("faults", timeline.faults)):
         yield f"{title}: {len(marks) or 'none'}"
         for mark in marks:
