@@ -153,3 +153,15 @@ def test_jump_then_skip_with_several_robots(tmp_path):
     assert motions(log, "/rcb4/a/tx") == [1, 2, 3] and motions(log, "/rcb4/b/tx") == [4]
     assert [m["message"] for m in log.topic("/choreo/command")] == ["playhead: cue 4 'b-two'",
                                                                       "skipped: cue 4 'b-two' will not run"]
+
+
+def test_a_shared_go_cue_skipped_while_a_robot_waits_there_is_passed_by_both(tmp_path):
+    body = SHARED.replace("    at: 0.5\n", "    at: go\n")
+    run = VirtualRun(tmp_path, body)
+    assert wait_for(lambda: bool(run.live.waiting), 10, 0.001)
+    assert run.say("skip").message == "skipped: cue 1 'two'"
+    log = run.finish()
+    assert run.result.outcome == "done" and not run.live.waiting
+    for robot in ("a", "b"):
+        assert motions(log, f"/rcb4/{robot}/tx") == [1, 3], robot
+        assert [e for e in events(log, f"/choreo/{robot}/step") if e[0] == "two"] == [("two", "skip", "skipped")]

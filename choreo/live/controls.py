@@ -261,7 +261,8 @@ class Live:
 
     @property
     def paused_robots(self) -> tuple[str, ...]:
-        """The robots the pause keeps from starting their next step now."""
+        """The robots whose next step is due and waits for the resume (a robot asleep towards a
+        later due time is not among them: the clock it sleeps on stands still)."""
         with self._changed:
             return tuple(sorted(self._paused_robots))
 
