@@ -172,15 +172,16 @@ class LinkListener(Protocol):
 
 @dataclass(frozen=True)
 class StepEvent:
-    """A step starting or ending, on the show clock (seconds since the show started)."""
+    """A step starting or ending (or passed, skipped), on the show clock (seconds since the
+    show started)."""
 
     step: PlannedStep
-    event: str  # start | end
+    event: str  # start | end | skip (a cue the operator skipped: its step not run, no start nor end)
     planned_s: float  # when it was due at run time
     actual_s: float
     time_ns: int
     late_ms: float = 0.0
-    outcome: str | None = None  # end: ok | failed | aborted | timeout
+    outcome: str | None = None  # end: ok | failed | aborted | timeout; skip: skipped
     robot: str | None = None  # whose step, in a show for several robots
     start_s: float | None = None  # end of a play: when the frame that started the motion was written
     lead_ms: float = 0.0  # end of a cued play: how far ahead of the cue its first frame was due
