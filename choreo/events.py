@@ -224,7 +224,8 @@ class ResultListener(Protocol):
 @dataclass(frozen=True)
 class Command:
     """An operator's command: what, from where (`key`, `osc udp 127.0.0.1:53001`), and for
-    `cue_go` which cue (its label)."""
+    `cue_go`, `playhead` and `skip` which cue (its number or label, as typed or sent; a `skip`
+    without one skips the playhead's cue)."""
 
     name: str
     source: str
