@@ -118,6 +118,7 @@ def test_the_playhead_is_auto_then_moves_among_the_cues_not_yet_run(tmp_path):
     # a cue that ran is left behind: the playhead goes back to auto once its own cue runs
     ran(live, settings, 1, "start", "end")
     assert live.cue_state(cues.cues[0]) == "done" and live.playhead == cues.cues[2]
+    assert list(live.cue_states().values()) == ["done", "ahead", "ahead", "ahead"]
     refused = say(live, "playhead", "1")
     assert not refused.ok and refused.message.startswith("cue 1 'bow' has run already: the playhead goes on")
     ran(live, settings, 3, "start")

@@ -373,6 +373,11 @@ class Live:
         with self._changed:
             return self._state_of(cue)
 
+    def cue_states(self) -> dict[Cue, str]:
+        """Every cue's state, under the lock once (the console's whole list at each redraw)."""
+        with self._changed:
+            return {cue: self._state_of(cue) for cue in self.cues}
+
     @property
     def playhead(self) -> Cue | None:
         """The cue a GO fires: where the operator put it, else the earliest GO cue waiting, else
