@@ -5,6 +5,10 @@ step before it)), so the time frames take on the wire never accumulates as drift
 sleeps until just before a due time and spins the rest, so a cue's first byte leaves within a
 millisecond of it. It reports each step's start and end, late steps and retried frames to its
 listeners (the recorder, the progress display) and sends nothing the show did not ask for.
+
+Live (`choreo.live.controls`), before a step starts it waits while the show is paused (a step
+under way finishes: a play sequence is never cut), and a cue the operator skipped is passed
+where the robot is, with one `skip` event and no frame.
 """
 
 from __future__ import annotations
