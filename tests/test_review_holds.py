@@ -155,7 +155,7 @@ def test_the_timeline_draws_holds_commands_and_a_motion_through_a_hold_at_its_le
     assert go.show_s == pytest.approx(0.1, abs=0.01)
     assert [m.kind for m in timeline.stands] == ["paused", "held", "held"]
     lines = list(render_text(timeline, 100))
-    row = next(line for line in lines if "holds, commands" in line)
+    row = next(line for line in lines if "holds/cmds" in line)
     assert "~" in row and "^" in row and "s" in row
     assert any(line.strip().startswith("0.100 s  held 2.300 s at cue 1 'applause', go from key") for line in lines)
 

@@ -411,7 +411,8 @@ def run_replay(args: argparse.Namespace) -> int:
           f"{unmatched}; frames left up to {report.max_lag_ms:.1f} ms after their recorded time{cut}")
     lengths = report.recorded
     if lengths is not None and lengths.show_s is not None:
-        print(f"recorded show: {lengths.show_s:.3f} s on the show clock{stood_text(lengths)}")
+        stood = stood_text(lengths)
+        print(f"recorded show: {lengths.show_s:.3f} s on the show clock" + (f" ({stood})" if stood else ""))
     print(f"log: {report.log_path}")
     return code
 

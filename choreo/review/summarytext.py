@@ -64,7 +64,6 @@ def _render_run(summary: Summary) -> Iterable[str]:
 def _render_outcome(summary: Summary) -> Iterable[str]:
     """How the run ended, and what its steps came to."""
     duration = f"{summary.duration_s:.3f} s" if summary.duration_s is not None else "-"
-    duration += stood_text(summary.lengths)
     if summary.result:
         outcome = summary.result.get(Result.OUTCOME, "?")
         error = summary.result.get(Result.ERROR)
@@ -110,9 +109,9 @@ def _render_stands(summary: Summary) -> Iterable[str]:
     lengths = summary.lengths
     if lengths is None or not (lengths.holds or lengths.pauses):
         return
-    for number, stand in enumerate(summary.stands):
-        head = "holds    " if number == 0 else "         "
-        yield f"{head} {stand.stand.show_s:9.3f} s  {stand.text(summary.end_ns)}"
+    yield f"holds     {stood_text(lengths)}"
+    for stand in summary.stands:
+        yield f"  {stand.stand.show_s:9.3f} s  {stand.text(summary.end_ns)}"
     listed = len(summary.stands)
     if lengths.holds + lengths.pauses > listed:
         yield f"  ... and {lengths.holds + lengths.pauses - listed} more"

@@ -426,7 +426,7 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
             row[_cells(cue.drawn_at, cue.drawn_at, scale, width)[0]] = "v"
         yield _row("", "cues", "", "", "".join(row), figures)
     if timeline.stands or timeline.commands:
-        yield _row("", "holds, commands", "", "", _marks_row(timeline, scale, width), figures)
+        yield _row("", "holds/cmds", "", "", _marks_row(timeline, scale, width), figures)
     lane = object()
     for run in sorted(timeline.runs + timeline.unplayed, key=_lane_order(timeline)):
         if run.robot is not None and run.robot != lane:
@@ -452,10 +452,12 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
 def _head(timeline: Timeline, span: float, width: int) -> Iterator[str]:
     """The show's lengths, the scale, the legend."""
     outcome = f", {timeline.outcome}" if timeline.outcome else ""
-    yield (f"timeline of {timeline.show}: {timeline.end_s:.3f} s on the show clock"
-           f"{stood_text(timeline.lengths)}{outcome}")
-    stood = " (drawn with the holds and pauses in)" if timeline.stands else ""
-    yield f"one column = {span / width * 1000:.0f} ms{stood}"
+    yield f"timeline of {timeline.show}: {timeline.end_s:.3f} s on the show clock{outcome}"
+    stood = stood_text(timeline.lengths)
+    if stood:
+        yield stood
+    drawn = " (drawn with the holds and pauses in)" if timeline.stands else ""
+    yield f"one column = {span / width * 1000:.0f} ms{drawn}"
     yield "bars: '-' planned, '#' actual, '=' both, '!' late, ':' not played, 'v' cue"
     if timeline.stands or timeline.commands:
         yield "marks: '~' held or paused, '^' command, 'x' command refused, 's' cue skipped"
@@ -464,7 +466,7 @@ def _head(timeline: Timeline, span: float, width: int) -> Iterator[str]:
 
 
 def stood_text(lengths: Durations | None) -> str:
-    """` (held 4.6 s at 2 GO cues, paused 1.2 s; 9.851 s in all)`, or nothing: no hold, no pause."""
+    """`held 4.600 s at 2 GO cues, paused 1.200 s; 9.851 s in all`, or "": no hold, no pause."""
     if lengths is None or not (lengths.holds or lengths.pauses):
         return ""
     parts = []
@@ -473,7 +475,7 @@ def stood_text(lengths: Durations | None) -> str:
     if lengths.pauses:
         parts.append(f"paused {lengths.paused_s:.3f} s" + (f" ({lengths.pauses} pauses)" if lengths.pauses > 1 else ""))
     wall = f"; {lengths.wall_s:.3f} s in all" if lengths.wall_s is not None else ""
-    return f" ({', '.join(parts)}{wall})"
+    return f"{', '.join(parts)}{wall}"
 
 
 def _marks_row(timeline: Timeline, scale: float, width: int) -> str:
@@ -649,7 +651,8 @@ def _draw_run(ax: Any, run: MotionRun, y: int) -> None:  # ax: a matplotlib Axes
 
 
 def _png_title(timeline: Timeline) -> str:
-    title = f"{timeline.show}: {timeline.end_s:.2f} s{stood_text(timeline.lengths)}"
+    stood = stood_text(timeline.lengths)
+    title = f"{timeline.show}: {timeline.end_s:.2f} s" + (f" ({stood})" if stood else "")
     if timeline.outcome:
         title += f", {timeline.outcome}"
     if timeline.cut is not None:
