@@ -268,3 +268,16 @@ def test_samples_out_of_order_and_states_that_change_are_reviewed_and_counted(tm
     assert "1 out of order, passed over" in capsys.readouterr().out
     for review in REVIEWS:
         assert vmain(["log", review[0], str(log), *review[1:]]) == 0, review
+
+
+@pytest.mark.parametrize("source, held_s", [("machine", 2.0), ("music", 0.0)])
+def test_an_older_log_without_states_has_its_holds_on_the_machines_clock_only(tmp_path, source, held_s):
+    """Before samples said the clock's state, a hold shows where a sample falls behind the one
+    before it: on the machine's clock (which never drifts) that is a hold; the music never held."""
+    s = 10**9
+    samples = [(10**18, ClockRecord(0.0, 0, source)), (10**18 + s, ClockRecord(1.0, s, source)),
+               (10**18 + 4 * s, ClockRecord(2.0, 4 * s, source)), (10**18 + 5 * s, ClockRecord(3.0, 5 * s, source))]
+    summary = summarize(_clock_log(tmp_path / "old.mcap", samples))
+    assert summary.lengths is not None and summary.lengths.held_s == pytest.approx(held_s)
+    assert summary.clock is not None
+    assert summary.clock.drift_ms == pytest.approx(0.0 if held_s else -2000.0)  # the music: it drifted
