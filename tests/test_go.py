@@ -67,7 +67,10 @@ def test_the_machine_clock_holds_while_a_go_cue_waits(tmp_path):
     # the show time the GO cue went on from is where the show reached it, not 0.4 s later
     assert steps["applause"]["actual_s"] < 0.1 and steps["applause"]["go"] is True
     # the cue at 0.5 s counts on the held clock: on time, 0.5 s of show after the start, not late
-    assert steps["after"]["actual_s"] == pytest.approx(0.5, abs=0.02)  # generous: a loaded machine
+    # (its step starts its lead early: the lead grows with the replies' time on a loaded machine)
+    after = next(m for m in log.topic("/choreo/step") if m["event"] == "end" and m.get("label") == "after")
+    assert started_on_cue(log.topic("/choreo/step"), after)
+    assert steps["after"]["actual_s"] == pytest.approx(0.5 - after["lead_ms"] / 1e3, abs=0.02)
     assert steps["after"]["late_ms"] < 20
     go = [m for m in log.topic("/choreo/command") if m["command"] == "go"]
     assert go == [{"command": "go", "source": "test", "status": "ok", "message": "GO: cue 1 'applause'",
@@ -331,7 +334,8 @@ def test_the_reviews_place_frames_on_the_held_clock(tmp_path, capsys):
     late_s = third["start_s"] - 0.5
     assert main(["log", "frames", str(run.log_path), "--kind", "play"]) == 0
     plays = [line for line in capsys.readouterr().out.splitlines() if "CALL" in line]
-    assert len(plays) == 3 and 0.48 < float(plays[2].split()[0]) < 0.53 + late_s
+    lead_s = third["lead_ms"] / 1e3  # how early its first frame was due: more on a loaded machine
+    assert len(plays) == 3 and 0.48 - lead_s < float(plays[2].split()[0]) < 0.53 + late_s
     assert main(["log", "summary", str(run.log_path), "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["clock"]["samples"] >= 3
