@@ -224,9 +224,11 @@ def test_each_key_is_a_command(tmp_path):
 def test_j_types_a_cue_and_enter_jumps_there(tmp_path):
     console, commands = keyed(tmp_path)
     press(console, "j", "1", "2", ".", "5")
-    assert console.screen().prompt is not None and "jump to cue: 12.5_" in (console.screen().prompt or "")
+    assert console.screen().prompt is not None and (console.screen().prompt or "").endswith(": 12.5_")
     assert commands.given == []  # nothing while typing
-    press(console, "enter")
+    press(console, *["9"] * 30)  # a long one: its end, being typed, is what stays at 60 columns
+    assert drawn(console, 60)[-1].endswith("99999_") and drawn(console, 60)[-1].startswith("jump to cue")
+    press(console, *["backspace"] * 30, "enter")
     assert commands.given == [("playhead", "12.5")] and console.screen().prompt is None
     press(console, "j", "b", "space", "o", "x", "backspace", "w", "enter")  # Space is typed, Backspace erases
     press(console, "j", "q", "s", "p", "up", "ctrl-u", "3", "enter")  # q, s, p are letters; Ctrl-U clears

@@ -127,7 +127,7 @@ def test_j_and_a_number_or_a_label_then_enter_jumps_the_playhead(tmp_path, pane)
     run: Pane = pane(THREE_GOS)
     run.wait_for("GO fires cue 1 'one'")
     run.keys("j", "3")
-    run.wait_for("jump to cue: 3_")
+    run.wait_for("cancels): 3_")
     run.keys("Enter")
     screen = run.wait_for("next GO: cue 3 'three' (not reached yet)")
     assert any(line.startswith("> 3 ") for line in screen.splitlines()), screen

@@ -2,9 +2,11 @@
 playhead (the cue GO fires next), how the robots and their links are doing, and the operator's
 keys (GO, playhead, skip, jump, pause, panic, stop).
 
-It is a listener like the others (the run's steps and log lines, the operator's commands, each
-link's frames and replies) and keeps only what it draws; the commands go through `Live`, so a
-key is answered exactly as an OSC message would be, and the log records it the same way.
+It is a listener like the others (the run's log lines, the operator's commands) and keeps only
+what it draws; where each robot is and how its link does it reads from the run's `ShowStatus`
+(the record `/choreo/status` reads too), the cue list, each cue's state and the playhead from
+`Live`. The keys' commands go through `Live` as well, so a key is answered exactly as an OSC
+message would be, and the log records it the same way.
 
 Two things it must never do. Delay the show: the runners call its listener methods on their
 own path, so those only note what happened under a short lock; drawing happens in its own
@@ -56,7 +58,7 @@ MAX_TYPED = 40  # characters a cue reference typed after `j` may have
 NAMES = 2  # robots named on a line they share (`left, right +3`)
 
 QUESTION = "stop the show? y/n"
-JUMP = "jump to cue: {typed}_  (number or label, Enter; empty Enter cancels)"
+JUMP = "jump to cue (number or label, Enter; Enter alone cancels): {typed}_"  # what is typed last: a cut keeps it
 STYLES = {ERROR: "bold red", WARNING: "yellow", INFO: ""}
 
 

@@ -1,5 +1,6 @@
-"""What the live console draws: the screen as plain records (`Screen`, `Row`, `Note`), and
-`render`, which lays them out with rich to any width from 60 columns.
+"""What the live console draws: the screen as plain records (`Screen`, `CueLine`, `Row`,
+`Note`), and `render`, which lays them out with rich to any width from 60 columns and, given the
+terminal's height, to its lines (8 robots and a cue list fit 80x24).
 
 Apart from `console` (which keeps the run's state, chooses when to draw and reads the keys):
 a screen is a value, so what is drawn can be tested, and changed, without a run or a terminal.
