@@ -6,9 +6,9 @@ sleeps until just before a due time and spins the rest, so a cue's first byte le
 millisecond of it. It reports each step's start and end, late steps and retried frames to its
 listeners (the recorder, the progress display) and sends nothing the show did not ask for.
 
-Live (`choreo.live.controls`), before a step starts it waits while the show is paused (a step
-under way finishes: a play sequence is never cut), and a cue the operator skipped is passed
-where the robot is, with one `skip` event and no frame.
+Under the live controls (`choreo.live.controls`) it waits, before a step starts, while the show
+is paused (a step under way finishes: a play sequence is never cut), and it passes a cue the
+operator skipped where the robot is, with one `skip` event and no frame.
 """
 
 from __future__ import annotations
@@ -206,8 +206,8 @@ class Runner:
 
         A cued play goes out early by its lead, so that its start frame is written on the cue,
         or (a cue the show has overrun) when the step before ends: a `wait:` before a cued play
-        ends its sleep that much early for it (`following`), so a cue on the very end of a wait
-        is still met."""
+        ends its sleep that much early for it (`_run_step`'s `following`), so a cue on the very
+        end of a wait is still met."""
         if self._skipping(step):
             return None
         if step.go:
