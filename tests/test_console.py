@@ -248,8 +248,8 @@ class Commands:
         self.paused = False
         self.labels: list[str | None] = []
 
-    def cue_state(self, cue) -> str:  # type: ignore[no-untyped-def]
-        return "ahead"
+    def cue_states(self) -> dict:
+        return {}
 
     def command(self, command: Command):  # type: ignore[no-untyped-def]
         assert command.source == "key"

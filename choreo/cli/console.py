@@ -28,7 +28,6 @@ import termios
 import threading
 from collections import deque
 from contextlib import suppress
-from collections.abc import Callable
 from typing import TextIO, cast
 
 from rich.console import Console as RichConsole
@@ -381,7 +380,7 @@ class Console:
         waiting = [] if stopping else self.live.waiting  # a stopped show's GO cues wait for nothing
         show_s = self._show_s()
         robots = self.status.robots()
-        states = self._states()
+        states = self.live.cue_states()  # under the controls' lock once (the runners share it)
         head = None if stopping else self.live.playhead
         window, at = self._window(head, states)
         groups = self._groups(waiting)
@@ -390,17 +389,14 @@ class Console:
         waits = tuple(f"{_names(names)} wait for GO: {name}" for names, name in groups if len(names) > 1)
         cue = "next cue: none, the show is stopping" if stopping else self._cue_line(show_s, states)
         go, go_waiting = self._go_line(head, states, stopping)
-        lines = tuple(self._cue_line_of(c, states.get(c), show_s) for c in window)
+        lines = tuple(self._cue_line_of(c, states.get(c, "done"), show_s) for c in window)
         with self._lock:
             prompt = QUESTION if self._asking else None if self._typed is None else JUMP.format(typed=self._typed)
             return Screen(self.session.settings.show.name, None if show_s is None else round(show_s, 1),
                           self._clock_text(stopping), cue, go, go_waiting, rows, tuple(self._notes), prompt,
                           self._final_line() if self._closing else LEGEND, self._bar(show_s), lines, at, waits)
 
-    def _states(self) -> _States:
-        return _States(self.live.cue_state)
-
-    def _window(self, head: Cue | None, states: _States) -> tuple[tuple[Cue, ...], int | None]:
+    def _window(self, head: Cue | None, states: dict[Cue, str]) -> tuple[tuple[Cue, ...], int | None]:
         """CUE_WINDOW cues from the one before the first not over yet (the last ones once all
         are), moved on if the playhead would fall past it; and the playhead's place in them."""
         cues = self._cues.cues
@@ -442,7 +438,7 @@ class Console:
         held = isinstance(show, HoldingShowClock) and show.held and not stopping
         return f"{clock} clock" + (", held for GO" if held else "")
 
-    def _cue_line(self, show_s: float | None, states: _States) -> str:
+    def _cue_line(self, show_s: float | None, states: dict[Cue, str]) -> str:
         """The next timed cue ahead, and how long until it."""
         cue = next((cue for cue in self._cues if not cue.go and cue.at is not None and states.get(cue) == "ahead"),
                    None)
@@ -457,7 +453,7 @@ class Console:
         left = f"in {at - show_s:.1f} s" if at >= show_s else "due now"
         return f"next cue {left}: {who}{cue.name} {where}"
 
-    def _go_line(self, head: Cue | None, states: _States, stopping: bool) -> tuple[str, bool]:
+    def _go_line(self, head: Cue | None, states: dict[Cue, str], stopping: bool) -> tuple[str, bool]:
         """What GO does now: fire the cue under the playhead, or why not; before a show run
         with --wait-start, the start it waits for; paused, how to go on."""
         if not self.live.started and not stopping:
@@ -511,17 +507,3 @@ class Console:
             return f"the show was {stop.reason}; keys off"
         return "the run is over; keys off"
 
-
-class _States:
-    """Cues' states as the live controls tell them, each asked once a screen and only if
-    needed (each is a look under the controls' lock, which the runners share)."""
-
-    def __init__(self, ask: Callable[[Cue], str]) -> None:
-        self._ask = ask
-        self._known: dict[Cue, str] = {}
-
-    def get(self, cue: Cue) -> str:
-        state = self._known.get(cue)
-        if state is None:
-            state = self._known[cue] = self._ask(cue)
-        return state
