@@ -193,3 +193,45 @@ def test_eight_robots_and_the_cue_list_fit_a_24_line_terminal(tmp_path, pane, wi
     assert any("GO: cue 1 'cue-0-of-the-show'" in line for line in console)  # and a message still fits
     run.keys("Escape")
     assert run.exit_code() == 130
+
+
+DUET = """\
+version: 1
+name: duet
+robots:
+  left: {}
+  right: {}
+steps:
+  - play: 1
+    at: go
+    label: start
+  - wait: 0.6
+  - play: 2
+    at: go
+    label: middle
+  - play: 3
+    at: go
+    label: never
+  - play: 4
+"""
+
+
+@needs_tmux
+def test_skip_and_jump_with_two_robots_on_shared_cues(tmp_path, pane):  # noqa: F811 - the fixture
+    run: Pane = pane(DUET)
+    run.wait_for("left, right wait for GO: cue 1 'start'")  # one line for both
+    run.keys("j", "n", "e", "v", "e", "r", "Enter")
+    run.wait_for("next GO: cue 3 'never' (not reached yet)")
+    run.keys("s")  # both robots will pass it
+    run.wait_for("skipped: cue 3 'never' will not run")
+    run.wait_for("GO fires cue 1 'start'")  # the playhead is back on the cue waiting
+    run.keys("Space")
+    run.wait_for("left, right wait for GO: cue 2 'middle'")  # 0.6 s of show later: past the GO lockout
+    run.keys("Enter")
+    assert run.exit_code() == 0
+    assert commands_in(tmp_path) == [("playhead", "key", "ok"), ("skip", "key", "ok"), ("go", "key", "ok"),
+                                     ("go", "key", "ok")]
+    for robot in ("left", "right"):
+        assert played(tmp_path, robot) == [1, 2, 4]  # cue 3's motion never played
+        events = [(m["index"], m["event"]) for m in read_log(tmp_path / "run.mcap").topic(f"/choreo/{robot}/step")]
+        assert (3, "skip") in events and (3, "start") not in events
