@@ -4,8 +4,8 @@ step it releases.
 `choreo run` runs as an operator runs it, in its own process with the console up: its stdin and
 stderr on a pseudo-terminal this benchmark opens (80x24), its port a `choreo sim` pseudo-terminal.
 The show is a row of plays, each waiting for GO (`at: go`, labelled cue-N). For each, once the
-console shows "GO waits: 'cue-N'" (and at least Live's 0.5 s lockout after the last press, plus
-a few pseudo-random milliseconds so that presses do not fall in step with anything), a space is
+console shows "GO fires cue M 'cue-N': press Space or Enter" (and at least Live's 0.5 s lockout
+after the last press, plus a few pseudo-random milliseconds so that presses do not fall in step with anything), a space is
 written to the terminal and the monotonic clock read just before that write.
 
 The first frame's time is the log's: the `/rcb4/tx` log time of the first frame tagged with the
@@ -143,7 +143,7 @@ def presses_ms(cues: int, seed: int = 14) -> list[float]:
         pressed: list[int] = []
         try:
             for i in range(cues):
-                terminal.wait_for(f"GO waits: 'cue-{i}'".encode())
+                terminal.wait_for(f"'cue-{i}': press Space".encode())  # GO fires cue N 'cue-i': press ...
                 ready = (pressed[-1] / 1e9 + LOCKOUT_S) if pressed else 0.0
                 time.sleep(max(0.0, ready - time.monotonic()) + rng.uniform(*JITTER_S))
                 pressed.append(terminal.press(b" "))
