@@ -5,8 +5,9 @@ step it releases.
 stderr on a pseudo-terminal this benchmark opens (80x24), its port a `choreo sim` pseudo-terminal.
 The show is a row of plays, each waiting for GO (`at: go`, labelled cue-N). For each, once the
 console shows "GO fires cue M 'cue-N': press Space or Enter" (and at least Live's 0.5 s lockout
-after the last press, plus a few pseudo-random milliseconds so that presses do not fall in step with anything), a space is
-written to the terminal and the monotonic clock read just before that write.
+after the last press, plus a few pseudo-random milliseconds so that presses do not fall in step
+with anything), a space is written to the terminal and the monotonic clock read just before that
+write.
 
 The first frame's time is the log's: the `/rcb4/tx` log time of the first frame tagged with the
 step, which the link takes just before handing the frame to the port's write call. It is a
