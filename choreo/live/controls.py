@@ -46,6 +46,7 @@ RESUME_FIRST = "paused: resume first (p or /choreo/resume)"
 
 # a cue's state (`Live.cue_state`)
 AHEAD, WAITING, ACTIVE, DONE, SKIPPED = "ahead", "waiting", "running", "done", "skipped"
+NOT_STARTED = "nothing waits for GO now (the show waits for its start: /choreo/start)"
 
 
 class _Stand(NamedTuple):
@@ -560,13 +561,21 @@ class Live:
 
     def _why_not(self, cue: Cue | None) -> str:
         """Why a GO fires nothing: the playhead's cue is not reached yet, or timed (the lock is held)."""
+        if not self._started:
+            return NOT_STARTED
         if cue is None:
-            return "nothing waits for GO now" + ("" if self._started else
-                                                  " (the show waits for its start: /choreo/start)")
+            return "nothing waits for GO now"
+        return self._not_waiting(cue)
+
+    def _not_waiting(self, cue: Cue) -> str:
+        """Why `cue` takes no GO now, in the operator's words (the lock is held)."""
+        state = self._state_of(cue)
         if not cue.go:
             return f"{cue.name} is a timed cue (at {cue.planned_s:.3f} s): nothing to GO; move the playhead"
-        if self._state_of(cue) == SKIPPED:
+        if state == SKIPPED:
             return f"{cue.name} is skipped (skip it again to undo)"
+        if state in (ACTIVE, DONE):
+            return f"{cue.name} has had its GO already"
         others = ", ".join(self._cue_of(w).name for w in self._in_order())
         waits = f"; waiting: {others} (move the playhead to it)" if others else ""
         return f"nothing waits for GO now: {cue.name} is not reached yet (planned at {cue.planned_s:.3f} s){waits}"
@@ -580,8 +589,8 @@ class Live:
                 return found
             waiting = self._waiting_for(found)
             if waiting is None:
-                at = ", ".join(self._cue_of(w).name for w in self._in_order()) or "no cue"
-                return Answer("error", f"{found.name} is not waiting for GO (waiting: {at})", self._data(found))
+                why = self._not_waiting(found) if self._started else NOT_STARTED
+                return Answer("error", why, self._data(found))
             self._last_go = self._now()
             self._release(waiting)
         self._clock_changed()
