@@ -150,8 +150,9 @@ def test_a_cues_go_by_number_or_label(tmp_path):
     live, cues, settings = live_of(tmp_path)
     encore = Waiter(live, settings, 3)
     wrong = say(live, "cue_go", "1")
-    assert not wrong.ok and wrong.message == ("nothing waits for GO now: cue 1 'bow' is not reached yet (planned at 0.000 s); "
-                                        "waiting: cue 3 'encore' (move the playhead to it)")
+    assert not wrong.ok
+    assert wrong.message == ("nothing waits for GO now: cue 1 'bow' is not reached yet (planned at 0.000 s); "
+                             "waiting: cue 3 'encore' (move the playhead to it)")
     assert say(live, "cue_go", "3").ok and encore.gone()  # by number
     finale = Waiter(live, settings, 4)
     assert say(live, "cue_go", "a/b finale").ok and finale.gone()  # by label, a slash in it
