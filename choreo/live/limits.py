@@ -23,10 +23,15 @@ whose address may be forged. So:
 - the questions (`/choreo/status`, `/choreo/thump`) are answered within `queries_per_sender`
   of their own, not the commands' nor the replies' (a desk polling status ten times a second
   must not take the answer to its GO); they carry nothing out and are not logged one by one,
-  only counted (a log line each at a desk's polling rate would fill the disk);
+  only counted (a log line each at a desk's polling rate would fill the disk); all senders'
+  questions together are answered within `queries_total` (each answer is sent to an address
+  that may be forged: a status reply is kilobytes for a question of 24 bytes), and a status
+  reply over UDP is at most `status_datagram` bytes (cut, and saying so, past it);
 - at most `update_subscribers` senders get the show's notifications at once (`/choreo/updates
   1`: each one multiplies what the show sends), each until `update_expire_s` without a message
-  from it;
+  from it; a UDP subscriber (its address may be forged: the notifications would go to a victim)
+  is sent at most `update_bytes` of them, the rest dropped, so that one forged datagram costs at
+  most its burst plus its rate for `update_expire_s` (about 1 MB), four of them at once;
 - a command that is taken (`ok`) is always logged and shown; refused and ignored ones are, one
   by one, only within `reported`: the rest are counted, and every `summary_every_s` one
   `unlogged` record (the log, the terminal) carries their counts, by command, so the log's
@@ -69,8 +74,11 @@ class Limits:
     senders_tracked: int = 256  # senders with a budget of their own; beyond, new ones share one
     notify_targets: int = 8  # --osc-notify given at most this many times
     queries_per_sender: Rate = Rate(20, 10.0)  # /choreo/status and /thump answered for one sender
+    queries_total: Rate = Rate(40, 20.0)  # ... and for all senders together (each reply may go to a forged address)
+    status_datagram: int = 16384  # bytes of a /choreo/status reply over UDP at most (robots left out past it)
     update_subscribers: int = 4  # senders subscribed to the notifications (/choreo/updates 1) at once
     update_expire_s: float = 61.0  # a subscription ends after this long without a message from it (QLab's)
+    update_bytes: Rate = Rate(65536, 16384.0)  # bytes of notifications sent to one UDP subscriber; the rest dropped
 
 
 LIMITS = Limits()
@@ -180,6 +188,7 @@ class SenderLimits:
         self._replies = Budgets(limits.replies_per_sender, limits.senders_tracked, now)
         self._refusals = Budget.of(limits.refusals, now)
         self._queries = Budgets(limits.queries_per_sender, limits.senders_tracked, now)
+        self._queries_total = Budget.of(limits.queries_total, now)
 
     def may_read(self, host: str, allowed: bool, tokens: int = 1) -> bool:
         """May a packet from `host` be read now (`tokens`: what reading it costs, a big one
@@ -205,8 +214,8 @@ class SenderLimits:
 
     def may_query(self, host: str) -> bool:
         """May a question from `host` (status, thump) be answered now? A budget apart from the
-        commands' and replies': polling spends neither."""
-        return self._queries.take(host)
+        commands' and replies': polling spends neither. Its own budget first, then all senders'."""
+        return self._queries.take(host) and self._queries_total.take()
 
     def may_answer_refusal(self) -> bool:
         """A reply to a sender not allowed (shared by all of them: their addresses are forged

@@ -20,7 +20,8 @@ such as `%00` are refused with a reply that says how to escape):
     /choreo/start               start a show run with --wait-start
     /choreo/stop                stop: the exchange in flight, then the abort motion
     /choreo/panic               no more show frames: stop frames and every robot's abort motion
-    /choreo/status              a question: the reply's data is the show's state (`Live.status`)
+    /choreo/status              a question: the reply's data is the show's state (`Live.status`;
+                                over UDP cut to `Limits.status_datagram` bytes, saying so)
     /choreo/thump               a heartbeat: answered at once (data: whether updates go to you)
     /choreo/updates 1|0         the notifications to you too (1), or no longer (0)
 
@@ -31,15 +32,19 @@ own, not its commands nor its replies (`choreo.live.limits`). `/choreo/updates 1
 sender, QLab's way: a UDP sender at its address and port, a TCP sender over its own connection
 (framed as it frames), to the notifications the `--osc-notify` targets get, sent from the
 notifier's thread (`choreo.live.oscnotify`). At most `Limits.update_subscribers` at once (one
-more is refused, told why); each ends after `Limits.update_expire_s` without a message from it
-(any message renews it: `/choreo/thump` is the usual), at `/choreo/updates 0`, or when its TCP
-connection closes. A sender whose address is our own port is refused (it would loop). Subscribing
-and its end are logged as the command `updates`.
+more is refused, told why, but a TCP sender, whose address its handshake proves, takes the place
+of the UDP subscriber least lately heard, whose address may be forged); a UDP subscriber is sent
+at most `Limits.update_bytes` of them (a forged one's victim gets a bounded share). Each ends
+after `Limits.update_expire_s` without a message from it (any message renews it:
+`/choreo/thump` is the usual), at `/choreo/updates 0`, or when its TCP connection closes. A
+sender whose address is our own port is refused (it would loop). Subscribing and its end are
+logged as the command `updates`.
 
 An unknown address is answered with the command meant when it differs from one of ours only by
-case, a missing `/choreo` or a trailing slash (`/go`, `/cue/1/go`); otherwise only an address
-that changes nothing on stage is suggested (`/ping` and `/heartbeat`: `/choreo/thump`), never a
-GO, a panic or another command with an effect: a typo answered with a suggestion is typed again.
+ASCII case (Unicode's folding would take `ſtop`, a long s, for `stop`), a missing `/choreo` or a
+trailing slash (`/go`, `/cue/1/go`); otherwise only an address that changes nothing on stage is
+suggested (`/ping` and `/heartbeat`: `/choreo/thump`), never a GO, a panic or another command
+with an effect: a typo answered with a suggestion is typed again.
 
 Packets are read by choreo's own bounded decoder (`choreo.live.oscwire`), and the sockets served by
 `choreo.live.oscnet` (connection caps, timeouts; the sizes and counts are `choreo.live.osclimits`): a
@@ -74,7 +79,9 @@ from __future__ import annotations
 
 import ipaddress
 import json
+import math
 import socket
+import string
 import time
 import unicodedata
 import urllib.parse
@@ -115,6 +122,7 @@ DICTIONARY = (*COMMANDS, f"{PLAYHEAD_PREFIX}CUE", f"{CUE_PREFIX}CUE{CUE_SUFFIX}"
 KNOWN = "go, panic, start, stop, pause, resume, skip, playhead/next|previous|CUE, cue/CUE/go, status, thump, updates"
 NOTIFY = f"{ROOT}/notify"
 PATTERN_CHARS = frozenset("*?[]{}")
+ASCII_LOWER = str.maketrans(string.ascii_uppercase, string.ascii_lowercase)
 HEX = frozenset("0123456789abcdefABCDEF")
 ESCAPING = ("a cue's number or label goes percent-escaped, as in a URL: %20 a space, %2F a slash, %25 a "
             "percent sign, other bytes as UTF-8 (/choreo/cue/big%20bow/go)")
@@ -123,6 +131,7 @@ ECHO = "echo"  # the command name a reply or notification sent to us is logged u
 LOST = "lost"  # the command name datagrams the system dropped before choreo read them are counted under
 UNREAD = "unread"  # the command name a packet over its sender's rate is counted under (not read)
 UNANSWERED = "unanswered"  # status or thump over the sender's budget of questions: counted, not answered
+UNSENT = "unsent updates"  # notifications over a UDP subscriber's budget of bytes: dropped, counted
 CUT = "…"  # ends an address cut to `Limits.address_shown` characters
 UPDATES_COMMAND = "updates"  # how the log names /choreo/updates (subscribing, ending, expiring)
 SENDERS_KNOWN = 4096  # senders whose verdict is remembered (an address's parse costs more than a refusal)
@@ -142,9 +151,71 @@ class Reply:
     data: dict = field(default_factory=dict)
 
     def encoded(self) -> bytes:
-        """The OSC message sent back: `/reply` + the address, the JSON its one argument."""
+        """The OSC message sent back: `/reply` + the address, the JSON its one argument (always
+        sent, always JSON: a text no UTF-8 can carry, a lone surrogate, goes \\u-escaped, and a
+        number JSON has no word for, NaN or infinity, as null)."""
         body = {"address": self.address, "status": self.status, "message": self.message, "data": self.data}
-        return encode_message("/reply" + self.address, [json.dumps(body, ensure_ascii=False)])
+        try:
+            return encode_message("/reply" + self.address, [json.dumps(body, ensure_ascii=False, allow_nan=False)])
+        except ValueError:  # UnicodeEncodeError is one, and so is json's refusal of a NaN
+            return encode_message("/reply" + self.address, [json.dumps(_finite(body))])
+
+
+def _finite(value: Any) -> Any:
+    """`value` with every float that is not finite (JSON has no NaN) as None."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {key: _finite(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(item) for item in value]
+    return value
+
+
+def status_reply(address: str, status: dict, most: int | None = None) -> Reply:
+    """The `/choreo/status` reply, in at most `most` bytes when given (over UDP: a reply larger
+    than its datagram could not be sent at all, and is sent to an address that may be forged):
+    whole if it fits; else the robots' rows left out from the last, then the cues waiting, then
+    the playhead, and `data["cut"]` and the message say what was left out."""
+    state = str(status.get("state", ""))
+    whole = Reply(address, "ok", state, status)
+    if most is None or len(whole.encoded()) <= most:
+        return whole
+    robots, waiting = list(status.get("robots", {}).items()), list(status.get("waiting", []))
+
+    def cut(kept_robots: int, kept_waiting: int, playhead: bool = True) -> Reply:
+        left = {"robots": len(robots) - kept_robots, "waiting": len(waiting) - kept_waiting, "playhead": not playhead}
+        data = {**status, "robots": dict(robots[:kept_robots]), "waiting": waiting[:kept_waiting], "cut": left}
+        if not playhead:
+            data["playhead"] = None
+        why = (f"{state} (cut to {most} bytes: {left['robots']} of {len(robots)} robots, {left['waiting']} of "
+               f"{len(waiting)} cues waiting{', the playhead' if not playhead else ''} left out; ask over TCP "
+               "for the whole status)")
+        return Reply(address, "ok", why, data)
+
+    def fits(reply: Reply) -> bool:
+        return len(reply.encoded()) <= most
+
+    kept = _most_kept(len(robots), lambda n: fits(cut(n, len(waiting))))
+    if kept is not None:
+        return cut(kept, len(waiting))
+    kept = _most_kept(len(waiting), lambda n: fits(cut(0, n)))
+    return cut(0, kept) if kept is not None else cut(0, 0, playhead=False)
+
+
+def _most_kept(count: int, fits: Callable[[int], bool]) -> int | None:
+    """The most of `count` items kept (the first ones) that `fits`, found in log2(count) tries,
+    or None: not even none."""
+    if not fits(0):
+        return None
+    low, high = 0, count  # fits(low); the answer is in low..high
+    while low < high:
+        middle = (low + high + 1) // 2
+        if fits(middle):
+            low = middle
+        else:
+            high = middle - 1
+    return low
 
 
 class BadAddress(ValueError):
@@ -266,7 +337,7 @@ def _loosely(address: str) -> str | None:
         if not candidate.startswith("/"):
             continue
         parts = candidate.split("/")[1:]
-        if parts[0].casefold() != ROOT[1:]:
+        if _fold(parts[0]) != ROOT[1:]:
             parts = [ROOT[1:], *parts]
         fixed = _address_of(parts)
         if fixed is not None and fixed != address and wanted_or_none(fixed) is not None:  # its cue read too
@@ -277,7 +348,7 @@ def _loosely(address: str) -> str | None:
 def _address_of(parts: list[str]) -> str | None:
     """`choreo/...` split at its slashes, matched to an address of ours ignoring the case of all
     but the cue, or None."""
-    folded = [part.casefold() for part in parts]
+    folded = [_fold(part) for part in parts]
     joined = "/".join(folded[1:])
     if folded[0] != ROOT[1:] or not joined:
         return None
@@ -288,6 +359,13 @@ def _address_of(parts: list[str]) -> str | None:
     if len(parts) == 4 and folded[1] == "cue" and folded[3] == "go" and parts[2]:
         return CUE_PREFIX + parts[2] + CUE_SUFFIX
     return None
+
+
+def _fold(text: str) -> str:
+    """`text` in lower case, but only its ASCII letters: Unicode's folding would take
+    `/choreo/ſtop` (a long s) or `/choreo/ﬆop` (a ligature) for `/choreo/stop`, and offer the
+    stop as a mere difference of case."""
+    return text.translate(ASCII_LOWER)
 
 
 def is_release(args: Sequence[Any]) -> bool:
@@ -348,7 +426,7 @@ class OscServer:
         self.notify = tuple(notify)
         self._notifier = Notifier(self.notify, self._deliver)
         self._limits = SenderLimits(limits, now)  # what a sender's messages may cost
-        self.subscriptions = Subscriptions(limits.update_subscribers, limits.update_expire_s, now)
+        self.subscriptions = Subscriptions(limits.update_subscribers, limits.update_expire_s, now, limits.update_bytes)
         self._closing = False
         self.wire_limits = wire_limits
         self.counts: Counter[str] = Counter()  # packets refused as malformed or unread, connections dropped
@@ -545,8 +623,8 @@ class OscServer:
             return None
         if name == "thump":
             return Reply(address, "ok", "thump", {"updates": origin.key in self.subscriptions})
-        status = self.live.status()
-        return Reply(address, "ok", str(status.get("state", "")), status)
+        most = self._limits.limits.status_datagram if origin.transport == "udp" else None
+        return status_reply(address, self.live.status(), most)
 
     def _updates(self, origin: Origin, address: str, args: tuple) -> Reply:
         """`/choreo/updates 1|0`: the sender gets the notifications (or no longer), logged as
@@ -586,12 +664,14 @@ class OscServer:
         subscribers, expired = self.subscriptions.current()
         self._tell_expired(expired)
         for subscriber in subscribers:
-            net.push(subscriber.transport, subscriber.sender, packet)
+            if subscriber.may_send(packet):
+                net.push(subscriber.transport, subscriber.sender, packet)
+            else:
+                self.counts[UNSENT] += 1
 
     def _tell_expired(self, expired: Sequence[Subscriber]) -> None:
         for subscriber in expired:
-            self._report(Command(UPDATES_COMMAND, subscriber.source),
-                         Answer("ok", f"updates off: no message for {self.subscriptions.expire_s:g} s"))
+            self._report(Command(UPDATES_COMMAND, subscriber.source), Answer("ok", f"updates off: {subscriber.ended}"))
 
     def _answer(self, budget: str, reply: Reply) -> Reply | None:
         """The reply, if the sender's reply budget allows (one packet can ask for many)."""

@@ -21,12 +21,12 @@ import socket
 import threading
 import time
 from collections.abc import Callable, Hashable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 
 from choreo.errors import UsageError
-from choreo.live.limits import LIMITS
+from choreo.live.limits import LIMITS, Budget, Rate
 from choreo.numtext import whole_number
 from choreo.live.oscwire import encode_message
 
@@ -179,6 +179,12 @@ class Subscriber:
     sender: tuple
     source: str
     heard: float
+    ended: str = ""  # why it ended, once it has (the log says)
+    budget: Budget | None = None  # the bytes it may be sent (a UDP subscriber's: its address may be forged)
+
+    def may_send(self, packet: bytes) -> bool:
+        """May this notification go to it (within its budget of bytes, if it has one)?"""
+        return self.budget is None or self.budget.take(len(packet))
 
 
 class Subscriptions:
@@ -187,9 +193,10 @@ class Subscriptions:
     adds and renews, the notifier's thread reads."""
 
     def __init__(self, most: int = LIMITS.update_subscribers, expire_s: float = LIMITS.update_expire_s,
-                 now: Callable[[], float] = time.monotonic) -> None:
+                 now: Callable[[], float] = time.monotonic, udp_bytes: Rate | None = LIMITS.update_bytes) -> None:
         self.most = most
         self.expire_s = expire_s
+        self.udp_bytes = udp_bytes  # what a UDP subscriber may be sent (None: unbounded)
         self._now = now
         self._lock = threading.Lock()
         self._subscribers: dict[Hashable, Subscriber] = {}
@@ -201,14 +208,25 @@ class Subscriptions:
         return key in self._subscribers
 
     def add(self, key: Hashable, transport: str, sender: tuple, source: str) -> tuple[bool, list[Subscriber]]:
-        """Subscribe (or renew); False when `most` others are subscribed. And the ones found
-        expired on the way (the caller tells of them)."""
+        """Subscribe (or renew); False when `most` others are subscribed, unless a TCP sender
+        (its address proven by its handshake) may take the place of the UDP subscriber least
+        lately heard: a UDP sender's address can be forged, and four forged subscriptions, each
+        renewed by a forged message a minute, must not keep a desk's TCP connection out. And
+        the ones ended on the way, each saying why (the caller tells of them)."""
         with self._lock:
-            expired = self._expire()
-            if key not in self._subscribers and len(self._subscribers) >= self.most:
-                return False, expired
-            self._subscribers[key] = Subscriber(transport, sender, source, self._now())
-            return True, expired
+            ended = self._expire()
+            known: Subscriber | None = self._subscribers.get(key)  # the table's own record
+            if known is not None:  # renewed: its budget goes on (a new one would refill it)
+                known.heard = self._now()
+                return True, ended
+            if len(self._subscribers) >= self.most:
+                displaced = self._displace() if transport == "tcp" else None
+                if displaced is None:
+                    return False, ended
+                ended.append(displaced)
+            budget = Budget.of(self.udp_bytes, self._now) if transport == "udp" and self.udp_bytes else None
+            self._subscribers[key] = Subscriber(transport, sender, source, self._now(), budget=budget)
+            return True, ended
 
     def remove(self, key: Hashable) -> Subscriber | None:
         with self._lock:
@@ -232,4 +250,16 @@ class Subscriptions:
         """The lock is held."""
         now = self._now()
         late = [key for key, subscriber in self._subscribers.items() if now - subscriber.heard >= self.expire_s]
-        return [self._subscribers.pop(key) for key in late]
+        return [self._ended(key, f"no message for {self.expire_s:g} s") for key in late]
+
+    def _displace(self) -> Subscriber | None:
+        """The lock is held. The UDP subscriber least lately heard, removed, or None."""
+        udp = [key for key, subscriber in self._subscribers.items() if subscriber.transport == "udp"]
+        if not udp:
+            return None
+        key = min(udp, key=lambda each: self._subscribers[each].heard)
+        return self._ended(key, "its place taken by a TCP subscriber (a UDP sender's address can be forged)")
+
+    def _ended(self, key: Hashable, why: str) -> Subscriber:
+        """The lock is held."""
+        return replace(self._subscribers.pop(key), ended=why)

@@ -12,7 +12,9 @@ plan's text and the reviews all read numbers from here, so a cue has one number 
 
 from __future__ import annotations
 
+import difflib
 import re
+import unicodedata
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from decimal import Decimal
@@ -94,14 +96,16 @@ class CueList:
             found = index.values.get(value)
         if found is not None:
             return found
-        named = index.labels.get(ref, ())
+        named = index.labels.get(unicodedata.normalize("NFC", ref), ())  # é typed or sent either way
         if len(named) > 1:
             numbers = ", ".join(cue.number for cue in named[:12]) + (", ..." if len(named) > 12 else "")
             raise CueNotFound(f"cue {_shown(ref)} is ambiguous: cues {numbers} are all labelled so; give the number")
         if named:
             return named[0]
         known = ", ".join(cue.number for cue in self.cues[:12]) + (", ..." if len(self.cues) > 12 else "")
-        raise CueNotFound(f"no cue {_shown(ref)} in this show (cues: {known or 'none'})")
+        near = _nearest(self.cues, ref)
+        meant = f": did you mean {near.name}?" if near is not None else ""
+        raise CueNotFound(f"no cue {_shown(ref)} in this show (cues: {known or 'none'}){meant}")
 
 
 @dataclass(frozen=True)
@@ -130,8 +134,31 @@ class _Index:
             if value is not None:
                 values.setdefault(value, cue)
             if cue.label is not None:
-                labels[cue.label] = (*labels.get(cue.label, ()), cue)
+                label = unicodedata.normalize("NFC", cue.label)
+                labels[label] = (*labels.get(label, ()), cue)
         return cls(positions, steps, numbers, values, labels)
+
+
+def _nearest(cues: tuple[Cue, ...], ref: str) -> Cue | None:
+    """The cue a mistyped reference most likely meant: the first whose label (in any case:
+    `curt`, `curtain`) or number (`12`, `12.5`) starts with it, else, in a list of at most
+    NEAREST_AMONG cues, the closest label's start (difflib). A typed or sent reference may be
+    anything: it is cut first, and a long list only looked through once."""
+    typed = ref.strip().casefold()[:NEAREST_CHARS]
+    if not typed:
+        return None
+    found = next((cue for cue in cues if (cue.label or "").casefold().startswith(typed)
+                  or cue.number.startswith(typed)), None)
+    if found is not None or len(cues) > NEAREST_AMONG:
+        return found
+    size = len(typed) + 8  # a label is compared by its start: the cost stays bounded by what was typed
+    labels = {cue.label.casefold()[:size]: cue for cue in reversed(cues) if cue.label}
+    close = difflib.get_close_matches(typed, list(labels), n=1, cutoff=0.6)
+    return labels[close[0]] if close else None
+
+
+NEAREST_AMONG = 100  # cues a mistyped reference is compared with (difflib) for a suggestion
+NEAREST_CHARS = 24  # of a reference, compared for a suggestion (a label longer than that is typed by number)
 
 
 def _shown(ref: str) -> str:

@@ -1,0 +1,292 @@
+"""OSC control attacked as a hostile network would: replies too big for a datagram, text JSON
+cannot carry, letters that fold to ASCII (a suggestion offered as "only a difference of case"),
+questions from many forged senders, forged subscriptions (their places and what they may be
+sent), bundles mixing commands, and cues written every odd way.
+
+Loopback only. Budgets run on a virtual clock that moves only when a test moves it; replies are
+waited for with a deadline, never a sleep that decides.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import pytest
+
+from choreo.clock import VirtualTime
+from choreo.live.limits import LIMITS, Limits, Rate
+from choreo.live.osc import COMMANDS, EFFECTS, Reply, OscServer, status_reply, suggestion, wanted
+from choreo.live.oscnotify import Subscriptions
+from choreo.live.oscwire import decode_packet, encode_bundle, encode_message
+from choreo.log.format import WARNING
+from runlog import wait_for
+from test_osc_dictionary import STATUS, Recording, ask, reply, told
+from test_osc_dictionary import peers, server  # noqa: F401 - fixtures
+from test_osc_limits import Peer
+
+TIMEOUT_S = 5.0
+
+
+@pytest.fixture
+def clock() -> VirtualTime:
+    return VirtualTime()
+
+
+@pytest.fixture
+def live(clock):  # type: ignore[no-untyped-def]
+    return Recording(clock)
+
+
+def strict_json(text: str) -> dict:
+    """JSON as any parser reads it: no NaN nor Infinity (Python's own json takes them)."""
+    def refuse(word: str) -> None:
+        raise ValueError(f"not JSON: {word}")
+    return json.loads(text, parse_constant=refuse)
+
+
+# -- status: a reply larger than a datagram, text JSON cannot carry ---------------------------------
+
+
+def many_robots(count: int) -> dict:
+    row = {"state": "running", "step": 3, "label": "é" * 200, "cue": "12.5", "doing": "play", "next": None}
+    return {**STATUS, "robots": {f"robot-{n:03d}-" + "x" * 60: {**row, "robot": str(n)} for n in range(count)}}
+
+
+class Big(Recording):
+    def __init__(self, clock: VirtualTime, status: dict) -> None:
+        super().__init__(clock)
+        self.said = status
+
+    def status(self) -> dict:
+        return self.said
+
+
+@pytest.mark.parametrize("transport", ["udp", "tcp"])
+def test_a_status_too_big_for_a_datagram_is_cut_saying_so_over_udp_and_whole_over_tcp(transport, clock):
+    """100 robots with long labels: 60 KB of status. Over UDP it was sent nowhere and said
+    nothing (sendto failed, quietly); now it is cut to `Limits.status_datagram` bytes, the
+    robots left out counted, the message saying to ask over TCP, where it comes whole."""
+    said = many_robots(100)
+    osc = OscServer(Big(clock, said), 0, now=clock.now)
+    osc.start()
+    peer = Peer(transport, osc.port)
+    try:
+        peer.send(encode_message("/choreo/status"))
+        peer.sock.settimeout(TIMEOUT_S)
+        packet = peer.sock.recv(65536) if transport == "udp" else _frame(peer)
+    finally:
+        peer.close()
+        osc.close()
+    address, body = reply(packet)
+    data = body["data"]
+    assert address == "/reply/choreo/status" and body["status"] == "ok"
+    if transport == "tcp":
+        assert data == said and body["message"] == "running"
+        return
+    assert len(packet) <= LIMITS.status_datagram < len(Reply("/choreo/status", "ok", "running", said).encoded())
+    kept = list(data["robots"])
+    assert 0 < len(kept) < 100 and kept == list(said["robots"])[:len(kept)]  # the first ones, whole
+    assert data["cut"] == {"robots": 100 - len(kept), "waiting": 0, "playhead": False}
+    assert body["message"] == (f"running (cut to {LIMITS.status_datagram} bytes: {100 - len(kept)} of 100 robots, "
+                               "0 of 0 cues waiting left out; ask over TCP for the whole status)")
+    assert len(Reply("/choreo/status", "ok", "", {**said, "robots": dict(list(said["robots"].items())[:len(kept) + 1])})
+               .encoded()) > LIMITS.status_datagram - 200  # as many as fit, not a few
+
+
+def _frame(peer: Peer) -> bytes:
+    while b"\xc0" not in peer._buffer.lstrip(b"\xc0"):
+        chunk = peer.sock.recv(65536)
+        assert chunk, "closed"
+        peer._buffer += chunk
+    frame, _, peer._buffer = peer._buffer.lstrip(b"\xc0").partition(b"\xc0")
+    return frame
+
+
+def test_a_status_cut_leaves_out_robots_then_the_cues_waiting_then_the_playhead():
+    cue = {"number": "1", "label": "a", "go": True, "planned_s": 1.0, "robots": [f"r{n}" * 30 for n in range(300)]}
+    waiting = [{**cue, "number": str(n), "reached_s": 1.0} for n in range(4)]
+    status = {**many_robots(5), "playhead": cue, "waiting": waiting}
+    for most in (60_000, 30_000, 2_000):
+        packet = status_reply("/choreo/status", status, most).encoded()
+        assert len(packet) <= most
+        data = strict_json(decoded_text(packet))["data"]
+        assert data["robots"] == {} and data["cut"]["robots"] == 5
+        assert len(data["waiting"]) + data["cut"]["waiting"] == 4
+        assert (data["playhead"] is None) == data["cut"]["playhead"]
+    assert reply(status_reply("/choreo/status", status, 2_000).encoded())[1]["data"]["cut"] == {
+        "robots": 5, "waiting": 4, "playhead": True}
+    assert status_reply("/choreo/status", status, None).data == status  # over TCP: whole
+
+
+def test_a_reply_is_always_sent_and_always_json():
+    """A lone surrogate (no UTF-8 for it) made encoding fail: no reply at all, a fault counted.
+    A NaN made Python write `NaN`, which no other JSON parser reads."""
+    for data in ({"label": "x\ud800y"}, {"show_s": float("nan")}, {"rows": [{"latency_ms": float("inf")}]}):
+        assert strict_json(decoded_text(Reply("/choreo/status", "ok", "running", data).encoded()))["status"] == "ok"
+    assert strict_json(decoded_text(Reply("/s", "ok", "", {"label": "x\ud800y"}).encoded()))["data"] == {
+        "label": "x\ud800y"}
+    assert strict_json(decoded_text(Reply("/s", "ok", "", {"a": [float("nan"), 1.5]}).encoded()))["data"] == {
+        "a": [None, 1.5]}
+    assert "été" in decoded_text(Reply("/s", "ok", "été").encoded())  # UTF-8 as it is when it can be
+
+
+def decoded_text(packet: bytes) -> str:
+    (message,) = decode_packet(packet).messages
+    return str(message.args[0])
+
+
+# -- suggestions: a letter that folds to ASCII is not a difference of case ---------------------------
+
+
+def ascii_lookalikes() -> dict[str, str]:
+    """Every non-ASCII character that Unicode's case mapping or folding turns into ASCII letters
+    (`ſ` s, `K` k, `ﬆ` st, ...): the ASCII it becomes."""
+    found = {}
+    for code in range(0x80, sys.maxunicode + 1):
+        char = chr(code)
+        for folded in (char.casefold(), char.lower(), char.upper()):
+            if folded.isascii() and folded.isalpha():
+                found[char] = folded.lower()
+    return found
+
+
+def test_a_letter_that_folds_to_ascii_never_reaches_a_command_with_an_effect():
+    """`/choreo/ſtop` (a long s) was offered `/choreo/stop` as a mere difference of case: a stop
+    for an address no operator meant. Every such letter, in every place of every address with
+    a stage effect and its upper-case spelling: nothing with an effect is offered."""
+    lookalikes = ascii_lookalikes()
+    assert {"ſ", "\u212a", "ﬆ"} <= set(lookalikes)  # a long s, the Kelvin sign, a ligature
+    bases = [a for a, name in COMMANDS.items() if name in EFFECTS] + ["/choreo/cue/1/go", "/go", "/cue/1/go"]
+    tried = 0
+    for base in bases:
+        for spelled in (base, base.upper()):
+            for char, ascii_text in lookalikes.items():
+                at = spelled.lower().find(ascii_text)
+                while at >= 0:
+                    address = spelled[:at] + char + spelled[at + len(ascii_text):]
+                    meant = suggestion(address)
+                    assert meant is None or wanted(meant).name not in EFFECTS, (address, meant)  # type: ignore[union-attr]
+                    tried += 1
+                    at = spelled.lower().find(ascii_text, at + 1)
+    assert tried >= 20
+    assert suggestion("/CHOREO/STOP") == "/choreo/stop"  # ASCII case still is case
+
+
+# -- questions from many senders ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("address", ["/choreo/status", "/choreo/thump"])
+def test_questions_from_many_forged_senders_are_answered_within_a_total(address, clock):
+    """Each sender had 20 answers of its own and nothing bounded them all: 256 addresses of an
+    allowed network, forged, each asking once a burst, had 256 status replies (kilobytes each)
+    sent to a victim among them for 24-byte questions. All senders' answers are bounded now."""
+    osc = OscServer(Recording(clock), 0, allow=["10.0.0.0/8"], now=clock.now)
+    question = encode_message(address)
+    answered = sum(bool(osc.packet("udp", (f"10.0.{n // 250}.{n % 250 + 1}", 53000), question))
+                   for n in range(200))
+    assert answered == LIMITS.queries_total.burst
+    assert osc.counts["unanswered"] == 200 - LIMITS.queries_total.burst
+    assert osc.packet("udp", ("10.9.9.9", 53000), encode_message("/choreo/go"))  # a command still is answered
+    clock.sleep(1.0)
+    assert sum(bool(osc.packet("udp", (f"10.1.0.{n + 1}", 53000), question)) for n in range(100)) == \
+        int(LIMITS.queries_total.per_s)
+
+
+# -- subscriptions: their places and what a UDP one may be sent ---------------------------------------
+
+
+def test_a_tcp_subscriber_takes_the_place_of_the_udp_one_least_lately_heard():
+    """Four forged UDP subscriptions, renewed by a forged message a minute, kept QLab's TCP
+    connection out for good. A TCP sender (proven by its handshake) now takes the place of the
+    UDP subscriber least lately heard; UDP never takes a TCP one's; all TCP: refused."""
+    clock = VirtualTime()
+    table = Subscriptions(most=3, expire_s=61.0, now=clock.now)
+    for n in range(3):
+        assert table.add(f"u{n}", "udp", ("10.0.0.1", n + 1), f"u{n}") == (True, [])
+        clock.sleep(1.0)
+    table.heard("u0")
+    taken, ended = table.add("t0", "tcp", ("127.0.0.1", 9), "t0")
+    assert taken and [(s.source, s.ended) for s in ended] == [
+        ("u1", "its place taken by a TCP subscriber (a UDP sender's address can be forged)")]
+    assert table.add("u1", "udp", ("10.0.0.1", 2), "u1") == (False, [])
+    assert table.add("t1", "tcp", ("127.0.0.1", 10), "t1")[0] and table.add("t2", "tcp", ("127.0.0.1", 11), "t2")[0]
+    assert table.add("t3", "tcp", ("127.0.0.1", 12), "t3") == (False, [])
+    assert sorted(s.source for s in table.current()[0]) == ["t0", "t1", "t2"]
+
+
+def test_over_the_network_a_tcp_subscriber_displaces_a_udp_one_and_the_log_says_so(live, clock, peers):  # noqa: F811
+    udp = [peers("udp") for _ in range(LIMITS.update_subscribers)]
+    for peer in udp:
+        assert ask(peer, "/choreo/updates", 1)[1]["status"] == "ok"
+    tcp = peers("tcp")
+    assert ask(tcp, "/choreo/updates", 1)[1]["status"] == "ok"
+    assert ("ok", "updates off: its place taken by a TCP subscriber (a UDP sender's address can be forged)") in \
+        [told_[1:] for told_ in told(live)]
+    assert ask(peers("udp"), "/choreo/updates", 1)[1]["status"] == "error"  # UDP never takes a place back
+
+
+def test_a_udp_subscriber_is_sent_within_its_budget_of_bytes_and_renewing_does_not_refill_it(clock):
+    """A forged `/choreo/updates 1` sent every notification to its victim for 61 s per datagram,
+    renewable by one more: what it may be sent is bounded (`Limits.update_bytes`), the rest
+    dropped and counted; renewing keeps the budget spent (a new one would refill it)."""
+    live = Recording(clock)
+    osc = OscServer(live, 0, now=clock.now, limits=Limits(update_bytes=Rate(1000, 1.0)))
+    osc.start()
+    live.subscribe(osc)
+    peer = Peer("udp", osc.port)
+    try:
+        assert ask(peer, "/choreo/updates", 1)[1]["status"] == "ok"  # its own notification spends some too
+        warning = encode_message("/choreo/notify/warning", ["x" * 300])
+        for _ in range(10):
+            osc.on_log(WARNING, "x" * 300)
+        warnings: list[bytes] = []
+
+        def all_told() -> bool:
+            warnings.extend(p for p in peer.replies(0.02) if p.startswith(b"/choreo/notify/warning"))
+            return len(warnings) + osc.counts["unsent updates"] == 10
+
+        assert wait_for(all_told, TIMEOUT_S, every=0.0)
+        assert 1 <= len(warnings) <= 1000 // len(warning) and set(warnings) == {warning}
+        unsent = osc.counts["unsent updates"]
+        assert ask(peer, "/choreo/updates", 1)[1]["status"] == "ok"  # renewed: nothing refilled
+        osc.on_log(WARNING, "x" * 300)
+        assert wait_for(lambda: osc.counts["unsent updates"] >= unsent + 1, TIMEOUT_S, every=0.005)
+        clock.sleep(1.0)  # the budget refills at its rate, 1 byte a second here
+        osc.on_log(WARNING, "x" * 300)
+        assert wait_for(lambda: osc.counts["unsent updates"] >= unsent + 2, TIMEOUT_S, every=0.005)
+    finally:
+        peer.close()
+        osc.close()
+
+
+def test_a_tcp_subscriber_is_not_bounded_by_the_udp_budget(clock):
+    """TCP's own flow control bounds a TCP subscriber (its address is proven): the byte budget
+    is the UDP subscribers' alone."""
+    table = Subscriptions(now=clock.now)
+    table.add("t", "tcp", ("127.0.0.1", 1), "t")
+    table.add("u", "udp", ("127.0.0.1", 2), "u")
+    (tcp, udp), _ = table.current()
+    assert tcp.budget is None and udp.budget is not None and udp.budget.burst == LIMITS.update_bytes.burst
+
+
+# -- bundles mixing commands ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("transport", ["udp", "tcp"])
+def test_a_bundle_is_carried_out_in_order_each_message_answered(transport, live, peers):  # noqa: F811
+    peer = peers(transport)
+    bundle = encode_bundle([encode_message("/choreo/pause"), encode_message("/choreo/go"),
+                            encode_message("/choreo/status"), encode_message("/choreo/bogus"),
+                            encode_message("/choreo/resume")])
+    peer.send(bundle)
+    got = [reply(packet) for packet in _replies(peer, 5)]
+    assert [address for address, _ in got] == ["/reply/choreo/pause", "/reply/choreo/go", "/reply/choreo/status",
+                                               "/reply/choreo/bogus", "/reply/choreo/resume"]
+    assert [c.name for c in live.given] == ["pause", "go", "resume"]  # the question carries nothing out
+
+
+def _replies(peer: Peer, count: int) -> list[bytes]:
+    got: list[bytes] = []
+    assert wait_for(lambda: got.extend(peer.replies(0.05)) or len(got) >= count, TIMEOUT_S, every=0.0)
+    return got
