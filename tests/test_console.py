@@ -112,7 +112,7 @@ def test_every_line_fits_the_width_and_the_key_parts_stay(tmp_path, width):
     text = "\n".join(lines)
     assert lines[0].startswith("a show for two robots") and "show not started · machine clock" in lines[0]
     assert "next GO: cue 1 'the-first-of" in text and "(not reached yet)" in text
-    assert any(line.startswith("alpha ") and "0: play 1" in line for line in lines)
+    assert any(line.startswith("alpha ") and "play 1" in line for line in lines)
     assert any(line.startswith("beta_with_a") for line in lines)
     assert lines[-1] == (LEGEND if width >= 80 else SHORT_LEGEND)
     assert any("…" in line for line in lines)  # cut, not wrapped
@@ -124,12 +124,12 @@ def test_the_screen_says_where_each_robot_is_and_what_comes(tmp_path):
     tell(console, live, started(steps[0]))
     screen = console.screen()
     (row,) = screen.rows
-    assert (row.robot, row.now, row.next) == ("robot", "0: play 1", "GO 1 'applause': play 2 (bow)")
+    assert (row.robot, row.now, row.next) == ("robot", "play 1", "GO cue 1 'applause': play 2 (bow)")
     assert screen.go == "next GO: cue 1 'applause' (not reached yet)" and not screen.go_waiting
     assert screen.cue == "next cue: cue 2 'after' at 0.5 s"  # the clock has not started
     assert screen.show_s is None and screen.clock == "machine clock"
     tell(console, live, started(steps[2], at_s=0.1))
-    assert console.screen().rows[0].next == "@0.5 s 3 'after': play 3"
+    assert console.screen().rows[0].next == "@0.5 s cue 2 'after': play 3"  # by its number in the cue list
     for step in (steps[1], steps[3]):
         tell(console, live, StepEvent(step, "start", 0.6, 0.6, 0))
         tell(console, live, StepEvent(step, "end", 0.6, 0.6, 0, outcome="ok"))
@@ -209,8 +209,9 @@ def test_a_waiting_go_cue_is_highlighted_and_commands_are_answered_on_screen(tmp
     assert screen.rows[0].now == "waits for GO: cue 1 'applause'"
     live.command(Command("go", "osc udp 127.0.0.1:53001"))
     live.command(Command("go", "key"))
+    notes = [(note.text, note.aside) for note in console.screen().notes]
+    assert notes[0] == ("GO: cue 1 'applause'", "osc udp 127.0.0.1:53001")  # who sent it: said after, cut first
     notes = [note.text for note in console.screen().notes]
-    assert notes[0] == "GO: cue 1 'applause' (osc udp 127.0.0.1:53001)"
     assert notes[1].startswith("GO ignored: 0.") and "a double press?" in notes[1]
 
 
@@ -250,6 +251,9 @@ class Commands:
 
     def cue_states(self) -> dict:
         return {}
+
+    def skipped(self, robot: str, index: int) -> bool:
+        return False
 
     def command(self, command: Command):  # type: ignore[no-untyped-def]
         assert command.source == "key"
@@ -323,7 +327,7 @@ def test_only_a_bare_esc_panics_every_other_sequence_is_read_whole_and_ignored(s
 
 def test_keys_and_bare_escs() -> None:
     parser = KeyParser()
-    assert parser.feed(b" \r\nqQyx") == ["space", "enter", "enter", "q", "q", "y", "x"]
+    assert parser.feed(b" \r\nqQyx") == ["space", "enter", "enter", "q", "Q", "y", "x"]  # as typed
     assert parser.feed(b"\x03\x00\xe3\x83\xad\t") == []  # control bytes and UTF-8 are not keys
     assert parser.feed(b"\x1b") == [] and parser.pending and parser.timeout() == ["escape"]
     assert parser.feed(b"\x1b\x1b") == [] and parser.timeout() == ["escape"]  # Esc twice in a hurry

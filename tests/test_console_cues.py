@@ -121,7 +121,7 @@ def test_hostile_labels_and_names_are_drawn_escaped(tmp_path):
     live.subscribe(console)
     live.command(Command("playhead", "osc udp 10.0.0.1:9", HOSTILE))
     text = "\n".join(drawn(console, 80))
-    assert "\x1b" not in text and "no cue 'evil" in text  # its outside text cut first, escaped
+    assert "\x1b" not in text and "no cue 'e" in text  # its outside text cut first, escaped
 
 
 def test_a_message_is_cut_in_its_quoted_outside_text_first_then_in_its_middle():

@@ -146,7 +146,7 @@ def test_j_and_a_number_or_a_label_then_enter_jumps_the_playhead(tmp_path, pane)
 @needs_tmux
 def test_p_pauses_p_resumes_and_esc_panics_while_paused(tmp_path, pane):  # noqa: F811 - the fixture
     run: Pane = pane(LONG_WAIT)
-    run.wait_for("1 'the-long-wait'")
+    run.wait_for("'the-long-wait': wait 60")
     run.keys("p")
     screen = run.wait_for("PAUSED: press p to resume")
     assert "machine clock, PAUSED" in screen

@@ -37,7 +37,19 @@ from rich.file_proxy import FileProxy
 from rich.live import Live as RichLive
 
 from choreo.cli.keys import PASTE_OFF, PASTE_ON, KeyReader, TerminalMode, in_foreground
-from choreo.cli.screen import LEGEND, NARROW, STATE_STYLES, WAITING_STYLE, CueLine, Note, Row, Screen, render
+from choreo.cli.screen import (
+    LEGEND,
+    NARROW,
+    PAUSED_LEGEND,
+    STATE_STYLES,
+    WAITING_STYLE,
+    CueLine,
+    Note,
+    Row,
+    Screen,
+    render,
+    seconds,
+)
 from choreo.cli.terminal import raw_stream, visible_stream
 from choreo.events import Command, CommandEvent, GoCue, StepEvent, Subscription
 from choreo.live.controls import HoldingShowClock, Live
@@ -62,9 +74,13 @@ STYLES = {ERROR: "bold red", WARNING: "yellow", INFO: ""}
 
 
 def _step_text(step: PlannedStep) -> str:
-    label = f" '{step.label}'" if step.label else ""
-    when = "GO " if step.go else f"@{step.at:g} s " if step.at is not None else ""
-    return f"{when}{step.index}{label}: {step.describe()}"
+    """`GO cue 1 'bow': play 1`, `@4 s cue 2: play 2`: a cue's step by its number in the cue
+    list (one number a cue on the whole screen); a step between cues by what it does."""
+    label = f"'{step.label}'" if step.label else ""
+    if step.cue is None:
+        return f"{label}: {step.describe()}" if label else step.describe()
+    when = "GO " if step.go else f"@{seconds(step.at, None)} s " if step.at is not None else ""
+    return f"{when}cue {step.cue}{' ' + label if label else ''}: {step.describe()}"
 
 
 def _names(robots: list[str] | tuple[str, ...]) -> str:
@@ -263,7 +279,7 @@ class Console:
         if show is None:
             return []
         windows = []
-        for robot in self.status.robots():
+        for robot in self.status.robots(self.live.skipped):
             for due in robot.due_s:
                 mono = show.mono_at(due)
                 windows.append((mono - QUIET_BEFORE_S, mono + QUIET_AFTER_S))
@@ -300,15 +316,17 @@ class Console:
             self._command_key(key)
 
     def _command_key(self, key: str) -> None:
-        """Space or Enter is GO (which also starts a show loaded with --wait-start)."""
-        names = {"up": "playhead_previous", "down": "playhead_next", "s": "skip", "S": "skip"}
+        """Space or Enter is GO (which also starts a show loaded with --wait-start); a letter
+        is its command in either case (Caps Lock on must not leave the operator without q)."""
+        key = key.lower() if len(key) == 1 else key
+        names = {"up": "playhead_previous", "down": "playhead_next", "s": "skip"}
         if key in ("space", "enter"):
             self.live.command(Command("go" if self.live.started else "start", "key"))
         elif key in names:
             self.live.command(Command(names[key], "key"))
-        elif key in ("p", "P"):
+        elif key == "p":
             self.live.command(Command("resume" if self.live.paused else "pause", "key"))
-        elif key in ("j", "J"):
+        elif key == "j":
             self._type("")
         elif key == "q":
             self._ask(True)
@@ -350,15 +368,14 @@ class Console:
 
     def on_command(self, event: CommandEvent) -> None:
         command, answer = event.command, event.answer
-        source = "" if command.source == "key" else f" ({command.source})"
-        text = f"{answer.message}{source}"
+        source = "" if command.source == "key" else command.source  # said after, cut first
         if answer.ok and command.name in ("go", "cue_go", "start", "resume", "skip"):
             with self._lock:  # the frames it releases go out now: no redraw in their way
                 self._quiet_until = self.session.clock.mono() + QUIET_AFTER_S
-        self._add(Note(text, "green" if answer.ok else "bold red", event.show_s))
+        self._add(Note(answer.message, "green" if answer.ok else "bold red", event.show_s, source))
 
     def on_play_out(self, end_s: float) -> None:
-        self._add(Note(f"the steps are done; the music plays to its end at {end_s:.1f} s", "",
+        self._add(Note(f"the steps are done; the music plays to its end at {seconds(end_s)} s", "",
                        self._show_s()))
 
     def _add(self, note: Note) -> None:
@@ -379,7 +396,7 @@ class Console:
         stopping = self.live.stop()
         waiting = [] if stopping else self.live.waiting  # a stopped show's GO cues wait for nothing
         show_s = self._show_s()
-        robots = self.status.robots()
+        robots = self.status.robots(self.live.skipped)  # a skipped cue is no robot's next step
         states = self.live.cue_states()  # under the controls' lock once (the runners share it)
         head = None if stopping else self.live.playhead
         window, at = self._window(head, states)
@@ -394,7 +411,7 @@ class Console:
             prompt = QUESTION if self._asking else None if self._typed is None else JUMP.format(typed=self._typed)
             return Screen(self.session.settings.show.name, None if show_s is None else round(show_s, 1),
                           self._clock_text(stopping), cue, go, go_waiting, rows, tuple(self._notes), prompt,
-                          self._final_line() if self._closing else LEGEND, self._bar(show_s), lines, at, waits)
+                          self._legend(), self._bar(show_s), lines, at, waits)
 
     def _window(self, head: Cue | None, states: dict[Cue, str]) -> tuple[tuple[Cue, ...], int | None]:
         """CUE_WINDOW cues from the one before the first not over yet (the last ones once all
@@ -446,11 +463,11 @@ class Console:
             return "next cue: none ahead"
         at = cue.at or 0.0
         who = f"{_names(cue.robots)}: " if self.session.settings.show.tracks else ""  # shared: everyone's cue
-        where = f"at {at:g} s" if cue.at_beat is None else \
-            f"at {at:g} s, bar {cue.at_beat[0]} beat {beat_text(cue.at_beat[1])}"  # as the show wrote it
+        where = f"at {seconds(at, None)} s" if cue.at_beat is None else \
+            f"at {seconds(at, None)} s, bar {cue.at_beat[0]} beat {beat_text(cue.at_beat[1])}"  # as the show wrote it
         if show_s is None:
             return f"next cue: {who}{cue.name} {where}"
-        left = f"in {at - show_s:.1f} s" if at >= show_s else "due now"
+        left = f"in {seconds(at - show_s)} s" if at >= show_s else "due now"
         return f"next cue {left}: {who}{cue.name} {where}"
 
     def _go_line(self, head: Cue | None, states: dict[Cue, str], stopping: bool) -> tuple[str, bool]:
@@ -472,7 +489,8 @@ class Console:
         """A cue's line in the list: who (`all` when every robot of several), when, its state."""
         names = list(self.session.settings.plans)
         robots = "" if len(names) == 1 else "all" if sorted(cue.robots) == sorted(names) else _names(cue.robots)
-        when = f"GO ~{cue.planned_s:.1f} s" if cue.go else f"@{cue.at if cue.at is not None else cue.planned_s:g} s"
+        when = f"GO ~{seconds(cue.planned_s)} s" if cue.go else \
+            f"@{seconds(cue.at if cue.at is not None else cue.planned_s, None)} s"
         tempo = self.session.settings.show.tempo
         if cue.at_beat is not None:
             when += f" {cue.at_beat[0]}.{beat_text(cue.at_beat[1])}"
@@ -481,7 +499,7 @@ class Console:
             when += f" {bar}.{int(beat)}"
         shown = state
         if state == "ahead" and not cue.go and cue.at is not None and show_s is not None and cue.at >= show_s:
-            shown = f"in {cue.at - show_s:.1f} s" if cue.at - show_s < 60 else state
+            shown = f"in {seconds(cue.at - show_s)} s" if cue.at - show_s < 60 else state
         return CueLine(cue.number, cue.label or "", robots, when, shown, STATE_STYLES.get(state, ""))
 
     def _row(self, robot: RobotRow, groups: list[tuple[tuple[str, ...], str]]) -> Row:
@@ -498,6 +516,12 @@ class Console:
         following = robot.next_step
         return Row(robot.robot, now, _step_text(following) if following is not None else "-", robot.latency_ms,
                    robot.retries, style, bool(robot.retries or robot.failed))
+
+    def _legend(self) -> str:
+        """The keys (p says what it does now), or how the show ended."""
+        if self._closing:
+            return self._final_line()
+        return PAUSED_LEGEND if self.live.paused else LEGEND
 
     def _final_line(self) -> str:
         stop = self.live.stop

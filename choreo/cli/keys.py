@@ -79,7 +79,7 @@ def in_foreground(fd: int) -> bool:
         return True  # not our controlling terminal: no job control to get in the way
 
 
-KEYS = {ord(" "): "space", ord("\r"): "enter", ord("\n"): "enter", ord("q"): "q", ord("Q"): "q",
+KEYS = {ord(" "): "space", ord("\r"): "enter", ord("\n"): "enter",
         0x7F: "backspace", 0x08: "backspace", 0x15: "ctrl-u"}  # Ctrl-U: clear what was typed
 ARROWS = {b"[A": "up", b"[B": "down", b"OA": "up", b"OB": "down"}  # CSI and SS3 (7- or 8-bit), no modifier
 ESC = 0x1B
@@ -96,8 +96,8 @@ PASTE_ON, PASTE_OFF = "\x1b[?2004h", "\x1b[?2004l"  # ask the terminal to bracke
 
 class KeyParser:
     """Key bytes in, key names out (`space`, `enter`, `escape`, `up`, `down`, `backspace`,
-    `ctrl-u`, `q`, or a printable character): no I/O and no clock, so every sequence a terminal
-    sends can be tried on it.
+    `ctrl-u`, or a printable character as typed: `Q` is `Q`, a cue's label may hold one): no
+    I/O and no clock, so every sequence a terminal sends can be tried on it.
 
     Esc also starts what other keys send: arrows and function keys (CSI `ESC [ ... final`, SS3
     `ESC O ...`), Alt+key (`ESC key`), Alt+arrow and Alt+F-key (`ESC ESC [ D`, `ESC ESC O P`),

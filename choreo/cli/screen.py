@@ -20,6 +20,9 @@ from choreo.textfit import char_width, display_width, fit, visible
 
 LEGEND = "Space/Enter GO · ↑↓ playhead · s skip · j jump · p pause · Esc panic · q stop"
 SHORT_LEGEND = "Spc GO ↑↓ cue s skip j jump p pause Esc panic q stop"  # below NARROW columns
+PAUSED_LEGEND = "Space/Enter GO · ↑↓ playhead · s skip · j jump · p RESUME · Esc panic · q stop"
+SHORT_PAUSED_LEGEND = "Spc GO ↑↓ cue s skip j jump p RESUME Esc panic q stop"
+SHORT = {LEGEND: SHORT_LEGEND, PAUSED_LEGEND: SHORT_PAUSED_LEGEND}  # each legend below NARROW columns
 WAITING_STYLE = "bold black on yellow"
 PLAYHEAD_STYLE = "bold reverse"
 STATE_STYLES = {"waiting": WAITING_STYLE, "running": "green", "done": "dim", "skipped": "dim strike"}
@@ -32,6 +35,7 @@ class Note:
     text: str
     style: str = ""
     show_s: float | None = None
+    aside: str = ""  # who sent the command (an OSC sender): said after it, and cut first
 
 
 @dataclass(frozen=True)
@@ -98,11 +102,12 @@ def render(screen: Screen, width: int = NARROW, height: int | None = None) -> Re
         parts.append(_robots(screen.rows, narrow))
     parts.append(Rule(style="dim"))
     notes = screen.notes[len(screen.notes) - notes_n:] if notes_n else ()
-    parts += [_line(_note_text(note), note.style, width) for note in notes] or [_line("(no messages yet)", "dim")]
+    parts += [_line(_note_text(note), note.style, width, note.aside) for note in notes] or \
+        [_line("(no messages yet)", "dim")]
     if screen.prompt is not None:
         parts.append(_line(screen.prompt, "bold reverse", width))
     else:
-        legend = SHORT_LEGEND if narrow and screen.legend == LEGEND else screen.legend
+        legend = SHORT.get(screen.legend, screen.legend) if narrow else screen.legend
         parts.append(_line(legend, "dim", width))
     return Group(*parts)
 
@@ -137,22 +142,81 @@ def _cue_table(screen: Screen, rows: int, narrow: bool) -> Table:
     return table
 
 
-def fit_message(text: str, width: int) -> str:
+def fit_message(text: str, width: int, aside: str = "") -> str:
     """`text` made visible and fitted to `width` columns, keeping what tells the operator what
-    to do: the quoted parts (a cue's label, a file's name: outside text, `'...'`) are cut
-    first, the longest first, down to MIN_QUOTED columns; if it is still too wide, its middle
-    goes (`…`), so both the start (what happened) and the end (what to do) stay."""
-    text = visible(text)
-    while display_width(text) > width:
-        quoted = [(display_width(m.group(1)), m) for m in QUOTED.finditer(text)]
-        longest = max(quoted, key=lambda q: q[0], default=None)
-        if longest is None or longest[0] <= MIN_QUOTED:
-            break
-        size, match = longest
-        keep = max(MIN_QUOTED, size - (display_width(text) - width))
-        text = text[:match.start(1)] + fit(match.group(1), keep) + text[match.end(1):]
+    to do: its tail (`_tail_at`: what follows a `: ` or `; `). `aside` (who sent a command)
+    is written after it in brackets and cut first: down to MIN_QUOTED columns, then left out.
+    Then the outside text (a cue's label, a file's name, an OSC address: `'...'`, `/...`) is
+    cut, the longest first: before the tail to MIN_QUOTED columns, in the tail to TAIL_QUOTED
+    (a suggested `'/choreo/go'` stays whole), before the tail to 2; then the end of what comes
+    before the tail, down to MIN_HEAD columns; then the tail's outside text to MIN_QUOTED; and
+    last the middle of it all: both the start (what happened) and the end (what to do) stay."""
+    text, aside = visible(text), visible(aside)
+    if aside:
+        whole = f"{text} ({aside})"
+        room = width - display_width(text) - 3
+        if display_width(whole) <= width or room >= MIN_QUOTED:
+            return f"{text} ({fit(aside, room)})" if display_width(whole) > width else whole
     if display_width(text) <= width:
         return text
+    tail_at = _tail_at(text, width - min(MIN_HEAD, width // 2))
+    for floor, in_tail in ((MIN_QUOTED, False), (TAIL_QUOTED, True), (2, False)):
+        text, tail_at = _cut_outside(text, width, tail_at, floor, in_tail)
+    room = width - min(MIN_HEAD, width // 2)  # for the tail, a start of the message kept
+    if display_width(text) > width and tail_at < len(text) and display_width(text[tail_at:]) > room:
+        target = max(width, display_width(text[:tail_at]) + room)  # it fits, or its tail fits `room`
+        text, tail_at = _cut_outside(text, target, tail_at, MIN_QUOTED, in_tail=True)
+    if display_width(text) <= width:
+        return text
+    head, tail = text[:tail_at], text[tail_at:]
+    if tail and display_width(tail) <= room:
+        return fit(head, width - display_width(tail)) + tail
+    return _middle_cut(text, width)
+
+
+QUOTED = re.compile(r"'([^']{2,})'")
+ADDRESS = re.compile(r"(?<![\w'/])(/[^\s'()]+[^\s'():;,.?!])")  # an OSC address, a path: outside text
+TAIL = re.compile(r"[:;] ")  # one of them, outside quoted text, begins what a message says to do
+MIN_HEAD = 16  # columns of a message's start kept before its tail (what happened)
+TAIL_QUOTED = 16  # outside text in a message's tail is cut to no fewer columns than this first (a long label)
+
+
+def _spans(text: str) -> list[tuple[int, int]]:
+    """Where the outside text is (quoted, addresses), in order, none inside another."""
+    quoted = [m.span(1) for m in QUOTED.finditer(text)]
+    inside = [(m.start(1), m.end(1)) for m in ADDRESS.finditer(text)
+              if not any(a <= m.start(1) < b for a, b in quoted)]
+    return sorted(quoted + inside)
+
+
+def _tail_at(text: str, room: int) -> int:
+    """Where the message's tail begins: after the first `: ` or `; ` (outside the outside text)
+    from which the rest fits `room` columns, else after the last `: ` (its end, when it has
+    none: it is cut in its outside text, then its middle)."""
+    spans = _spans(text)
+    ends = [m.end() for m in TAIL.finditer(text) if not any(a <= m.start() < b for a, b in spans)]
+    fitting = [end for end in ends if display_width(text[end:]) <= room]
+    return fitting[0] if fitting else ends[-1] if ends else len(text)
+
+
+def _cut_outside(text: str, width: int, tail_at: int, floor: int, in_tail: bool) -> tuple[str, int]:
+    """`text` with its outside text (in its tail, or before it) cut, the longest first, down
+    to `floor` columns each, until it fits; and where its tail now begins."""
+    while display_width(text) > width:
+        spans = [(display_width(text[a:b]), a, b) for a, b in _spans(text) if (a >= tail_at) == in_tail]
+        size, start, end = max(spans, default=(0, 0, 0))
+        if size <= floor:
+            break
+        keep = max(floor, size - (display_width(text) - width))
+        cut = fit(text[start:end], keep)
+        text = text[:start] + cut + text[end:]
+        if start < tail_at:
+            tail_at -= (end - start) - len(cut)
+    return text, tail_at
+
+
+def _middle_cut(text: str, width: int) -> str:
+    """Its start and its end, with `…` between, in `width` columns."""
     head = fit(text, (width + 1) // 2)
     tail_room = width - display_width(head)
     tail = ""
@@ -163,12 +227,9 @@ def fit_message(text: str, width: int) -> str:
     return head + tail
 
 
-QUOTED = re.compile(r"'([^']{2,})'")
-
-
-def _line(text: str, style: str = "", width: int | None = None) -> Text:
+def _line(text: str, style: str = "", width: int | None = None, aside: str = "") -> Text:
     """A line of the screen; given its `width`, fitted by `fit_message` (else rich cuts its end)."""
-    shown = visible(text) if width is None else fit_message(text, width)
+    shown = visible(text + (f" ({aside})" if aside else "")) if width is None else fit_message(text, width, aside)
     return Text(shown, style=style, no_wrap=True, overflow="ellipsis", end="\n")
 
 
@@ -178,7 +239,17 @@ def _cell(text: str, style: str = "") -> Text:
 
 
 def _note_text(note: Note) -> str:
-    return f"{note.show_s:7.1f} s  {note.text}" if note.show_s is not None else f"{'':11}{note.text}"
+    return f"{seconds(note.show_s):>7} s  {note.text}" if note.show_s is not None else f"{'':11}{note.text}"
+
+
+def seconds(value: float, digits: int | None = 1) -> str:
+    """A time as the console writes it: `digits` decimals (None: as short as it goes, `4`,
+    `12.5`), and never `-0.0` (a time a hair before zero, a show clock just started or a
+    countdown just run out, is 0.0)."""
+    if digits is not None:
+        value = round(value, digits)
+    value = value if value != 0 else 0.0  # -0.0 == 0
+    return f"{value:g}" if digits is None else f"{value:.{digits}f}"
 
 
 def _title(screen: Screen) -> Table:
@@ -186,7 +257,7 @@ def _title(screen: Screen) -> Table:
     grid = Table.grid(expand=True)
     grid.add_column(ratio=1, no_wrap=True, overflow="ellipsis")
     grid.add_column(no_wrap=True, overflow="ellipsis", justify="right")
-    time = f"{screen.show_s:.1f} s" if screen.show_s is not None else "not started"
+    time = f"{seconds(screen.show_s)} s" if screen.show_s is not None else "not started"
     bar = f" · bar {screen.bar[0]}.{screen.bar[1]}" if screen.bar is not None else ""  # 12.3: bar 12, beat 3
     grid.add_row(_cell(screen.title, "bold"), _cell(f" show {time}{bar} · {screen.clock}"))
     return grid

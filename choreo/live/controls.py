@@ -460,7 +460,7 @@ class Live:
             playhead = self._playhead()
             waiting = [{**cue_json(self._cue_of(w)), "robots": sorted(w.robots), "reached_s": round(w.reached_s, 3)}
                        for w in self._in_order()]
-        rows = self.status_of_robots.robots() if self.status_of_robots is not None else ()
+        rows = self.status_of_robots.robots(self.skipped) if self.status_of_robots is not None else ()
         return {"state": self.state,
                 "show_s": round(show.show_at(self._now()), 3) if show is not None else None,
                 "clock": self.clock,

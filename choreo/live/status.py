@@ -11,7 +11,7 @@ from __future__ import annotations
 import statistics
 import threading
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,6 +19,11 @@ from choreo.events import LinkListener, RxEvent, StepEvent, TxEvent
 from choreo.show.model import SOLO, Plan, PlannedStep, StepKind
 
 LATENCIES = 20  # the replies a link's health is the median of
+Skipped = Callable[[str, int], bool]  # is this robot's step a cue the operator skipped? (`Live.skipped`)
+
+
+def _none_skipped(robot: str, index: int) -> bool:
+    return False
 
 
 @dataclass(frozen=True)
@@ -75,9 +80,15 @@ class _Robot:
     retries: int = 0
     failed: int = 0
     positions: dict[int, int] = field(default_factory=dict)  # step index -> position in `steps`
+    timed: tuple[int, ...] = ()  # position -> the position of the first timed step from it on (or len)
 
     def __post_init__(self) -> None:
         self.positions = {step.index: at for at, step in enumerate(self.steps)}
+        timed, later = [len(self.steps)] * (len(self.steps) + 1), len(self.steps)
+        for at in range(len(self.steps) - 1, -1, -1):
+            later = at if self.steps[at].at is not None else later
+            timed[at] = later
+        self.timed = tuple(timed)
 
     @property
     def current(self) -> PlannedStep | None:
@@ -103,21 +114,31 @@ class _Robot:
     def retried(self) -> None:
         self.retries += 1
 
-    def dues_s(self) -> tuple[float, ...]:
+    def dues_s(self, skipped: Skipped) -> tuple[float, ...]:
         """When, on the show clock, this robot's runner next wakes to send: the end of the wait
-        it is in, and its next timed cue (a step after a play goes at once: no wake-up)."""
+        it is in, and its next timed cue not skipped (a step after a play goes at once: no
+        wake-up). Skipped cues one after another are the only walk: the rest is looked up."""
         step = self.current
-        dues = [s.at for s in self.steps[self.at + 1:] if s.at is not None][:1]
+        at = self.timed[self.at + 1]
+        while at < len(self.steps) and skipped(self.name, self.steps[at].index):
+            at = self.timed[at + 1]
+        dues = [self.steps[at].at or 0.0] if at < len(self.steps) else []
         if step is not None and step.kind is StepKind.WAIT and not self.ended:
             dues.append(self.started_s + (step.seconds or 0.0))
         return tuple(dues)
 
-    def row(self) -> RobotRow:
-        following = self.steps[self.at + 1] if self.at + 1 < len(self.steps) else None
+    def following(self, skipped: Skipped) -> PlannedStep | None:
+        """The step that will really run next: a cue the operator skipped is passed over."""
+        at = self.at + 1
+        while at < len(self.steps) and skipped(self.name, self.steps[at].index):
+            at += 1
+        return self.steps[at] if at < len(self.steps) else None
+
+    def row(self, skipped: Skipped) -> RobotRow:
         latency = statistics.median(self.latencies_ms) if self.latencies_ms else None
         done = self.ended and self.at == len(self.steps) - 1
-        return RobotRow(self.name, self.current, self.ended, done, following, self.started_s, latency,
-                        self.retries, self.failed, self.dues_s())
+        return RobotRow(self.name, self.current, self.ended, done, self.following(skipped), self.started_s, latency,
+                        self.retries, self.failed, self.dues_s(skipped))
 
 
 @dataclass
@@ -182,7 +203,9 @@ class ShowStatus:
 
     # -- readers -------------------------------------------------------------------------------
 
-    def robots(self) -> tuple[RobotRow, ...]:
-        """Every robot now, in the show's cast order."""
+    def robots(self, skipped: Skipped = _none_skipped) -> tuple[RobotRow, ...]:
+        """Every robot now, in the show's cast order; `skipped` (the live controls' own,
+        `Live.skipped`: lock-free) says which cues' steps will not run, so a robot's next step
+        is the one it will really take."""
         with self._lock:
-            return tuple(robot.row() for robot in self._robots.values())
+            return tuple(robot.row(skipped) for robot in self._robots.values())

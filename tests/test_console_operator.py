@@ -1,0 +1,213 @@
+"""The console as a stage manager found it (issue 24's review): one number a cue on the whole
+screen (rows name a cue's step by its cue number), a skipped cue never shown as anyone's next
+step (screen and `/choreo/status`), messages cut in their outside text and never in what they
+tell the operator to do, no `-0.0`, keys that say and do the same in either case, and a
+mistyped cue answered with the nearest one. No terminal: screens as values, drawn through rich."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import pytest
+from rich.console import Console as RichConsole
+
+from choreo.cli.console import Console
+from choreo.cli.screen import (
+    LEGEND,
+    PAUSED_LEGEND,
+    SHORT_PAUSED_LEGEND,
+    Note,
+    Screen,
+    fit_message,
+    render,
+    seconds,
+)
+from choreo.events import Answer, Command, CommandEvent, StepEvent, StopRequest
+from choreo.live.controls import Live
+from choreo.live.status import ShowStatus
+from choreo.run.session import Session
+from choreo.run.settings import RunRequest
+from choreo.show.cues import cue_list
+from choreo.textfit import display_width
+from runlog import write_show
+
+EVENING = """\
+version: 1
+name: Evening
+robots:
+  left: {}
+  right: {}
+motions:
+  home: {number: 0, duration: 1.5}
+  bow:  {number: 1, duration: 2.0}
+  wave: {number: 2, duration: 1.2}
+  clap: {number: 3, duration: 0.6}
+on_abort: home
+steps:
+  - {play: bow, at: go, label: applause}
+  - wait: done
+  - {play: wave, at: 4, label: hello world}
+  - wait: done
+  - {play: clap, at: go, cue: 12.5, label: act 2/intro}
+  - wait: done
+  - {play: bow, at: 10, label: finale}
+  - wait: done
+  - {play: home, at: go, label: curtain}
+  - wait: done
+"""
+
+
+def evening(tmp_path: Path) -> tuple[Console, Session, Live, ShowStatus]:
+    """The run's one status, given to the live controls and the console, as `choreo run` does."""
+    session = Session.prepare(RunRequest(str(write_show(tmp_path, EVENING)), no_log=True))
+    settings = session.settings
+    status = ShowStatus(settings.plans, settings.sections.starts)
+    live = Live(StopRequest(), cues=cue_list(settings.plans), status=status)
+    console = Console(session, live, status=status, out=io.StringIO(), keys=io.StringIO())
+    live.subscribe(console)
+    return console, session, live, status
+
+
+def step_event(session: Session, robot: str, index: int, kind: str = "start", at_s: float = 0.0) -> StepEvent:
+    return StepEvent(session.settings.plans[robot].steps[index], kind, at_s, at_s, 0, robot=robot)
+
+
+def lines_of(console: Console, width: int) -> list[str]:
+    out = io.StringIO()
+    RichConsole(file=out, width=width, height=24, color_system=None).print(console.renderable(width, 24))
+    return out.getvalue().splitlines()
+
+
+# -- 1. one number a cue -----------------------------------------------------------------------
+
+
+def test_rows_name_a_cued_step_by_its_cue_number_as_the_cue_list_does(tmp_path):
+    console, session, live, status = evening(tmp_path)
+    (left, right) = console.screen().rows
+    assert left.next == "GO cue 1 'applause': play 1 (bow)"  # not step 0
+    for robot in ("left", "right"):
+        status.on_step(step_event(session, robot, 3))  # the wait after cue 2
+    (left, _) = console.screen().rows
+    assert left.now.startswith("wait until motion 2 is done")
+    assert left.next == "GO cue 12.5 'act 2/intro': play 3 (clap)"
+    status.on_step(step_event(session, "left", 4))
+    assert console.screen().rows[0].now == "GO cue 12.5 'act 2/intro': play 3 (clap)"
+    status.on_step(step_event(session, "left", 5))
+    assert console.screen().rows[0].next == "@10 s cue 13 'finale': play 1 (bow)"
+    assert "cue 13" in " ".join(line for line in lines_of(console, 80) if line.startswith("left"))
+
+
+# -- 2. a skipped cue is nobody's next step ----------------------------------------------------
+
+
+def test_a_skipped_cue_is_not_shown_as_the_next_step_on_screen_or_in_status(tmp_path):
+    console, session, live, status = evening(tmp_path)
+    for robot in ("left", "right"):
+        status.on_step(step_event(session, robot, 1))  # the wait after cue 1: cue 2 comes next
+    assert console.screen().rows[0].next.startswith("@4 s cue 2 'hello world'")
+    assert live.command(Command("skip", "key", "2")).ok
+    rows = console.screen().rows
+    assert all(row.next.startswith("wait until motion 2 is done") for row in rows), rows  # cue 2's play passed
+    nexts = {name: robot["next"] for name, robot in live.status()["robots"].items()}
+    assert all(n is not None and n["cue"] is None and n["step"] == 3 for n in nexts.values()), nexts
+    assert all(4.0 not in row.due_s for row in status.robots(live.skipped))  # no quiet window kept for it
+    assert 4.0 in status.robots()[0].due_s  # (without the skips, it would be)
+    assert live.command(Command("skip", "key", "2")).message.startswith("skip undone")
+    assert console.screen().rows[0].next.startswith("@4 s cue 2 'hello world'")
+
+
+# -- 3. messages keep what they tell the operator to do ----------------------------------------
+
+LONG = "the-longest-label-a-stage-manager-ever-typed-for-a-cue"
+MESSAGES = [  # (message, who sent it, the tail that must stay whole)
+    ("unknown command /choreo/go/: did you mean '/choreo/go'?", "osc udp 127.0.0.1:43023",
+     "did you mean '/choreo/go'?"),
+    (f"cue 2 '{LONG}' is a timed cue (at 4.000 s): nothing to GO; move the playhead", "osc udp 127.0.0.1:1",
+     "nothing to GO; move the playhead"),
+    ("nothing waits for GO now (the show waits for its start: /choreo/start)", "osc tcp 10.0.0.2:5000",
+     "/choreo/start)"),
+    (f"no cue '{LONG}x' in this show (cues: 1, 2, 12.5, 13, 14): did you mean cue 14 'curtain'?", "",
+     "did you mean cue 14 'curtain'?"),
+    (f"robot right: step 2 '{LONG}' skipped (cue 2): not run", "", "not run"),
+    (f"GO refused: cue 3 '{LONG}' is not reached yet: press p to resume", "", "press p to resume"),
+    (f"unknown command /choreo/cue/{LONG}/{LONG}/go: send a label's slash as %2F", "osc udp 127.0.0.1:9",
+     "send a label's slash as %2F"),
+    ("paused at 2.706 s: no new step starts (one under way finishes); resume: p or /choreo/resume", "",
+     "p or /choreo/resume"),
+]
+
+
+@pytest.mark.parametrize("width", (60, 72, 80))
+@pytest.mark.parametrize(("message", "aside", "tail"), MESSAGES)
+def test_a_message_is_cut_in_its_outside_text_and_keeps_its_instruction(width, message, aside, tail):
+    line = fit_message(f"{'1.0':>7} s  {message}", width, aside)
+    assert display_width(line) <= width
+    assert line.endswith(tail) or line.endswith(f"{tail} ({aside[:3]}") or aside and f"{tail} (" in line, line
+    assert line.startswith("    1.0 s  ") and line.count("…") <= 3, line
+
+
+def test_on_screen_the_sender_goes_first_then_the_address(tmp_path):
+    console, session, live, status = evening(tmp_path)
+    refused = Answer("error", "unknown command /choreo/go/: did you mean '/choreo/go'?")
+    console.on_command(CommandEvent(Command("go/", "osc udp 127.0.0.1:43023"), refused, 0, 1.0))
+    for width in (60, 72, 80):
+        (line,) = [line for line in lines_of(console, width) if "unknown command" in line]
+        assert "did you mean '/choreo/go'?" in line and display_width(line) <= width, line
+        assert line.count("…") <= 1, line  # cut once, not twice
+
+
+# -- 4. no -0.0 --------------------------------------------------------------------------------
+
+
+def test_no_time_on_the_console_is_negative_zero(tmp_path):
+    assert seconds(-0.04) == "0.0" and seconds(-0.0, None) == "0" and seconds(-0.06) == "-0.1"
+    assert seconds(12.5, None) == "12.5" and seconds(3.14159, 3) == "3.142"
+    screen = Screen("show", -0.0, "machine clock", "", "", False, (), (Note("robot left: skipped", "", -0.04),))
+    out = io.StringIO()
+    RichConsole(file=out, width=80, color_system=None).print(render(screen, 80, 24))
+    assert "-0.0" not in out.getvalue() and "show 0.0 s" in out.getvalue() and "    0.0 s  robot left" in out.getvalue()
+
+
+# -- 5. keys -----------------------------------------------------------------------------------
+
+
+def test_paused_the_legend_says_p_resumes(tmp_path):
+    console, session, live, status = evening(tmp_path)
+    assert console.screen().legend == LEGEND
+    live._paused = True  # what a pause leaves (no show clock to stop here)
+    assert console.screen().legend == PAUSED_LEGEND
+    assert lines_of(console, 80)[-1] == PAUSED_LEGEND and lines_of(console, 60)[-1] == SHORT_PAUSED_LEGEND
+
+
+class Given:
+    """The live controls, keeping the commands the keys give."""
+
+    def __init__(self, live: Live) -> None:
+        self.live = live
+        self.given: list[tuple[str, str | None]] = []
+
+    def __getattr__(self, name: str):  # type: ignore[no-untyped-def]
+        return getattr(self.live, name)
+
+    def command(self, command: Command):  # type: ignore[no-untyped-def]
+        self.given.append((command.name, command.label))
+        return self.live.command(command)
+
+
+def test_every_letter_key_works_in_either_case_and_j_keeps_the_case_typed(tmp_path):
+    console, session, live, status = evening(tmp_path)
+    console.live = given = Given(live)  # type: ignore[assignment]
+    for key in ("S", "P", "P", "J", "Q", "u", "i", "E", "T", "enter", "Q", "n", "Q", "Y"):
+        console.on_key(key)
+    assert given.given == [("skip", None), ("pause", None), ("resume", None), ("playhead", "QuiET"), ("stop", None)]
+
+
+def test_a_mistyped_cue_is_answered_with_the_nearest(tmp_path):
+    console, session, live, status = evening(tmp_path)
+    for key in ("j", "c", "u", "r", "t", "enter"):
+        console.on_key(key)
+    note = console.screen().notes[-1]
+    assert note.text.startswith("no cue 'curt' in this show") and note.text.endswith(": did you mean cue 14 'curtain'?")
+    assert live.command(Command("playhead", "key", "finalle")).message.endswith("did you mean cue 13 'finale'?")
+    assert "did you mean" not in live.command(Command("playhead", "key", "zzz")).message
