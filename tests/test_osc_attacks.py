@@ -10,7 +10,6 @@ waited for with a deadline, never a sleep that decides.
 from __future__ import annotations
 
 import json
-import sys
 
 import pytest
 
@@ -23,6 +22,8 @@ from choreo.log.format import WARNING
 from runlog import wait_for
 from test_osc_dictionary import STATUS, Recording, ask, reply, told
 from test_osc_dictionary import peers, server  # noqa: F401 - fixtures
+from test_osc import Commands
+from test_osc_dictionary import real_shows  # noqa: F401 - a fixture
 from test_osc_limits import Peer
 
 TIMEOUT_S = 5.0
@@ -143,7 +144,7 @@ def ascii_lookalikes() -> dict[str, str]:
     """Every non-ASCII character that Unicode's case mapping or folding turns into ASCII letters
     (`ſ` s, `K` k, `ﬆ` st, ...): the ASCII it becomes."""
     found = {}
-    for code in range(0x80, sys.maxunicode + 1):
+    for code in range(0x80, 0x10000):  # past the BMP no letter folds to ASCII (Unicode 15)
         char = chr(code)
         for folded in (char.casefold(), char.lower(), char.upper()):
             if folded.isascii() and folded.isalpha():
@@ -290,3 +291,89 @@ def _replies(peer: Peer, count: int) -> list[bytes]:
     got: list[bytes] = []
     assert wait_for(lambda: got.extend(peer.replies(0.05)) or len(got) >= count, TIMEOUT_S, every=0.0)
     return got
+
+
+# -- cues written every odd way, on a show's own cue list -------------------------------------------
+
+ODD_SHOW = """\
+    version: 1
+    motions:
+      bow: {number: 2, duration: 0.05}
+    steps:
+      - play: 1
+      - play: bow
+        at: go
+        label: café
+      - play: bow
+        at: go
+        cue: 12.5
+        label: next
+      - play: bow
+        at: go
+        label: "1.5"
+      - play: bow
+        at: go
+        label: "*"
+    """
+
+
+def playhead_of(peer: Peer) -> str | None:
+    data = ask(peer, "/choreo/status")[1]["data"]
+    return data["playhead"]["number"] if data["playhead"] else None
+
+
+@pytest.mark.parametrize("transport", ["udp", "tcp"])
+def test_cues_sent_every_odd_way_reach_their_cue_or_change_nothing(transport, real_shows):  # noqa: F811
+    """Cue 1 'café', 12.5 'next', 13 '1.5' (a label that reads as a number), 14 '*' (a pattern's
+    character). A number by its value, a label decomposed (NFD, as macOS may send it), `next`
+    escaped; every refused reference (overlong UTF-8, a surrogate, %00, a bad escape, 10,000
+    characters, a pattern) answered as an error with the playhead where it was."""
+    many = Rate(1000, 1.0)  # every reference here is carried out and answered (the budgets are tested elsewhere)
+    run = real_shows(ODD_SHOW, limits=Limits(commands_per_sender=many, commands_total=many, replies_per_sender=many,
+                                             queries_per_sender=many, queries_total=many))
+    peer = Peer(transport, run.server.port)
+    try:
+        assert wait_for(lambda: run.waiting() == ["café"], TIMEOUT_S, every=0.005), run.waiting()
+        heard = Commands()
+        run.live.subscribe(heard)
+        reached = {"12.50": "12.5", "%6Eext": "12.5", "cafe%CC%81": "1", "caf%C3%A9": "1", "café": "1",
+                   "1": "1", "13": "13", "1.5": "13", "1%2E5": "13", "%31": "1", "%2A": "14", "*": "14",
+                   "12.5": "12.5", "014": "14"}
+        for ref, number in reached.items():
+            body = ask(peer, f"/choreo/playhead/{ref}")[1]
+            assert body["status"] == "ok" and body["data"]["cue"] == number, (ref, body)
+        assert ask(peer, "/choreo/playhead/13")[1]["status"] == "ok"
+        refused = ["%C0%AF", "%E0%80%AF", "%ED%A0%80", "%F4%90%80%80", "%00", "%", "%%", "a%2", "x" * 10_000,
+                   "14.0.0", "1e1", "1.50", "%2B1", "nope", "cafe"]
+        for ref in refused:
+            got, body = ask(peer, f"/choreo/playhead/{ref}")
+            assert body["status"] == "error", (ref, body)
+            got, body = ask(peer, f"/choreo/cue/{ref}/go")
+            assert body["status"] == "error", (ref, body)
+        assert ask(peer, "/choreo/playhead/next")[1]["data"]["cue"] == "14"  # the command, not the label
+        assert playhead_of(peer) == "14" and run.waiting() == ["café"]  # nothing refused moved it
+        taken = [e.command.name for e in heard.events if e.answer.status == "ok"]
+        assert taken == ["playhead"] * (len(reached) + 1) + ["playhead_next"]
+    finally:
+        peer.close()
+
+
+@pytest.mark.parametrize("transport", ["udp", "tcp"])
+def test_a_bundle_of_pause_and_go_on_a_show(transport, real_shows):  # noqa: F811
+    """pause + GO in one bundle: carried out in order (the GO refused: paused), then resume + GO
+    in another: the cue released. Each message answered, in order."""
+    run = real_shows()  # GO_SHOW: cue 1 'applause' waits
+    peer = Peer(transport, run.server.port)
+    try:
+        assert wait_for(lambda: run.waiting() == ["applause"], TIMEOUT_S, every=0.005), run.waiting()
+        peer.send(encode_bundle([encode_message("/choreo/pause"), encode_message("/choreo/go")]))
+        (pause, pause_body), (go, go_body) = [reply(p) for p in _replies(peer, 2)]
+        assert (pause, pause_body["status"]) == ("/reply/choreo/pause", "ok")
+        assert (go, go_body["status"], go_body["message"]) == (
+            "/reply/choreo/go", "error", "paused: resume first (p or /choreo/resume)")
+        assert run.waiting() == ["applause"]
+        peer.send(encode_bundle([encode_message("/choreo/resume"), encode_message("/choreo/go")]))
+        (_, resume_body), (_, go_body) = [reply(p) for p in _replies(peer, 2)]
+        assert resume_body["status"] == "ok" and go_body["message"] == "GO: cue 1 'applause'"
+    finally:
+        peer.close()
