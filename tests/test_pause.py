@@ -55,7 +55,7 @@ class VirtualRun:
     commands given when steps start or end (`OnStep`)."""
 
     def __init__(self, tmp_path, body: str, at: dict | None = None, robot: str | None = None,  # type: ignore[no-untyped-def]
-                 before=(), **request) -> None:  # type: ignore[no-untyped-def]
+                 before=(), attach=lambda live: [], **request) -> None:  # type: ignore[no-untyped-def]
         self.source = VirtualTime()
         self.log_path = tmp_path / "run.mcap"
         self.session = Session.prepare(RunRequest(str(write_show(tmp_path, body)), log_path=str(self.log_path),
@@ -66,6 +66,7 @@ class VirtualRun:
         for name in before:  # commands before the show starts
             assert self.say(*name.split(" ", 1)).ok
         self.hook = OnStep(self.live, dict(at or {}), robot)
+        self.others = attach(self.live)  # more listeners of the run, made with its Live
         self.result = None
         self.error: BaseException | None = None
         self.thread = threading.Thread(target=self._run, daemon=True)
@@ -74,7 +75,7 @@ class VirtualRun:
     def _run(self) -> None:
         try:
             with self.session:
-                self.result = self.session.run([self.hook], live=self.live)
+                self.result = self.session.run([self.hook, *self.others], live=self.live)
         except BaseException as exc:  # noqa: BLE001 - the test asserts on it
             self.error = exc
 
@@ -84,6 +85,13 @@ class VirtualRun:
     def held(self, robots: tuple[str, ...] = ("robot",)) -> None:
         """Until the pause holds `robots` back (their runners wait to start their next step)."""
         assert wait_for(lambda: self.live.paused_robots == robots, 10, 0.001), self.live.paused_robots
+
+    def curtain(self) -> None:
+        """The show's last cue waits for GO: its GO. On virtual time a resume lets the runner
+        run the rest of the show at once, maybe before the resume's own record is written:
+        a GO cue at the end keeps the log open for it."""
+        assert wait_for(lambda: bool(self.live.waiting), 10, 0.001)
+        assert self.say("go").ok
 
     def finish(self):  # type: ignore[no-untyped-def]
         self.thread.join(20)
@@ -175,6 +183,9 @@ steps:
     label: rest
   - play: 4
     label: last
+  - play: 5
+    at: go
+    label: curtain
 """
 PAUSE_S = 5.0  # how long the operator keeps the show paused (virtual time)
 
@@ -186,10 +197,14 @@ def test_pause_during_a_motion_finishes_the_play_and_times_the_rest_from_the_res
     stood = run.live.show.show_at(run.session.clock.mono())
     run.source.advance(PAUSE_S)  # the operator waits; the motion ends on the board meanwhile
     assert run.live.show.show_at(run.session.clock.mono()) == stood  # the show clock stood still
+    resumed = run.session.clock.wall_ns()  # the runner waits: virtual time stands till the resume
     assert run.say("resume").ok
+    run.curtain()
     log = run.finish()
     assert run.result.outcome == "done" and run.hook.answers[0].ok
-    paused, resumed = command_time(log, "pause"), command_time(log, "resume")
+    # (the resume's record may come after the runner's next steps: virtual time runs them at once)
+    paused = command_time(log, "pause")
+    assert command_time(log, "resume") >= resumed
     assert resumed - paused >= PAUSE_S * 1e9
     # the play under way finished: every frame of its sequence went out, and was answered, before the resume
     walk = [m for m in log.tx if m.get("step") == 0]
@@ -208,11 +223,11 @@ def test_pause_during_a_motion_finishes_the_play_and_times_the_rest_from_the_res
     assert steps["later"]["late_ms"] < 1.0 and steps["last"]["actual_s"] == pytest.approx(2.5, abs=0.01)
     # the log marks the pause and the resume: clock samples with the clock's state, at those instants
     samples = log.topic("/choreo/clock")
-    assert {m.get("state") for m in samples} == {"running", "paused"}
+    assert {m.get("state") for m in samples} == {"running", "paused", "held"}  # held: at the curtain's GO cue
     pause_sample = next(m for m in samples if m.get("state") == "paused")
     assert pause_sample["show_s"] == pytest.approx(stood, abs=1e-6) and pause_sample["_log_time"] == paused
-    after = next(m for m in samples if m["_log_time"] >= resumed)
-    assert after["state"] == "running" and after["show_s"] == pytest.approx(stood, abs=1e-6)
+    assert [m for m in samples if m["_log_time"] >= resumed and m["state"] == "running"
+            and m["show_s"] == pytest.approx(stood, abs=1e-6)]  # the resume's, wherever the runner's fell
     assert log.metadata["choreo.result"]["outcome"] == "done"
 
 
@@ -220,12 +235,16 @@ def test_a_wait_done_under_way_when_paused_polls_to_the_motions_end(tmp_path):
     run = VirtualRun(tmp_path, WALK, at={(1, "start"): ["pause"]})  # paused as `wait: done` starts
     assert wait_for(lambda: (1, "end") in run.hook.seen, 10, 0.001)  # it ended while paused
     assert run.live.paused and (2, "start") not in run.hook.seen
+    # on virtual time the runner may run on before the resume's record is written: its instant
+    # is read just before it (the runner dozes meanwhile, towards a cue the clock stands before)
+    resumed = run.session.clock.wall_ns()
     assert run.say("resume").ok
+    run.curtain()
     log = run.finish()
-    resumed = command_time(log, "resume")
+    assert command_time(log, "resume") >= resumed
     done = next(m for m in log.steps if m.get("label") == "done" and m["event"] == "end")
-    assert done["outcome"] == "ok" and done["_log_time"] < resumed
-    polls = [m for m in log.tx if m["kind"] == "status" and m["_log_time"] < resumed]
+    assert done["outcome"] == "ok" and done["_log_time"] <= resumed
+    polls = [m for m in log.tx if m["kind"] == "status" and m["_log_time"] <= resumed]
     assert len(polls) >= 2  # it went on polling while paused, until the board said the motion was over
     later = next(m for m in log.steps if m.get("label") == "later" and m["event"] == "end")
     assert later["start_s"] == pytest.approx(2.0, abs=1e-3) and later["_log_time"] > resumed
@@ -309,3 +328,47 @@ def test_pause_in_a_music_show_pauses_the_song_and_the_next_cue_keeps_its_place(
     after = next(m for m in steps if m["event"] == "end" and m["label"] == "after")
     assert started_on_cue(steps, after), steps
     assert command_time(log, "resume") < after["_log_time"]
+
+
+class PauseAtSecondStart:
+    """Pauses `live` when the second robot starts step `index` (every robot is then past the
+    pause's check, into its play sequence)."""
+
+    def __init__(self, live: Live, index: int) -> None:
+        self.live, self.index = live, index
+        self.started: list[str] = []
+        self.ended: list[str] = []
+
+    def on_step(self, event: StepEvent) -> None:
+        if event.step.index != self.index:
+            return
+        if event.event == "start":
+            self.started.append(event.robot or "")
+            if len(self.started) == 2:
+                assert self.live.command(Command("pause", "test")).ok
+        elif event.event == "end":
+            self.ended.append(event.robot or "")
+
+    def on_log(self, level: int, message: str, time_ns: int) -> None:
+        pass
+
+
+def test_a_unison_play_under_way_when_paused_starts_its_motions_and_a_stop_then_ends_the_run(tmp_path):
+    """Two robots' unison play, paused once both have begun its sequence: the start frames the
+    gate writes for both go out (a step under way finishes; it was waiting on the standing show
+    clock for the resume, and a stop while paused hung the run for good)."""
+    body = "version: 1\nrobots: {a: {}, b: {}}\nsteps:\n  - play: 1\n    label: one\n  - play: 2\n    at: 3\n"
+    run = VirtualRun(tmp_path, body, attach=lambda live: [PauseAtSecondStart(live, 0)])
+    hook = run.others[0]
+    try:
+        assert wait_for(lambda: sorted(hook.ended) == ["a", "b"], 10, 0.001), (hook.started, hook.ended)
+        assert run.live.paused
+        assert run.say("stop").ok
+        log = run.finish()
+    finally:
+        if run.live.paused and run.thread.is_alive():
+            run.say("resume")
+    plays = [m for robot in ("a", "b") for m in log.topic(f"/choreo/{robot}/step")
+             if m["event"] == "end" and m["index"] == 0]
+    assert [m["outcome"] for m in plays] == ["ok", "ok"]
+    assert run.result is None or run.result.outcome == "aborted"

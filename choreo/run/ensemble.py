@@ -25,7 +25,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from choreo.clock import MachineShowClock, RunClock, ShowClock, quick_thread_switches, sleep_until_show
+from choreo.clock import MachineShowClock, RunClock, ShowClock, quick_thread_switches
 from choreo.errors import LinkError
 from choreo.events import STOPPED, RunResult, StopRequest, never
 from choreo.log.format import ERROR, WARNING
@@ -49,6 +49,7 @@ class _Gate:
     writes: dict[str, Callable[[], None]] = field(default_factory=dict)  # a unison play's start frames
     written: dict[str, int] | None = None  # when each was written (monotonic ns)
     taking: bool = False  # the writer has the writes: no robot may take its own back
+    opened: float = 0.0  # monotonic time the gate opened
 
 
 class Gates:
@@ -102,8 +103,11 @@ class Gates:
         return gate.written.get(robot) if gate.written is not None else None
 
     def _write_all(self, gate: _Gate) -> None:
+        """The start frames, `SYNC_S` after the gate opened on the machine's clock, not the show's:
+        a play under way finishes while the show clock stands (a pause, another track's GO
+        cue held), its motion never left waiting halfway for the clock to go on."""
         assert gate.release is not None, "written only once the gate is open"
-        sleep_until_show(self.clock, self.show, gate.release)
+        self.clock.sleep_until(gate.opened + SYNC_S)
         written = {}
         with self._lock:
             gate.taking = True
@@ -133,7 +137,8 @@ class Gates:
         awaited = self.live if gate.expected is None else gate.expected & self.live
         if gate.release is not None or not awaited <= gate.arrived:
             return
-        now = self.show.show_at(self.clock.mono())
+        gate.opened = self.clock.mono()
+        now = self.show.show_at(gate.opened)
         end = gate.end if gate.end is not None else gate.idle if gate.idle is not None else now
         gate.release = max(end, now + SYNC_S)
         if isinstance(key, int):  # everyone is past the step before and its play: forget them
