@@ -249,8 +249,8 @@ class Commands:
         self.paused = False
         self.labels: list[str | None] = []
 
-    def cue_states(self) -> dict:
-        return {}
+    def cue_state(self, cue) -> str:  # type: ignore[no-untyped-def]
+        return "ahead"
 
     def skipped(self, robot: str, index: int) -> bool:
         return False

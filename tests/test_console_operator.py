@@ -211,3 +211,46 @@ def test_a_mistyped_cue_is_answered_with_the_nearest(tmp_path):
     assert note.text.startswith("no cue 'curt' in this show") and note.text.endswith(": did you mean cue 14 'curtain'?")
     assert live.command(Command("playhead", "key", "finalle")).message.endswith("did you mean cue 13 'finale'?")
     assert "did you mean" not in live.command(Command("playhead", "key", "zzz")).message
+
+
+# -- a long show: each redraw looks up, never walks ---------------------------------------------
+
+
+class Counted:
+    """The live controls, counting the cue states the console asks for."""
+
+    def __init__(self, live: Live) -> None:
+        self.live = live
+        self.asked = 0
+
+    def __getattr__(self, name: str):  # type: ignore[no-untyped-def]
+        if name == "cue_states":
+            raise AssertionError("every cue's state asked for")
+        return getattr(self.live, name)
+
+    def cue_state(self, cue):  # type: ignore[no-untyped-def]
+        self.asked += 1
+        return self.live.cue_state(cue)
+
+
+def test_a_redraw_of_a_long_show_asks_a_window_of_cue_states_not_every_cue(tmp_path):
+    n = 600
+    body = "version: 1\nname: long\nrobots:\n  a: {}\n  b: {}\nsteps:\n"
+    body += "".join(f"- {{play: 1, at: {'go' if i % 2 else i * 0.5}}}\n" for i in range(n))
+    session = Session.prepare(RunRequest(str(write_show(tmp_path, body)), no_log=True))
+    settings = session.settings
+    status = ShowStatus(settings.plans, settings.sections.starts)
+    live = Live(StopRequest(), cues=cue_list(settings.plans), status=status)
+    console = Console(session, live, status=status, out=io.StringIO(), keys=io.StringIO())
+    console.live = counted = Counted(live)  # type: ignore[assignment]
+    for index in range(n - 6):
+        for robot in ("a", "b"):
+            for kind in ("start", "end"):
+                event = step_event(session, robot, index, kind)
+                status.on_step(event)
+                live.on_step(event)
+    screen = console.screen()
+    assert counted.asked <= 2 * 9 + 1 + 64
+    assert [line.number for line in screen.cues][:3] == [str(n - 8), str(n - 7), str(n - 6)]  # where the show is
+    assert screen.cues[screen.playhead].number == str(n - 4)  # the next GO cue (cue n-4 is step n-5)
+    assert screen.cue.startswith(f"next cue: cue {n - 5} at ")  # the next timed one

@@ -27,6 +27,7 @@ import sys
 import termios
 import threading
 from collections import deque
+from collections.abc import Callable
 from contextlib import suppress
 from typing import TextIO, cast
 
@@ -67,6 +68,7 @@ NOTES = 5  # lines of log and answers on screen
 CUE_WINDOW = 9  # cues of the list on screen at most (render shows fewer on a short terminal)
 MAX_TYPED = 40  # characters a cue reference typed after `j` may have
 NAMES = 2  # robots named on a line they share (`left, right +3`)
+NEXT_TIMED_LOOKS = 64  # timed cues looked at for the next one ahead (those before it ran or were skipped)
 
 QUESTION = "stop the show? y/n"
 JUMP = "jump to cue (number or label, Enter; Enter alone cancels): {typed}_"  # what is typed last: a cut keeps it
@@ -87,6 +89,15 @@ def _names(robots: list[str] | tuple[str, ...]) -> str:
     """`left, right +3`: the first NAMES robots (each cut to 12 columns) and how many more."""
     shown = ", ".join(fit(name, 12) for name in robots[:NAMES])
     return shown + (f" +{len(robots) - NAMES}" if len(robots) > NAMES else "")
+
+
+def _firsts(cues: CueList, kind: Callable[[Cue], bool]) -> tuple[int, ...]:
+    """For each position in the list, the first cue of `kind` from it on (len: none)."""
+    first, later = [len(cues.cues)] * (len(cues.cues) + 1), len(cues.cues)
+    for at in range(len(cues.cues) - 1, -1, -1):
+        later = at if kind(cues.cues[at]) else later
+        first[at] = later
+    return tuple(first)
 
 
 # -- the console -------------------------------------------------------------------------------
@@ -112,6 +123,7 @@ class Console:
         self._own_status = status is None  # then it is told the steps, and watches the links, itself
         self.status = status if status is not None else ShowStatus(settings.plans, settings.sections.starts)
         self._cues: CueList = live.cues  # the live controls keep the cue list and each cue's state
+        self._timed = _firsts(self._cues, lambda cue: not cue.go and cue.at is not None)
         self._typed: str | None = None  # a cue reference being typed after `j`
         self._notes: deque[Note] = deque(maxlen=NOTES)
         self._asking = False
@@ -397,14 +409,15 @@ class Console:
         waiting = [] if stopping else self.live.waiting  # a stopped show's GO cues wait for nothing
         show_s = self._show_s()
         robots = self.status.robots(self.live.skipped)  # a skipped cue is no robot's next step
-        states = self.live.cue_states()  # under the controls' lock once (the runners share it)
         head = None if stopping else self.live.playhead
-        window, at = self._window(head, states)
+        first = self._first_open(robots)
+        window, at = self._window(head, first)
+        states = {cue: self.live.cue_state(cue) for cue in (*window, *(() if head is None else (head,)))}
         groups = self._groups(waiting)
         shared = {name for names, _ in groups if len(names) > 1 for name in names}
         rows = tuple(self._row(robot, groups) for robot in robots if robot.robot not in shared)
         waits = tuple(f"{_names(names)} wait for GO: {name}" for names, name in groups if len(names) > 1)
-        cue = "next cue: none, the show is stopping" if stopping else self._cue_line(show_s, states)
+        cue = "next cue: none, the show is stopping" if stopping else self._cue_line(show_s, first)
         go, go_waiting = self._go_line(head, states, stopping)
         lines = tuple(self._cue_line_of(c, states.get(c, "done"), show_s) for c in window)
         with self._lock:
@@ -413,14 +426,33 @@ class Console:
                           self._clock_text(stopping), cue, go, go_waiting, rows, tuple(self._notes), prompt,
                           self._legend(), self._bar(show_s), lines, at, waits)
 
-    def _window(self, head: Cue | None, states: dict[Cue, str]) -> tuple[tuple[Cue, ...], int | None]:
-        """CUE_WINDOW cues from the one before the first not over yet (the last ones once all
-        are), moved on if the playhead would fall past it; and the playhead's place in them."""
+    def _first_open(self, robots: tuple[RobotRow, ...]) -> int:
+        """Where the show is in the cue list: the first cue a robot is on or comes to next
+        (len: none). From the robots' rows, looked up: a show of 10,000 cues is not walked
+        at each redraw, nor every cue's state asked of the live controls (their lock is the
+        runners' too)."""
+        cues, first = self._cues, len(self._cues.cues)
+        for row in robots:
+            step = row.cue_step
+            cue = cues.of_step(row.robot, step.index) if step is not None else None
+            if cue is not None:
+                first = min(first, cues.position(cue))
+        return first
+
+    def _place(self, cue: Cue | None) -> int | None:
+        """`cue`'s place in the list, looked up (None: none, or a cue made up for a show run
+        without its list)."""
+        try:
+            return None if cue is None else self._cues.position(cue)
+        except ValueError:
+            return None
+
+    def _window(self, head: Cue | None, active: int) -> tuple[tuple[Cue, ...], int | None]:
+        """CUE_WINDOW cues from the one before `active` (the first not over yet; the last ones
+        once all are), moved on if the playhead would fall past it; and the playhead's place."""
         cues = self._cues.cues
-        active = next((i for i, cue in enumerate(cues) if states.get(cue) in ("ahead", "waiting", "running")),
-                      len(cues))
         first = max(0, active - 1)
-        at = self._cues.position(head) if head is not None and head in cues else None
+        at = self._place(head)
         if at is not None:
             first = min(first, at - 1) if at >= 1 else 0
             if at - first >= CUE_WINDOW - 1:
@@ -455,10 +487,21 @@ class Console:
         held = isinstance(show, HoldingShowClock) and show.held and not stopping
         return f"{clock} clock" + (", held for GO" if held else "")
 
-    def _cue_line(self, show_s: float | None, states: dict[Cue, str]) -> str:
+    def _next_timed(self, first: int) -> Cue | None:
+        """The first timed cue ahead from position `first` on: timed cues looked up (`_timed`),
+        those not ahead any more passed over, NEXT_TIMED_LOOKS of them at most."""
+        cues, at = self._cues.cues, self._timed[first]
+        for _ in range(NEXT_TIMED_LOOKS):
+            if at >= len(cues):
+                return None
+            if self.live.cue_state(cues[at]) == "ahead":
+                return cues[at]
+            at = self._timed[at + 1]
+        return None
+
+    def _cue_line(self, show_s: float | None, first: int) -> str:
         """The next timed cue ahead, and how long until it."""
-        cue = next((cue for cue in self._cues if not cue.go and cue.at is not None and states.get(cue) == "ahead"),
-                   None)
+        cue = self._next_timed(first)
         if cue is None:
             return "next cue: none ahead"
         at = cue.at or 0.0

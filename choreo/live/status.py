@@ -40,6 +40,7 @@ class RobotRow:
     retries: int
     failed: int  # tries without a good reply
     due_s: tuple[float, ...] = ()  # show times its runner next wakes to send (`_Robot.dues_s`)
+    cue_step: PlannedStep | None = None  # the cue's step it is on, or comes to next: where it is in the cue list
 
     @property
     def state(self) -> str:
@@ -81,14 +82,21 @@ class _Robot:
     failed: int = 0
     positions: dict[int, int] = field(default_factory=dict)  # step index -> position in `steps`
     timed: tuple[int, ...] = ()  # position -> the position of the first timed step from it on (or len)
+    cued: tuple[int, ...] = ()  # position -> the position of the first cue's step from it on (or len)
 
     def __post_init__(self) -> None:
         self.positions = {step.index: at for at, step in enumerate(self.steps)}
-        timed, later = [len(self.steps)] * (len(self.steps) + 1), len(self.steps)
+        self.timed = self._first_from(lambda step: step.at is not None)
+        self.cued = self._first_from(lambda step: step.cue is not None)
+
+    def _first_from(self, kind: Callable[[PlannedStep], bool]) -> tuple[int, ...]:
+        """For each position, the first from it on of a step of `kind` (len: none): made once,
+        so that a show of 10,000 cues is looked up, never walked, at each redraw."""
+        first, later = [len(self.steps)] * (len(self.steps) + 1), len(self.steps)
         for at in range(len(self.steps) - 1, -1, -1):
-            later = at if self.steps[at].at is not None else later
-            timed[at] = later
-        self.timed = tuple(timed)
+            later = at if kind(self.steps[at]) else later
+            first[at] = later
+        return tuple(first)
 
     @property
     def current(self) -> PlannedStep | None:
@@ -134,11 +142,19 @@ class _Robot:
             at += 1
         return self.steps[at] if at < len(self.steps) else None
 
+    def cue_step(self) -> PlannedStep | None:
+        """The cue's step it is on (not over), or the next one it comes to."""
+        step = self.current
+        if step is not None and step.cue is not None and not self.ended:
+            return step
+        at = self.cued[self.at + 1]
+        return self.steps[at] if at < len(self.steps) else None
+
     def row(self, skipped: Skipped) -> RobotRow:
         latency = statistics.median(self.latencies_ms) if self.latencies_ms else None
         done = self.ended and self.at == len(self.steps) - 1
         return RobotRow(self.name, self.current, self.ended, done, self.following(skipped), self.started_s, latency,
-                        self.retries, self.failed, self.dues_s(skipped))
+                        self.retries, self.failed, self.dues_s(skipped), self.cue_step())
 
 
 @dataclass
