@@ -95,6 +95,25 @@ def test_a_status_too_big_for_a_datagram_is_cut_saying_so_over_udp_and_whole_ove
                .encoded()) > LIMITS.status_datagram - 200  # as many as fit, not a few
 
 
+def test_a_status_too_big_for_one_message_is_cut_over_tcp_too(clock):
+    """300 robots: 175 KB of status over TCP, more than one message choreo takes (and more than
+    a connection may leave unsent before it is closed): cut to `OscLimits.max_message`."""
+    said = many_robots(300)
+    osc = OscServer(Big(clock, said), 0, now=clock.now)
+    osc.start()
+    peer = Peer("tcp", osc.port)
+    try:
+        peer.send(encode_message("/choreo/status"))
+        peer.sock.settimeout(TIMEOUT_S)
+        packet = _frame(peer)
+    finally:
+        peer.close()
+        osc.close()
+    body = reply(packet)[1]
+    assert len(packet) <= osc.wire_limits.max_message and 0 < len(body["data"]["robots"]) < 300
+    assert body["message"].endswith("robots, 0 of 0 cues waiting left out; one message holds no more)")
+
+
 def _frame(peer: Peer) -> bytes:
     while b"\xc0" not in peer._buffer.lstrip(b"\xc0"):
         chunk = peer.sock.recv(65536)

@@ -21,7 +21,8 @@ such as `%00` are refused with a reply that says how to escape):
     /choreo/stop                stop: the exchange in flight, then the abort motion
     /choreo/panic               no more show frames: stop frames and every robot's abort motion
     /choreo/status              a question: the reply's data is the show's state (`Live.status`;
-                                over UDP cut to `Limits.status_datagram` bytes, saying so)
+                                cut to `Limits.status_datagram` bytes over UDP, to the
+                                longest message choreo takes over TCP, saying so)
     /choreo/thump               a heartbeat: answered at once (data: whether updates go to you)
     /choreo/updates 1|0         the notifications to you too (1), or no longer (0)
 
@@ -132,6 +133,7 @@ LOST = "lost"  # the command name datagrams the system dropped before choreo rea
 UNREAD = "unread"  # the command name a packet over its sender's rate is counted under (not read)
 UNANSWERED = "unanswered"  # status or thump over the sender's budget of questions: counted, not answered
 UNSENT = "unsent updates"  # notifications over a UDP subscriber's budget of bytes: dropped, counted
+ASK_TCP = "ask over TCP for the whole status"  # a status reply cut to fit a datagram
 CUT = "…"  # ends an address cut to `Limits.address_shown` characters
 UPDATES_COMMAND = "updates"  # how the log names /choreo/updates (subscribing, ending, expiring)
 SENDERS_KNOWN = 4096  # senders whose verdict is remembered (an address's parse costs more than a refusal)
@@ -172,11 +174,12 @@ def _finite(value: Any) -> Any:
     return value
 
 
-def status_reply(address: str, status: dict, most: int | None = None) -> Reply:
+def status_reply(address: str, status: dict, most: int | None = None, advice: str = ASK_TCP) -> Reply:
     """The `/choreo/status` reply, in at most `most` bytes when given (over UDP: a reply larger
-    than its datagram could not be sent at all, and is sent to an address that may be forged):
-    whole if it fits; else the robots' rows left out from the last, then the cues waiting, then
-    the playhead, and `data["cut"]` and the message say what was left out."""
+    than its datagram could not be sent at all, and is sent to an address that may be forged;
+    over TCP: the longest message choreo takes, so a peer built alike takes it too): whole if
+    it fits; else the robots' rows left out from the last, then the cues waiting, then the
+    playhead, and `data["cut"]` and the message say what was left out, and `advice`."""
     state = str(status.get("state", ""))
     whole = Reply(address, "ok", state, status)
     if most is None or len(whole.encoded()) <= most:
@@ -189,8 +192,7 @@ def status_reply(address: str, status: dict, most: int | None = None) -> Reply:
         if not playhead:
             data["playhead"] = None
         why = (f"{state} (cut to {most} bytes: {left['robots']} of {len(robots)} robots, {left['waiting']} of "
-               f"{len(waiting)} cues waiting{', the playhead' if not playhead else ''} left out; ask over TCP "
-               "for the whole status)")
+               f"{len(waiting)} cues waiting{', the playhead' if not playhead else ''} left out; {advice})")
         return Reply(address, "ok", why, data)
 
     def fits(reply: Reply) -> bool:
@@ -623,8 +625,9 @@ class OscServer:
             return None
         if name == "thump":
             return Reply(address, "ok", "thump", {"updates": origin.key in self.subscriptions})
-        most = self._limits.limits.status_datagram if origin.transport == "udp" else None
-        return status_reply(address, self.live.status(), most)
+        if origin.transport == "udp":
+            return status_reply(address, self.live.status(), self._limits.limits.status_datagram)
+        return status_reply(address, self.live.status(), self.wire_limits.max_message, "one message holds no more")
 
     def _updates(self, origin: Origin, address: str, args: tuple) -> Reply:
         """`/choreo/updates 1|0`: the sender gets the notifications (or no longer), logged as
