@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import grp
 import os
+import shlex
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -144,7 +145,7 @@ def _board(port: str, probe: Callable[[str], BoardInfo]) -> Finding:
     try:
         info = probe(port)
     except ChoreoError as exc:
-        return Finding(PROBLEM, "board", exc.lines()[0], f"choreo probe --port {port} says "
+        return Finding(PROBLEM, "board", exc.lines()[0], f"choreo probe --port {shlex.quote(port)} says "
                        "more; check the cable, the board's power and its baud")
     version = f", version {info.version!r}" if info.version else ""
     return Finding(OK, "board", f"a board answers on {port} at {info.baud} baud{version}")
@@ -197,12 +198,13 @@ def _answers(info: BoardInfo, wanted: BoardWanted) -> Finding:
     config = f", config 0x{info.config.word:04x}" if info.config is not None else ""
     said = f"a board answers on {wanted.port} at {info.baud} baud{version}{config}"
     if info.baud != wanted.baud:
-        return Finding(PROBLEM, "board", f"{said}, but the show runs at {wanted.baud} baud",
-                       f"--baud {info.baud} (or robot.baud: {info.baud} in the show)", wanted.robot)
+        fix = (f"robots.{wanted.robot}.baud: {info.baud} in the show" if wanted.robot is not None
+               else f"--baud {info.baud} (or robot.baud: {info.baud} in the show)")
+        return Finding(PROBLEM, "board", f"{said}, but the show runs at {wanted.baud} baud", fix, wanted.robot)
     if wanted.layout.reads_config and info.config is None:
         return Finding(PROBLEM, "board", f"{said}, but its config word was not read: layout {wanted.layout.name} "
-                       "builds its stop and start frames from it", f"choreo probe --port {wanted.port} says "
-                       "more; check the cable and the board's firmware", wanted.robot)
+                       f"builds its stop and start frames from it", f"choreo probe --port {shlex.quote(wanted.port)} "
+                       "says more; check the cable and the board's firmware", wanted.robot)
     unread = [note.removeprefix("note: ") for note in info.notes]
     if unread:
         return Finding(NOTE, "board", f"{said}; {unread[0]}", None, wanted.robot)
@@ -214,7 +216,8 @@ def _layout_check(info: BoardInfo, wanted: BoardWanted) -> Finding:
     loop, which the seed stop frame also writes, contradicts hth4-2.2; HTH4 2.x's fits both
     layouts (2.0/2.1 are seed), so it only says which is whose."""
     layout, robot = wanted.layout, wanted.robot
-    choose = "robot.layout in the show or --layout; `choreo import PROJECT.h4p` reads it from the project"
+    where = "robot.layout in the show or --layout" if robot is None else f"robots.{robot}.layout in the show"
+    choose = f"{where}; `choreo import PROJECT.h4p` reads it from the project"
     if info.counter is None or info.counter.in_call:
         why = "not read" if info.counter is None else "a motion is running"
         return Finding(NOTE, "layout", f"{layout.name}: the board's program counter cannot tell ({why})", None, robot)

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from choreo.board.usb import KONDO_USB_ID
 from choreo.errors import UsageError
-from choreo.textfit import visible
+from choreo.textfit import char_width, display_width, pad, visible
 from choreo.wire.layouts import LAYOUT_NAMES
 from choreo.wire.protocol import spell_bauds
 
@@ -134,9 +134,12 @@ def _show(args: argparse.Namespace) -> int:
         log = report.log
         print_json({"ok": report.exit_code == 0, "exit": report.exit_code, "show": report.show,
                     "log_estimate_bytes": log.bytes if log is not None else None,
+                    "log_room_bytes": log.room if log is not None else None,
                     "findings": [_record(f) | {"robot": f.robot} for f in report.findings]})
         return report.exit_code
-    for line in table(report.findings):
+    from choreo.cli.terminal import columns
+
+    for line in table(report.findings, columns()):
         print(line)
     return report.exit_code
 
@@ -146,12 +149,53 @@ def _record(finding: Finding) -> dict:
     return {"level": finding.level, "check": finding.check, "text": finding.text, "fix": finding.fix}
 
 
-def table(findings: Sequence[Finding]) -> list[str]:
-    """One line a check: its name, the verdict, what was found and, for a problem, the fix;
-    whatever a name from outside (a port, a file, a show) put in it is shown escaped."""
-    width = max([len("check"), *(len(visible(f.name)) for f in findings)])
-    lines = [f"{'check':<{width}}  verdict  detail -> fix"]
+def table(findings: Sequence[Finding], width: int | None = None) -> list[str]:
+    """One row a check: its name, the verdict, what was found and, for a problem, the fix;
+    whatever a name from outside (a port, a file, a show) put in it is shown escaped. Given a
+    terminal's `width`, a long detail wraps under the detail column (never cut: the fix is the
+    point of the line)."""
+    names = max([len("check"), *(display_width(visible(f.name)) for f in findings)])
+    indent = names + 2 + len("verdict") + 2
+    room = max(width - indent, MIN_DETAIL) if width is not None else None
+    lines = [f"{pad('check', names)}  verdict  detail -> fix"]
     for f in findings:
-        fix = f" -> fix: {f.fix}" if f.fix else ""
-        lines.append(f"{visible(f.name):<{width}}  {f.verdict:<7}  {visible(f.text + fix)}")
+        detail = visible(f.text + (f" -> fix: {f.fix}" if f.fix else ""))
+        first, *rest = wrapped(detail, room)
+        lines.append(f"{pad(visible(f.name), names)}  {f.verdict:<7}  {first}")
+        lines += [" " * indent + more for more in rest]
     return lines
+
+
+MIN_DETAIL = 24  # columns the detail keeps however narrow the terminal (it then runs past the edge)
+
+
+def wrapped(text: str, width: int | None) -> list[str]:
+    """`text` in lines of at most `width` columns (by display width), broken at spaces; a word
+    longer than a line (a path, a URL) is broken where the line ends."""
+    if width is None or display_width(text) <= width:
+        return [text]
+    lines: list[str] = []
+    line = ""
+    for word in text.split(" "):
+        candidate = f"{line} {word}" if line else word
+        if display_width(candidate) <= width:
+            line = candidate
+            continue
+        if line:
+            lines.append(line)
+        while display_width(word) > width:
+            cut = _cut(word, width)
+            lines.append(word[:cut])
+            word = word[cut:]
+        line = word
+    return lines + [line] if line else lines
+
+
+def _cut(word: str, width: int) -> int:
+    """How many characters of `word` fit in `width` columns (at least one)."""
+    used = 0
+    for index, char in enumerate(word):
+        used += char_width(char)
+        if used > width:
+            return max(index, 1)
+    return len(word)

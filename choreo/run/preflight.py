@@ -25,6 +25,7 @@ from __future__ import annotations
 import ipaddress
 import math
 import os
+import shlex
 import shutil
 import tempfile
 import threading
@@ -35,10 +36,12 @@ from pathlib import Path
 
 from choreo.board.doctor import NOTE, OK, PROBLEM, BoardWanted, Finding, audio_output, board_checks, device_checks
 from choreo.board.probe import BoardInfo
-from choreo.board.usb import SYSFS
+from choreo.board.usb import LOW_LATENCY_MS, SYSFS
 from choreo.clock import RunClock, TimeSource
 from choreo.errors import ChoreoError, ShowError, UsageError
-from choreo.log.format import CLOCK_EVERY_S
+from choreo.log.format import CLOCK_EVERY_S, channels_for
+from choreo.log.recorder import (BATCH, CHUNK_BOUND, CHUNK_BUDGET, CHUNK_SIZE, FLUSH_EVERY_S, IN_FLIGHT, MESSAGE_BUDGET,
+                                 RESERVE_AHEAD, SUMMARY_SLACK, schema_text)
 from choreo.run.runner import POLL_S
 from choreo.run.settings import LinkSettings, RunRequest, RunSettings
 from choreo.show.model import Plan, Show, StepKind, is_simulator
@@ -50,15 +53,21 @@ from choreo.wire.protocol import BAUDS
 # each try waiting the show's reply timeout, at most PROBE_TIMEOUT_S (12 s at worst; 2.4 s by default).
 PROBE_TIMEOUT_S = 1.0
 PORT_DEADLINE_S = 15.0
-# What a log costs, measured on the simulator's logs (MCAP, uncompressed): a frame and its reply
-# are two records of ~90 bytes plus ~50 of record header and index each; a step event ~180 + 50;
-# a clock sample ~70 + 50; the metadata, schemas, show file and summary ~40 KiB.
+# What a log costs in the file (MCAP, uncompressed), measured on the simulator's logs: a message
+# is its JSON (a frame ~88 bytes, its reply ~84, a step ~170 and its label, a clock sample ~85,
+# a command ~130) and 47 bytes of record header and index entry; the recorder closes a chunk
+# every quarter second of a show that sends (~120 bytes and 25 a channel of indexes each); the
+# schemas are written twice (in the first chunk and in the summary); header, metadata, channels
+# and footer ~6 KiB. A hold or a pause adds next to nothing: the clock is sampled on show time.
 FRAME_AND_REPLY_BYTES = 300
 STEP_EVENT_BYTES = 240
-CLOCK_SAMPLE_BYTES = 120
-FIXED_LOG_BYTES = 64 * 1024
+CLOCK_SAMPLE_BYTES = 140
+COMMAND_BYTES = 200  # a GO (and a sample of the clock forced as it releases the show)
+CHUNK_BYTES = 120
+CHUNK_CHANNEL_BYTES = 25
+START_BYTES = 6 * 1024
 MUSIC_FILE = format_path(("music", "file"))  # where a show's problem with its music file is
-ROOM_MARGIN = 4  # less free space than this many logs is worth a note (a held show logs on)
+ROOM_MARGIN = 2  # less free space than twice the run's reserve is a note: little to spare for another writer
 
 
 @dataclass(frozen=True)
@@ -114,17 +123,19 @@ class Machine:
 
 @dataclass(frozen=True)
 class LogEstimate:
-    """What the plan will log: its records, and their size in bytes."""
+    """What the plan will log: its records, the file's size, and the disk space the recorder
+    holds at most as it writes (`room`: the log so far, the chunk being built, what a stopping
+    run still reports and the summary; a disk without it stops the run, `choreo.log.recorder`)."""
 
     frames: int  # frames sent, each with its reply
     step_events: int
     clock_samples: int
     bytes: int
-    per_minute_held: int  # a show held for GO (or paused) logs on: its clock samples
+    room: int
 
     def text(self) -> str:
         return (f"about {size(self.bytes)} ({self.frames} frames and replies, {self.step_events} step events, "
-                f"{self.clock_samples} clock samples; {size(self.per_minute_held)} more a minute held)")
+                f"{self.clock_samples} clock samples); the run holds up to {size(self.room)} as it writes")
 
 
 @dataclass(frozen=True)
@@ -146,7 +157,7 @@ def preflight(request: RunRequest, osc: OscAsk = OscAsk(), machine: Machine = Ma
     settings, findings = _settle(request)
     estimate = None
     if settings is not None:
-        estimate = log_estimate(settings.plans, len(settings.show.source or ""))
+        estimate = run_log_estimate(settings)
         findings += _robots(settings, machine)
         if not any(f.check == "music" for f in findings):  # a music file not found is said already
             findings += _music(settings, request, machine)
@@ -184,7 +195,7 @@ def _settle(request: RunRequest) -> tuple[RunSettings | None, list[Finding]]:
 def _unloaded(exc: ChoreoError, request: RunRequest) -> Finding:
     lines = exc.lines()
     more = f" (and {len(lines) - 1} more)" if len(lines) > 1 else ""
-    fix = (f"choreo validate {request.show_path} lists every problem" if isinstance(exc, ShowError)
+    fix = (f"choreo validate {shlex.quote(request.show_path)} lists every problem" if isinstance(exc, ShowError)
            else "change the option or the show as the message says")
     return Finding(PROBLEM, "show", lines[0] + more, fix)
 
@@ -208,7 +219,7 @@ def _robots(settings: RunSettings, machine: Machine) -> list[Finding]:
     for link in settings.links.values():
         robot = link.robot if ensemble else None
         device = [] if _is_url(link.port) else device_checks(link.port, machine.sysfs)
-        device = [replace(f, robot=robot) for f in device]
+        device = [_in_show(replace(f, robot=robot)) for f in device]
         found += device
         if machine.talk and not any(f.check == "device" for f in device):  # a device that is not there
             talk.append(link)
@@ -218,27 +229,44 @@ def _robots(settings: RunSettings, machine: Machine) -> list[Finding]:
     return found + [replace(f, robot=f.robot if ensemble else None) for link in talk for f in results[link.robot]]
 
 
+def _in_show(finding: Finding) -> Finding:
+    """A slow latency timer does not stop a show: the run asks the driver for low latency as it
+    opens the port (and says so if the timer stays slow), so it is a note here."""
+    if finding.check != "latency" or finding.level != PROBLEM:
+        return finding
+    return replace(finding, level=NOTE, text=f"{finding.text}; choreo run asks the driver for "
+                   f"{LOW_LATENCY_MS} ms as it opens the port, and says so if the timer stays above")
+
+
 def _is_url(port: str) -> bool:
     return is_simulator(port) or "://" in port
 
 
 def _board(link: LinkSettings, machine: Machine, ensemble: bool) -> list[Finding]:
-    """The port opens at the show's baud; the board answers the probe (the show's baud first)."""
+    """The port opens at the show's baud; the board answers the probe (the show's baud first).
+    What the port's errors say is said of the port as the user named it (`given_port`), not of
+    the URL the run derives from it (a simulator's with the show's durations and layout)."""
     robot = link.robot if ensemble else None
+    port = shlex.quote(link.given_port)
     try:
         machine.open_port(link.port, link.baud, link.timeout, machine.time_source)
     except ChoreoError as exc:
-        return [Finding(PROBLEM, "port", exc.lines()[0], "choreo ports lists the serial ports; check the "
+        return [Finding(PROBLEM, "port", _named(exc, link), "choreo ports lists the serial ports; check the "
                         "cable and that no other program holds the port", robot)]
     found = [Finding(OK, "port", f"{link.given_port} opens at {link.baud} baud", None, robot)]
     bauds = (link.baud, *(b for b in BAUDS if b != link.baud))
     try:
         info = machine.probe(link.port, bauds, min(link.timeout, PROBE_TIMEOUT_S), machine.time_source)
     except ChoreoError as exc:
-        return found + [Finding(PROBLEM, "board", exc.lines()[0], f"choreo probe --port {link.given_port} says more; "
+        return found + [Finding(PROBLEM, "board", _named(exc, link), f"choreo probe --port {port} says more; "
                                 "check the board's power, the cable and its baud", robot)]
+    info = replace(info, notes=[note.replace(link.port, link.given_port) for note in info.notes])
     wanted = BoardWanted(link.given_port, link.baud, link.layout, link.layout_source == "default", robot)
     return found + board_checks(info, wanted)
+
+
+def _named(exc: ChoreoError, link: LinkSettings) -> str:
+    return exc.lines()[0].replace(link.port, link.given_port) if link.port else exc.lines()[0]
 
 
 def _each(links: list[LinkSettings], check: Callable[[LinkSettings], list[Finding]],
@@ -272,13 +300,14 @@ def _guarded(check: Callable[[LinkSettings], list[Finding]], link: LinkSettings)
     try:
         return check(link)
     except (OSError, ValueError) as exc:
-        return [Finding(PROBLEM, "port", f"{link.port}: {exc}", "choreo probe --port PORT says more", link.robot)]
+        return [Finding(PROBLEM, "port", f"{link.given_port}: {exc}", "choreo probe --port "
+                        f"{shlex.quote(link.given_port)} says more", link.robot)]
 
 
 def _hung(link: LinkSettings, machine: Machine) -> Finding:
     return Finding(PROBLEM, "port", f"{link.given_port}: no answer within {machine.deadline_s:g} s (the port "
                    "or its driver hangs)", "unplug the adapter and plug it in again; then choreo probe --port "
-                   f"{link.given_port}", link.robot)
+                   f"{shlex.quote(link.given_port)}", link.robot)
 
 
 # --------------------------------------------------------------------------- music
@@ -302,7 +331,31 @@ def _music(settings: RunSettings, request: RunRequest, machine: Machine) -> list
         return [Finding(PROBLEM, "music", exc.lines()[0], "music.file in the show: a wav, mp3, flac or ogg "
                         "file next to it (choreo beats SONG decodes it too)")]
     return [_song_length(settings, song.end_show_s, song.path),
-            audio_output(lambda: machine.audio(request.audio_device), request.audio_device)]
+            audio_output(lambda: _in_time(lambda: machine.audio(request.audio_device), machine), request.audio_device)]
+
+
+def _in_time(call: Callable[[], str], machine: Machine) -> str:
+    """`call` on a thread of its own on the machine's time: a sound system that hangs as an
+    output opens is a ChoreoError after `machine.deadline_s` (its thread is left behind)."""
+    if machine.virtual:
+        return call()
+    done: list[str] = []
+    failed: list[BaseException] = []
+
+    def work() -> None:
+        try:
+            done.append(call())
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller's thread, raised there
+            failed.append(exc)
+
+    thread = threading.Thread(target=work, daemon=True, name="doctor audio")
+    thread.start()
+    thread.join(machine.deadline_s)
+    if failed:
+        raise failed[0]
+    if not done:
+        raise ChoreoError(f"no answer within {machine.deadline_s:g} s (the sound system hangs)")
+    return done[0]
 
 
 def _song_length(settings: RunSettings, end: float, path: str) -> Finding:
@@ -352,16 +405,33 @@ def _osc(osc: OscAsk, settings: RunSettings | None) -> list[Finding]:
     try:
         server = _bound(osc)
     except UsageError as exc:
-        check = "osc-allow" if str(exc).startswith("--osc-allow") else "osc"
-        return [Finding(PROBLEM, check, exc.lines()[0], "another --osc port (QLab itself listens on 53000; "
-                        "e.g. 53200), or stop what holds it" if check == "osc" else "an IP address or network, "
-                        "as 192.168.1.20 or 192.168.1.0/24")]
+        return [_osc_problem(exc.lines()[0])]
     allowed = f"; allows {', '.join(osc.allow)}" if osc.allow else "; this machine only"
     said = f"udp and tcp port {server} on {osc.host} are free{allowed}"
+    if osc.port.strip() == "0":
+        return [Finding(NOTE, "osc", f"--osc 0: the run listens on a port the system picks as it starts ({server} "
+                        "now): QLab cannot be told it beforehand", "a fixed port, e.g. --osc 53200")]
     if osc.allow and _loopback(osc.host):
         return [Finding(NOTE, "osc", f"{said}, but {osc.host} is reachable from this machine only",
                         "--osc-host 0.0.0.0 (or this machine's address on the stage network)")]
     return [Finding(OK, "osc", said)]
+
+
+def _osc_problem(said: str) -> Finding:
+    """What the run would refuse, with the fix for its cause: the allow-list, a target, the port
+    number, a port in use, or an address this machine cannot listen on."""
+    if said.startswith("--osc-allow"):
+        return Finding(PROBLEM, "osc-allow", said, "an IP address or network, as 192.168.1.20 or 192.168.1.0/24")
+    if said.startswith("--osc-notify"):
+        return Finding(PROBLEM, "osc-notify", said, "HOST:PORT where a program listens for choreo's progress, "
+                       "e.g. 127.0.0.1:53001")
+    if "give a port number" in said:
+        return Finding(PROBLEM, "osc", said, "--osc with a number, e.g. 53200 (QLab itself listens on 53000)")
+    if "another program listens there" in said:
+        return Finding(PROBLEM, "osc", said, "another --osc port (QLab itself listens on 53000; e.g. 53200), "
+                       "or stop what holds it")
+    return Finding(PROBLEM, "osc", said, "--osc-host with an address of this machine (127.0.0.1; 0.0.0.0: every "
+                   "network) and a port from 1024 up")
 
 
 def _loopback(host: str) -> bool:
@@ -401,11 +471,18 @@ def _bound(osc: OscAsk) -> int | None:
 # --------------------------------------------------------------------------- the log
 
 
-def log_estimate(plans: Mapping[str, Plan], source_bytes: int = 0) -> LogEstimate:
+def run_log_estimate(settings: RunSettings) -> LogEstimate:
+    """The log of the run `settings` describe (its plans, its show file, its robots' topics)."""
+    robots = tuple(settings.links) if settings.show.ensemble else ()
+    return log_estimate(settings.plans, len(settings.show.source), robots)
+
+
+def log_estimate(plans: Mapping[str, Plan], source_bytes: int = 0, robots: tuple[str, ...] = ()) -> LogEstimate:
     """What a run of `plans` will log: each frame with its reply (a `wait: done` polls every
-    POLL_S for the motion's expected rest, and once more), each step's start and end, and a
-    clock sample every CLOCK_EVERY_S of the show; held time adds clock samples only."""
-    frames = events = 0
+    POLL_S for the motion's expected rest, and once more), each step's start and end, a clock
+    sample every CLOCK_EVERY_S of the show and one at each GO, each GO's command. `robots`: a
+    show for several names them (each has topics, so schemas, of its own)."""
+    frames = events = gos = labels = 0
     longest = 0.0
     for plan in plans.values():
         longest = max(longest, plan.estimated_s)
@@ -413,31 +490,57 @@ def log_estimate(plans: Mapping[str, Plan], source_bytes: int = 0) -> LogEstimat
             if not step.is_for(plan.robot):
                 continue
             events += 2
+            labels += 2 * len(step.label or "")
+            gos += 1 if step.go else 0
             polls = math.ceil(step.expected_s / POLL_S) + 1 if step.kind is StepKind.WAIT_DONE else 1
             frames += len(step.frames) * polls if step.kind is not StepKind.WAIT else 0
         frames += 4  # opening the port (an ACK check, a config read) and its close
-    samples = math.ceil(longest / CLOCK_EVERY_S) + 2
-    total = (FIXED_LOG_BYTES + source_bytes + frames * FRAME_AND_REPLY_BYTES + events * STEP_EVENT_BYTES
-             + samples * CLOCK_SAMPLE_BYTES)
-    return LogEstimate(frames, events, samples, total, round(60 / CLOCK_EVERY_S) * CLOCK_SAMPLE_BYTES)
+    samples = math.ceil(longest / CLOCK_EVERY_S) + 2 + gos
+    topics = channels_for(robots)
+    schemas = sum(len(schema_text(filename)) for _, filename in topics.values())
+    records = (frames * FRAME_AND_REPLY_BYTES + events * STEP_EVENT_BYTES + labels + samples * CLOCK_SAMPLE_BYTES
+               + gos * COMMAND_BYTES)
+    chunks = math.ceil(longest / (FLUSH_EVERY_S / 2)) + records // CHUNK_SIZE + 2
+    indexes = chunks * (CHUNK_BYTES + CHUNK_CHANNEL_BYTES * len(topics))
+    total = START_BYTES + 2 * schemas + source_bytes + records + indexes
+    return LogEstimate(frames, events, samples, total, total + _reserve_tail(schemas, chunks, total))
+
+
+def _reserve_tail(schemas: int, chunks: int, written: int) -> int:
+    """What the recorder keeps reserved past the log's end at most (its `_tail_bytes`, a batch of
+    messages not yet written, the least it grows by) and a file system block to round up to."""
+    tail = (CHUNK_BOUND + IN_FLIGHT * MESSAGE_BUDGET + schemas + SUMMARY_SLACK
+            + CHUNK_BUDGET * (chunks + written // CHUNK_SIZE + 2))
+    return tail + BATCH * MESSAGE_BUDGET + RESERVE_AHEAD // 16 + 4096
 
 
 def _log(request: RunRequest, estimate: LogEstimate | None, machine: Machine) -> list[Finding]:
     """The log's folder takes a file, and has room for the log."""
     if request.no_log:
         return [Finding(NOTE, "log", "off (--no-log): nothing of the show is recorded")]
-    named = request.log_path is not None
+    named = bool(request.log_path)  # as the run takes it: `--log ''` is the default name
     folder = Path(request.log_path).parent if request.log_path else Path(request.log_dir)
     writable = _writable(folder, named)
-    if writable.level == PROBLEM or (named and Path(str(request.log_path)).exists()):
-        if writable.level != PROBLEM:
-            writable = Finding(PROBLEM, "log", f"{request.log_path} exists already: choreo never overwrites "
-                               "a log", "give another --log path, or leave --log out")
-        return [writable]
+    taken = _taken(str(request.log_path)) if named and writable.level != PROBLEM else None
+    if writable.level == PROBLEM or taken is not None:
+        return [taken or writable]
     room = _room(folder, estimate, machine)
     if request.loop is not None and estimate is not None:  # a rehearsal loops until stopped
         room = replace(room, text=f"{room.text}; --loop: the whole show's estimate, each pass logs about as much")
     return [writable, room]
+
+
+def _taken(path: str) -> Finding | None:
+    """Why the run could not create the log `path`: a file there already (a dangling link too:
+    the run creates it exclusively), or a name the system refuses (too long)."""
+    fix = "give another --log path, or leave --log out"
+    try:
+        os.lstat(path)
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        return Finding(PROBLEM, "log", f"--log {path}: {exc.strerror or exc}", fix)
+    return Finding(PROBLEM, "log", f"{path} exists already: choreo never overwrites a log", fix)
 
 
 def _writable(folder: Path, named: bool) -> Finding:
@@ -478,11 +581,13 @@ def _room(folder: Path, estimate: LogEstimate | None, machine: Machine) -> Findi
     if estimate is None:
         return Finding(NOTE, "log space", f"{size(free)} free on {where}; the log's size is not "
                        "estimated (the show did not load)")
-    said = f"the log needs {estimate.text()}; {size(free)} free on {where}"
-    if free < estimate.bytes:
-        return Finding(PROBLEM, "log space", said, "free some space there, or --log PATH on another disk")
-    if free < ROOM_MARGIN * estimate.bytes:
-        return Finding(NOTE, "log space", f"{said}: little to spare if the show is held", "free some space there")
+    said = f"the log will take {estimate.text()}; {size(free)} free on {where}"
+    if free < estimate.room:
+        return Finding(PROBLEM, "log space", f"{said}: the run would stop when the disk fills",
+                       f"free {size(estimate.room - free)} or more there, or --log PATH on another disk")
+    if free < ROOM_MARGIN * estimate.room:
+        return Finding(NOTE, "log space", f"{said}: little to spare (another program writing there, each "
+                       "pass of a --loop)", "free some space there")
     return Finding(OK, "log space", said)
 
 
