@@ -165,3 +165,31 @@ def test_a_shared_go_cue_skipped_while_a_robot_waits_there_is_passed_by_both(tmp
     for robot in ("a", "b"):
         assert motions(log, f"/rcb4/{robot}/tx") == [1, 3], robot
         assert [e for e in events(log, f"/choreo/{robot}/step") if e[0] == "two"] == [("two", "skip", "skipped")]
+
+
+def test_a_go_cue_skipped_as_its_robot_reaches_it_does_not_hold_the_show(tmp_path):
+    """The skip lands between the runner's look at the skips and its arrival at the GO cue
+    (a race the runner cannot close alone): the cue is passed at once, not waited at (the
+    show held for a GO the operator had skipped), and the clock does not hold for it."""
+    import threading
+
+    from choreo.events import Command, StopRequest, never
+    from choreo.live.controls import HoldingShowClock, Live
+    from choreo.show.cues import cue_list
+    from choreo.show.load import load_show
+    from choreo.show.plan import compile_plans
+    from runlog import write_show
+
+    body = "version: 1\nsteps:\n  - play: 1\n  - play: 2\n    at: go\n    label: bow\n"
+    plans = compile_plans(load_show(write_show(tmp_path, body)))
+    mono = [100.0]
+    live = Live(StopRequest(), cues=cue_list(plans), now=lambda: mono[0])
+    clock = HoldingShowClock(100.0, lambda: mono[0])
+    live.use_clock(clock)
+    assert live.command(Command("skip", "test", "bow")).ok  # the runner has just looked: not skipped then
+    step = next(s for s in next(iter(plans.values())).steps if s.go)
+    went: list = []
+    runner = threading.Thread(target=lambda: went.append(live.await_go(step, "robot", 0.0, never)), daemon=True)
+    runner.start()
+    runner.join(5)
+    assert went == [0.0] and not live.waiting and clock.state == "running"

@@ -308,7 +308,9 @@ class Live:
         show = self.show
         key = step.index if shared else (robot, step.index)
         with self._changed:
-            if key in self._released:  # the others were given their GO as this robot arrived
+            # the others were given their GO as this robot arrived; or the cue was skipped since
+            # the runner looked (it passes it, as it would have): neither waits nor holds the clock
+            if key in self._released or self.skipped(robot, step.index):
                 return show.show_at(self._now()) if show is not None else step.planned_s
             cue = self._waiting.get(key)
             new = cue is None
