@@ -372,3 +372,40 @@ def test_a_unison_play_under_way_when_paused_starts_its_motions_and_a_stop_then_
              if m["event"] == "end" and m["index"] == 0]
     assert [m["outcome"] for m in plays] == ["ok", "ok"]
     assert run.result is None or run.result.outcome == "aborted"
+
+
+def test_clock_samples_from_two_threads_reach_the_log_in_the_order_they_were_read():
+    """A runner's periodic sample and the operator's forced one (a pause) at once: the log gets
+    them in their own order (an older sample written last is passed over by the reviews, and
+    if it was the pause's, the change is lost)."""
+    from choreo.clock import RunClock
+    from choreo.run.session import ClockSampler
+
+    source = VirtualTime()
+    first_in = threading.Event()
+    second_done = threading.Event()
+    written: list[int] = []
+
+    class Recorder:
+        def on_clock(self, record, time_ns):  # type: ignore[no-untyped-def]
+            if not written and not first_in.is_set():
+                first_in.set()
+                second_done.wait(0.3)  # the runner's thread is put off here
+            written.append(record.monotonic_ns)
+
+    clock = RunClock(source)
+    sampler = ClockSampler(Recorder(), clock, HoldingShowClock(clock.mono(), clock.mono), "machine")  # type: ignore[arg-type]
+    runner = threading.Thread(target=sampler.sample, kwargs={"force": True})
+    runner.start()
+    assert first_in.wait(5)
+    source.advance(0.001)
+
+    def operator() -> None:
+        sampler.sample(force=True)
+        second_done.set()
+
+    other = threading.Thread(target=operator)
+    other.start()
+    runner.join(5)
+    other.join(5)
+    assert len(written) == 2 and written == sorted(written)

@@ -286,4 +286,7 @@ class ClockSampler:
                 return
             self._last = show_s
             state = self._pausable.state if self._pausable is not None else None  # running | held | paused
-        self.recorder.on_clock(ClockRecord(round(show_s, 6), mono_ns, self.source, state), self.clock.wall_ns(mono_ns))
+            # queued under the lock (a queue's append): a runner's sample and the operator's forced
+            # one at a pause reach the log in the order they were read, never the older one last
+            self.recorder.on_clock(ClockRecord(round(show_s, 6), mono_ns, self.source, state),
+                                   self.clock.wall_ns(mono_ns))
