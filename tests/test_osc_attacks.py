@@ -396,3 +396,18 @@ def test_a_bundle_of_pause_and_go_on_a_show(transport, real_shows):  # noqa: F81
         assert resume_body["status"] == "ok" and go_body["message"] == "GO: cue 1 'applause'"
     finally:
         peer.close()
+
+
+@pytest.mark.parametrize("silent_s, still", [(60.999, True), (61.0, False), (600.0, False)])
+def test_a_subscription_silent_61_s_has_ended_whether_or_not_a_notification_went_meanwhile(silent_s, still, live,
+                                                                                         clock, peers):  # noqa: F811
+    """Expiring was lazy: a subscriber silent for ten minutes, with nothing notified meanwhile,
+    was renewed by its next message (its thump said `updates: true`, and the notifications went
+    on), while one silent as long in a busier show had ended. The boundary is the same either
+    way: 61 s of silence ends it."""
+    peer = peers("udp")
+    assert ask(peer, "/choreo/updates", 1)[1]["status"] == "ok"
+    clock.sleep(silent_s)
+    assert ask(peer, "/choreo/thump")[1]["data"] == {"updates": still}
+    ended = [m for _, _, m in told(live) if m.startswith("updates off")]
+    assert ended == ([] if still else ["updates off: no message for 61 s"])

@@ -516,7 +516,7 @@ class OscServer:
             replies = [self._refuse(host, source, "")]  # its address is not read: the reply is `/reply`
         else:
             origin = Origin(transport, sender, host, budget, source)
-            self.subscriptions.heard(origin.key)  # any message renews its subscription
+            self._tell_expired(self.subscriptions.heard(origin.key))  # any message renews its subscription
             decoded = decode_packet(data, self.wire_limits)
             if decoded.error is not None:
                 replies = [self._malformed(budget, source, decoded.error, decoded.address)]

@@ -232,13 +232,22 @@ class Subscriptions:
         with self._lock:
             return self._subscribers.pop(key, None)
 
-    def heard(self, key: Hashable) -> None:
-        """A message from `key`: its subscription (if any) goes on."""
-        if key in self._subscribers:  # most senders are not subscribed: no lock for them
-            with self._lock:
-                subscriber: Subscriber | None = self._subscribers.get(key)  # the table's own record
-                if subscriber is not None:
-                    subscriber.heard = self._now()
+    def heard(self, key: Hashable) -> list[Subscriber]:
+        """A message from `key`: its subscription (if any) goes on, unless it has been silent
+        `expire_s` already: then it has ended (returned, for the caller to tell), whether or not
+        a notification found it ended first (expiring is lazy: the answer must not depend on
+        whether the show happened to notify meanwhile)."""
+        if key not in self._subscribers:  # most senders are not subscribed: no lock for them
+            return []
+        with self._lock:
+            subscriber: Subscriber | None = self._subscribers.get(key)  # the table's own record
+            if subscriber is None:
+                return []
+            now = self._now()
+            if now - subscriber.heard >= self.expire_s:
+                return [self._ended(key, f"no message for {self.expire_s:g} s")]
+            subscriber.heard = now
+            return []
 
     def current(self) -> tuple[list[Subscriber], list[Subscriber]]:
         """The subscribers now, and those that have just expired (removed)."""
