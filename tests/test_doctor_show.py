@@ -437,3 +437,18 @@ def test_the_table_wraps_at_the_terminals_width_and_names_ports_as_given(tmp_pat
     text = " ".join([lines[board][indent:], *rest])
     assert "port sim://?drop=1&junk=1: no answer" in text and "durations" not in text  # as the user named it
     assert "fix: choreo probe --port 'sim://?drop=1&junk=1' says more" in text
+
+
+@pytest.mark.parametrize("kind", ["flac", "mp3"])
+def test_a_song_cut_short_is_decoded_not_taken_at_its_headers_word(tmp_path, kind):
+    """A file cut short keeps the header of the whole (8 s here): the doctor decodes the song as
+    far as the show needs it, and the cue at 3 s would play in silence."""
+    whole = (REPO / "tests" / "data" / "songs" / f"drums.{kind}").read_bytes()
+    (tmp_path / f"cut.{kind}").write_bytes(whole[:12000])
+    found = checks(tmp_path, request(tmp_path, show(tmp_path, music=f"cut.{kind}")))
+    music = found["music"]
+    assert found["exit"] == 1 and music.level == PROBLEM, music
+    assert "decodes only to" in music.text and "of its 8.000 s" in music.text and "cue 1 'late'" in music.text
+    assert music.fix.startswith("the whole file again")
+    (tmp_path / f"cut.{kind}").write_bytes(whole)  # the whole file: all clear
+    assert checks(tmp_path, request(tmp_path, show(tmp_path, music=f"cut.{kind}")))["music"].level == OK

@@ -33,6 +33,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, TypeVar
 
 from choreo.board.doctor import NOTE, OK, PROBLEM, BoardWanted, Finding, audio_output, board_checks, device_checks
 from choreo.board.probe import BoardInfo
@@ -53,6 +54,11 @@ from choreo.wire.protocol import BAUDS
 # each try waiting the show's reply timeout, at most PROBE_TIMEOUT_S (12 s at worst; 2.4 s by default).
 PROBE_TIMEOUT_S = 1.0
 PORT_DEADLINE_S = 15.0
+if TYPE_CHECKING:
+    from choreo.music.player import Song
+
+T = TypeVar("T")
+HEARD_SLACK_S = 0.05  # a decoded length this close to what was asked is all of it (resampling rounds)
 # What a log costs in the file (MCAP, uncompressed), measured on the simulator's logs: a message
 # is its JSON (a frame ~88 bytes, its reply ~84, a step ~170 and its label, a clock sample ~85,
 # a command ~130) and 47 bytes of record header and index entry; the recorder closes a chunk
@@ -330,16 +336,53 @@ def _music(settings: RunSettings, request: RunRequest, machine: Machine) -> list
     except ChoreoError as exc:
         return [Finding(PROBLEM, "music", exc.lines()[0], "music.file in the show: a wav, mp3, flac or ogg "
                         "file next to it (choreo beats SONG decodes it too)")]
-    return [_song_length(settings, song.end_show_s, song.path),
+    try:
+        end, said = _heard(settings, song, machine)
+    except ChoreoError as exc:
+        return [Finding(PROBLEM, "music", f"{song.path}: {exc.lines()[0]}", "a sound file that decodes to its "
+                        "end (choreo beats SONG decodes it too)")]
+    return [_song_length(settings, end, said),
             audio_output(lambda: _in_time(lambda: machine.audio(request.audio_device), machine), request.audio_device)]
 
 
-def _in_time(call: Callable[[], str], machine: Machine) -> str:
+def _heard(settings: RunSettings, song: Song, machine: Machine) -> tuple[float, str]:
+    """Where the song really ends in show time, and how to say so: its header's length is only
+    a claim (a file cut short keeps the header of the whole), so the song is decoded as far as
+    the show needs it (a second past its end), no further."""
+    start = song.music.start
+    needed = max(plan.estimated_s for plan in settings.plans.values()) + start + 1.0
+    until = min(song.duration_s, needed)
+    heard = _in_time(lambda: _decoded_s(song.path, song.sample_rate, until), machine)
+    if heard >= until - HEARD_SLACK_S:
+        return song.end_show_s, f"{song.path} decodes"
+    return heard - start, (f"{song.path} decodes only to {heard:.3f} s of its {song.duration_s:.3f} s (cut short "
+                           "or damaged)")
+
+
+def _decoded_s(path: str, rate: int, until_s: float) -> float:
+    """Seconds of the file that decode, reading no further than `until_s`."""
+    import miniaudio
+
+    wanted = math.ceil(until_s * rate)
+    frames = 0
+    try:
+        for block in miniaudio.stream_file(path, output_format=miniaudio.SampleFormat.SIGNED16, nchannels=1,
+                                           sample_rate=rate, frames_to_read=rate):
+            frames += len(block)
+            if frames >= wanted:
+                break
+    except (miniaudio.DecodeError, OSError) as exc:
+        raise ChoreoError(f"stops decoding after {frames / rate:.3f} s ({exc})") from None
+    return frames / rate
+
+
+def _in_time(call: Callable[[], T], machine: Machine) -> T:
     """`call` on a thread of its own on the machine's time: a sound system that hangs as an
-    output opens is a ChoreoError after `machine.deadline_s` (its thread is left behind)."""
+    output opens (or a file that hangs as it decodes) is a ChoreoError after `machine.deadline_s`
+    (its thread is left behind)."""
     if machine.virtual:
         return call()
-    done: list[str] = []
+    done: list[T] = []
     failed: list[BaseException] = []
 
     def work() -> None:
@@ -348,7 +391,7 @@ def _in_time(call: Callable[[], str], machine: Machine) -> str:
         except BaseException as exc:  # noqa: BLE001 - handed to the caller's thread, raised there
             failed.append(exc)
 
-    thread = threading.Thread(target=work, daemon=True, name="doctor audio")
+    thread = threading.Thread(target=work, daemon=True, name="doctor music")
     thread.start()
     thread.join(machine.deadline_s)
     if failed:
@@ -358,18 +401,19 @@ def _in_time(call: Callable[[], str], machine: Machine) -> str:
     return done[0]
 
 
-def _song_length(settings: RunSettings, end: float, path: str) -> Finding:
+def _song_length(settings: RunSettings, end: float, decodes: str) -> Finding:
     last = last_cue(settings.plans)
     show_end = max(plan.estimated_s for plan in settings.plans.values())
     origin = settings.sections.origin
-    said = f"{path} decodes; it ends at {max(end, 0.0):.3f} s of show time"
+    said = f"{decodes}; it ends at {max(end, 0.0):.3f} s of show time"
     if origin >= end - 1e-9:
         return Finding(PROBLEM, "music", f"{said}: the run starts at {origin:.3f} s, past its end",
                        "an earlier --from or --loop, or --no-music")
     if last is not None and last[1] > end:
+        fix = ("the whole file again (a copy that decodes to its end)" if " only " in decodes
+               else f"a longer music file, or move the cues before {end:.3f} s")
         return Finding(PROBLEM, "music", f"{said}, before {last[0]} at {last[1]:.3f} s: that cue and the ones "
-                       "after it would play in silence", "a longer music file, or move the cues before "
-                       f"{end:.3f} s")
+                       "after it would play in silence", fix)
     cue = f", after the last cue ({last[0]} at {last[1]:.3f} s)" if last is not None else ""
     if show_end > end:
         return Finding(NOTE, "music", f"{said}{cue}; the show's last motions run on to {show_end:.3f} s, in silence")
