@@ -15,7 +15,7 @@ import pytest
 
 from choreo.clock import VirtualTime
 from choreo.live.limits import LIMITS, Limits, Rate
-from choreo.live.osc import COMMANDS, EFFECTS, Reply, OscServer, status_reply, suggestion, wanted
+from choreo.live.osc import COMMANDS, EFFECTS, BadAddress, OscServer, Reply, status_reply, suggestion, wanted
 from choreo.live.oscnotify import Subscriptions
 from choreo.live.oscwire import decode_packet, encode_bundle, encode_message
 from choreo.log.format import WARNING
@@ -411,3 +411,51 @@ def test_a_subscription_silent_61_s_has_ended_whether_or_not_a_notification_went
     assert ask(peer, "/choreo/thump")[1]["data"] == {"updates": still}
     ended = [m for _, _, m in told(live) if m.startswith("updates off")]
     assert ended == ([] if still else ["updates off: no message for 61 s"])
+
+
+# -- suggestions: every near miss, exhaustively ------------------------------------------------------
+
+WORDS = ("go", "panic", "start", "stop", "pause", "resume", "skip", "playhead", "next", "previous", "cue", "status",
+         "thump", "updates", "1", "bow")
+
+
+def single_edits(text: str) -> set[str]:
+    """Every address one keystroke from `text`: a character left out, added, changed, or two
+    swapped (letters, digits, `/`, `%`)."""
+    alphabet = "abcdefghijklmnopqrstuvwxyz0123456789/%"
+    edits = {text[:i] + text[i + 1:] for i in range(len(text))}
+    edits |= {text[:i] + text[i + 1] + text[i] + text[i + 2:] for i in range(len(text) - 1)}
+    edits |= {text[:i] + c + text[i:] for i in range(len(text) + 1) for c in alphabet}
+    edits |= {text[:i] + c + text[i + 1:] for i in range(len(text)) for c in alphabet}
+    return edits
+
+
+def test_no_address_one_keystroke_or_one_word_away_is_offered_a_command_with_an_effect():
+    """Exhaustively (not sampled): every address one keystroke from one of ours (its cue `1` or
+    `bow`), and every `/choreo/A/B` and `/choreo/cue/1/A` of the dictionary's words
+    (`/choreo/cue/1/skip`, `/choreo/pause/1`, `/choreo/skip/go`): none is offered GO, panic, start,
+    stop, pause, resume, skip or a cue's GO unless it is that address but for ASCII case, /choreo
+    and a trailing slash; `/playhead` alone (QLab's question) is offered status."""
+    ours = [*COMMANDS, "/choreo/cue/1/go", "/choreo/cue/bow/go", "/choreo/playhead/1", "/choreo/status",
+            "/choreo/thump", "/choreo/updates", "/go", "/cue/1/go", "/ping"]
+    near = set().union(*(single_edits(address) for address in ours))
+    near |= {f"/choreo/{a}/{b}" for a in WORDS for b in WORDS} | {f"/choreo/cue/1/{a}" for a in WORDS}
+    offered = 0
+    for address in sorted(near):
+        if not address.startswith("/") or wanted_or_bad(address):
+            continue
+        meant = suggestion(address)
+        if meant is not None and wanted(meant).name in EFFECTS:  # type: ignore[union-attr]  # a suggestion is ours
+            assert address.lower().rstrip("/").removeprefix("/choreo") == meant.lower().removeprefix("/choreo"), \
+                (address, meant)
+            offered += 1
+    assert len(near) > 15_000 and offered > 20  # `/GO`, `/choreo/stop/`, ... are offered
+    assert suggestion("/choreo/playhead") == suggestion("/choreo/playhead/") == "/choreo/status"
+
+
+def wanted_or_bad(address: str) -> bool:
+    """One of ours (taken as it is), or one of ours badly escaped (answered with how to escape)."""
+    try:
+        return wanted(address) is not None
+    except BadAddress:
+        return True

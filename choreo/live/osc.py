@@ -118,7 +118,9 @@ PLAYHEAD_PREFIX = f"{ROOT}/playhead/"
 EFFECTS = frozenset({"go", "panic", "start", "stop", "pause", "resume", "skip", "cue_go"})
 SUGGESTED = (STATUS, THUMP, UPDATES, f"{ROOT}/playhead/next", f"{ROOT}/playhead/previous")  # the rest
 # a last segment that names a question (QLab's /workspace/ID/thump), or a heartbeat's other names
-ALIASES = {"ping": THUMP, "heartbeat": THUMP, "thump": THUMP, "status": STATUS, "updates": UPDATES}
+# (`/playhead` alone is QLab's question for the playhead: status says where it is, never moves it)
+ALIASES = {"ping": THUMP, "heartbeat": THUMP, "thump": THUMP, "status": STATUS, "updates": UPDATES,
+           "playhead": STATUS}
 DICTIONARY = (*COMMANDS, f"{PLAYHEAD_PREFIX}CUE", f"{CUE_PREFIX}CUE{CUE_SUFFIX}", STATUS, THUMP, UPDATES)
 KNOWN = "go, panic, start, stop, pause, resume, skip, playhead/next|previous|CUE, cue/CUE/go, status, thump, updates"
 NOTIFY = f"{ROOT}/notify"
