@@ -452,3 +452,18 @@ def test_a_song_cut_short_is_decoded_not_taken_at_its_headers_word(tmp_path, kin
     assert music.fix.startswith("the whole file again")
     (tmp_path / f"cut.{kind}").write_bytes(whole)  # the whole file: all clear
     assert checks(tmp_path, request(tmp_path, show(tmp_path, music=f"cut.{kind}")))["music"].level == OK
+
+
+def test_json_keeps_its_keys_when_the_show_does_not_load(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    keys = {"ok", "exit", "show", "log_estimate_bytes", "log_room_bytes", "findings"}
+    assert vmain(["doctor", show(tmp_path), "--port", "sim://", "--json"]) == 0
+    loaded = json.loads(capsys.readouterr().out)
+    assert set(loaded) == keys and loaded["log_room_bytes"] > loaded["log_estimate_bytes"] > 0
+    assert vmain(["doctor", str(tmp_path / "gone.yaml"), "--json"]) == 1
+    gone = json.loads(capsys.readouterr().out)
+    assert set(gone) == keys and gone["log_estimate_bytes"] is None and gone["log_room_bytes"] is None
+    first = gone["findings"][0]
+    assert first["check"] == "show" and first["level"] == "problem"
+    assert first["fix"] == "the path of the show's YAML file"
+    assert [f["check"] for f in gone["findings"]] == ["show", "log", "log space"]  # the rest still checked

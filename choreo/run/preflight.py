@@ -201,8 +201,12 @@ def _settle(request: RunRequest) -> tuple[RunSettings | None, list[Finding]]:
 def _unloaded(exc: ChoreoError, request: RunRequest) -> Finding:
     lines = exc.lines()
     more = f" (and {len(lines) - 1} more)" if len(lines) > 1 else ""
-    fix = (f"choreo validate {shlex.quote(request.show_path)} lists every problem" if isinstance(exc, ShowError)
-           else "change the option or the show as the message says")
+    if isinstance(exc, ShowError) and all(p.line == 0 and not p.path for p in exc.problems):  # no file to read
+        fix = "the path of the show's YAML file"
+    elif isinstance(exc, ShowError):
+        fix = f"choreo validate {shlex.quote(request.show_path)} lists every problem"
+    else:
+        fix = "change the option or the show as the message says"
     return Finding(PROBLEM, "show", lines[0] + more, fix)
 
 
@@ -570,7 +574,7 @@ def _log(request: RunRequest, estimate: LogEstimate | None, machine: Machine) ->
         return [taken or writable]
     room = _room(folder, estimate, machine)
     if request.loop is not None and estimate is not None:  # a rehearsal loops until stopped
-        room = replace(room, text=f"{room.text}; --loop: the whole show's estimate, each pass logs about as much")
+        room = replace(room, text=f"{room.text}; --loop logs until stopped: each pass adds at most as much")
     return [writable, room]
 
 
