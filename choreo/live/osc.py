@@ -184,9 +184,12 @@ def status_reply(address: str, status: dict, most: int | None = None, advice: st
     playhead, and `data["cut"]` and the message say what was left out, and `advice`."""
     state = str(status.get("state", ""))
     whole = Reply(address, "ok", state, status)
-    if most is None or len(whole.encoded()) <= most:
+    if most is None:
         return whole
     robots, waiting = list(status.get("robots", {}).items()), list(status.get("waiting", []))
+    at_most = _at_most(robots, most)  # measures the first robots only, as many as could fit
+    if at_most == len(robots) and len(whole.encoded()) <= most:
+        return whole
 
     def cut(kept_robots: int, kept_waiting: int, playhead: bool = True) -> Reply:
         left = {"robots": len(robots) - kept_robots, "waiting": len(waiting) - kept_waiting, "playhead": not playhead}
@@ -200,11 +203,24 @@ def status_reply(address: str, status: dict, most: int | None = None, advice: st
     def fits(reply: Reply) -> bool:
         return len(reply.encoded()) <= most
 
-    kept = _most_kept(len(robots), lambda n: fits(cut(n, len(waiting))))
+    kept = _most_kept(at_most, lambda n: fits(cut(n, len(waiting))))
     if kept is not None:
         return cut(kept, len(waiting))
     kept = _most_kept(len(waiting), lambda n: fits(cut(0, n)))
     return cut(0, kept) if kept is not None else cut(0, 0, playhead=False)
+
+
+def _at_most(items: list[tuple[str, Any]], most: int) -> int:
+    """How many of the first `items` could fit in `most` bytes at best, each measured alone
+    once: the search for how many do fit then encodes a reply a few times, each at most `most`
+    long, not the whole status each time (1,000 robots: 26 ms a question on the thread that
+    reads the operator's GO)."""
+    total = 0
+    for count, (key, value) in enumerate(items):
+        total += len(json.dumps({key: value}, ensure_ascii=False).encode(errors="replace"))
+        if total > most:
+            return count
+    return len(items)
 
 
 def _most_kept(count: int, fits: Callable[[int], bool]) -> int | None:
