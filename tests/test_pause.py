@@ -409,3 +409,19 @@ def test_clock_samples_from_two_threads_reach_the_log_in_the_order_they_were_rea
     runner.join(5)
     other.join(5)
     assert len(written) == 2 and written == sorted(written)
+
+
+@pytest.mark.parametrize("command", ["panic", "stop"])
+def test_a_stop_while_paused_wakes_the_runners_dozing_on_any_clock(command):
+    """On the music's clock too (paused: every later cue out of reach, the runners dozing in
+    slices), a stop or panic ends their dozes at once through the run's time source, not a
+    sleep slice (50 ms) later."""
+    from choreo.music.player import MusicClock
+
+    woken: list[int] = []
+    live = Live(StopRequest())
+    clock = MusicClock(48000, -0.25)
+    clock.handed_over(100.0, 0)  # the device's first ask: the clock runs
+    live.use_clock(clock, wake=lambda: woken.append(1))
+    assert live.command(Command("pause", "test")).ok and clock.state == PAUSED and woken == []
+    assert live.command(Command(command, "test")).ok and woken == [1]

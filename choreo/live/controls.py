@@ -181,6 +181,7 @@ class Live:
         self.listeners: Listeners[CommandListener] = Listeners()  # attached through `subscribe`
         self.show: ShowClock | None = None  # the pass's show clock (`use_clock`), once the show starts
         self._pausable: PausableShowClock | None = None  # the same, if it can pause
+        self._wake_runners: Callable[[], None] | None = None  # ends the runners' dozes (`use_clock`)
         self._now = now
         self._wall_ns = wall_ns
         self._changed = threading.Condition()
@@ -215,11 +216,14 @@ class Live:
         GO cue holds it, a GO releases it, a pause, a resume): the log samples the clock then."""
         return self._clock_changes.subscribe(listener)
 
-    def use_clock(self, show: ShowClock) -> None:
+    def use_clock(self, show: ShowClock, wake: Callable[[], None] | None = None) -> None:
         """The show clock of the pass now starting: GO cues hold it, a pause stands it still
-        (one given before it started too), commands are timed on it."""
+        (one given before it started too), commands are timed on it. `wake` (the run's time
+        source's `notify`) ends the runners' dozes towards a cue when a stop or panic comes,
+        on any clock (the music's too), not a sleep slice later."""
         with self._pausing:
             self.show = show
+            self._wake_runners = wake
             self._pausable = show if isinstance(show, PausableShowClock) else None  # asked once: it is slow
             if self._paused and self._pausable is not None:
                 self._pausable.pause()
@@ -776,8 +780,11 @@ class Live:
     def _wake(self) -> None:
         with self._changed:
             self._changed.notify_all()
-        if isinstance(self.show, HoldingShowClock):
-            self.show.wake()  # runners dozing towards a cue see the stop now
+        wake = self._wake_runners
+        if wake is not None:
+            wake()  # runners dozing towards a cue see the stop now
+        elif isinstance(self.show, HoldingShowClock):
+            self.show.wake()
 
 
 def summary_of(held: Held) -> tuple[Command, Answer]:

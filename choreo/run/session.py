@@ -141,7 +141,7 @@ class Session:
         with contextlib.ExitStack() as music:
             show = self._start_show_clock(preroll, everyone, music, holding=live is not None)
             if live is not None:
-                live.use_clock(show)
+                live.use_clock(show, self.clock.source.notify)  # a stop or panic ends the runners' dozes
             sampler = ClockSampler(self.recorder, self.clock, show, "music" if self.player else "machine") \
                 if self.recorder is not None else None
             if sampler is not None and live is not None:
