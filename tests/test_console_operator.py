@@ -10,7 +10,11 @@ import io
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from rich.console import Console as RichConsole
+
+from choreo.cli import screen
 
 from choreo.cli.console import Console
 from choreo.cli.screen import (
@@ -254,3 +258,33 @@ def test_a_redraw_of_a_long_show_asks_a_window_of_cue_states_not_every_cue(tmp_p
     assert [line.number for line in screen.cues][:3] == [str(n - 8), str(n - 7), str(n - 6)]  # where the show is
     assert screen.cues[screen.playhead].number == str(n - 4)  # the next GO cue (cue n-4 is step n-5)
     assert screen.cue.startswith(f"next cue: cue {n - 5} at ")  # the next timed one
+
+
+alphabet = st.sampled_from(list("ab '/:; ()…") + ["ロ", "\u0301", "\x1b", "\u202e", "é"])
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(alphabet, max_size=200).map("".join), st.integers(min_value=1, max_value=100),
+       st.lists(alphabet, max_size=30).map("".join))
+def test_any_message_fits_any_width_escaped(text: str, width: int, aside: str) -> None:
+    line = fit_message(text, width, aside)
+    assert display_width(line) <= width and "\x1b" not in line and "\u202e" not in line
+
+
+@pytest.mark.parametrize("text", ["'abc' " * 20000, "/ab " * 30000, ": " * 50000, "ロ" * 50000 + ": do this",
+                                  ("'" + "y" * 50 + "' ") * 2000 + ": do this"])
+def test_a_hostile_message_of_any_length_costs_a_bounded_measure(monkeypatch, text):
+    """Fitting measured the text again at each piece it cut (a message of 12,000 characters in
+    quotes or slashes: seconds of a redraw); now a bounded number of passes over at most
+    LONGEST_FITTED characters, whatever comes. Counted in characters measured, not timed."""
+    measured = []
+
+    def counted(part: str) -> int:
+        measured.append(len(part))
+        return display_width(part)
+
+    monkeypatch.setattr(screen, "display_width", counted)
+    for width in (20, 60, 80):
+        line = fit_message(text, width, "osc udp 127.0.0.1:9")
+        assert display_width(line) <= width
+    assert sum(measured) <= 3 * 40 * screen.LONGEST_FITTED

@@ -8,7 +8,9 @@ a screen is a value, so what is drawn can be tested, and changed, without a run 
 
 from __future__ import annotations
 
+import bisect
 import re
+import sys
 from dataclasses import dataclass
 
 from rich.console import Group, RenderableType
@@ -16,7 +18,7 @@ from rich.rule import Rule
 from rich.table import Table
 from rich.text import Text
 
-from choreo.textfit import char_width, display_width, fit, visible
+from choreo.textfit import ELLIPSIS, char_width, display_width, fit, visible
 
 LEGEND = "Space/Enter GO · ↑↓ playhead · s skip · j jump · p pause · Esc panic · q stop"
 SHORT_LEGEND = "Spc GO ↑↓ cue s skip j jump p pause Esc panic q stop"  # below NARROW columns
@@ -151,7 +153,9 @@ def fit_message(text: str, width: int, aside: str = "") -> str:
     (a suggested `'/choreo/go'` stays whole), before the tail to 2; then the end of what comes
     before the tail, down to MIN_HEAD columns; then the tail's outside text to MIN_QUOTED; and
     last the middle of it all: both the start (what happened) and the end (what to do) stay."""
-    text, aside = visible(text), visible(aside)
+    if len(text) > LONGEST_FITTED:  # a (hostile) message of any length costs no more than this
+        text = text[:LONGEST_FITTED // 4] + ELLIPSIS + text[-(LONGEST_FITTED * 3 // 4):]
+    text, aside = visible(text), visible(aside[:LONGEST_FITTED])
     if aside:
         whole = f"{text} ({aside})"
         room = width - display_width(text) - 3
@@ -177,6 +181,7 @@ def fit_message(text: str, width: int, aside: str = "") -> str:
 QUOTED = re.compile(r"'([^']{2,})'")
 ADDRESS = re.compile(r"(?<![\w'/])(/[^\s'()]+[^\s'():;,.?!])")  # an OSC address, a path: outside text
 TAIL = re.compile(r"[:;] ")  # one of them, outside quoted text, begins what a message says to do
+LONGEST_FITTED = 1024  # characters of a message fitted: its start and its end beyond that
 MIN_HEAD = 16  # columns of a message's start kept before its tail (what happened)
 TAIL_QUOTED = 16  # outside text in a message's tail is cut to no fewer columns than this first (a long label)
 
@@ -184,9 +189,14 @@ TAIL_QUOTED = 16  # outside text in a message's tail is cut to no fewer columns 
 def _spans(text: str) -> list[tuple[int, int]]:
     """Where the outside text is (quoted, addresses), in order, none inside another."""
     quoted = [m.span(1) for m in QUOTED.finditer(text)]
-    inside = [(m.start(1), m.end(1)) for m in ADDRESS.finditer(text)
-              if not any(a <= m.start(1) < b for a, b in quoted)]
+    inside = [m.span(1) for m in ADDRESS.finditer(text) if _within(quoted, m.start(1)) is None]
     return sorted(quoted + inside)
+
+
+def _within(spans: list[tuple[int, int]], at: int) -> tuple[int, int] | None:
+    """The span of `spans` (in order, apart) that holds `at`, found by bisection."""
+    found = bisect.bisect_right(spans, (at, sys.maxsize)) - 1
+    return spans[found] if found >= 0 and spans[found][0] <= at < spans[found][1] else None
 
 
 def _tail_at(text: str, room: int) -> int:
@@ -194,25 +204,39 @@ def _tail_at(text: str, room: int) -> int:
     from which the rest fits `room` columns, else after the last `: ` (its end, when it has
     none: it is cut in its outside text, then its middle)."""
     spans = _spans(text)
-    ends = [m.end() for m in TAIL.finditer(text) if not any(a <= m.start() < b for a, b in spans)]
-    fitting = [end for end in ends if display_width(text[end:]) <= room]
-    return fitting[0] if fitting else ends[-1] if ends else len(text)
+    ends = [m.end() for m in TAIL.finditer(text) if _within(spans, m.start()) is None]
+    left, at = display_width(text), 0  # the width from `at` on, measured once along the text
+    for end in ends:
+        left -= display_width(text[at:end])
+        at = end
+        if left <= room:
+            return end
+    return ends[-1] if ends else len(text)
 
 
 def _cut_outside(text: str, width: int, tail_at: int, floor: int, in_tail: bool) -> tuple[str, int]:
     """`text` with its outside text (in its tail, or before it) cut, the longest first, down
-    to `floor` columns each, until it fits; and where its tail now begins."""
-    while display_width(text) > width:
-        spans = [(display_width(text[a:b]), a, b) for a, b in _spans(text) if (a >= tail_at) == in_tail]
-        size, start, end = max(spans, default=(0, 0, 0))
-        if size <= floor:
+    to `floor` columns each, until it fits; and where its tail now begins. One pass, however
+    many pieces a (hostile) message holds."""
+    excess = display_width(text) - width
+    if excess <= 0:
+        return text, tail_at
+    spans = sorted(((display_width(text[a:b]), a, b) for a, b in _spans(text) if (a >= tail_at) == in_tail),
+                   key=lambda span: -span[0])
+    cuts: list[tuple[int, int, str]] = []
+    for size, start, end in spans:
+        if excess <= 0 or size <= floor:
             break
-        keep = max(floor, size - (display_width(text) - width))
-        cut = fit(text[start:end], keep)
-        text = text[:start] + cut + text[end:]
+        cut = fit(text[start:end], max(floor, size - excess))
+        excess -= size - display_width(cut)
+        cuts.append((start, end, cut))
+    pieces, at = [], 0
+    for start, end, cut in sorted(cuts):
+        pieces += [text[at:start], cut]
+        at = end
         if start < tail_at:
             tail_at -= (end - start) - len(cut)
-    return text, tail_at
+    return "".join(pieces) + text[at:], tail_at
 
 
 def _middle_cut(text: str, width: int) -> str:
