@@ -24,7 +24,7 @@ whose address may be forged. So:
   of their own, not the commands' nor the replies' (a desk polling status ten times a second
   must not take the answer to its GO); they carry nothing out and are not logged one by one,
   only counted (a log line each at a desk's polling rate would fill the disk); all senders'
-  questions together are answered within `queries_total` (each answer is sent to an address
+  status questions together are answered within `queries_total` (each answer is sent to an address
   that may be forged: a status reply is kilobytes for a question of 24 bytes), and a status
   reply over UDP is at most `status_datagram` bytes (cut, and saying so, past it);
 - at most `update_subscribers` senders get the show's notifications at once (`/choreo/updates
@@ -74,7 +74,7 @@ class Limits:
     senders_tracked: int = 256  # senders with a budget of their own; beyond, new ones share one
     notify_targets: int = 8  # --osc-notify given at most this many times
     queries_per_sender: Rate = Rate(20, 10.0)  # /choreo/status and /thump answered for one sender
-    queries_total: Rate = Rate(40, 20.0)  # ... and for all senders together (each reply may go to a forged address)
+    queries_total: Rate = Rate(40, 20.0)  # status answered, all senders together (replies may go to forged addresses)
     status_datagram: int = 16384  # bytes of a /choreo/status reply over UDP at most (robots left out past it)
     update_subscribers: int = 4  # senders subscribed to the notifications (/choreo/updates 1) at once
     update_expire_s: float = 61.0  # a subscription ends after this long without a message from it (QLab's)
@@ -212,10 +212,12 @@ class SenderLimits:
     def may_reply(self, host: str) -> bool:
         return self._replies.take(host)
 
-    def may_query(self, host: str) -> bool:
+    def may_query(self, host: str, costly: bool = True) -> bool:
         """May a question from `host` (status, thump) be answered now? A budget apart from the
-        commands' and replies': polling spends neither. Its own budget first, then all senders'."""
-        return self._queries.take(host) and self._queries_total.take()
+        commands' and replies': polling spends neither. Its own budget first, then, for a
+        `costly` one (status: kilobytes), all senders' (a heartbeat's reply is as small as a
+        command's: a status flood must not silence a desk's heartbeat)."""
+        return self._queries.take(host) and (not costly or self._queries_total.take())
 
     def may_answer_refusal(self) -> bool:
         """A reply to a sender not allowed (shared by all of them: their addresses are forged

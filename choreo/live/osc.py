@@ -638,7 +638,7 @@ class OscServer:
         """`/choreo/status`, `/choreo/thump`: answered at once within the sender's budget of
         questions (past it, counted and not answered), never logged one by one (a desk polls)."""
         self.counts[name] += 1
-        if not self._limits.may_query(origin.budget):
+        if not self._limits.may_query(origin.budget, costly=name == "status"):
             self.counts[UNANSWERED] += 1
             return None
         if name == "thump":
