@@ -8,8 +8,9 @@ loopback, the unspecified address, and every address of this machine's interface
 
 A sender may ask for the same notifications with `/choreo/updates 1` (QLab's `/updates`):
 `Subscriptions` keeps who (at most `Limits.update_subscribers`, each until it has been silent
-`Limits.update_expire_s`), and the notifier's thread hands each notification to them too
-(`Notifier(deliver=)`), never a runner.
+`Limits.update_expire_s`; a TCP sender, proven by its handshake, may take a UDP one's place,
+and a UDP one, whose address may be forged, is sent at most `Limits.update_bytes`), and the
+notifier's thread hands each notification to them too (`Notifier(deliver=)`), never a runner.
 """
 
 from __future__ import annotations
