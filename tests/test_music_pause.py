@@ -280,3 +280,42 @@ def test_a_music_show_paused_for_a_moment_goes_on_from_where_it_stood(tmp_path):
         went_on = sample["show_s"] - pauser.stood
         ahead = [sample["monotonic_ns"] / 1e9 - when[at] - went_on for at in ("resume", "resumed")]
         assert ahead[0] > -0.05 and ahead[1] < 0.1, (ahead, paused_for)  # a clock that ran through the pause: -0.3
+
+
+def test_a_pause_in_the_musics_play_out_stands_it_still_and_a_stop_ends_it(tmp_path):
+    """The last step is done and the song plays out (the show is over on stage, not in the
+    sound): a pause stands the music and show time still, as anywhere in the show; a stop
+    then ends the run at once, the music stopped (state only: real time, the null output)."""
+    from choreo.clock import PAUSED
+    from runlog import LiveRun, wait_for
+
+    write_song(tmp_path / "song.wav", 30.0)
+    body = "version: 1\nmusic: {file: song.wav}\nsteps:\n  - play: 1\n    label: only\n"
+
+    class PlayOut:
+        """Hears the run's steps and when the music's play-out begins."""
+
+        def __init__(self) -> None:
+            self.began = threading.Event()
+
+        def on_step(self, event) -> None:  # type: ignore[no-untyped-def]
+            pass
+
+        def on_log(self, *args) -> None:  # type: ignore[no-untyped-def]
+            pass
+
+        def on_play_out(self, end_s: float) -> None:
+            self.began.set()
+
+    out = PlayOut()
+    run = LiveRun(tmp_path, body, cues=True, audio_device="null", attach=lambda live: [out])
+    assert out.began.wait(10)
+    assert run.go("pause").ok and run.live.show is not None and run.live.show.state == PAUSED
+    stood = run.live.status()["show_s"]
+    assert wait_for(lambda: run.session.player is not None and run.session.player.feed is not None
+                    and run.session.player.feed.paused > 0, 5, 0.005)  # silence handed: the song stands
+    assert run.live.status()["show_s"] == stood and run.thread.is_alive()
+    assert run.go("stop").ok
+    run.finish(5)
+    assert run.error is None and run.result is not None and run.result.outcome == "done"
+    assert run.session.player is None  # the music was stopped and closed
