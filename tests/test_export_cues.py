@@ -64,7 +64,7 @@ def test_a_cue_export_to_a_file_says_how_many_rows(tmp_path, capsys):
     out = tmp_path / "cues.csv"
     assert vmain(["log", "export", "--cues", "--csv", str(out), str(log)]) == 0
     assert "exported 2 cue rows to " in capsys.readouterr().err
-    assert out.read_text().splitlines()[0] == "number,label,robot,planned_s,actual_s,late_ms,released,bar_beat"
+    assert out.read_text().splitlines()[0] == "number,label,robot,pass,planned_s,actual_s,late_ms,released,bar_beat"
 
 
 ENSEMBLE = """\

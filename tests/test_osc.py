@@ -246,9 +246,10 @@ def test_go_releases_the_waiting_cue_and_the_show_goes_on(shows):
     run.finish()
     assert run.result.outcome == "done" and run.result.steps_run == 3
     log = read_log(run.log_path)
-    commands = [(m["command"], m["source"], m["status"], m.get("label")) for m in log.topic("/choreo/command")]
-    # the cue as sent (cue_go), the number of the one fired (go)
-    assert commands == [("cue_go", sources[0], "ok", "applause"), ("go", sources[1], "ok", "2")]
+    commands = [(m["command"], m["source"], m["status"], m.get("label"), m.get("cue"))
+                for m in log.topic("/choreo/command")]
+    # the cue as sent (cue_go; none for go), and the number of the one fired
+    assert commands == [("cue_go", sources[0], "ok", "applause", "1"), ("go", sources[1], "ok", None, "2")]
 
 
 def test_start_begins_a_show_loaded_with_wait_start(shows):

@@ -267,7 +267,7 @@ def test_timeline_text_planned_against_actual(logs, capsys):
     assert "motion 3 wave" in rows[0] and "motion 5 bow" in rows[1]
     assert "0.000-0.330" in rows[0]  # planned from the attached show's durations
     assert "!" in rows[1] and ("#" in rows[1] or "=" in rows[1])  # the overrun cue, started late
-    assert "cues: late-bow at " in out
+    assert "cues: cue 1 'late-bow' at " in out
     late = out.split("late plays: ", 1)[1]
     assert int(late.split()[0]) >= 1 and "step 2 'late-bow' started" in late  # by construction
     assert "faults: none" in out

@@ -116,7 +116,8 @@ def test_summary_timeline_export_and_replay_agree_to_the_millisecond(held, tmp_p
     assert [(c.label, round(c.show_s, 3)) for c in timeline.cues] == [
         (r["label"], r["planned_s"] if r["released"] == "time" else r["actual_s"]) for r in rows][:2]
     assert [(r["number"], r["label"], r["released"]) for r in rows] == [
-        ("1", "applause", "go key"), ("2", "encore", "time"), ("3", "extra", "skipped"), ("4", "finale", "not reached")]
+        ("1", "applause", "go key"), ("2", "encore", "time"), ("3", "extra", "skipped"),
+        ("4", "finale", "waiting (stopped)")]
     assert vmain(["replay", str(held), "--log", str(tmp_path / "replay.mcap"), "--json"]) == 0
     replayed = json.loads(capsys.readouterr().out)
     assert replayed["recorded"] == lengths.to_json() and replayed["different"] == 0
@@ -145,8 +146,8 @@ def test_the_timeline_draws_holds_commands_and_a_motion_through_a_hold_at_its_le
     assert through.drawn_end_at - through.start_at == pytest.approx(1.0, abs=0.01)
     assert through.start_s == pytest.approx(0.004, abs=0.002)  # its show time: where the clock stood
     assert [m.kind for m in timeline.commands] == ["command"] * 3 + ["command", "skip", "command"]
-    assert [m.text.split(" ")[0] for m in timeline.commands] == ["pause", "skip", "resume", "go", "step", "panic"]
-    assert timeline.commands[4].text == "step 6 'extra' skipped (cue 3)"
+    assert [m.text.split(" ")[0] for m in timeline.commands] == ["pause", "skip", "resume", "go", "cue", "panic"]
+    assert timeline.commands[4].text == "cue 3 'extra' skipped (step 6)"
     go_text, panic_text = (m.text.split(":")[0] for m in timeline.commands[3::2])
     assert go_text.startswith("go ") and go_text.endswith(" from key")
     assert panic_text == "panic from osc udp 127.0.0.1"
@@ -169,7 +170,7 @@ def test_the_png_timeline_draws_a_held_show(held, tmp_path):
 def test_export_cues_to_csv_from_the_command_line(held, capsys):
     assert vmain(["log", "export", "--cues", "--csv", "-", str(held)]) == 0
     rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
-    assert [r["released"] for r in rows] == ["go key", "time", "skipped", "not reached"]
+    assert [r["released"] for r in rows] == ["go key", "time", "skipped", "waiting (stopped)"]
     assert rows[1]["late_ms"] == "0.0" and rows[0]["bar_beat"] == ""
 
 

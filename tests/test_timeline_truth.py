@@ -61,11 +61,11 @@ def test_cues_are_drawn_and_listed(tmp_path):
     log = tmp_path / "cues.mcap"
     assert vmain(["run", str(write_show(tmp_path, SHOW)), "--log", str(log), "-q"]) == 0
     timeline = timeline_of(log)
-    assert [(c.show_s, c.name) for c in timeline.cues] == [(1.0, "bow-cue"), (2.0, "step 4")]
+    assert [(c.show_s, c.name) for c in timeline.cues] == [(1.0, "cue 1 'bow-cue'"), (2.0, "cue 2")]
     lines = list(render_text(timeline, 100))
     cue_row = next(line for line in lines if line.split()[0] == "cues")
     assert cue_row.count("v") == 2
-    assert "cues: bow-cue at 1 s, step 4 at 2 s" in lines
+    assert "cues: cue 1 'bow-cue' at 1 s, cue 2 at 2 s" in lines
 
 
 def test_the_plan_stays_visible_under_the_actual_bars(tmp_path):

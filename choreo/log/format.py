@@ -388,10 +388,12 @@ class CommandRecord(_Record):
     source: str
     status: str  # ok | error | denied (a sender not allowed)
     message: str = ""
-    label: str | None = None  # a cue's GO: which cue; unknown or refused: the OSC address
+    label: str | None = None  # the cue as typed or sent (number or label); unknown or refused: the OSC address
     show_s: float | None = None  # the show clock when it came (absent before the show started)
     count: int | None = None  # `unlogged`: how many commands it sums up (absent: this one)
     counts: dict | None = None  # `unlogged`: those commands by name (go, refused, unknown...)
+    cue: str | None = None  # the cue it acted on, by its number in the cue list (whatever was typed)
+    cue_label: str | None = None  # and that cue's label
 
     @property
     def commands(self) -> int:
@@ -407,6 +409,39 @@ class CommandRecord(_Record):
     def refused(self) -> int:
         """How many of them were not carried out (a summary holds refused ones only)."""
         return self.commands if self.count is not None or self.status != "ok" else 0
+
+    @property
+    def what(self) -> str:
+        """The command and its cue as the cue list names it, whatever was typed: `go cue 1
+        'applause'`; what was typed too where it differs (`cue_go cue 1 'applause' (given as
+        '01')`), or alone for a cue the command found none by (`cue_go 'nosuch'`). Every review
+        names commands so; text from the log is quoted (escaped) and cut, as it is from outside."""
+        if self.cue is not None:
+            name = cue_name(self.cue, self.cue_label)
+            given = self.label if self.label is not None and self.label not in (self.cue, self.cue_label) else None
+            return f"{self.command} {name}" + (f" (given as {_quoted(given)})" if given is not None else "")
+        if self.label is None:
+            return self.command
+        return f"{self.command} {_quoted(self.label) if self.command in CUE_COMMANDS else _cut(self.label)}"
+
+
+CUE_COMMANDS = ("cue_go", "skip", "playhead")  # the commands whose label names a cue, as typed or sent
+SHOWN_CHARS = 40  # a cue number, label or reference from a log, as a review shows it (then "…")
+
+
+def _cut(text: str) -> str:
+    return text if len(text) <= SHOWN_CHARS else text[:SHOWN_CHARS] + "…"
+
+
+def _quoted(text: str) -> str:
+    """`'applause'`, as `Cue.name` quotes a label; cut to SHOWN_CHARS."""
+    return f"'{_cut(text)}'"
+
+
+def cue_name(number: str, label: str | None) -> str:
+    """A cue named from a log as `Cue.name` names it in the show (`cue 1 'applause'`), the log's
+    text cut: how every review names a cue."""
+    return f"cue {_cut(number)}" + (f" {_quoted(label)}" if label else "")
 
 
 Record = TxRecord | RxRecord | StepRecord | LogRecord | ClockRecord | CommandRecord

@@ -333,12 +333,14 @@ class Recorder:
     def on_command(self, event: CommandEvent) -> None:
         """Queued only: an operator's command and its answer (`choreo.live.controls`)."""
         command, answer = event.command, event.answer
-        label = command.label or answer.data.get("cue")  # a plain GO: the cue it released
         summed = command.name == UNLOGGED  # commands held back by the limits, summed up
-        record = CommandRecord(command.name, command.source, answer.status, answer.message, label,
+        cue, cue_label = answer.data.get("cue"), answer.data.get("label")  # the cue it acted on, whatever was typed
+        record = CommandRecord(command.name, command.source, answer.status, answer.message, command.label,
                                None if event.show_s is None else round(event.show_s, 6),
                                answer.data.get("count") if summed else None,
-                               answer.data.get("counts") if summed else None)
+                               answer.data.get("counts") if summed else None,
+                               cue if isinstance(cue, str) else None,
+                               cue_label if isinstance(cue, str) and isinstance(cue_label, str) else None)
         self._queue((COMMAND_TOPIC, event.time_ns, _record_message, record))
 
     def _queue(self, item: _Pending) -> None:

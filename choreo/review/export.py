@@ -4,9 +4,11 @@ For spreadsheets and pandas (`pandas.read_csv`, `pandas.read_json`): a flat tabl
 wall-clock nanoseconds (exact, as logged) and show-clock seconds (what a reviewer reads), and the
 meaning of each frame and reply in words. Written as it is read, so a long log never sits in memory.
 
-`--cues`: one row a cue a robot instead: its number, label, planned and actual show time (the
-step records' own, the times every review shows), lateness, and how it was released (`time`, the
-GO's source such as `go key` or `go osc udp 127.0.0.1:53001`, `skipped`, `not reached`).
+`--cues`: one row a cue a robot (and --loop pass) instead: its number, label, planned and actual
+show time (the step records' own, the times every review shows), lateness, and how it was
+released (`time`, the GO's source such as `go key` or `go osc udp 127.0.0.1:53001`, `skipped`), or
+why it did not run (`waiting (stopped)`: the run ended while it waited for its GO; `not reached`;
+`not in this run`: before --from's step or outside --loop's section).
 """
 
 from __future__ import annotations
@@ -14,17 +16,19 @@ from __future__ import annotations
 import csv
 import json
 import math
-from collections.abc import Iterator
+from bisect import bisect_left
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import TextIO
 
-from choreo.log.format import (COMMAND_TOPIC, STEP_TOPIC, CommandRecord, LogLayouts, Record, StepRecord,
+from choreo.log.format import (COMMAND_TOPIC, STEP_TOPIC, CommandRecord, LogLayouts, Record, Result, StepRecord,
                                frame_meaning, parse, reply_meaning)
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import Exchange, exchanges
+from choreo.review.showtime import ShowTimes
 from choreo.log.reader import LogReader
 from choreo.show.cues import Cue, CueList, cue_list
-from choreo.show.model import Tempo, beat_text
+from choreo.show.model import Plan, Tempo, beat_text
 
 COLUMNS = (
     "seq",
@@ -140,52 +144,92 @@ def export(reader: LogReader, sinks: list[CsvSink | JsonSink | JsonLinesSink]) -
 
 # -- cues (`choreo log export --cues`) ---------------------------------------------------------
 
-CUE_COLUMNS = ("number", "label", "robot", "planned_s", "actual_s", "late_ms", "released", "bar_beat")
+CUE_COLUMNS = ("number", "label", "robot", "pass", "planned_s", "actual_s", "late_ms", "released", "bar_beat")
 GO_COMMANDS = ("go", "cue_go")
+GO = "go"  # a GO cue's row until the pass is over: which GO released it is found then
+WAITING = "waiting (stopped)"  # a GO cue a robot stood at, waiting for its GO, when the run ended
+NOT_REACHED = "not reached"
+NOT_IN_RUN = "not in this run"  # before --from's step, or outside --loop's section
+
+
+@dataclass
+class _Whereabouts:
+    """Where one robot's steps went: --loop starts them again (a pass), --from later than 0."""
+
+    passes: int = 1
+    first: int | None = None  # the first step it started or skipped
+    started: int = -1  # the last step it started or skipped, in this pass
+    last: int = -1  # the step of its last event
+    between: bool = False  # that event ended or skipped it: the robot stood between steps
+    highest: int = -1  # the highest step it reached, in any pass
+
+    def see(self, record: StepRecord) -> None:
+        if record.event != "end":
+            if record.index <= self.started:
+                self.passes += 1
+            self.started = record.index
+            self.first = record.index if self.first is None else self.first
+        self.last, self.between = record.index, record.event != "start"
+        self.highest = max(self.highest, record.index)
 
 
 @dataclass
 class _CuePass:
-    """One pass over the steps and commands: each cue's row per robot, as its step records say."""
+    """One pass over the steps and commands: each cue's row per robot and --loop pass, as its
+    step records say; which GO released a GO cue is matched by time once every command is read
+    (a GO's command and its step start are logged in either order)."""
 
     numbers: dict[tuple[str, int], Cue] = field(default_factory=dict)  # (robot or "", index) -> its cue
     tempo: Tempo | None = None  # the attached show's: each cue's bar.beat
-    rows: dict[tuple[str, int], dict] = field(default_factory=dict)  # in the order the run reached them
-    go_by: str | None = None  # the source of the last GO carried out
+    rows: dict[tuple[str, int, int], dict] = field(default_factory=dict)  # (robot, index, pass), as reached
+    at: dict[tuple[str, int, int], int] = field(default_factory=dict)  # a GO cue's row: its step's log time
+    robots: dict[str, _Whereabouts] = field(default_factory=dict)
+    gos: dict[str | None, list[tuple[int, str]]] = field(default_factory=dict)  # cue (None: all) -> GOs' (time, source)
 
-    def see(self, record: Record) -> None:
+    def see(self, record: Record, log_time: int) -> None:
         if isinstance(record, CommandRecord):
             if record.command in GO_COMMANDS and record.status == "ok" and record.count is None:
-                self.go_by = record.source
+                for named in {record.cue, None}:
+                    self.gos.setdefault(named, []).append((log_time, str(record.source)))
             return
-        if not isinstance(record, StepRecord) or record.event not in ("start", "skip"):
+        if not isinstance(record, StepRecord) or record.event not in ("start", "skip", "end"):
             return
-        key = (record.robot or "", record.index)
-        cue = self.numbers.get(key)
-        if key in self.rows or not (record.cue is not None or record.go or record.cue_number or cue):
+        where = self.robots.setdefault(record.robot or "", _Whereabouts())
+        where.see(record)
+        key = (record.robot or "", record.index, where.passes)
+        cue = self.numbers.get(key[:2])
+        if record.event == "end" or key in self.rows or \
+                not (record.cue is not None or record.go or record.cue_number or cue):
             return
-        self.rows[key] = _cue_row(record, cue, self._released(record), self.tempo)
+        released = "skipped" if record.event == "skip" else GO if record.go else "time"
+        self.rows[key] = _cue_row(record, cue, released, self.tempo, where.passes)
+        if released == GO:
+            self.at[key] = log_time
 
-    def _released(self, record: StepRecord) -> str:
-        if record.event == "skip":
-            return "skipped"
-        if record.go:
-            return f"go {self.go_by}" if self.go_by else "go"
-        return "time"
+    def released_by(self) -> None:
+        """Each GO cue's row names the GO that released it: of that cue (by number), else any
+        (an older log's commands name none), the one logged nearest its step's start."""
+        for key, log_time in self.at.items():
+            row = self.rows[key]
+            gos = self.gos.get(row["number"]) or self.gos.get(None) or []
+            at = bisect_left(gos, (log_time, ""))
+            near = [gos[i] for i in (at - 1, at) if 0 <= i < len(gos)]
+            if near:
+                row["released"] = f"go {min(near, key=lambda go: abs(go[0] - log_time))[1]}"
 
 
-def _cue_row(record: StepRecord, cue: Cue | None, released: str, tempo: Tempo | None) -> dict:
+def _cue_row(record: StepRecord, cue: Cue | None, released: str, tempo: Tempo | None, passes: int) -> dict:
     skipped = released == "skipped"
     return {"number": record.cue_number or (cue.number if cue else None), "label": record.label,
-            "robot": record.robot, "planned_s": _ms(record.estimated_s),
+            "robot": record.robot, "pass": passes, "planned_s": _ms(record.estimated_s),
             "actual_s": None if skipped else _ms(record.actual_s),
             "late_ms": None if skipped or record.go else round(record.late_ms, 3), "released": released,
             "bar_beat": _bar_beat(cue, tempo, record.estimated_s)}
 
 
-def _unreached(cue: Cue, robot: str, tempo: Tempo | None) -> dict:
-    return {"number": cue.number, "label": cue.label, "robot": robot or None, "planned_s": _ms(cue.planned_s),
-            "actual_s": None, "late_ms": None, "released": "not reached",
+def _unreached(cue: Cue, robot: str, passes: int, released: str, tempo: Tempo | None) -> dict:
+    return {"number": cue.number, "label": cue.label, "robot": robot or None, "pass": passes,
+            "planned_s": _ms(cue.planned_s), "actual_s": None, "late_ms": None, "released": released,
             "bar_beat": _bar_beat(cue, tempo, cue.planned_s)}
 
 
@@ -207,9 +251,10 @@ def _ms(seconds: float | None) -> float | None:
 
 
 def cue_rows(reader: LogReader, show: AttachedShow | None = None) -> list[dict]:
-    """One row a cue a robot: as the run reached it (by time, by whose GO, skipped), then the
-    attached show's cues it never reached. Numbers from the step records, or for an older log
-    from the attached show's cue list (blank without one). Held in memory: a row a cue."""
+    """One row a cue a robot (and --loop pass): as the run reached it (by time, by whose GO,
+    skipped), then the attached show's cues it did not run (waiting when it stopped, not reached,
+    not in this run). Numbers from the step records, or for an older log from the attached
+    show's cue list (blank without one). Held in memory: a row a cue."""
     show = show or attached_show(reader)
     plans = show.plans or ({"": show.plan} if show.plan is not None else {})
     cues = cue_list(plans) if plans else None
@@ -217,28 +262,88 @@ def cue_rows(reader: LogReader, show: AttachedShow | None = None) -> list[dict]:
     seen = _CuePass({step: cue for cue in cues or () for step in cue.steps}, tempo)
     topic, number = None, 0
     try:
-        for topic, _, data in reader.messages((STEP_TOPIC, COMMAND_TOPIC)):
+        for topic, log_time, data in reader.messages((STEP_TOPIC, COMMAND_TOPIC)):
             number += 1
-            seen.see(parse(topic, data))
+            seen.see(parse(topic, data), log_time)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise reader.not_choreo(topic, number, exc) from None
-    rows = list(seen.rows.values())
-    reached = set(seen.rows)
-    for cue in cues or ():
-        rows += [_unreached(cue, robot, tempo) for robot, index in cue.steps if (robot, index) not in reached]
+    seen.released_by()
+    ended = _Ended.of(reader, seen, plans)
+    rows = list(seen.rows.values()) + _not_reached(seen, cues, ended, tempo)
     return _in_cue_order(rows, cues, reader.robots)
 
 
+@dataclass
+class _Ended:
+    """Where each robot was when the run ended: its last --loop pass (the clock's passes: a robot
+    may not have begun its steps in the last), and the step it stood before, if it stood between
+    steps (None: it was in the middle of one, or the run was done)."""
+
+    passes: dict[str, int]
+    before: dict[str, int | None]
+
+    @classmethod
+    def of(cls, reader: LogReader, seen: _CuePass, plans: Mapping[str, Plan]) -> _Ended:
+        times = ShowTimes.of(reader)
+        total = times.passes()
+        done = (reader.result or {}).get(Result.OUTCOME) == "done"
+        passes: dict[str, int] = {}
+        before: dict[str, int | None] = {}
+        for robot in {**dict.fromkeys(plans), **seen.robots}:
+            where = seen.robots.get(robot)
+            passes[robot] = max(total, where.passes if where is not None else 1)
+            before[robot] = None if done else _stood_before(where, plans.get(robot), robot, total, times.start_s)
+        return cls(passes, before)
+
+
+def _stood_before(where: _Whereabouts | None, plan: Plan | None, robot: str, passes: int, start_s: float) -> int | None:
+    """The step a robot stood before when a run that was not done ended (None: in a step)."""
+    if where is None:
+        return _first_step(plan, start_s) if passes == 1 else None
+    if where.passes < passes:
+        return where.first  # a new --loop pass began, and the robot had not begun its steps
+    return _next_step(plan, robot, where.last) if where.between else None
+
+
+def _not_reached(seen: _CuePass, cues: CueList | None, ended: _Ended, tempo: Tempo | None) -> list[dict]:
+    """A row for each cue a robot did not run in a pass (one for a cue outside the run)."""
+    rows = []
+    for cue in cues or ():
+        for robot, index in cue.steps:
+            where, passes = seen.robots.get(robot), ended.passes.get(robot, 1)
+            if where is not None and where.first is not None and (
+                    index < where.first or (passes > 1 and index > where.highest)):
+                rows.append(_unreached(cue, robot, 1, NOT_IN_RUN, tempo))
+                continue
+            for pass_ in range(1, passes + 1):
+                if (robot, index, pass_) not in seen.rows:
+                    waiting = pass_ == passes and cue.go and ended.before.get(robot) == index
+                    rows.append(_unreached(cue, robot, pass_, WAITING if waiting else NOT_REACHED, tempo))
+    return rows
+
+
+def _first_step(plan: Plan | None, start_s: float) -> int | None:
+    """A robot's first step in a run that began at `start_s` (--from's step's planned time)."""
+    steps = plan.steps if plan is not None else ()
+    return next((step.index for step in steps if step.planned_s >= start_s - 1e-6), None)
+
+
+def _next_step(plan: Plan | None, robot: str, after: int) -> int | None:
+    """The robot's next step after step `after` (a step of others comes between in a track)."""
+    steps = plan.steps if plan is not None else ()
+    return next((step.index for step in steps[after + 1:] if not robot or step.is_for(robot)), None)
+
+
 def _in_cue_order(rows: list[dict], cues: CueList | None, robots: list[str]) -> list[dict]:
-    """Rows in the cue list's order, each cue's robots in the show's (a row the list does not
-    know keeps its place after the cue before it: sorting is stable)."""
+    """Rows pass by pass in the cue list's order, each cue's robots in the show's (a row the
+    list does not know keeps its place after the cue before it: sorting is stable)."""
     position = {cue.number: at for at, cue in enumerate(cues or ())}
     robot_at = {name: at for at, name in enumerate(robots)}
     last = -1
     keyed = []
     for row in rows:
         last = position.get(row["number"], last)
-        keyed.append(((last, robot_at.get(row["robot"], len(robot_at))), row))
+        keyed.append(((row["pass"], last, robot_at.get(row["robot"], len(robot_at))), row))
     return [row for _, row in sorted(keyed, key=lambda pair: pair[0])]
 
 

@@ -24,6 +24,17 @@ the clock stood at, not where the clock would have been had it run on:
 A sample earlier than the one before it (a damaged or hostile log) is counted and passed over:
 inserting it would cost a reviewer time growing with the square of the samples.
 
+Two more turns of the clock are the reviews' to know:
+- a --loop pass starts the show clock again at the section's start: a sample behind the one
+  before it in show time (which no hold, pause or drift makes: the music never goes back, and
+  --loop runs on the machine's clock) is a new pass, and the show time it went back is counted
+  (`rewound_s`), so that the time the clock ran and the drawing's axis go on across the passes;
+- on the music's clock, a resume does not move show time at once: the song is heard again a
+  chunk and the sound card's buffer later (~10-35 ms), and only then does show time go on (the
+  run writes its resume sample, true, with show time still where it paused). The pause ends
+  where the first sample after it says show time began to move again (its show time less the
+  pause's, back from its log time): so that gap is pause, not drift, in every review.
+
 Besides show time, a review may draw on `elapsed`: show time with the time the clock stood
 still put back in. It moves with the wall clock (less the music's drift), so a motion that ran
 through a hold has its real length there, and with no hold it is show time itself.
@@ -38,7 +49,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from choreo.clock import HELD, PAUSED, RUNNING
-from choreo.log.format import CLOCK_TOPIC, STEP_TOPIC, ClockRecord, CommandRecord, Result, StepRecord, parse
+from choreo.log.format import (CLOCK_TOPIC, STEP_TOPIC, ClockRecord, CommandRecord, Result, StepRecord, cue_name,
+                               parse)
 from choreo.log.reader import LogReader
 
 BREAK_S = 0.001  # a clock sample this far from the mapping's prediction starts a new piece
@@ -77,6 +89,10 @@ class ShowTimes:
         self.anchored = False  # the zero comes from the show clock (a sample or a step), not the metadata
         self.complete = False  # every clock sample is read (`of`): later samples change nothing
         self.disordered = 0  # clock samples earlier than the one before them, passed over
+        self.start_s = 0.0  # the show time the run began at: 0, or --from's step's (see `anchor`)
+        self._rewind_ns: list[int] = []  # where a --loop pass went back (log time)
+        self._rewound: list[float] = []  # and the show time gone back up to there (running sums)
+        self._restart: int | None = None  # a music pause just resumed: its stand, until show time moves
         self.stands: list[Stand] = []
         self._break_ns: list[int] = []  # where a piece begins (log time)
         self._break_s: list[float] = []  # and the show time there
@@ -96,7 +112,10 @@ class ShowTimes:
         return times
 
     def anchor(self, reader: LogReader) -> None:
-        """Read ahead to the show clock's first sample or step start and fix the zero by it.
+        """Read ahead to the show clock's first sample or step start and fix the zero by it, and
+        on to the first step start: where the run began (`start_s`): 0 for a show from its first
+        step; --from's (or --loop's) step's planned time for one begun later. The show clock starts
+        a moment before (a lead-in, a show for several robots starting its threads): no part of it.
 
         A message that does not parse, or holds no number, is left for the review's own pass
         to report."""
@@ -113,10 +132,11 @@ class ShowTimes:
                     continue
                 if isinstance(record, StepRecord):
                     self.see_step(log_time, record)
+                    if record.event == "start" and self.anchored:
+                        self.start_s = max(0.0, float(record.estimated_s)) if record.index else 0.0
+                        return
                 elif isinstance(record, ClockRecord):
                     self.see_start(log_time, record.show_s)
-                if self.anchored:
-                    return
         finally:
             messages.close()
 
@@ -153,6 +173,10 @@ class ShowTimes:
             self.disordered += 1
             return
         self.see_start(log_time, sample.show_s)
+        if self._restart is not None:
+            self._restarted(log_time, sample)
+        if self._last is not None and sample.show_s < self._last[1] - BREAK_S:
+            self._rewind(log_time, sample.show_s)
         predicted = self._piece_seconds(log_time) if (self._break_ns or self.zero_ns is not None) else None
         self._see_state(log_time, sample, predicted)
         if predicted is None or abs(predicted - sample.show_s) > BREAK_S:
@@ -176,6 +200,8 @@ class ShowTimes:
             return
         if open_stand is not None and open_stand.kind != state:
             self._close(log_time)
+            if state == RUNNING and sample.source != MACHINE and sample.show_s == open_stand.show_s:
+                self._restart = len(self.stands) - 1  # the music goes on a little later (module docstring)
             open_stand = None
         if state != RUNNING and open_stand is None:
             self._open(Stand(state, sample.show_s, log_time, None))
@@ -189,6 +215,42 @@ class ShowTimes:
     def _close(self, log_time: int) -> None:
         last = self.stands[-1]
         self.stands[-1] = Stand(last.kind, last.show_s, last.start_ns, log_time)
+
+    def _restarted(self, log_time: int, sample: ClockRecord) -> None:
+        """The first sample after a music pause's resume: the pause ends where show time began
+        to move again, and the piece the resume began starts there (see the module's docstring).
+        A sample still at the pause's show time moves the end up to it and waits for the next."""
+        at = self._restart
+        assert at is not None
+        stand = self.stands[at]
+        moved_s = sample.show_s - stand.show_s
+        if stand.end_ns is None or moved_s < 0 or at != len(self.stands) - 1:
+            self._restart = None
+            return
+        moved = log_time - round(moved_s * 1e9)
+        if moved_s > 0:
+            self._restart = None
+        if not stand.end_ns < moved <= log_time:
+            return
+        if self._break_ns and self._break_ns[-1] == stand.end_ns and self._break_s[-1] == stand.show_s:
+            self._break_ns[-1] = moved  # the resume's piece: from where show time moved
+        self.stands[at] = Stand(stand.kind, stand.show_s, stand.start_ns, moved)
+
+    def _rewind(self, log_time: int, show_s: float) -> None:
+        """A --loop pass began: the clock went back from where it was to `show_s`."""
+        back = (self.seconds(log_time) or 0.0) - show_s
+        if back > 0:
+            self._rewind_ns.append(log_time)
+            self._rewound.append((self._rewound[-1] if self._rewound else 0.0) + back)
+
+    def rewound_s(self, log_time: int | None = None) -> float:
+        """The show time --loop passes went back up to `log_time` (None: in all; 0: no loop)."""
+        at = bisect_right(self._rewind_ns, log_time) - 1 if log_time is not None else len(self._rewound) - 1
+        return self._rewound[at] if at >= 0 else 0.0
+
+    def passes(self, log_time: int | None = None) -> int:
+        """How many --loop passes began up to `log_time` (None: in all; 1: the show ran once)."""
+        return 1 + (bisect_right(self._rewind_ns, log_time) if log_time is not None else len(self._rewind_ns))
 
     def stand_at(self, log_time: int) -> int:
         """The index of the last stand begun at or before `log_time` (-1: none)."""
@@ -233,9 +295,10 @@ class ShowTimes:
         return self._stood[at] + max(0, until - stand.start_ns) / 1e9
 
     def elapsed(self, log_time: int | None) -> float | None:
-        """Show time with the time stood still put back in: the axis a timeline draws on."""
+        """Show time with the time stood still, and what --loop's passes went back, put back in:
+        the axis a timeline draws on (it only goes forward)."""
         show_s = self.seconds(log_time)
-        return None if show_s is None else show_s + self.stood_s(log_time)
+        return None if show_s is None else show_s + self.stood_s(log_time) + self.rewound_s(log_time)
 
     def elapsed_of_show(self, show_s: float, end_ns: int | None = None) -> float:
         """Where a show time falls on the `elapsed` axis: after the stands at show times up to
@@ -253,16 +316,20 @@ class ShowTimes:
 class Durations:
     """The one figure of each of a show's lengths every review prints (seconds)."""
 
-    show_s: float | None  # on the show clock: holds and pauses not counted
+    show_s: float | None  # where the show clock ended: holds and pauses not counted
     held_s: float  # stood still at GO cues
     paused_s: float  # stood still, paused by the operator
     holds: int
     pauses: int
-    wall_s: float | None  # from show time 0 to the end, on the wall clock (elapsed)
+    wall_s: float | None  # from the run's start to its end, on the wall clock: ran, held and paused
+    start_s: float = 0.0  # where the show clock began (--from: its step's time)
+    ran_s: float | None = None  # how long it ran: from start_s to show_s, and every --loop pass before
+    passes: int = 1  # --loop: the passes begun
 
     def to_json(self) -> dict:
         return {"show_s": _ms(self.show_s), "held_s": _ms(self.held_s), "paused_s": _ms(self.paused_s),
-                "holds": self.holds, "pauses": self.pauses, "wall_s": _ms(self.wall_s)}
+                "holds": self.holds, "pauses": self.pauses, "wall_s": _ms(self.wall_s),
+                "start_s": _ms(self.start_s), "ran_s": _ms(self.ran_s), "passes": self.passes}
 
 
 def durations(times: ShowTimes, result: Mapping[str, str] | None, last_ns: int | None) -> Durations:
@@ -273,8 +340,10 @@ def durations(times: ShowTimes, result: Mapping[str, str] | None, last_ns: int |
         show_s = times.seconds(last_ns)
     held = [s.seconds(last_ns) for s in times.stands if s.kind == HELD]
     paused = [s.seconds(last_ns) for s in times.stands if s.kind == PAUSED]
-    wall = None if show_s is None else show_s + sum(held) + sum(paused)
-    return Durations(show_s, sum(held), sum(paused), len(held), len(paused), wall)
+    ran = None if show_s is None else max(0.0, show_s - times.start_s + times.rewound_s(last_ns))
+    wall = None if ran is None else ran + sum(held) + sum(paused)
+    return Durations(show_s, sum(held), sum(paused), len(held), len(paused), wall, times.start_s, ran,
+                     times.passes(last_ns))
 
 
 def result_show_s(result: Mapping[str, str] | None) -> float | None:
@@ -347,6 +416,5 @@ def see_for_stands(notes: StandNotes, record: object, log_time: int) -> None:
     if isinstance(record, CommandRecord):
         if record.status == "ok" and record.count is None:
             notes.see(log_time, command=str(record.command), source=str(record.source))
-    elif isinstance(record, StepRecord) and record.event == "start" and record.go:
-        number = f"cue {record.cue_number}" if record.cue_number else record.ref
-        notes.see(log_time, step_ref=number + (f" '{record.label}'" if record.cue_number and record.label else ""))
+    elif isinstance(record, StepRecord) and record.event in ("start", "skip") and record.go:
+        notes.see(log_time, step_ref=cue_name(record.cue_number, record.label) if record.cue_number else record.ref)

@@ -135,6 +135,7 @@ class ClockSpan:
     first_ns: int = 0  # their log times
     last_ns: int = 0
     stood_s: float = 0.0  # of the span, the time the show clock stood still (held, paused)
+    rewound_s: float = 0.0  # of the span, the show time --loop passes went back
 
     def add(self, sample: ClockRecord, log_time: int = 0) -> None:
         self.samples += 1
@@ -154,7 +155,7 @@ class ClockSpan:
     def drift_ms(self) -> float:
         """How far the show clock ran ahead of the machine's while it ran (ms): a hold or a
         pause is no drift."""
-        return ((self.last.show_s - self.first.show_s) - self.ran_s) * 1e3
+        return ((self.last.show_s - self.first.show_s + self.rewound_s) - self.ran_s) * 1e3
 
 
 @dataclass
@@ -254,7 +255,7 @@ def summary_record(summary: Summary) -> dict:
             Result.SHOW_ZERO_WALL_NS: _int(summary.result, Result.SHOW_ZERO_WALL_NS)},
         "motions": [{"motion": m.motion, "plays": m.plays, "measured": m.measured, "median_s": m.median_s}
                     for m in sorted(summary.motions.values(), key=lambda m: m.motion)],
-        "commands": [command.to_json() for command in summary.commands],
+        "commands": [{**command.to_json(), "what": command.what} for command in summary.commands],
         "commands_total": summary.commands_total,
         "commands_refused": summary.commands_refused,
         "commands_unlogged": summary.commands_unlogged,
@@ -347,7 +348,8 @@ def _lengths(summary: Summary, times: ShowTimes, reader: LogReader, last_time: i
     summary.clock_disordered = times.disordered
     if summary.clock is not None:
         clock = summary.clock
-        summary.clock = replace(clock, stood_s=times.stood_s(clock.last_ns) - times.stood_s(clock.first_ns))
+        summary.clock = replace(clock, stood_s=times.stood_s(clock.last_ns) - times.stood_s(clock.first_ns),
+                                rewound_s=times.rewound_s(clock.last_ns) - times.rewound_s(clock.first_ns))
 
 
 def _see_shared(summary: Summary, tally: _Tally, record: Record, log_time: int) -> None:

@@ -107,9 +107,10 @@ def _render_wire(summary: Summary) -> Iterable[str]:
 def _render_stands(summary: Summary) -> Iterable[str]:
     """Each time the show clock stood still: held at a GO cue, paused; hold time is no drift."""
     lengths = summary.lengths
-    if lengths is None or not (lengths.holds or lengths.pauses):
+    text = stood_text(lengths)
+    if lengths is None or not text:
         return
-    yield f"holds     {stood_text(lengths)}"
+    yield ("holds     " if lengths.holds or lengths.pauses else "ran       ") + text
     for stand in summary.stands:
         yield f"  {stand.stand.show_s:9.3f} s  {stand.text(summary.end_ns)}"
     listed = len(summary.stands)
@@ -158,7 +159,7 @@ def _render_commands(summary: Summary) -> Iterable[str]:
     yield f"commands  {summary.commands_total} from the operator ({summary.commands_refused} refused{unlogged or ')'}"
     for command in summary.commands:
         when = f"{command.show_s:9.3f} s" if command.show_s is not None else "   before  "
-        what = command.command + (f" {command.label}" if command.label else "")
+        what = command.what
         verdict = "" if command.status == "ok" else f" {command.status.upper()}"
         yield f"  {when}  {what:<12} {command.source}{verdict}: {command.message}"
     if summary.command_records > len(summary.commands):

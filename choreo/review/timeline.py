@@ -27,7 +27,8 @@ from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.showtime import Durations, ShowTimes, StandNote, StandNotes, durations, see_for_stands
 from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC,
                                STEP_TOPIC, TX_TOPIC, ClockRecord, CommandRecord, LogLayouts, LogRecord, MotionPlay,
-                               MotionTracker, Record, Result, RxRecord, StepRecord, TxRecord, is_late, parse, slipped)
+                               MotionTracker, Record, Result, RxRecord, StepRecord, TxRecord, cue_name, is_late, parse,
+                               slipped)
 from choreo.log.reader import Cut, LogReader
 from choreo.textfit import fit
 
@@ -136,7 +137,8 @@ class Cue:
 
     @property
     def name(self) -> str:
-        return self.label or f"step {self.step}"
+        """`cue 1 'applause'`, as the cue list names it (an older log's: its label or step)."""
+        return cue_name(self.number, self.label) if self.number else self.label or f"step {self.step}"
 
     @property
     def drawn_at(self) -> float:
@@ -288,8 +290,8 @@ class _Pass:
 
 
 def command_text(record: CommandRecord) -> str:
-    """`go applause from key: GO: applause` (REFUSED when it was not carried out)."""
-    what = record.command + (f" {record.label}" if record.label else "")
+    """`go cue 1 'applause' from key: GO: cue 1 'applause'` (REFUSED when it was not carried out)."""
+    what = record.what
     verdict = "" if record.status == "ok" else f" {str(record.status).upper()}"
     return f"{what} from {record.source}{verdict}: {record.message}"
 
@@ -303,8 +305,9 @@ def _see_step(timeline: Timeline, steps: dict[tuple[str | None, int], _Step], st
               now: float, at: float | None = None) -> None:
     whose = f"{step.robot}: " if step.robot else ""
     if step.event == "skip":
-        timeline.marks.append(Mark(now, "skip", f"{whose}{step.ref} skipped" +
-                                   (f" (cue {step.cue_number})" if step.cue_number else ""), at))
+        what = f"{cue_name(step.cue_number, step.label)} skipped (step {step.index})" if step.cue_number \
+            else f"{step.ref} skipped"
+        timeline.marks.append(Mark(now, "skip", whose + what, at))
         return
     if step.event == "start":
         cue_s = step.cue if step.cue is not None else step.actual_s if step.go else None
@@ -466,16 +469,28 @@ def _head(timeline: Timeline, span: float, width: int) -> Iterator[str]:
 
 
 def stood_text(lengths: Durations | None) -> str:
-    """`held 4.600 s at 2 GO cues, paused 1.200 s; 9.851 s in all`, or "": no hold, no pause."""
-    if lengths is None or not (lengths.holds or lengths.pauses):
+    """`held 4.600 s at 2 GO cues, paused 1.200 s; 9.851 s in all`, with --from's start and
+    --loop's passes (`from 12.000 s, 3 passes: ran 30.500 s; ...`), or "": a show that ran
+    from 0 once, never held nor paused."""
+    if lengths is None:
         return ""
-    parts = []
+    ran = []
+    if lengths.start_s >= 0.0005:
+        ran.append(f"from {lengths.start_s:.3f} s")
+    if lengths.passes > 1:
+        ran.append(f"{lengths.passes} passes")
+    stood = []
     if lengths.holds:
-        parts.append(f"held {lengths.held_s:.3f} s at {counted(lengths.holds, 'GO cue')}")
+        stood.append(f"held {lengths.held_s:.3f} s at {counted(lengths.holds, 'GO cue')}")
     if lengths.pauses:
-        parts.append(f"paused {lengths.paused_s:.3f} s" + (f" ({lengths.pauses} pauses)" if lengths.pauses > 1 else ""))
-    wall = f"; {lengths.wall_s:.3f} s in all" if lengths.wall_s is not None else ""
-    return f"{', '.join(parts)}{wall}"
+        stood.append(f"paused {lengths.paused_s:.3f} s" + (f" ({lengths.pauses} pauses)" if lengths.pauses > 1 else ""))
+    if not (ran or stood):
+        return ""
+    parts = [", ".join(ran) + (f": ran {lengths.ran_s:.3f} s" if lengths.ran_s is not None else "")] if ran else []
+    parts += [", ".join(stood)] if stood else []
+    if lengths.wall_s is not None:
+        parts.append(f"{lengths.wall_s:.3f} s in all")
+    return "; ".join(parts)
 
 
 def _marks_row(timeline: Timeline, scale: float, width: int) -> str:
