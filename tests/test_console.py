@@ -328,7 +328,7 @@ def test_only_a_bare_esc_panics_every_other_sequence_is_read_whole_and_ignored(s
 def test_keys_and_bare_escs() -> None:
     parser = KeyParser()
     assert parser.feed(b" \r\nqQyx") == ["space", "enter", "enter", "q", "Q", "y", "x"]  # as typed
-    assert parser.feed(b"\x03\x00\xe3\x83\xad\t") == []  # control bytes and UTF-8 are not keys
+    assert parser.feed(b"\x03\x00\xe3\x83\xad\t") == ["ロ"]  # control bytes are no keys; UTF-8, its character
     assert parser.feed(b"\x1b") == [] and parser.pending and parser.timeout() == ["escape"]
     assert parser.feed(b"\x1b\x1b") == [] and parser.timeout() == ["escape"]  # Esc twice in a hurry
     assert parser.feed(b"\x1b\x1b\x1b") == ["escape"] and parser.timeout() == ["escape"]
@@ -378,7 +378,8 @@ def test_any_run_of_key_sequences_in_any_chunks_gives_no_key(sequences: list[byt
 def test_after_any_bytes_and_a_pause_esc_and_go_work(noise: bytes) -> None:
     parser = KeyParser()
     keys = parser.feed(noise) + parser.timeout()
-    assert set(keys) <= set(KEYS.values()) | {"escape", "up", "down"} | {chr(b) for b in range(0x21, 0x7F)}
+    named = set(KEYS.values()) | {"escape", "up", "down"}
+    assert all(key in named or len(key) == 1 and key.isprintable() and key != " " for key in keys)  # typed ones
     assert parser.feed(b"\x1b") == [] and parser.timeout() == ["escape"]
     assert parser.feed(b" ") == ["space"]
 
@@ -791,8 +792,11 @@ def test_a_sequence_begun_by_an_8_bit_control_is_no_key(sequence: bytes) -> None
     assert parser.feed(b" q") == ["space", "q"]
 
 
-def test_utf8_text_typed_is_no_key_and_no_sequence() -> None:
+def test_utf8_text_typed_is_its_characters_and_no_sequence() -> None:
     parser = KeyParser()  # 〛 and 〜 end in 9B and 9C: continuation bytes, not 8-bit controls
-    assert parser.feed("〛 q 〜 ロボ\u009c ".encode()) == ["space", "q", "space", "space", "space"]
-    assert parser.feed("\x1b〛 q".encode()) == ["space", "q"]  # Alt+〛, then keys
+    assert parser.feed("〛 q 〜 ロボ\u009c ".encode()) == ["〛", "space", "q", "space", "〜", "space", "ロ", "ボ",
+                                                           "space"]  # (a C1 control is no key)
+    assert parser.feed("\x1b〛 q".encode()) == ["space", "q"]  # Alt+〛 (no key), then keys
+    assert parser.feed("お".encode()[:2]) == [] and parser.feed("お".encode()[2:]) == ["お"]  # across reads
+    assert parser.feed("\u200b\u202e".encode()) == []  # invisible and bidi characters are no key
     assert not parser.pending

@@ -17,6 +17,7 @@ from rich.console import Console as RichConsole
 from choreo.cli import screen
 
 from choreo.cli.console import Console
+from choreo.cli.keys import KeyParser
 from choreo.cli.screen import (
     LEGEND,
     PAUSED_LEGEND,
@@ -288,3 +289,19 @@ def test_a_hostile_message_of_any_length_costs_a_bounded_measure(monkeypatch, te
         line = fit_message(text, width, "osc udp 127.0.0.1:9")
         assert display_width(line) <= width
     assert sum(measured) <= 3 * 40 * screen.LONGEST_FITTED
+
+
+def test_j_takes_a_label_typed_in_any_script(tmp_path):
+    """Kondo robots' shows are often labelled in Japanese: `j` and the label typed jumps there
+    (a character typed arrives as UTF-8 bytes, maybe split across reads)."""
+    body = EVENING.replace("label: finale", "label: お辞儀")
+    session = Session.prepare(RunRequest(str(write_show(tmp_path, body)), no_log=True))
+    live = Live(StopRequest(), cues=cue_list(session.settings.plans))
+    console = Console(session, live, out=io.StringIO(), keys=io.StringIO())
+    live.subscribe(console)
+    parser = KeyParser()
+    for chunk in (b"j", "お辞".encode()[:4], "お辞".encode()[4:], "儀".encode(), b"\r"):
+        for key in parser.feed(chunk):
+            console.on_key(key)
+    assert live.playhead is not None and live.playhead.number == "13"
+    assert console.screen().notes[-1].text == "playhead: cue 13 'お辞儀'"

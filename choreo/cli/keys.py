@@ -96,7 +96,7 @@ PASTE_ON, PASTE_OFF = "\x1b[?2004h", "\x1b[?2004l"  # ask the terminal to bracke
 
 class KeyParser:
     """Key bytes in, key names out (`space`, `enter`, `escape`, `up`, `down`, `backspace`,
-    `ctrl-u`, or a printable character as typed: `Q` is `Q`, a cue's label may hold one): no
+    `ctrl-u`, or a character as typed: `Q` is `Q`, `ロ` is `ロ`, a cue's label may hold them): no
     I/O and no clock, so every sequence a terminal sends can be tried on it.
 
     Esc also starts what other keys send: arrows and function keys (CSI `ESC [ ... final`, SS3
@@ -108,8 +108,8 @@ class KeyParser:
     Esc, and a third Esc right after makes that pair one. A paste is text up to its end marker
     (`ESC [201~`), whatever it holds (Esc, half sequences, spaces, q and y), skipped whole and
     fast (a megabyte costs the show nothing). A pause (`timeout`) also ends any sequence or
-    paste cut short, so the next key is read afresh whatever came before; UTF-8 characters and
-    control bytes other than Enter are not keys, and an 8-bit control (`EIGHT_BIT`) begins a
+    paste cut short, so the next key is read afresh whatever came before; control bytes other
+    than Enter are not keys, and an 8-bit control (`EIGHT_BIT`) begins a
     sequence as its ESC form does."""
 
     def __init__(self) -> None:
@@ -119,6 +119,8 @@ class KeyParser:
         self._pasting = False
         self._paste_tail = b""  # a paste's last bytes: its end marker may be split across reads
         self._utf8 = (0, 0)  # a UTF-8 character under way: its first byte, continuation bytes to come
+        self._char = bytearray()  # its bytes so far
+        self._alt = False  # it came with Alt (`ESC` first): no key, as Alt and any key
 
     @property
     def pending(self) -> bool:
@@ -174,8 +176,7 @@ class KeyParser:
                 self._in_escape = True
                 return None
             if byte >= 0x80:
-                self._high(byte)
-                return None
+                return self._high(byte)
             self._utf8 = (0, 0)  # an ASCII byte ends a UTF-8 character cut short
             return KEYS.get(byte, chr(byte) if 0x20 < byte < 0x7F else None)
         if byte == ESC and self._sequence == b"\x1b" and not self._pasting:
@@ -202,21 +203,34 @@ class KeyParser:
             return False
         return self._eight_bit == 1 or sequence[-2:-1] == b"\xc2"
 
-    def _high(self, byte: int) -> None:
-        """A byte past ASCII outside a sequence: part of a UTF-8 character (no key), or an
-        8-bit control, raw or as UTF-8 (`C2 9B`), which begins a sequence."""
+    def _high(self, byte: int) -> str | None:
+        """A byte past ASCII outside a sequence: part of a UTF-8 character (the character, as
+        typed, once whole: a cue's label after `j` may be `お辞儀`), or an 8-bit control, raw
+        or as UTF-8 (`C2 9B`), which begins a sequence."""
         lead, left = self._utf8
         if left and 0x80 <= byte <= 0xBF:
             self._utf8 = (lead, left - 1)
+            self._char.append(byte)
             if lead == 0xC2 and byte in EIGHT_BIT:  # U+0080-U+009F: a C1 control
                 self._begin_eight_bit(byte, 2)
-            return
+                return None
+            if left > 1:
+                return None
+            alt, self._alt = self._alt, False
+            try:
+                char = self._char.decode()
+            except UnicodeDecodeError:  # overlong, a surrogate, past U+10FFFF: no character
+                return None
+            return char if char.isprintable() and not alt else None
+        self._char[:] = bytes([byte])
+        self._alt = False
         if 0xC2 <= byte <= 0xF4:
             self._utf8 = (byte, 1 if byte < 0xE0 else 2 if byte < 0xF0 else 3)
-            return
+            return None
         self._utf8 = (0, 0)
         if byte in EIGHT_BIT:
             self._begin_eight_bit(byte, 1)
+        return None
 
     def _begin_eight_bit(self, byte: int, form: int) -> None:
         self._in_escape = True
@@ -231,6 +245,7 @@ class KeyParser:
             self._pasting = True
         elif len(sequence) == 1 and sequence[0] >= 0x80:
             self._high(sequence[0])  # Alt and a non-ASCII key: the rest of its UTF-8 follows
+            self._alt = True
         elif len(sequence) > 1 and sequence[-1] == ESC and not _is_string(sequence):
             self._in_escape = True  # a sequence broken off by an Esc: that Esc starts the next
         return None
