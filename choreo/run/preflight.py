@@ -6,15 +6,18 @@ bauds and layouts), then each thing the run will need is checked on its own, so 
 problem does not hide the next: every robot's port opens and its board answers the read-only
 probe (`choreo.board.probe`: nothing is written to the board) at the show's baud, with no motion
 running and a program counter that does not contradict the show's layout; a real device's
-permission and USB latency timer; the music decodes (`Song.open`, what the run opens first) and
-lasts past the show's last cue; its output opens; the OSC port is free (the run's own
+permission and USB latency timer; the music opens as the run opens it (`Song.open`) and decodes
+as far as the show needs it (its header's length is only a claim: a file cut short keeps the
+whole one's) past the show's last cue; its output opens; the OSC port is free (the run's own
 `OscServer.bind`, then closed) and its allow-list parses; the log's folder takes a file and has
-room for the log the plan will write (`log_estimate`).
+room for what the recorder holds as it writes the plan's log (`log_estimate`: more than the
+finished log, or the run stops on a full disk).
 
 A port that hangs (a driver stuck in open, a network port that never answers) cannot hang the
 preflight: on the machine's time each robot's port is checked on a thread of its own and
-whatever has not answered by `Machine.deadline_s` is a problem. On virtual time (the in-process
-simulator only, which cannot hang) the checks run in turn, deterministic.
+whatever has not answered by `Machine.deadline_s` is a problem; so are a sound output that hangs
+as it opens and a song that hangs as it decodes. On virtual time (the in-process simulator only,
+which cannot hang) the checks run in turn, deterministic.
 
 What the checks read of the machine (the probe, the port's open, free space, the audio output)
 comes in through `Machine`, so tests give them a machine of their own.
@@ -50,13 +53,13 @@ from choreo.show.read import MAX_BYTES
 from choreo.show.report import format_path
 from choreo.wire.protocol import BAUDS
 
+if TYPE_CHECKING:  # the music loads when the show has some
+    from choreo.music.player import Song
+
 # Every port's checks together: a probe of a dead board tries 3 bauds, 2 ACK checks of 2 tries each,
 # each try waiting the show's reply timeout, at most PROBE_TIMEOUT_S (12 s at worst; 2.4 s by default).
 PROBE_TIMEOUT_S = 1.0
-PORT_DEADLINE_S = 15.0
-if TYPE_CHECKING:
-    from choreo.music.player import Song
-
+PORT_DEADLINE_S = 15.0  # and for the music's output and decoding, each
 T = TypeVar("T")
 HEARD_SLACK_S = 0.05  # a decoded length this close to what was asked is all of it (resampling rounds)
 # What a log costs in the file (MCAP, uncompressed), measured on the simulator's logs: a message
