@@ -36,6 +36,7 @@ from choreo.run.settings import RunRequest
 from choreo.show.cues import cue_list
 from choreo.textfit import display_width
 from runlog import write_show
+from test_console import Pane, commands_in, needs_tmux, pane  # noqa: F401 - pane: the fixture
 
 EVENING = """\
 version: 1
@@ -305,3 +306,27 @@ def test_j_takes_a_label_typed_in_any_script(tmp_path):
             console.on_key(key)
     assert live.playhead is not None and live.playhead.number == "13"
     assert console.screen().notes[-1].text == "playhead: cue 13 'お辞儀'"
+
+
+# -- on a terminal: 20 columns and 5 lines, then a hurried operator ----------------------------
+
+
+@needs_tmux
+def test_at_20x5_the_console_fits_and_keys_work_and_capital_q_stops(tmp_path, pane):  # noqa: F811 - the fixture
+    run: Pane = pane(EVENING)
+    run.wait_for("GO fires cue 1 'applause'")
+    run._tmux("resize-window", "-t", "run", "-x", "20", "-y", "5")
+    screen = run.wait_for("GO fires")  # the GO line stays in sight, near the top
+    assert all(display_width(line.rstrip()) <= 20 for line in screen.splitlines()), screen
+    run.keys("p", "Space")  # paused: GO is refused, and says how to go on
+    run.keys("P", "S")  # resumed, then cue 1 (waiting) skipped
+    run._tmux("resize-window", "-t", "run", "-x", "80", "-y", "24")
+    run.wait_for("skipped: cue 1 'applause'")
+    run.wait_for("robot left: step 0 'applause' skipped (cue 1): not run")
+    run.keys("Q")
+    run.wait_for("stop the show? y/n")
+    run.keys("Y")
+    assert run.exit_code() == 130
+    assert [(name, ok) for name, _, ok in commands_in(tmp_path)] == [
+        ("pause", "ok"), ("go", "error"), ("resume", "ok"), ("skip", "ok"), ("stop", "ok")]
+    assert run.terminal_restored()
