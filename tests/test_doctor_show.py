@@ -84,7 +84,7 @@ def test_all_clear_on_the_simulator(tmp_path):
     song(tmp_path / "song.wav", 6.0)
     found = checks(tmp_path, request(tmp_path, show(tmp_path, music="song.wav")), OscAsk(str(free_port())))
     assert found["exit"] == 0
-    for name in ("show", "port", "board", "layout", "idle", "music", "osc", "log", "log space"):
+    for name in ("show", "port", "board", "layout", "idle", "line", "music", "osc", "log", "log space"):
         assert found[name].level == OK, found[name]
     assert found["audio"].level == NOTE  # the null output: silent
     assert "ends at 6.000 s" in found["music"].text and "cue 1 'late' at 3.000 s" in found["music"].text
@@ -231,7 +231,7 @@ def test_the_cli_table_json_and_exit_codes(tmp_path, capsys, monkeypatch):
     assert lines[0].split() == ["check", "verdict", "detail", "->", "fix"]
     width = lines[0].index("verdict")
     rows = {line[:width].strip(): line[width:].split()[0] for line in lines[1:]}
-    assert rows == {"show": "ok", "port": "ok", "board": "ok", "layout": "ok", "idle": "ok", "log": "ok",
+    assert rows == {"show": "ok", "port": "ok", "board": "ok", "layout": "ok", "idle": "ok", "line": "ok", "log": "ok",
                     "log space": "ok"}
     assert not (tmp_path / "runs").exists()  # the default folder is not made by the check
     assert vmain(["doctor", path, "--port", "sim://?drop=1", "--json"]) == 1
@@ -467,3 +467,15 @@ def test_json_keeps_its_keys_when_the_show_does_not_load(tmp_path, capsys, monke
     assert first["check"] == "show" and first["level"] == "problem"
     assert first["fix"] == "the path of the show's YAML file"
     assert [f["check"] for f in gone["findings"]] == ["show", "log", "log space"]  # the rest still checked
+
+
+def test_a_line_that_loses_frames_is_a_problem_and_one_that_loses_a_few_a_note(tmp_path):
+    """The probe's few questions may all be answered on a line that loses a frame in two: twenty
+    ACK checks, none retried, tell (on the simulator's faults: the run on such a line stops)."""
+    path = show(tmp_path)
+    lossy = checks(tmp_path, request(tmp_path, path, port="sim://?drop=0.5&seed=0"))
+    assert lossy["board"].level == OK and lossy["line"].level == PROBLEM and lossy["exit"] == 1
+    assert "3 of " in lossy["line"].text and "then stops" in lossy["line"].text
+    assert "choreo probe --port 'sim://?drop=0.5&seed=0'" in lossy["line"].fix
+    once = checks(tmp_path, request(tmp_path, path, port="sim://?junk=20"))
+    assert once["line"].level == NOTE and "1 of 20" in once["line"].text and once["exit"] == 0

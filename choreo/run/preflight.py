@@ -57,9 +57,12 @@ if TYPE_CHECKING:  # the music loads when the show has some
     from choreo.music.player import Song
 
 # Every port's checks together: a probe of a dead board tries 3 bauds, 2 ACK checks of 2 tries each,
-# each try waiting the show's reply timeout, at most PROBE_TIMEOUT_S (12 s at worst; 2.4 s by default).
+# each try waiting the show's reply timeout, at most PROBE_TIMEOUT_S (12 s at worst; 2.4 s by default);
+# a board that answers, then LINE_MISSES missed ACK checks of the line at most (3 s at worst).
 PROBE_TIMEOUT_S = 1.0
 PORT_DEADLINE_S = 15.0  # and for the music's output and decoding, each
+LINE_CHECKS = 20  # ACK checks that measure the line once the board answered (20 ms on a good line)
+LINE_MISSES = 3  # stop at this many misses: each waits its timeout
 T = TypeVar("T")
 HEARD_SLACK_S = 0.05  # a decoded length this close to what was asked is all of it (resampling rounds)
 # What a log costs in the file (MCAP, uncompressed), measured on the simulator's logs: a message
@@ -101,6 +104,23 @@ def _open(url: str, baud: int, timeout: float, time_source: TimeSource | None) -
     open_port(url, baud, timeout=timeout, clock=RunClock(time_source) if time_source else None).close()
 
 
+def _line(url: str, baud: int, timeout: float, time_source: TimeSource | None) -> tuple[int, int]:
+    """ACK checks sent one by one without retry (the probe's own read-only frame), stopped at
+    LINE_MISSES: (sent, unanswered or garbled)."""
+    from choreo.board.link import Link
+    from choreo.wire.protocol import ReplyKind, sync_frame
+
+    link = Link.open(url, baud, timeout=timeout, tries=1, clock=RunClock(time_source) if time_source else None)
+    sent = missed = 0
+    try:
+        while sent < LINE_CHECKS and missed < LINE_MISSES:
+            sent += 1
+            missed += link.send(sync_frame(), 1).kind is not ReplyKind.ACK
+    finally:
+        link.close()
+    return sent, missed
+
+
 def _audio(asked: str | None) -> str:
     from choreo.music.player import pick_output, try_output
 
@@ -120,6 +140,7 @@ class Machine:
     talk: bool = True
     probe: Callable[[str, Sequence[int], float, TimeSource | None], BoardInfo] = _probe
     open_port: Callable[[str, int, float, TimeSource | None], None] = _open
+    line: Callable[[str, int, float, TimeSource | None], tuple[int, int]] = _line
     audio: Callable[[str | None], str] = _audio
     free_bytes: Callable[[Path], int] = _free
     sysfs: Path = SYSFS
@@ -275,7 +296,28 @@ def _board(link: LinkSettings, machine: Machine, ensemble: bool) -> list[Finding
                                 "check the board's power, the cable and its baud", robot)]
     info = replace(info, notes=[note.replace(link.port, link.given_port) for note in info.notes])
     wanted = BoardWanted(link.given_port, link.baud, link.layout, link.layout_source == "default", robot)
-    return found + board_checks(info, wanted)
+    checked = found + board_checks(info, wanted)
+    return checked + [_line_check(link, machine, robot)] if info.baud == link.baud else checked
+
+
+def _line_check(link: LinkSettings, machine: Machine, robot: str | None) -> Finding:
+    """A board that answers the probe's few questions may still sit on a line that loses or
+    garbles one frame in a few (a loose cable, a noisy adapter): the run retries a frame, then
+    stops. LINE_CHECKS ACK checks, none retried, tell: LINE_MISSES lost is a problem (a line that
+    loses one frame in a few loses a frame's every try in a show), fewer a note."""
+    fix = ("check the cable and the adapter, and that no other program talks on the port; then "
+           f"choreo probe --port {shlex.quote(link.given_port)}")
+    try:
+        sent, missed = machine.line(link.port, link.baud, min(link.timeout, PROBE_TIMEOUT_S), machine.time_source)
+    except ChoreoError as exc:
+        return Finding(PROBLEM, "line", _named(exc, link), fix, robot)
+    said = f"{missed} of {sent} ACK checks at {link.baud} baud went unanswered or garbled"
+    if missed >= LINE_MISSES:
+        return Finding(PROBLEM, "line", f"{said}: the run tries a frame {link.tries} times, then stops", fix, robot)
+    if missed:
+        return Finding(NOTE, "line", f"{said}: the run's retries cover a frame lost now and then, but a good "
+                       "line loses none", fix, robot)
+    return Finding(OK, "line", f"{sent} ACK checks at {link.baud} baud, every one answered", None, robot)
 
 
 def _named(exc: ChoreoError, link: LinkSettings) -> str:
