@@ -61,6 +61,7 @@ if TYPE_CHECKING:  # the music loads when the show has some
 # a board that answers, then LINE_MISSES missed ACK checks of the line at most (3 s at worst).
 PROBE_TIMEOUT_S = 1.0
 PORT_DEADLINE_S = 15.0  # and for the music's output and decoding, each
+DECODE_SPEED = 20  # seconds of song decoded a second at the least (mp3 on this machine: 500)
 LINE_CHECKS = 20  # ACK checks that measure the line once the board answered (20 ms on a good line)
 LINE_MISSES = 3  # stop at this many misses: each waits its timeout
 T = TypeVar("T")
@@ -391,7 +392,8 @@ def _music(settings: RunSettings, request: RunRequest, machine: Machine) -> list
         return [Finding(PROBLEM, "music", f"{song.path}: {exc.lines()[0]}", "a sound file that decodes to its "
                         "end (choreo beats SONG decodes it too)")]
     return [_song_length(settings, end, said),
-            audio_output(lambda: _in_time(lambda: machine.audio(request.audio_device), machine), request.audio_device)]
+            audio_output(lambda: _in_time(lambda: machine.audio(request.audio_device), machine.deadline_s, machine,
+                                          "the sound system hangs"), request.audio_device)]
 
 
 def _heard(settings: RunSettings, song: Song, machine: Machine) -> tuple[float, str]:
@@ -401,7 +403,8 @@ def _heard(settings: RunSettings, song: Song, machine: Machine) -> tuple[float, 
     start = song.music.start
     needed = max(plan.estimated_s for plan in settings.plans.values()) + start + 1.0
     until = min(song.duration_s, needed)
-    heard = _in_time(lambda: _decoded_s(song.path, song.sample_rate, until), machine)
+    seconds = machine.deadline_s + until / DECODE_SPEED  # a long song on a slow machine is no hang
+    heard = _in_time(lambda: _decoded_s(song.path, song.sample_rate, until), seconds, machine, "decoding hangs")
     if heard >= until - HEARD_SLACK_S:
         return song.end_show_s, f"{song.path} decodes"
     return heard - start, (f"{song.path} decodes only to {heard:.3f} s of its {song.duration_s:.3f} s (cut short "
@@ -425,10 +428,10 @@ def _decoded_s(path: str, rate: int, until_s: float) -> float:
     return frames / rate
 
 
-def _in_time(call: Callable[[], T], machine: Machine) -> T:
+def _in_time(call: Callable[[], T], seconds: float, machine: Machine, hangs: str) -> T:
     """`call` on a thread of its own on the machine's time: a sound system that hangs as an
-    output opens (or a file that hangs as it decodes) is a ChoreoError after `machine.deadline_s`
-    (its thread is left behind)."""
+    output opens (or a file that hangs as it decodes) is a ChoreoError after `seconds` (its
+    thread is left behind); `hangs` says what then."""
     if machine.virtual:
         return call()
     done: list[T] = []
@@ -442,11 +445,11 @@ def _in_time(call: Callable[[], T], machine: Machine) -> T:
 
     thread = threading.Thread(target=work, daemon=True, name="doctor music")
     thread.start()
-    thread.join(machine.deadline_s)
+    thread.join(seconds)
     if failed:
         raise failed[0]
     if not done:
-        raise ChoreoError(f"no answer within {machine.deadline_s:g} s (the sound system hangs)")
+        raise ChoreoError(f"no answer within {seconds:g} s ({hangs})")
     return done[0]
 
 
