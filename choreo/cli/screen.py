@@ -150,7 +150,7 @@ def fit_message(text: str, width: int, aside: str = "") -> str:
     is written after it in brackets and cut first: down to MIN_QUOTED columns, then left out.
     Then the outside text (a cue's label, a file's name, an OSC address: `'...'`, `/...`) is
     cut, the longest first: before the tail to MIN_QUOTED columns, in the tail to TAIL_QUOTED
-    (a suggested `'/choreo/go'` stays whole), before the tail to 2; then the end of what comes
+    (a suggested address stays whole), before the tail to 2; then the end of what comes
     before the tail, down to MIN_HEAD columns; then the tail's outside text to MIN_QUOTED; and
     last the middle of it all: both the start (what happened) and the end (what to do) stay."""
     if len(text) > LONGEST_FITTED:  # a (hostile) message of any length costs no more than this
