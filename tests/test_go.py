@@ -262,8 +262,9 @@ def test_the_summary_lists_who_pressed_what_and_when(tmp_path, capsys):
     assert main(["log", "summary", str(run.log_path)]) == 0
     out = capsys.readouterr().out
     assert "commands  2 from the operator (1 refused)" in out
-    assert "cue_go nope  test ERROR: cue 'nope' is not waiting for GO (waiting: 'applause')" in out
-    assert "go 1         test: GO: cue 1 'applause'" in out
+    # a command names the cue it acted on as the cue list does, or what was typed (quoted)
+    assert "cue_go 'nope' test ERROR: cue 'nope' is not waiting for GO (waiting: 'applause')" in out
+    assert "go cue 1 'applause' test: GO: cue 1 'applause'" in out
     assert main(["log", "summary", str(run.log_path), "--json"]) == 0
     record = json.loads(capsys.readouterr().out)
     assert [c["command"] for c in record["commands"]] == ["cue_go", "go"] and record["commands_total"] == 2
