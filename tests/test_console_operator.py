@@ -17,7 +17,7 @@ from rich.console import Console as RichConsole
 from choreo.cli import screen
 
 from choreo.cli.console import Console
-from choreo.cli.keys import KeyParser
+from choreo.cli.keys import KeyParser, unmarked_paste
 from choreo.cli.screen import (
     LEGEND,
     PAUSED_LEGEND,
@@ -329,4 +329,24 @@ def test_at_20x5_the_console_fits_and_keys_work_and_capital_q_stops(tmp_path, pa
     assert run.exit_code() == 130
     assert [(name, ok) for name, _, ok in commands_in(tmp_path)] == [
         ("pause", "ok"), ("go", "error"), ("resume", "ok"), ("skip", "ok"), ("stop", "ok")]
+    assert run.terminal_restored()
+
+
+def test_an_unmarked_paste_is_no_key():
+    assert unmarked_paste(["space", "s", "p", "up", "q", "y", "j", "down"]) == ["space", "s", "p", "up", "q", "y",
+                                                                                "j", "down"]  # 6 typed: a hand
+    pasted = KeyParser().feed(b"notes for the show: qy s p\r")
+    assert unmarked_paste(pasted) == ["paste"]
+    assert unmarked_paste(pasted + ["escape"]) == ["paste", "escape"]  # Esc still panics
+
+
+@needs_tmux
+def test_text_pasted_where_the_terminal_does_not_mark_it_gives_no_go_skip_or_stop(tmp_path, pane):  # noqa: F811
+    run: Pane = pane(EVENING)
+    run.wait_for("GO fires cue 1 'applause'")
+    run.keys("-l", "a note pasted: qy p s and  spaces\r")  # one write, as a terminal sends a paste unmarked
+    run.wait_for("a paste is no key")
+    run.keys("q", "y")
+    assert run.exit_code() == 130
+    assert commands_in(tmp_path) == [("stop", "key", "ok")]
     assert run.terminal_restored()

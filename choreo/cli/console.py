@@ -314,6 +314,9 @@ class Console:
             self._type(None)
             self.live.command(Command("panic", "key"))
             return
+        if key == "paste":  # text pasted on a terminal that does not mark pastes: no key of it
+            self._add(Note("a paste is no key: ignored (type a cue's number after j)", "yellow", self._show_s()))
+            return
         with self._lock:
             asking, typed = self._asking, self._typed
         if asking:

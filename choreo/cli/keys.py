@@ -17,6 +17,7 @@ from collections.abc import Callable
 ESCAPE_WAIT_S = 0.03  # a byte this soon after Esc makes it an escape sequence (an arrow key), not Esc
 PASTE_WAIT_S = 0.5  # a paste's rest may come this late (a big paste over ssh) and still be a paste
 KEY_POLL_S = 0.05  # how often the key reader looks up from the terminal to see whether to stop
+PASTE_KEYS = 8  # keys typed in one read that make it a paste the terminal did not mark (no hand types so fast)
 
 
 # Keys the terminal itself would act on, each taken from it while the console reads: Ctrl-Z
@@ -273,6 +274,18 @@ def _complete(sequence: bytes) -> bool:
     return not 0x20 <= body[-1] <= 0x3F  # CSI, SS3: parameters, intermediates, a final byte
 
 
+def unmarked_paste(keys: list[str]) -> list[str]:
+    """The keys of one read, or `paste` for them all if they are more text than a hand types
+    between two reads (PASTE_KEYS): a terminal that does not mark pastes (the Linux console,
+    some serial and web terminals) sends one as typed keys, and every space in it would be a
+    GO, its `s` a skip, its `q` and `y` a stop. Arrows and Esc are not counted (held Down
+    repeats one at a time, a hurried Esc must still panic)."""
+    typed = [key for key in keys if key not in ("up", "down", "escape")]
+    if len(typed) < PASTE_KEYS:
+        return keys
+    return ["paste"] + (["escape"] if "escape" in keys else [])
+
+
 class KeyReader:
     """Reads the terminal in a thread of its own and hands each key to `on_key` by name
     (`KeyParser` tells keys from sequences): it waits ESCAPE_WAIT_S after an Esc for the rest
@@ -303,7 +316,7 @@ class KeyReader:
             data = self._read(self.paste_wait_s if pasting else self.escape_wait_s if pending else KEY_POLL_S,
                               4096 if pasting else 64)
             keys = self.parser.feed(data) if data is not None else self.parser.timeout() if pending else []
-            for key in keys:
+            for key in unmarked_paste(keys):
                 self.on_key(key)
 
     def _read(self, timeout: float, size: int) -> bytes | None:
