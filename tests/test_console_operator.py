@@ -350,3 +350,17 @@ def test_text_pasted_where_the_terminal_does_not_mark_it_gives_no_go_skip_or_sto
     assert run.exit_code() == 130
     assert commands_in(tmp_path) == [("stop", "key", "ok")]
     assert run.terminal_restored()
+
+
+def test_with_the_playhead_moved_off_a_cue_that_waits_the_go_line_says_how_to_reach_it(tmp_path):
+    console, session, live, status = evening(tmp_path)
+    live.command(Command("start", "key"))
+    for robot in ("left", "right"):
+        live.await_go(session.settings.plans[robot].steps[0], robot, reached_s=0.0, should_stop=lambda: True)
+    assert console.screen().go == "GO fires cue 1 'applause': press Space or Enter"
+    assert live.command(Command("playhead_next", "key")).ok  # onto cue 2, timed
+    screen = console.screen()
+    assert screen.go == ("GO does nothing: playhead on cue 2 'hello world' (a timed cue); cue 1 'applause' waits: "
+                         "move the playhead (Up/Down)") and screen.go_waiting
+    line = next(line for line in lines_of(console, 60) if line.startswith("GO does nothing"))
+    assert line.endswith("move the playhead (Up/Down)"), line

@@ -421,7 +421,7 @@ class Console:
         rows = tuple(self._row(robot, groups) for robot in robots if robot.robot not in shared)
         waits = tuple(f"{_names(names)} wait for GO: {name}" for names, name in groups if len(names) > 1)
         cue = "next cue: none, the show is stopping" if stopping else self._cue_line(show_s, first)
-        go, go_waiting = self._go_line(head, states, stopping)
+        go, go_waiting = self._go_line(head, states, stopping, groups[0][1] if groups else None)
         lines = tuple(self._cue_line_of(c, states.get(c, "done"), show_s) for c in window)
         with self._lock:
             prompt = QUESTION if self._asking else None if self._typed is None else JUMP.format(typed=self._typed)
@@ -516,9 +516,11 @@ class Console:
         left = f"in {seconds(at - show_s)} s" if at >= show_s else "due now"
         return f"next cue {left}: {who}{cue.name} {where}"
 
-    def _go_line(self, head: Cue | None, states: dict[Cue, str], stopping: bool) -> tuple[str, bool]:
+    def _go_line(self, head: Cue | None, states: dict[Cue, str], stopping: bool,
+                 waits: str | None) -> tuple[str, bool]:
         """What GO does now: fire the cue under the playhead, or why not; before a show run
-        with --wait-start, the start it waits for; paused, how to go on."""
+        with --wait-start, the start it waits for; paused, how to go on; with the playhead
+        moved off a cue that waits (`waits`, the earliest), how to reach it."""
         if not self.live.started and not stopping:
             return "the show waits for its start: press Space or Enter", True
         if self.live.paused and not stopping:
@@ -527,6 +529,9 @@ class Console:
             return "next GO: none ahead", False
         if states.get(head) == "waiting":
             return f"GO fires {head.name}: press Space or Enter", True
+        if waits is not None:
+            why = "a timed cue" if not head.go else "not reached yet"
+            return f"GO does nothing: playhead on {head.name} ({why}); {waits} waits: move the playhead (Up/Down)", True
         if not head.go:
             return f"playhead on {head.name}: a timed cue, it runs at its time (GO does nothing)", False
         return f"next GO: {head.name} (not reached yet)", False
