@@ -193,3 +193,52 @@ def test_a_go_cue_skipped_as_its_robot_reaches_it_does_not_hold_the_show(tmp_pat
     runner.start()
     runner.join(5)
     assert went == [0.0] and not live.waiting and clock.state == "running"
+
+
+def skip_times(log, robots=("",)) -> list[float]:  # type: ignore[no-untyped-def]
+    topics = [f"/choreo/{robot}/step" if robot else "/choreo/step" for robot in robots]
+    return [m["actual_s"] for topic in topics for m in log.topic(topic) if m["event"] == "skip"]
+
+
+def test_a_skip_wakes_the_robot_asleep_towards_the_cue_and_passes_it_then(tmp_path):
+    # robot a is asleep towards a-two (at 5 s) when b's first step starts (0.5 s): it passes the
+    # cue then, and a-three follows at once, not 5 s later, nor counted late from a-one
+    body = TRACKS.replace("      at: 1\n      label: a-two", "      at: 5\n      label: a-two")
+    run = VirtualRun(tmp_path, body, at={(0, "start"): ["skip a-two"]}, robot="b")
+    log = run.finish()
+    assert run.result.late_steps == 0, [m["message"] for m in log.logs]
+    assert skip_times(log, "a") == [pytest.approx(0.5, abs=0.01)]
+    three = next(m for m in log.topic("/choreo/a/step") if m.get("label") == "a-three" and m["event"] == "start")
+    assert three["actual_s"] == pytest.approx(0.5, abs=0.01) and three["late_ms"] < 10
+    assert not any("late" in m["message"] for m in log.logs)
+
+
+def test_a_go_cue_skipped_after_the_clock_went_on_times_the_next_step_from_the_skip(tmp_path):
+    # b's GO lets the clock go on; a's GO cue, skipped 3 s later, passes then: a-three is not
+    # 'late' by the time a waited at its GO cue
+    body = """\
+version: 1
+robots: {a: {}, b: {}}
+tracks:
+  a:
+    - play: 1
+    - play: 2
+      at: go
+      label: a-go
+    - play: 3
+      label: a-three
+  b:
+    - play: 1
+    - play: 4
+      at: go
+      label: b-go
+"""
+    run = VirtualRun(tmp_path, body)
+    assert wait_for(lambda: len(run.live.waiting) == 2, 10, 0.001)
+    assert run.say("cue_go", "b-go").ok
+    assert wait_for(lambda: run.live.cue_state(run.live.cues.find("b-go")) != "waiting", 10, 0.001)
+    run.source.advance(3.0)
+    assert run.say("skip", "a-go").ok
+    log = run.finish()
+    assert run.result.late_steps == 0, [m["message"] for m in log.logs]
+    assert not any("late" in m["message"] for m in log.logs)

@@ -667,6 +667,8 @@ class Live:
                             self._data(found))
         if waiting is not None:
             self._clock_changed()
+        else:
+            self._wake()  # a robot asleep towards the cue passes it now, not at its time
         return answer
 
     def _gone_by(self, cue: Cue, state: str) -> str:

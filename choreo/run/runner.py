@@ -111,15 +111,18 @@ class Runner:
         time the next step may start at."""
         mine = step.is_for(self.robot) if self.robot is not None else True
         end = self._run_step(step, cursor, following) if mine else None
+        # a step skipped passes where the robot is when it reaches it (now, or the step
+        # before's end if that is later): the next step is timed from there, never from a cue
+        # the robot was on its way to or waited at
+        passed = max(cursor, self.show_time()) if mine and end is None else None
         if self.cues is not None and self.robot is not None:
-            # a step for others takes, if none of them is left to do it, its planned time; a
-            # step skipped passes where the robot is
-            idle = (None if end is not None else cursor) if mine else cursor + step.expected_s
+            # a step for others takes, if none of them is left to do it, its planned time
+            idle = passed if mine else cursor + step.expected_s
             through = self.cues.through(step.index, self.robot, end, idle)
             if through is None:
                 raise Interrupted(self.stop.reason)
             return through
-        return end if end is not None else cursor
+        return end if end is not None else passed if passed is not None else cursor
 
     def _origin(self) -> float:
         """Where the show clock starts: 0 for a whole show, so that a cue on the first step
@@ -213,7 +216,12 @@ class Runner:
         if step.go:
             cursor = self._await_go(step, cursor)
         due = max(step.at, cursor) - self._lead(step) if step.at is not None else cursor
-        if not self._sleep_until(due):
+        # a skip given while the robot sleeps towards the cue ends the sleep (the Live wakes
+        # the dozers): the robot passes the cue then, not at its time
+        if not sleep_until_show(self.clock, self.show, due, lambda: self.stop() or self._skipping(step),
+                                on_idle=self.on_idle):
+            if self._skipping(step) and not self.stop():
+                return None
             raise Interrupted(self.stop.reason)
         if self.live is not None:  # not paused: one attribute read, and one set look-up for a cue
             if not self.live.await_running(self.stop, self.robot or SOLO):
