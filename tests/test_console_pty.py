@@ -108,7 +108,7 @@ def test_s_skips_the_cue_waiting_and_one_ahead(tmp_path, pane):  # noqa: F811 - 
     run.keys("s")  # the cue waiting: released as skipped, the robot goes on to the next
     run.wait_for("GO fires cue 2 'two'")
     run.keys("Down")
-    run.wait_for("playhead on cue 3 'three' (not reached yet); cue 2 'two' waits")
+    run.wait_for("playhead on cue 3 'three', not reached yet; cue 2 'two' waits: Up/Down to it")
     run.keys("s")  # the cue ahead: the robot will pass it
     run.wait_for("skipped: cue 3 'three'")
     run.wait_for("GO fires cue 2 'two'")  # the playhead goes on past it: the cue waiting
@@ -129,7 +129,7 @@ def test_j_and_a_number_or_a_label_then_enter_jumps_the_playhead(tmp_path, pane)
     run.keys("j", "3")
     run.wait_for("cancels): 3_")
     run.keys("Enter")
-    screen = run.wait_for("playhead on cue 3 'three' (not reached yet); cue 1 'one' waits")
+    screen = run.wait_for("playhead on cue 3 'three', not reached yet; cue 1 'one' waits: Up/Down to it")
     assert any(line.startswith("> 3 ") for line in screen.splitlines()), screen
     run.keys("j", "x", "BSpace", "o", "n", "e", "Enter")  # Backspace erases; a label is a cue too
     run.wait_for("playhead: cue 1 'one'")
@@ -221,7 +221,7 @@ def test_skip_and_jump_with_two_robots_on_shared_cues(tmp_path, pane):  # noqa: 
     run: Pane = pane(DUET)
     run.wait_for("left, right wait for GO: cue 1 'start'")  # one line for both
     run.keys("j", "n", "e", "v", "e", "r", "Enter")
-    run.wait_for("playhead on cue 3 'never' (not reached yet)")
+    run.wait_for("playhead on cue 3 'never', not reached yet")
     run.keys("s")  # both robots will pass it
     run.wait_for("skipped: cue 3 'never' will not run")
     run.wait_for("GO fires cue 1 'start'")  # the playhead is back on the cue waiting

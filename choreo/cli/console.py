@@ -531,7 +531,7 @@ class Console:
             return f"GO fires {head.name}: press Space or Enter", True
         if waits is not None:
             why = "a timed cue" if not head.go else "not reached yet"
-            return f"GO does nothing: playhead on {head.name} ({why}); {waits} waits: move the playhead (Up/Down)", True
+            return f"playhead on {head.name}, {why}; {waits} waits: Up/Down to it", True  # GO would do nothing
         if not head.go:
             return f"playhead on {head.name}: a timed cue, it runs at its time (GO does nothing)", False
         return f"next GO: {head.name} (not reached yet)", False
