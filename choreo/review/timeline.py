@@ -30,7 +30,7 @@ from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, L
                                MotionTracker, Record, Result, RxRecord, StepRecord, TxRecord, cue_name, is_late, parse,
                                slipped)
 from choreo.log.reader import Cut, LogReader
-from choreo.textfit import fit
+from choreo.textfit import fit, visible
 
 
 class PlotUnavailable(ChoreoError):
@@ -121,6 +121,8 @@ class Mark:
 
 
 FAULT_KINDS = ("fault", "error", "failure", "abort")
+LISTED_MARKS = 200  # of each kind of mark, listed one a line (text) or labelled (PNG)
+LISTED_CUES = 100
 STAND_KINDS = ("held", "paused")
 COMMAND_KINDS = ("command", "skip")
 
@@ -277,7 +279,8 @@ class _Pass:
                 known = self.steps.get((robot, play.step)) if play.step is not None else None
                 timeline.runs.append(_run_of(play, known, show, clock, robot))
         stood_end = self.last_ns
-        timeline.runs.sort(key=lambda r: (order.get(r.robot, len(order)),
+        timeline.runs.sort(key=lambda r: (order.get(r.robot, len(order)),  # as drawn: --loop's passes in turn
+                                          r.start_at if r.start_at is not None else
                                           r.start_s if r.start_s is not None else r.due_s or 0.0))
         timeline.marks.sort(key=lambda m: m.show_s)
         robots = list(show.plans) if show.plans else [None]
@@ -522,17 +525,20 @@ def _row(step: str, title: str, planned: str, actual: str, bar: str, figures: bo
 
 
 def _listed(timeline: Timeline) -> Iterator[str]:
+    """The cues, then each kind of mark, the first LISTED_MARKS of each one a line (a log of
+    thousands of holds or commands is still a page, not a flood)."""
     if timeline.cues:
-        yield "cues: " + ", ".join(f"{c.name} at {round(c.show_s, 3):g} s" for c in timeline.cues)
-    for title, marks in (("late plays", timeline.late), ("faults", timeline.faults)):
-        yield f"{title}: {len(marks) or 'none'}"
-        for mark in marks:
+        more = len(timeline.cues) - LISTED_CUES
+        yield "cues: " + ", ".join(f"{c.name} at {round(c.show_s, 3):g} s" for c in timeline.cues[:LISTED_CUES]) \
+            + (f", ... and {more} more" if more > 0 else "")
+    for title, marks in (("late plays", timeline.late), ("faults", timeline.faults),
+                         ("holds and pauses", timeline.stands), ("commands", timeline.commands)):
+        if marks or title in ("late plays", "faults"):
+            yield f"{title}: {len(marks) or 'none'}"
+        for mark in marks[:LISTED_MARKS]:
             yield f"  {mark.show_s:9.3f} s  {mark.text}"
-    for title, marks in (("holds and pauses", timeline.stands), ("commands", timeline.commands)):
-        if marks:
-            yield f"{title}: {len(marks)}"
-            for mark in marks:
-                yield f"  {mark.show_s:9.3f} s  {mark.text}"
+        if len(marks) > LISTED_MARKS:
+            yield f"  ... and {len(marks) - LISTED_MARKS} more"
     if timeline.unplayed:
         robots = sorted({run.robot for run in timeline.unplayed if run.robot})
         whose = f" (robot {', '.join(robots)})" if robots else ""
@@ -589,29 +595,35 @@ def render_png(timeline: Timeline, out: BinaryIO) -> None:
     slots = list(dict.fromkeys((r.robot, r.motion) for r in everything))  # a row a robot's motion slot
     if not any(r.robot for r in everything):
         slots.sort(key=lambda slot: slot[1])
-    row = {slot: i for i, slot in enumerate(slots)}
     names = {(r.robot, r.motion): (f"{r.robot}: " if r.robot else "") + r.title() for r in everything}
     height = max(2.5, 0.55 * (len(slots) + 1) + 1.8)
-    fig, ax = plt.subplots(figsize=(11, height), dpi=100)
-    try:
-        for run in everything:
-            _draw_run(ax, run, row[(run.robot, run.motion)])
-        extra = _draw_marks(ax, timeline, len(slots))
-        ax.set_yticks(list(range(len(slots) + len(extra))))
-        ax.set_yticklabels([names[m] for m in slots] + extra)
-        ax.set_ylim(-0.8, len(slots) - 1 + len(extra) + (0.8 if extra else 0.6))
-        ax.invert_yaxis()
-        ax.set_xlim(0, timeline.span_s * 1.02)
-        ax.set_xlabel("show clock (s), with the holds and pauses in" if timeline.stands else "show clock (s)")
-        ax.grid(axis="x", color="#dddddd", linewidth=0.6)
-        ax.set_axisbelow(True)
-        ax.set_title(_png_title(timeline))
-        ax.legend(handles=_legend(), loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=5,
-                  frameon=False, fontsize="small")
-        fig.tight_layout()
-        fig.savefig(out, format="png")
-    finally:
-        plt.close(fig)
+    with plt.rc_context({"text.parse_math": False, "text.usetex": False}):  # names from the log: `$` is a dollar
+        fig, ax = plt.subplots(figsize=(11, height), dpi=100)
+        try:
+            _draw_png(ax, timeline, everything, slots, names)
+            fig.tight_layout()
+            fig.savefig(out, format="png")
+        finally:
+            plt.close(fig)
+
+
+def _draw_png(ax: Any, timeline: Timeline, everything: list[MotionRun], slots: list, names: dict) -> None:
+    """The figure's content (`render_png`): runs, marks, axes, title and legend."""
+    row = {slot: i for i, slot in enumerate(slots)}
+    for run in everything:
+        _draw_run(ax, run, row[(run.robot, run.motion)])
+    extra = _draw_marks(ax, timeline, len(slots))
+    ax.set_yticks(list(range(len(slots) + len(extra))))
+    ax.set_yticklabels([visible(names[m]) for m in slots] + extra)
+    ax.set_ylim(-0.8, len(slots) - 1 + len(extra) + (0.8 if extra else 0.6))
+    ax.invert_yaxis()
+    ax.set_xlim(0, timeline.span_s * 1.02)
+    ax.set_xlabel("show clock (s), with the holds and pauses in" if timeline.stands else "show clock (s)")
+    ax.grid(axis="x", color="#dddddd", linewidth=0.6)
+    ax.set_axisbelow(True)
+    ax.set_title(visible(_png_title(timeline)))
+    ax.legend(handles=_legend(), loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=5,
+              frameon=False, fontsize="small")
 
 
 def _draw_marks(ax: Any, timeline: Timeline, first_y: int) -> list[str]:  # ax: a matplotlib Axes
@@ -629,12 +641,16 @@ def _draw_marks(ax: Any, timeline: Timeline, first_y: int) -> list[str]:  # ax: 
             if at:
                 ax.plot(at, [y] * len(at), marker=marker, color=colour, markersize=9, markeredgewidth=2,
                         linestyle="")
-    for cue in timeline.cues:
-        ax.axvline(cue.drawn_at, color="#555555", linestyle="--", linewidth=0.8)
-        ax.annotate(cue.name, (cue.drawn_at, 1.0), xycoords=("data", "axes fraction"), rotation=90,
+    if timeline.cues:  # the lines in one artist, the first few labelled: a log of thousands draws at once
+        ax.vlines([cue.drawn_at for cue in timeline.cues], 0, 1, transform=ax.get_xaxis_transform(),
+                  colors="#555555", linestyles="--", linewidth=0.8)
+    for cue in timeline.cues[:LISTED_CUES]:
+        ax.annotate(visible(cue.name), (cue.drawn_at, 1.0), xycoords=("data", "axes fraction"), rotation=90,
                     va="top", ha="right", fontsize="x-small", color="#333333")
-    for stand in timeline.stands:
-        ax.axvspan(stand.drawn_at, stand.drawn_at + stand.length_s, color=STOOD, linewidth=0, zorder=0)
+    if timeline.stands:
+        ax.broken_barh([(stand.drawn_at, stand.length_s) for stand in timeline.stands], (0, 1),
+                       transform=ax.get_xaxis_transform(), facecolors=STOOD, linewidth=0, zorder=0)
+    for stand in timeline.stands[:LISTED_MARKS]:
         ax.annotate(f"{stand.kind} {stand.length_s:.1f} s at {stand.show_s:.3f} s", (stand.drawn_at, 0.0),
                     xycoords=("data", "axes fraction"), va="bottom", ha="left", fontsize="x-small",
                     color="#555555")
