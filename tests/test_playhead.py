@@ -366,3 +366,32 @@ def test_with_only_timed_cues_ahead_the_playhead_moves_onto_the_first_and_a_sect
     assert say(live, "playhead_next").data == {"cue": "2", "label": None, "playhead": "2"}
     assert say(live, "playhead", "3").message.startswith("cue 3 is not in this run (--from, --loop)")
     assert say(live, "go").message == "cue 2 is a timed cue (at 2.000 s): nothing to GO; move the playhead"
+
+
+def test_the_auto_playhead_looks_from_where_it_last_found_a_cue_not_from_cue_1(monkeypatch):
+    """A 10,000-cue show near its end: the playhead (read by the console's redraw, status and a
+    GO's answer, under the lock a released runner needs) looks at a few cues, not every cue
+    before it; a skip undone and a new pass find earlier cues again."""
+    from choreo.show.cues import Cue
+    from choreo.show.model import PlannedStep, StepKind
+    n = 10_000
+    cues = CueList(tuple(Cue(str(i + 1), f"c{i}", ("robot",), float(i), True, steps=(("robot", i),))
+                         for i in range(n)))
+    live = Live(StopRequest(), cues=cues, lockout_s=0.0)
+    steps = [PlannedStep(index=i, path="", kind=StepKind.PLAY, line=1, go=True, cue=str(i + 1)) for i in range(n)]
+    for step in steps[:n - 5]:
+        live.on_step(StepEvent(step, "end", 0.0, 0.0, 0))
+    assert live.playhead is cues.cues[n - 5]  # the first look walks the list once
+    looked = []
+    state_of = live._state_of
+    monkeypatch.setattr(live, "_state_of", lambda cue: looked.append(cue) or state_of(cue))
+    for _ in range(3):
+        assert live.playhead is cues.cues[n - 5] and live.status()["playhead"]["number"] == str(n - 4)
+    live.on_step(StepEvent(steps[n - 5], "end", 0.0, 0.0, 0))
+    assert live.playhead is cues.cues[n - 4]
+    assert len(looked) < 20, len(looked)
+    monkeypatch.undo()
+    assert say(live, "skip").ok and live.playhead is cues.cues[n - 3]
+    assert say(live, "skip", str(n - 3)).message.startswith("skip undone") and live.playhead is cues.cues[n - 4]
+    live.new_pass()
+    assert live.playhead is cues.cues[0]

@@ -199,6 +199,7 @@ class Live:
         self._skips: dict[str, Cue] = {}  # cues to skip, by number
         self._skip_steps: frozenset[tuple[str, int]] = frozenset()  # their steps; swapped whole, read without the lock
         self._moved: Cue | None = None  # the playhead where the operator put it (None: auto)
+        self._ahead_from = 0  # no GO cue before this position of the list is ahead (`_next_ahead`)
         self._out: frozenset[str] = frozenset()  # cues outside the run's section (--from, --loop)
         self._paused_robots: set[str] = set()  # runners the pause keeps from their next step
         self._reports = ReportGate(limits, now)  # what of the commands the listeners hear
@@ -236,6 +237,7 @@ class Live:
 
         with self._changed:
             self._out = frozenset(cue.number for cue in self.cues if all(outside(*key) for key in cue.steps))
+            self._ahead_from = 0
 
     @property
     def panicked(self) -> bool:
@@ -346,6 +348,7 @@ class Live:
             passed = {number for number, cue in self._skips.items() if self._passed(cue)}
             self._marks.clear()
             self._moved = None
+            self._ahead_from = 0
             for number in passed:
                 del self._skips[number]
             self._skips_changed()
@@ -448,7 +451,22 @@ class Live:
         waiting = self._in_order()
         if waiting:
             return self._cue_of(waiting[0])
-        return next((cue for cue in self.cues if cue.go and self._state_of(cue) == AHEAD), None)
+        return self._next_ahead()
+
+    def _next_ahead(self) -> Cue | None:
+        """The first GO cue ahead, looked for from where the last look found one: a cue once
+        past that (waiting, running, done, skipped) is ahead again only with a new pass, a new
+        section or a skip undone, which look from the start again. So the console's redraw,
+        `/choreo/status` and a GO's answer cost a few cues, not a 10,000-cue walk under the lock
+        a released runner needs. The lock is held."""
+        cues = self.cues.cues
+        for at in range(self._ahead_from, len(cues)):
+            cue = cues[at]
+            if cue.go and self._state_of(cue) == AHEAD:
+                self._ahead_from = at
+                return cue
+        self._ahead_from = len(cues)
+        return None
 
     def _skips_changed(self) -> None:
         """The lock is held."""
@@ -654,6 +672,7 @@ class Live:
             if state == SKIPPED:
                 del self._skips[found.number]
                 self._skips_changed()
+                self._ahead_from = 0  # the cue is ahead again
                 return Answer("ok", f"skip undone: {found.name} will run", self._data(found))
             was_playhead = self._playhead() == found
             self._skips[found.number] = found
