@@ -365,3 +365,12 @@ def test_with_the_playhead_moved_off_a_cue_that_waits_the_go_line_says_how_to_re
     for width in (60, 72, 80):
         line = next(line for line in lines_of(console, width) if line.startswith("playhead on cue 2 '"))
         assert line.endswith("cue 1 'applause' waits: Up/Down to it"), line
+
+
+@pytest.mark.parametrize("width", (72, 80))
+def test_an_unknown_address_stays_whole_in_its_message(width):
+    """A message with nothing after a `: ` keeps more of its start; an address is cut last."""
+    message = ("unknown command /choreo/skip/2 (choreo takes /choreo/ followed by go, panic, start, stop, pause, "
+               "resume, skip, playhead/next|previous|CUE, cue/CUE/go, status, thump, updates)")
+    line = fit_message(f"{'0.0':>7} s  {message}", width, "osc udp 127.0.0.1:54446")
+    assert line.startswith("    0.0 s  unknown command /choreo/skip/2 (cho") and line.endswith("thump, updates)")

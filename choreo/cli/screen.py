@@ -152,7 +152,9 @@ def fit_message(text: str, width: int, aside: str = "") -> str:
     cut, the longest first: before the tail to MIN_QUOTED columns, in the tail to TAIL_QUOTED
     (a suggested address stays whole), before the tail to 2; then the end of what comes
     before the tail, down to MIN_HEAD columns; then the tail's outside text to MIN_QUOTED; and
-    last the middle of it all: both the start (what happened) and the end (what to do) stay."""
+    last the middle of it all: both the start (what happened) and the end (what to do) stay.
+    An address is cut to no fewer than MIN_ADDRESS columns (it names the command sent), and a
+    message with no tail keeps twice as much of its start as of its end."""
     if len(text) > LONGEST_FITTED:  # a (hostile) message of any length costs no more than this
         text = text[:LONGEST_FITTED // 4] + ELLIPSIS + text[-(LONGEST_FITTED * 3 // 4):]
     text, aside = visible(text), visible(aside[:LONGEST_FITTED])
@@ -175,13 +177,14 @@ def fit_message(text: str, width: int, aside: str = "") -> str:
     head, tail = text[:tail_at], text[tail_at:]
     if tail and display_width(tail) <= room:
         return fit(head, width - display_width(tail)) + tail
-    return _middle_cut(text, width)
+    return _middle_cut(text, width, 2 if not tail else 1)  # no tail: more of what happened (`unknown command /x`)
 
 
 QUOTED = re.compile(r"'([^']{2,})'")
 ADDRESS = re.compile(r"(?<![\w'/])(/[^\s'()]+[^\s'():;,.?!])")  # an OSC address, a path: outside text
 TAIL = re.compile(r"[:;] ")  # one of them, outside quoted text, begins what a message says to do
 LONGEST_FITTED = 1024  # characters of a message fitted: its start and its end beyond that
+MIN_ADDRESS = 16  # an OSC address (or a path) is cut to no fewer columns: it names the command sent
 MIN_HEAD = 16  # columns of a message's start kept before its tail (what happened)
 TAIL_QUOTED = 16  # outside text in a message's tail is cut to no fewer columns than this first (a long label)
 
@@ -225,9 +228,12 @@ def _cut_outside(text: str, width: int, tail_at: int, floor: int, in_tail: bool)
                    key=lambda span: -span[0])
     cuts: list[tuple[int, int, str]] = []
     for size, start, end in spans:
-        if excess <= 0 or size <= floor:
+        least = max(floor, MIN_ADDRESS) if text[start] == "/" else floor  # an address says which command
+        if excess <= 0:
             break
-        cut = fit(text[start:end], max(floor, size - excess))
+        if size <= least:
+            continue
+        cut = fit(text[start:end], max(least, size - excess))
         excess -= size - display_width(cut)
         cuts.append((start, end, cut))
     pieces, at = [], 0
@@ -239,9 +245,10 @@ def _cut_outside(text: str, width: int, tail_at: int, floor: int, in_tail: bool)
     return "".join(pieces) + text[at:], tail_at
 
 
-def _middle_cut(text: str, width: int) -> str:
-    """Its start and its end, with `…` between, in `width` columns."""
-    head = fit(text, (width + 1) // 2)
+def _middle_cut(text: str, width: int, start_share: int = 1) -> str:
+    """Its start and its end, with `…` between, in `width` columns: the start `start_share`
+    times as wide as the end."""
+    head = fit(text, (width * start_share + start_share) // (start_share + 1))
     tail_room = width - display_width(head)
     tail = ""
     for char in reversed(text):
