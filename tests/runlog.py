@@ -207,7 +207,8 @@ class LiveRun:
     controls that also listen to the run (an OscServer). Real time, the in-process simulator."""
 
     def __init__(self, tmp_path: Path, body: str, *, wait_start: bool = False, lockout_s: float | None = None,
-                 attach=None, cues: bool = False, **request) -> None:  # type: ignore[no-untyped-def]
+                 attach=None, cues: bool = False, opening: bool = False,
+                 **request) -> None:  # type: ignore[no-untyped-def]
         import threading
 
         from choreo.live.controls import Live
@@ -223,7 +224,8 @@ class LiveRun:
             from choreo.show.cues import cue_list
 
             timing["cues"] = cue_list(self.session.settings.plans)
-        self.live = Live(StopRequest(), wait_start=wait_start, **timing)
+        # opening: commands refused until the log hears them, as `choreo run` has it
+        self.live = Live(StopRequest(), wait_start=wait_start, opening=opening, **timing)
         self.listeners = attach(self.live) if attach is not None else []
         self.result = None
         self.error: BaseException | None = None

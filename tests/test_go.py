@@ -360,3 +360,30 @@ def test_the_reviews_place_frames_on_the_held_clock(tmp_path, capsys):
     with LogReader(path) as reader:
         runs = [r for r in build(reader).runs if r.motion == 3]
     assert len(runs) == 1 and runs[0].start_s == pytest.approx(third["start_s"], abs=1e-3)
+
+
+def test_while_the_show_opens_only_panic_and_stop_are_taken_and_the_log_hears_them_once_it_records():
+    """`choreo run` serves OSC while the ports and the log open: a command carried out then
+    would be missing from the log. Until the log records (`recording`), anything but a panic or
+    a stop is refused, and those are told to the log when it begins."""
+    from choreo.events import Command, StopRequest
+    from choreo.live.controls import OPENING, Live
+
+    live = Live(StopRequest(), wait_start=True, opening=True)
+    assert live.state == "opening" and live.status()["state"] == "opening"
+    for name in ("start", "go", "skip", "pause", "playhead_next"):
+        answer = live.command(Command(name, "osc 127.0.0.1"))
+        assert not answer.ok and answer.message == OPENING, name
+    assert not live.started
+    heard: list = []
+
+    class Log:
+        def on_command(self, event) -> None:  # type: ignore[no-untyped-def]
+            heard.append((event.command.name, event.answer.status))
+
+    assert live.command(Command("stop", "osc 127.0.0.1")).ok and live.stop()
+    live.recording(Log())
+    assert heard == [("stop", "ok")] and live.state == "stopping"
+    live = Live(StopRequest(), wait_start=True, opening=True)
+    live.recording(None)
+    assert live.state == "waiting_start" and live.command(Command("start", "key")).ok

@@ -99,9 +99,9 @@ def source_of(osc, transport: str) -> str:  # type: ignore[no-untyped-def]
 class ShowRun(LiveRun):
     """A show playing in a thread with a Live and an OscServer, wired as `choreo run` wires them."""
 
-    def __init__(self, tmp_path: Path, body: str = GO_SHOW, *, wait_start: bool = False,
+    def __init__(self, tmp_path: Path, body: str = GO_SHOW, *, wait_start: bool = False, opening: bool = False,
                  **options) -> None:  # type: ignore[no-untyped-def]
-        super().__init__(tmp_path, body, wait_start=wait_start, lockout_s=0.0, cues=True,
+        super().__init__(tmp_path, body, wait_start=wait_start, lockout_s=0.0, cues=True, opening=opening,
                          attach=lambda live: [self._serve(live, options)])
 
     def _serve(self, live: Live, options: dict) -> OscServer:

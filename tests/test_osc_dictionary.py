@@ -511,10 +511,10 @@ def until_state(peer: Peer, state: str) -> dict:
 
 @pytest.mark.parametrize("transport", ["udp", "tcp"])
 def test_status_says_each_state_of_a_show(transport, real_shows):
-    run = real_shows(LONG_SHOW, wait_start=True)
+    run = real_shows(LONG_SHOW, wait_start=True, opening=True)  # as `choreo run`: OSC serves as the log opens
     peer = Peer(transport, run.server.port)
     try:
-        waiting = status_of(peer)
+        waiting = until_state(peer, "waiting_start")  # "opening" until the log hears the commands
         assert waiting["state"] == "waiting_start" and waiting["show_s"] is None and waiting["clock"] == "machine"
         assert waiting["playhead"] == {"number": "1", "label": "big bow/2", "go": True,
                                        "planned_s": waiting["playhead"]["planned_s"], "robots": ["robot"]}
@@ -539,8 +539,8 @@ def test_status_says_each_state_of_a_show(transport, real_shows):
         peer.close()
     assert run.result.outcome == "aborted"
     names = [m["command"] for m in run.log().topic("/choreo/command")]
-    assert names == ["pause", "resume", "cue_go", "stop"]  # the questions are not in the log (nor, here, the
-    # start: the log begins with the show)
+    assert names == ["start", "pause", "resume", "cue_go", "stop"]  # every command carried out; the questions
+    # are not in the log
 
 
 @pytest.mark.parametrize("transport", ["udp", "tcp"])

@@ -221,7 +221,7 @@ def _live(args: argparse.Namespace, stop: StopRequest, console: bool,
     settings = session.settings
     status = ShowStatus(settings.plans, settings.sections.starts)
     return Live(stop, cues=cue_list(settings.plans), status=status, clock="music" if settings.song else "machine",
-                wait_start=args.wait_start), status
+                wait_start=args.wait_start, opening=True), status
 
 
 @contextmanager

@@ -47,6 +47,7 @@ RESUME_FIRST = "paused: resume first (p or /choreo/resume)"
 # a cue's state (`Live.cue_state`)
 AHEAD, WAITING, ACTIVE, DONE, SKIPPED = "ahead", "waiting", "running", "done", "skipped"
 NOT_STARTED = "nothing waits for GO now (the show waits for its start: /choreo/start)"
+OPENING = "refused: the show is still opening (its log is not recording yet): send it again in a moment"
 
 
 class _Stand(NamedTuple):
@@ -172,7 +173,7 @@ class Live:
     def __init__(self, stop: StopRequest, *, cues: CueList = NO_CUES, status: ShowStatus | None = None,
                  clock: str = "machine", wait_start: bool = False, lockout_s: float = LOCKOUT_S,
                  now: Callable[[], float] = time.monotonic, wall_ns: Callable[[], int] = time.time_ns,
-                 limits: Limits = LIMITS) -> None:
+                 limits: Limits = LIMITS, opening: bool = False) -> None:
         self.stop = stop
         self.cues = cues
         self.status_of_robots = status  # each robot's row for `status()` (None: none given)
@@ -205,6 +206,11 @@ class Live:
         self._reports = ReportGate(limits, now)  # what of the commands the listeners hear
         self._summing = threading.RLock()  # a summary is told whole before `close` returns
         self._over = False  # the run is over (`close`): no command is taken any more
+        # `opening`: until the log hears the commands (`recording`), only a panic or a stop is
+        # carried out, and told to the log once it does: every command carried out is logged
+        self._opening = opening
+        self._opened = threading.Lock()
+        self._unheard: list[tuple[Command, Answer]] = []
         self._handlers = self._handlers_by_name()
 
     def subscribe(self, listener: CommandListener) -> Subscription:
@@ -255,11 +261,14 @@ class Live:
 
     @property
     def state(self) -> str:
-        """waiting_start | running | held (a GO cue waits) | paused | stopping | over."""
+        """opening (the log not recording yet) | waiting_start | running | held (a GO cue
+        waits) | paused | stopping | over."""
         if self._over:
             return "over"
         if self.stop():
             return "stopping"
+        if self._opening:
+            return "opening"
         if not self._started:
             return "waiting_start"
         if self._paused:
@@ -499,6 +508,10 @@ class Live:
         stopping (or over) every command is refused: a GO then releases nothing, whatever still
         waits, and a stop or panic cannot change the stop under way."""
         handler = self._handlers.get(command.name)
+        if self._opening:
+            with self._opened:
+                if self._opening:
+                    return self._while_opening(command, handler)
         refusal = self._refusal()
         if refusal is not None:
             answer = refusal
@@ -506,6 +519,27 @@ class Live:
             answer = handler(command) if handler else Answer("error", f"unknown command {command.name!r}")
         self.report(command, answer)
         return answer
+
+    def _while_opening(self, command: Command, handler: Callable[[Command], Answer] | None) -> Answer:
+        """Before the log hears the commands: a panic or a stop is carried out (and kept for
+        the log), anything else refused (`_opened` is held)."""
+        if handler is not None and command.name in ("panic", "stop") and self._refusal() is None:
+            answer = handler(command)
+            self._unheard.append((command, answer))
+        else:
+            answer = self._refusal() or Answer("error", OPENING)
+        self.report(command, answer)
+        return answer
+
+    def recording(self, log: CommandListener | None) -> None:
+        """The log hears the commands now (subscribed; None: the run keeps none): commands are
+        taken from here on, and `log` is told the panic or stop carried out before."""
+        with self._opened:
+            self._opening = False
+            unheard, self._unheard = self._unheard, []
+        for command, answer in unheard:
+            if log is not None:
+                log.on_command(CommandEvent(command, answer, self._wall_ns(), None))
 
     def _handlers_by_name(self) -> dict[str, Callable[[Command], Answer]]:
         return {"go": self._go, "cue_go": self._cue_go, "skip": self._skip, "playhead": self._put_playhead,

@@ -105,6 +105,7 @@ class Session:
                     wiring.enter_context(live.subscribe(self.recorder))
                     wiring.callback(live.flush_reports, force=True)  # held-back commands summed up while it hears
             if live is not None:
+                live.recording(self.recorder)  # commands are taken from now on: the log hears each
                 live.use_section(self.settings.sections.starts, self.settings.sections.ends)
             if live is not None and not live.await_start():
                 self.result = RunResult("aborted", 0, 0, 0.0)
