@@ -244,25 +244,33 @@ class _Pass:
             return
         assert self.notes is not None  # made with the pass
         see_for_stands(self.notes, record, log_time)
-        marks = self.timeline.marks
-        now, at = self.clock.seconds(log_time) or 0.0, self.clock.elapsed(log_time)
-        if isinstance(record, StepRecord):
-            if record.event == "start":
-                self.clock.see_start(log_time, record.actual_s)
-            _see_step(self.timeline, self.steps, record, now, at)
-        elif isinstance(record, TxRecord):
+        if isinstance(record, TxRecord):  # most of a log: a frame's place is worked out only for a mark
             _tracker(self.trackers, self.layouts, record.robot).tx(record, log_time)
-            if record.label == ABORT_LABEL and not any(m.kind == "abort" for m in marks):
+            if record.label == ABORT_LABEL and not any(m.kind == "abort" for m in self.timeline.marks):
                 what = f"abort motion {record.motion} played" if record.motion is not None else "stop frames sent"
-                marks.append(Mark(now, "abort", f"show stopped: {what}", at))
+                self.timeline.marks.append(Mark(*self._at(log_time, "abort", f"show stopped: {what}")))
         elif isinstance(record, RxRecord):
             _tracker(self.trackers, self.layouts, record.robot).rx(record, log_time)
             if not record.answered:
-                marks.append(_fault(record, now, at))
+                self.timeline.marks.append(_fault(record, *self._when(log_time)))
+        elif isinstance(record, StepRecord):
+            if record.event == "start":
+                self.clock.see_start(log_time, record.actual_s)
+            _see_step(self.timeline, self.steps, record, *self._when(log_time))
         elif isinstance(record, LogRecord) and record.level >= ERROR:
-            marks.append(Mark(now, "error", str(record.message), at))
+            self.timeline.marks.append(Mark(*self._at(log_time, "error", str(record.message))))
         elif isinstance(record, CommandRecord) and record.count is None:
-            marks.append(Mark(now, "command", command_text(record), at))
+            self.timeline.marks.append(Mark(*self._at(log_time, "command", command_text(record))))
+
+    def _when(self, log_time: int) -> tuple[float, float | None]:
+        """Show time and where it is drawn (`elapsed`), the show time worked out once."""
+        now = self.clock.seconds(log_time) or 0.0
+        return now, now + self.clock.stood_s(log_time) + self.clock.rewound_s(log_time)
+
+    def _at(self, log_time: int, kind: str, text: str) -> tuple[float, str, str, float | None]:
+        """A mark's fields (show time, kind, text, where drawn) at `log_time`."""
+        now, at = self._when(log_time)
+        return now, kind, text, at
 
     def finish(self, reader: LogReader, show: AttachedShow) -> None:
         """The runs in robot then time order, the marks in time order, what was never played."""
