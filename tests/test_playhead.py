@@ -133,9 +133,6 @@ def test_go_fires_the_playheads_cue_or_says_why_not(tmp_path):
                                              "0.000 s)"
     bow = Waiter(live, settings, 1)
     assert live.cue_state(cues.cues[0]) == "waiting" and live.state == "held"
-    say(live, "playhead", "2")
-    timed = say(live, "go")
-    assert not timed.ok and timed.message == "cue 2 is a timed cue (at 1.000 s): nothing to GO; move the playhead"
     say(live, "playhead", "encore")
     early = say(live, "go")
     assert not early.ok and early.message.endswith("waiting: cue 1 'bow' (move the playhead to it)")
@@ -146,13 +143,29 @@ def test_go_fires_the_playheads_cue_or_says_why_not(tmp_path):
     assert answer.data == {"cue": "1", "label": "bow", "playhead": "3"}  # auto again: the next GO cue ahead
 
 
+def test_a_go_with_the_playhead_on_a_timed_cue_fires_the_earliest_cue_waiting(tmp_path):
+    """Up/Down may stand the playhead on a timed cue; GO is never dead while a cue waits."""
+    live, cues, settings = live_of(tmp_path)
+    ran(live, settings, 0, "start", "end")
+    bow = Waiter(live, settings, 1)
+    moved = say(live, "playhead_next")
+    assert moved.message == "playhead: cue 2" and live.playhead == cues.cues[1]  # a timed cue
+    answer = say(live, "go")
+    assert answer.ok and bow.gone()
+    assert answer.message == ("GO: cue 1 'bow' (the playhead is on cue 2, a timed cue: GO fired the earliest "
+                              "cue waiting)")
+    assert answer.data == {"cue": "1", "label": "bow", "playhead": "2"}
+    nothing = say(live, "go")  # nothing waits: why, as before
+    assert not nothing.ok and nothing.message.startswith("cue 2 is a timed cue (at 1.000 s): nothing to GO")
+
+
 def test_a_cues_go_by_number_or_label(tmp_path):
     live, cues, settings = live_of(tmp_path)
     encore = Waiter(live, settings, 3)
     wrong = say(live, "cue_go", "1")
     assert not wrong.ok
     assert wrong.message == ("nothing waits for GO now: cue 1 'bow' is not reached yet (planned at 0.000 s); "
-                             "waiting: cue 3 'encore' (move the playhead to it)")
+                             "waiting: cue 3 'encore'")  # a cue's own GO: no word of the playhead
     assert say(live, "cue_go", "3").ok and encore.gone()  # by number
     finale = Waiter(live, settings, 4)
     assert say(live, "cue_go", "a/b finale").ok and finale.gone()  # by label, a slash in it
@@ -395,3 +408,15 @@ def test_the_auto_playhead_looks_from_where_it_last_found_a_cue_not_from_cue_1(m
     assert say(live, "skip", str(n - 3)).message.startswith("skip undone") and live.playhead is cues.cues[n - 4]
     live.new_pass()
     assert live.playhead is cues.cues[0]
+
+
+def test_the_answers_say_how_to_skip_a_timed_cue_and_a_cues_go_names_no_playhead(tmp_path):
+    body = "version: 1\nsteps:\n  - play: 1\n  - play: 2\n    at: 5\n    label: timed\n  - play: 3\n    at: 8\n"
+    live, cues, settings = live_of(tmp_path, body)
+    skip = say(live, "skip")
+    assert not skip.ok and skip.message == ("nothing to skip under the playhead (no GO cue ahead): to skip a "
+                                            "timed cue, move the playhead onto it (Up/Down, j, /choreo/playhead/CUE), "
+                                            "then skip")
+    named = say(live, "cue_go", "timed")
+    assert not named.ok and named.message == "cue 1 'timed' is a timed cue (at 5.000 s): nothing to GO"
+    assert say(live, "playhead", "timed").ok and say(live, "skip").message == "skipped: cue 1 'timed' will not run"

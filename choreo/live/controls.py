@@ -252,7 +252,8 @@ class Live:
 
     @property
     def started(self) -> bool:
-        """False until the show may start (with --wait-start, until start or GO)."""
+        """False until the show may start (with --wait-start, until /choreo/start or the
+        console's Space or Enter; /choreo/go does not start it)."""
         return self._started
 
     @property
@@ -599,23 +600,29 @@ class Live:
                               f"(a double press? GOs {self.lockout_s:g} s apart at least)")
             if self._paused:
                 return Answer("error", RESUME_FIRST)
-            waiting = self._under_playhead()
+            waiting, timed = self._under_playhead()
             if waiting is None:
                 return Answer("error", self._why_not(self._playhead()))
             self._last_go = now
             self._release(waiting)
         # the answer, and the sample of the clock going on, once the runners are free to go
         self._clock_changed()
-        return self._answer("GO", waiting)
+        return self._answer("GO", waiting, f" (the playhead is on {timed.name}, a timed cue: GO fired the earliest "
+                                           "cue waiting)" if timed is not None else "")
 
-    def _under_playhead(self) -> GoCue | None:
+    def _under_playhead(self) -> tuple[GoCue | None, Cue | None]:
         """The GO cue waiting under the playhead, if one is: the runner's path to a GO's first
-        frame, so the auto playhead's (the earliest waiting) is found without the cue list."""
+        frame, so the auto playhead's (the earliest waiting) is found without the cue list. A
+        playhead moved onto a timed cue (which takes no GO) never leaves GO dead while a cue
+        waits: GO fires the earliest waiting, and the timed cue is returned to say so."""
         moved = self._moved
         if moved is not None and self._open(moved):
-            return self._waiting_for(moved)
+            if moved.go:
+                return self._waiting_for(moved), None
+            waiting = min(self._waiting.values(), key=_order, default=None)
+            return waiting, moved if waiting is not None else None
         self._moved = None
-        return min(self._waiting.values(), key=_order, default=None)
+        return min(self._waiting.values(), key=_order, default=None), None
 
     def _why_not(self, cue: Cue | None) -> str:
         """Why a GO fires nothing: the playhead's cue is not reached yet, or timed (the lock is held)."""
@@ -625,17 +632,19 @@ class Live:
             return "nothing waits for GO now"
         return self._not_waiting(cue)
 
-    def _not_waiting(self, cue: Cue) -> str:
-        """Why `cue` takes no GO now, in the operator's words (the lock is held)."""
+    def _not_waiting(self, cue: Cue, named: bool = False) -> str:
+        """Why `cue` takes no GO now, in the operator's words (the lock is held); `named`: the
+        cue's own GO (by number or label), where the playhead has no part."""
         state = self._state_of(cue)
         if not cue.go:
-            return f"{cue.name} is a timed cue (at {cue.planned_s:.3f} s): nothing to GO; move the playhead"
+            return f"{cue.name} is a timed cue (at {cue.planned_s:.3f} s): nothing to GO" + \
+                ("" if named else "; move the playhead")
         if state == SKIPPED:
             return f"{cue.name} is skipped (skip it again to undo)"
         if state in (ACTIVE, DONE):
             return f"{cue.name} has had its GO already"
         others = ", ".join(self._cue_of(w).name for w in self._in_order())
-        waits = f"; waiting: {others} (move the playhead to it)" if others else ""
+        waits = f"; waiting: {others}" + ("" if named else " (move the playhead to it)") if others else ""
         return f"nothing waits for GO now: {cue.name} is not reached yet (planned at {cue.planned_s:.3f} s){waits}"
 
     def _cue_go(self, command: Command) -> Answer:
@@ -647,7 +656,7 @@ class Live:
                 return found
             waiting = self._waiting_for(found)
             if waiting is None:
-                why = self._not_waiting(found) if self._started else NOT_STARTED
+                why = self._not_waiting(found, named=True) if self._started else NOT_STARTED
                 return Answer("error", why, self._data(found))
             self._last_go = self._now()
             self._release(waiting)
@@ -670,10 +679,10 @@ class Live:
                 return Answer("error", f"cue {_ref(ref)} is not waiting for GO (waiting: {at})")
             return Answer("error", fit(str(exc), 200))
 
-    def _answer(self, verb: str, waiting: GoCue) -> Answer:
+    def _answer(self, verb: str, waiting: GoCue, note: str = "") -> Answer:
         with self._changed:
             cue = self._cue_of(waiting)
-            return Answer("ok", f"{verb}: {cue.name}", self._data(cue))
+            return Answer("ok", f"{verb}: {cue.name}{note}", self._data(cue))
 
     def _release(self, waiting: GoCue, go: bool = True) -> None:
         """Let the robots waiting at `waiting` go on (`go`: given its GO, else skipped); the
@@ -697,7 +706,7 @@ class Live:
         with self._changed:
             found = self._find(command.label) if command.label is not None else self._playhead()
             if found is None:
-                return Answer("error", "nothing to skip: no cue ahead")
+                return Answer("error", self._nothing_to_skip())
             if isinstance(found, Answer):
                 return found
             state = self._state_of(found)
@@ -723,6 +732,14 @@ class Live:
         else:
             self._wake()  # a robot asleep towards the cue passes it now, not at its time
         return answer
+
+    def _nothing_to_skip(self) -> str:
+        """A skip with the auto playhead on no cue: no GO cue is ahead, but a timed cue may be,
+        and the operator skips one by standing the playhead on it (the lock is held)."""
+        if any(not cue.go and self._open(cue) for cue in self.cues):
+            return "nothing to skip under the playhead (no GO cue ahead): to skip a timed cue, move the playhead " \
+                   "onto it (Up/Down, j, /choreo/playhead/CUE), then skip"
+        return "nothing to skip: no cue ahead"
 
     def _gone_by(self, cue: Cue, state: str) -> str:
         """Why a cue can no longer be skipped or stood on (the lock is held)."""
