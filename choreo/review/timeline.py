@@ -244,23 +244,24 @@ class _Pass:
             return
         assert self.notes is not None  # made with the pass
         see_for_stands(self.notes, record, log_time)
+        marks = self.timeline.marks
         if isinstance(record, TxRecord):  # most of a log: a frame's place is worked out only for a mark
             _tracker(self.trackers, self.layouts, record.robot).tx(record, log_time)
-            if record.label == ABORT_LABEL and not any(m.kind == "abort" for m in self.timeline.marks):
+            if record.label == ABORT_LABEL and not any(m.kind == "abort" for m in marks):
                 what = f"abort motion {record.motion} played" if record.motion is not None else "stop frames sent"
-                self.timeline.marks.append(Mark(*self._at(log_time, "abort", f"show stopped: {what}")))
+                marks.append(Mark(*self._at(log_time, "abort", f"show stopped: {what}")))
         elif isinstance(record, RxRecord):
             _tracker(self.trackers, self.layouts, record.robot).rx(record, log_time)
             if not record.answered:
-                self.timeline.marks.append(_fault(record, *self._when(log_time)))
+                marks.append(_fault(record, *self._when(log_time)))
         elif isinstance(record, StepRecord):
             if record.event == "start":
                 self.clock.see_start(log_time, record.actual_s)
             _see_step(self.timeline, self.steps, record, *self._when(log_time))
         elif isinstance(record, LogRecord) and record.level >= ERROR:
-            self.timeline.marks.append(Mark(*self._at(log_time, "error", str(record.message))))
+            marks.append(Mark(*self._at(log_time, "error", str(record.message))))
         elif isinstance(record, CommandRecord) and record.count is None:
-            self.timeline.marks.append(Mark(*self._at(log_time, "command", command_text(record))))
+            marks.append(Mark(*self._at(log_time, "command", command_text(record))))
 
     def _when(self, log_time: int) -> tuple[float, float | None]:
         """Show time and where it is drawn (`elapsed`), the show time worked out once."""
