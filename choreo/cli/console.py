@@ -529,9 +529,11 @@ class Console:
             return "next GO: none ahead", False
         if states.get(head) == "waiting":
             return f"GO fires {head.name}: press Space or Enter", True
+        if waits is not None and not head.go:  # GO on a timed cue fires the earliest cue waiting (Live)
+            return f"GO fires {waits} (the playhead's {head.name} is timed): press Space or Enter", True
         if waits is not None:
-            why = "a timed cue" if not head.go else "not reached yet"
-            return f"playhead on {head.name}, {why}; {waits} waits: Up/Down to it", True  # GO would do nothing
+            # GO would do nothing: the playhead's GO cue is not reached yet
+            return f"playhead on {head.name}, not reached yet; {waits} waits: Up/Down to it", True
         if not head.go:
             return f"playhead on {head.name}: a timed cue, it runs at its time (GO does nothing)", False
         return f"next GO: {head.name} (not reached yet)", False
