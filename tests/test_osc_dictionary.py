@@ -516,8 +516,9 @@ def test_status_says_each_state_of_a_show(transport, real_shows):
     try:
         waiting = until_state(peer, "waiting_start")  # "opening" until the log hears the commands
         assert waiting["state"] == "waiting_start" and waiting["show_s"] is None and waiting["clock"] == "machine"
-        assert waiting["playhead"] == {"number": "1", "label": "big bow/2", "go": True,
-                                       "planned_s": waiting["playhead"]["planned_s"], "robots": ["robot"]}
+        assert waiting["playhead"] == {"number": "1", "label": "big bow/2", "go": True, "at": None, "bar": None,
+                                       "beat": None, "planned_s": waiting["playhead"]["planned_s"],
+                                       "robots": ["robot"]}
         assert ask(peer, "/choreo/start")[1]["status"] == "ok"
         held = until_state(peer, "held")
         waits = [(cue["number"], cue["label"], cue["robots"]) for cue in held["waiting"]]

@@ -132,9 +132,7 @@ def cues_record(plans: dict[str, Plan]) -> list[dict[str, Any]]:
     """The show's cue list for `--json`: one record a cue, in show order, as the console lists it."""
     from choreo.show.cues import cue_list
 
-    return [{"number": cue.number, "label": cue.label, "robots": list(cue.robots), "planned_s": cue.planned_s,
-             "go": cue.go, "at": cue.at, "bar": cue.at_beat[0] if cue.at_beat else None,
-             "beat": cue.at_beat[1] if cue.at_beat else None} for cue in cue_list(plans)]
+    return [cue.to_json() for cue in cue_list(plans)]
 
 
 def cue_numbers_text(numbers: Sequence[str], most: int = 8) -> str:

@@ -162,9 +162,8 @@ def _ref(text: str) -> str:
 
 
 def cue_json(cue: Cue) -> dict[str, Any]:
-    """A cue as `/choreo/status` and the answers give it."""
-    return {"number": cue.number, "label": cue.label, "go": cue.go, "planned_s": round(cue.planned_s, 3),
-            "robots": list(cue.robots)}
+    """A cue as `/choreo/status` and the answers give it: as every JSON output does."""
+    return cue.to_json()
 
 
 class Live:

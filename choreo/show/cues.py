@@ -18,6 +18,7 @@ import unicodedata
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from decimal import Decimal
+from typing import Any
 
 from choreo.errors import ChoreoError
 from choreo.show.model import Plan, PlannedStep
@@ -54,6 +55,12 @@ class Cue:
     def starts(self, robot: str, index: int) -> bool:
         """Is step `index` of `robot`'s plan where this cue starts?"""
         return (robot, index) in self.steps
+
+    def to_json(self) -> dict[str, Any]:
+        """The cue as every JSON output gives it (`choreo plan --json`, `/choreo/status`)."""
+        return {"number": self.number, "label": self.label, "robots": list(self.robots),
+                "planned_s": round(self.planned_s, 6), "go": self.go, "at": self.at,
+                "bar": self.at_beat[0] if self.at_beat else None, "beat": self.at_beat[1] if self.at_beat else None}
 
 
 @dataclass(frozen=True)
