@@ -282,3 +282,24 @@ def test_an_older_log_without_states_has_its_holds_on_the_machines_clock_only(tm
     assert summary.lengths is not None and summary.lengths.held_s == pytest.approx(held_s)
     assert summary.clock is not None
     assert summary.clock.drift_ms == pytest.approx(0.0 if held_s else -2000.0)  # the music: it drifted
+
+
+def test_a_replay_keeps_the_holds_and_pauses_the_board_saw(held, tmp_path):
+    """Replay paces the frames on the recorded show's elapsed time: the gaps the board saw
+    across the pause and the holds are in the replay too (paced on show time, the 1.2 s pause
+    and the 2.3 s hold would vanish, and the board be driven faster than on the night)."""
+    from choreo.run.replay import replay
+    from runlog import read_log
+
+    out = tmp_path / "replayed.mcap"
+    replay(held, port="sim://", log_path=out, time_source=VirtualTime())
+
+    def plays(path) -> list[int]:  # type: ignore[no-untyped-def]
+        return [m["_log_time"] for m in read_log(path).topic("/rcb4/tx") if m["kind"] == "play"]
+
+    recorded, replayed = plays(held), plays(out)
+    assert len(recorded) == len(replayed) >= 3
+    gaps = [(b - a) / 1e9 for a, b in zip(recorded, recorded[1:], strict=False)]
+    again = [(b - a) / 1e9 for a, b in zip(replayed, replayed[1:], strict=False)]
+    assert max(gaps) > FIRST_HOLD_S  # the night's frames straddle a hold
+    assert again == pytest.approx(gaps, abs=0.005)
