@@ -303,3 +303,34 @@ def test_a_replay_keeps_the_holds_and_pauses_the_board_saw(held, tmp_path):
     again = [(b - a) / 1e9 for a, b in zip(replayed, replayed[1:], strict=False)]
     assert max(gaps) > FIRST_HOLD_S  # the night's frames straddle a hold
     assert again == pytest.approx(gaps, abs=0.005)
+
+
+def test_the_png_shades_each_hold_and_pause_and_marks_each_command(held, tmp_path, monkeypatch):
+    """The figure itself, read back from matplotlib's artists: a shaded span for the pause and
+    each hold, at their places on the elapsed axis and of their lengths, and a marker for each
+    command (removing the shading or the markers fails this, not only a PNG header check)."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.colors
+    import matplotlib.pyplot as plt
+
+    from choreo.review.timeline import STOOD, render_png
+
+    figures = []
+    close = plt.close
+    monkeypatch.setattr(plt, "close", lambda fig=None: (figures.append(fig), close(fig)))
+    with LogReader(held) as reader:
+        timeline = build(reader)
+    with open(tmp_path / "t.png", "wb") as out:
+        render_png(timeline, out)
+    (ax,) = figures[0].axes
+    stood = matplotlib.colors.to_rgba(STOOD)
+    spans = sorted((round(float(v[:, 0].min()), 3), round(float(v[:, 0].max() - v[:, 0].min()), 3))
+                   for c in ax.collections if len(c.get_facecolor()) and tuple(c.get_facecolor()[0]) == stood
+                   for v in (p.vertices for p in c.get_paths()))
+    assert [(k.kind) for k in timeline.stands] == ["paused", "held", "held"]
+    assert spans == sorted((round(s.drawn_at, 3), round(s.length_s, 3)) for s in timeline.stands)
+    assert [length for _, length in sorted(spans)] == pytest.approx([PAUSE_S, FIRST_HOLD_S, SECOND_HOLD_S], abs=0.01)
+    row = [label.get_text() for label in ax.get_yticklabels()].index("commands")
+    marked = sorted(x for line in ax.lines for x, y in zip(line.get_xdata(), line.get_ydata(), strict=True) if y == row)
+    assert marked == pytest.approx(sorted(m.drawn_at for m in timeline.commands))
+    assert len(marked) == 6  # pause, skip, resume, GO, the skipped cue passed, panic
