@@ -232,11 +232,16 @@ def test_skipping_a_waiting_go_cue_releases_it_as_skipped(tmp_path):
     assert live.skipped("robot", 1) and not live.waiting and live.state == "running"
 
 
-def test_skipping_the_moved_playheads_cue_moves_it_past(tmp_path):
+def test_skipping_the_moved_playheads_cue_lets_it_follow_the_show_again(tmp_path):
+    """A stage manager moved the playhead down to skip a cue: after the skip it goes back to
+    the show (the next GO cue, or one waiting), never stays parked on a cue not reached while
+    another waits (GO would be dead)."""
     live, cues, settings = live_of(tmp_path)
     say(live, "playhead", "2")
-    assert say(live, "skip").data == {"cue": "2", "label": None, "playhead": "3"}
-    assert live.playhead == cues.cues[2]
+    assert say(live, "skip").data == {"cue": "2", "label": None, "playhead": "1"}
+    assert live.playhead == cues.cues[0]
+    bow = Waiter(live, settings, 1)
+    assert say(live, "go").ok and bow.gone()
 
 
 # -- pause, and the state ------------------------------------------------------------------------
@@ -420,3 +425,14 @@ def test_the_answers_say_how_to_skip_a_timed_cue_and_a_cues_go_names_no_playhead
     named = say(live, "cue_go", "timed")
     assert not named.ok and named.message == "cue 1 'timed' is a timed cue (at 5.000 s): nothing to GO"
     assert say(live, "playhead", "timed").ok and say(live, "skip").message == "skipped: cue 1 'timed' will not run"
+
+
+def test_a_go_right_after_the_start_is_a_double_press():
+    """The console's GO key starts a --wait-start show: a nervous double tap must not also fire
+    the first cue (the start counts as a GO for the double-press guard)."""
+    now = [100.0]
+    live = Live(StopRequest(), wait_start=True, lockout_s=0.5, now=lambda: now[0])
+    assert live.command(Command("start", "key")).ok
+    now[0] += 0.2
+    answer = live.command(Command("go", "key"))
+    assert not answer.ok and answer.message.startswith("GO ignored: 0.20 s after the last one (a double press?")

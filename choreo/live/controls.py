@@ -722,8 +722,8 @@ class Live:
             waiting = self._waiting_for(found)
             if waiting is not None:
                 self._release(waiting, go=False)
-            if was_playhead and self._moved is not None:
-                self._moved = self._after(found)
+            if was_playhead:
+                self._moved = None  # the playhead follows the show again: a cue waiting, else the next GO cue
             answer = Answer("ok", f"skipped: {found.name}" + ("" if waiting is not None else " will not run"),
                             self._data(found))
         if waiting is not None:
@@ -845,6 +845,7 @@ class Live:
             if self._started:
                 return Answer("error", "the show has started already")
             self._started = True
+            self._last_go = self._now()  # a second press of the start's GO key is a double press, not a GO
             self._changed.notify_all()
         return Answer("ok", "starting")
 
