@@ -289,6 +289,10 @@ def _board(link: LinkSettings, machine: Machine, ensemble: bool) -> list[Finding
         return [Finding(PROBLEM, "port", _named(exc, link), "choreo ports lists the serial ports; check the "
                         "cable and that no other program holds the port", robot)]
     found = [Finding(OK, "port", f"{link.given_port} opens at {link.baud} baud", None, robot)]
+    if is_simulator(link.port):  # all clear on the simulator says nothing of the robot on the night
+        found.append(Finding(NOTE, "simulator", f"{link.given_port} is choreo's simulator: no robot moves on it",
+                             "give the robot's port (--port, or `port:` in the show); choreo ports lists them",
+                             robot))
     bauds = (link.baud, *(b for b in BAUDS if b != link.baud))
     try:
         info = machine.probe(link.port, bauds, min(link.timeout, PROBE_TIMEOUT_S), machine.time_source)
@@ -387,28 +391,28 @@ def _music(settings: RunSettings, request: RunRequest, machine: Machine) -> list
         return [Finding(PROBLEM, "music", exc.lines()[0], "music.file in the show: a wav, mp3, flac or ogg "
                         "file next to it (choreo beats SONG decodes it too)")]
     try:
-        end, said = _heard(settings, song, machine)
+        end, said, cut = _heard(settings, song, machine)
     except ChoreoError as exc:
         return [Finding(PROBLEM, "music", f"{song.path}: {exc.lines()[0]}", "a sound file that decodes to its "
                         "end (choreo beats SONG decodes it too)")]
-    return [_song_length(settings, end, said),
+    return [_song_length(settings, end, said, cut),
             audio_output(lambda: _in_time(lambda: machine.audio(request.audio_device), machine.deadline_s, machine,
                                           "the sound system hangs"), request.audio_device)]
 
 
-def _heard(settings: RunSettings, song: Song, machine: Machine) -> tuple[float, str]:
-    """Where the song really ends in show time, and how to say so: its header's length is only
-    a claim (a file cut short keeps the header of the whole), so the song is decoded as far as
-    the show needs it (a second past its end), no further."""
+def _heard(settings: RunSettings, song: Song, machine: Machine) -> tuple[float, str, bool]:
+    """Where the song really ends in show time, how to say so, and whether it was cut short: its
+    header's length is only a claim (a file cut short keeps the header of the whole), so the
+    song is decoded as far as the show needs it (a second past its end), no further."""
     start = song.music.start
     needed = max(plan.estimated_s for plan in settings.plans.values()) + start + 1.0
     until = min(song.duration_s, needed)
     seconds = machine.deadline_s + until / DECODE_SPEED  # a long song on a slow machine is no hang
     heard = _in_time(lambda: _decoded_s(song.path, song.sample_rate, until), seconds, machine, "decoding hangs")
     if heard >= until - HEARD_SLACK_S:
-        return song.end_show_s, f"{song.path} decodes"
+        return song.end_show_s, f"{song.path} decodes", False
     return heard - start, (f"{song.path} decodes only to {heard:.3f} s of its {song.duration_s:.3f} s (cut short "
-                           "or damaged)")
+                           "or damaged)"), True
 
 
 def _decoded_s(path: str, rate: int, until_s: float) -> float:
@@ -453,7 +457,7 @@ def _in_time(call: Callable[[], T], seconds: float, machine: Machine, hangs: str
     return done[0]
 
 
-def _song_length(settings: RunSettings, end: float, decodes: str) -> Finding:
+def _song_length(settings: RunSettings, end: float, decodes: str, cut: bool = False) -> Finding:
     last = last_cue(settings.plans)
     show_end = max(plan.estimated_s for plan in settings.plans.values())
     origin = settings.sections.origin
@@ -462,7 +466,7 @@ def _song_length(settings: RunSettings, end: float, decodes: str) -> Finding:
         return Finding(PROBLEM, "music", f"{said}: the run starts at {origin:.3f} s, past its end",
                        "an earlier --from or --loop, or --no-music")
     if last is not None and last[1] > end:
-        fix = ("the whole file again (a copy that decodes to its end)" if " only " in decodes
+        fix = ("the whole file again (a copy that decodes to its end)" if cut
                else f"a longer music file, or move the cues before {end:.3f} s")
         return Finding(PROBLEM, "music", f"{said}, before {last[0]} at {last[1]:.3f} s: that cue and the ones "
                        "after it would play in silence", fix)
