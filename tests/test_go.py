@@ -387,3 +387,27 @@ def test_while_the_show_opens_only_panic_and_stop_are_taken_and_the_log_hears_th
     live = Live(StopRequest(), wait_start=True, opening=True)
     live.recording(None)
     assert live.state == "waiting_start" and live.command(Command("start", "key")).ok
+
+
+def test_a_panic_as_the_show_opens_is_logged_once_at_its_own_time_by_the_log_recording_subscribes():
+    """The session subscribed its log, then called `recording`: a panic between the two was
+    told the log live, then again as one held (and that one stamped with the time of
+    `recording`). `recording` subscribes the log itself, under the lock such a command takes."""
+    from choreo.events import Command, StopRequest
+    from choreo.live.controls import Live
+
+    ticks = iter(range(100, 10**6, 100))
+    live = Live(StopRequest(), opening=True, wall_ns=lambda: next(ticks))
+    heard: list = []
+
+    class Log:
+        def on_command(self, event) -> None:  # type: ignore[no-untyped-def]
+            heard.append((event.command.name, event.answer.status, event.time_ns))
+
+    assert live.command(Command("panic", "osc 10.0.0.5")).ok
+    with live.recording(Log()):
+        assert heard == [("panic", "ok", 100)]  # once, at the time it was carried out
+        assert not live.command(Command("go", "key")).ok  # heard: the log is subscribed
+        assert [name for name, _status, _ns in heard] == ["panic", "go"]
+    live.command(Command("go", "key"))  # the subscription closed: the log hears no more
+    assert len(heard) == 2

@@ -386,6 +386,51 @@ def test_with_only_timed_cues_ahead_the_playhead_moves_onto_the_first_and_a_sect
     assert say(live, "go").message == "cue 2 is a timed cue (at 2.000 s): nothing to GO; move the playhead"
 
 
+def test_a_go_with_the_playhead_on_a_skipped_cue_fires_the_earliest_cue_waiting(tmp_path):
+    """A skipped cue takes no GO, as a timed one: the playhead stood on it never leaves GO dead
+    while a cue waits (it answered 'cue 3 is skipped' and cue 1 kept waiting)."""
+    live, cues, settings = live_of(tmp_path)
+    bow = Waiter(live, settings, 1)
+    assert say(live, "skip", "encore").message == "skipped: cue 3 'encore' will not run"
+    assert say(live, "playhead", "encore").ok and live.playhead == cues.cues[2]
+    answer = say(live, "go")
+    assert answer.ok and bow.gone() and bow.went != [None]
+    assert answer.message == ("GO: cue 1 'bow' (the playhead is on cue 3 'encore', a skipped cue: GO fired the "
+                              "earliest cue waiting)")
+    nothing = say(live, "go")  # nothing waits: why, as before
+    assert not nothing.ok and nothing.message == "cue 3 'encore' is skipped (skip it again to undo)"
+
+
+def test_a_skip_refused_at_the_end_of_a_long_show_looks_at_a_few_cues(monkeypatch):
+    """`nothing to skip` asks whether a timed cue is ahead: it walked all 10,000 cues under the
+    lock the runners need, on every refused skip. It looks from where it last found one, and
+    a new pass finds the earlier ones again."""
+    from choreo.show.cues import Cue
+    from choreo.show.model import PlannedStep, StepKind
+    n = 10_000
+    cues = CueList(tuple(Cue(str(i + 1), f"c{i}", ("robot",), float(i), i % 2 == 0, steps=(("robot", i),))
+                         for i in range(n)))
+    live = Live(StopRequest(), cues=cues, lockout_s=0.0)
+    steps = [PlannedStep(index=i, path="", kind=StepKind.PLAY, line=1, go=i % 2 == 0, cue=str(i + 1))
+             for i in range(n)]
+    for step in steps[:n - 1]:
+        live.on_step(StepEvent(step, "end", 0.0, 0.0, 0))
+    timed = say(live, "skip")  # the last cue, timed, is ahead: the first look walks the list once
+    assert not timed.ok and timed.message.startswith("nothing to skip under the playhead (no GO cue ahead)")
+    looked = []
+    state_of = live._state_of
+    monkeypatch.setattr(live, "_state_of", lambda cue: looked.append(cue) or state_of(cue))
+    for _ in range(3):
+        assert say(live, "skip").message.startswith("nothing to skip under the playhead")
+    live.on_step(StepEvent(steps[n - 1], "end", 0.0, 0.0, 0))
+    for _ in range(3):
+        assert say(live, "skip").message == "nothing to skip: no cue ahead"
+    assert len(looked) < 20, len(looked)
+    monkeypatch.undo()
+    live.new_pass()
+    assert say(live, "playhead", "2").ok and say(live, "skip").message == "skipped: cue 2 'c1' will not run"
+
+
 def test_the_auto_playhead_looks_from_where_it_last_found_a_cue_not_from_cue_1(monkeypatch):
     """A 10,000-cue show near its end: the playhead (read by the console's redraw, status and a
     GO's answer, under the lock a released runner needs) looks at a few cues, not every cue

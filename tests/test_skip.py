@@ -200,6 +200,29 @@ def skip_times(log, robots=("",)) -> list[float]:  # type: ignore[no-untyped-def
     return [m["actual_s"] for topic in topics for m in log.topic(topic) if m["event"] == "skip"]
 
 
+def test_a_skip_undone_as_the_robot_wakes_for_it_runs_the_cue_and_aborts_nothing(tmp_path, monkeypatch):
+    """The sleep towards a cue ends when it is skipped; the skip undone before the runner looks
+    again raised Interrupted with no stop requested: the abort motion played, the show ended.
+    Only a stop interrupts: the runner sleeps on and the cue runs, as the undo promised."""
+    from choreo.live import controls
+    looks = []
+    real = controls.Live.skipped
+
+    def skipped(self, robot: str, index: int) -> bool:  # type: ignore[no-untyped-def]
+        if index != 1:
+            return real(self, robot, index)
+        looks.append(index)
+        return len(looks) == 2  # skipped when the sleep looks, undone before the runner looks again
+
+    monkeypatch.setattr(controls.Live, "skipped", skipped)
+    run = VirtualRun(tmp_path, "version: 1\non_abort: 9\n" + SOLO.removeprefix("version: 1\n"))
+    log = run.finish()
+    assert len(looks) > 2  # the look after the sleep's was taken
+    assert run.result.outcome == "done" and not run.live.stop(), [m["message"] for m in log.logs]
+    assert motions(log) == [1, 2, 3]  # no abort motion 9
+    assert [e for e in events(log) if e[0] == "two"] == [("two", "start", None), ("two", "end", "ok")]
+
+
 def test_a_skip_wakes_the_robot_asleep_towards_the_cue_and_passes_it_then(tmp_path):
     # robot a is asleep towards a-two (at 5 s) when b's first step starts (0.5 s): it passes the
     # cue then, and a-three follows at once, not 5 s later, nor counted late from a-one

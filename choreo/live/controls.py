@@ -200,6 +200,7 @@ class Live:
         self._skip_steps: frozenset[tuple[str, int]] = frozenset()  # their steps; swapped whole, read without the lock
         self._moved: Cue | None = None  # the playhead where the operator put it (None: auto)
         self._ahead_from = 0  # no GO cue before this position of the list is ahead (`_next_ahead`)
+        self._timed_from = 0  # no timed cue before this position is open (`_timed_open`): reset with it
         self._out: frozenset[str] = frozenset()  # cues outside the run's section (--from, --loop)
         self._paused_robots: set[str] = set()  # runners the pause keeps from their next step
         self._reports = ReportGate(limits, now)  # what of the commands the listeners hear
@@ -209,7 +210,7 @@ class Live:
         # carried out, and told to the log once it does: every command carried out is logged
         self._opening = opening
         self._opened = threading.Lock()
-        self._unheard: list[tuple[Command, Answer]] = []
+        self._unheard: list[tuple[Command, Answer, int]] = []  # each with when it was carried out
         self._handlers = self._handlers_by_name()
 
     def subscribe(self, listener: CommandListener) -> Subscription:
@@ -242,7 +243,7 @@ class Live:
 
         with self._changed:
             self._out = frozenset(cue.number for cue in self.cues if all(outside(*key) for key in cue.steps))
-            self._ahead_from = 0
+            self._ahead_from = self._timed_from = 0
 
     @property
     def panicked(self) -> bool:
@@ -357,7 +358,7 @@ class Live:
             passed = {number for number, cue in self._skips.items() if self._passed(cue)}
             self._marks.clear()
             self._moved = None
-            self._ahead_from = 0
+            self._ahead_from = self._timed_from = 0
             for number in passed:
                 del self._skips[number]
             self._skips_changed()
@@ -525,21 +526,26 @@ class Live:
         the log), anything else refused (`_opened` is held)."""
         if handler is not None and command.name in ("panic", "stop") and self._refusal() is None:
             answer = handler(command)
-            self._unheard.append((command, answer))
+            self._unheard.append((command, answer, self._wall_ns()))
         else:
             answer = self._refusal() or Answer("error", OPENING)
         self.report(command, answer)
         return answer
 
-    def recording(self, log: CommandListener | None) -> None:
-        """The log hears the commands now (subscribed; None: the run keeps none): commands are
-        taken from here on, and `log` is told the panic or stop carried out before."""
+    def recording(self, log: CommandListener | None) -> Subscription:
+        """The log hears the commands from now (None: the run keeps none) until the subscription
+        closes: commands are taken from here on, and `log` is told first the panic or stop
+        carried out before, at the time each was. Subscribed here, under the lock a command
+        given while opening takes: subscribed apart, a panic between the two was told it twice
+        (as it happened, then as one held)."""
         with self._opened:
-            self._opening = False
+            subscription = self.subscribe(log) if log is not None else Subscription(lambda: None)
             unheard, self._unheard = self._unheard, []
-        for command, answer in unheard:
-            if log is not None:
-                log.on_command(CommandEvent(command, answer, self._wall_ns(), None))
+            for command, answer, wall_ns in unheard:
+                if log is not None:
+                    log.on_command(CommandEvent(command, answer, wall_ns, None))
+            self._opening = False
+        return subscription
 
     def _handlers_by_name(self) -> dict[str, Callable[[Command], Answer]]:
         return {"go": self._go, "cue_go": self._cue_go, "skip": self._skip, "playhead": self._put_playhead,
@@ -599,24 +605,25 @@ class Live:
                               f"(a double press? GOs {self.lockout_s:g} s apart at least)")
             if self._paused:
                 return Answer("error", RESUME_FIRST)
-            waiting, timed = self._under_playhead()
+            waiting, aside = self._under_playhead()
             if waiting is None:
                 return Answer("error", self._why_not(self._playhead()))
             self._last_go = now
             self._release(waiting)
         # the answer, and the sample of the clock going on, once the runners are free to go
         self._clock_changed()
-        return self._answer("GO", waiting, f" (the playhead is on {timed.name}, a timed cue: GO fired the earliest "
-                                           "cue waiting)" if timed is not None else "")
+        kind = "a timed" if aside is not None and not aside.go else "a skipped"
+        return self._answer("GO", waiting, f" (the playhead is on {aside.name}, {kind} cue: GO fired the earliest "
+                                           "cue waiting)" if aside is not None else "")
 
     def _under_playhead(self) -> tuple[GoCue | None, Cue | None]:
         """The GO cue waiting under the playhead, if one is: the runner's path to a GO's first
         frame, so the auto playhead's (the earliest waiting) is found without the cue list. A
-        playhead moved onto a timed cue (which takes no GO) never leaves GO dead while a cue
-        waits: GO fires the earliest waiting, and the timed cue is returned to say so."""
+        playhead moved onto a cue that takes no GO (timed, or skipped) never leaves GO dead
+        while a cue waits: GO fires the earliest waiting, and that cue is returned to say so."""
         moved = self._moved
         if moved is not None and self._open(moved):
-            if moved.go:
+            if moved.go and moved.number not in self._skips:
                 return self._waiting_for(moved), None
             waiting = min(self._waiting.values(), key=_order, default=None)
             return waiting, moved if waiting is not None else None
@@ -714,7 +721,7 @@ class Live:
             if state == SKIPPED:
                 del self._skips[found.number]
                 self._skips_changed()
-                self._ahead_from = 0  # the cue is ahead again
+                self._ahead_from = self._timed_from = 0  # the cue is ahead again
                 return Answer("ok", f"skip undone: {found.name} will run", self._data(found))
             was_playhead = self._playhead() == found
             self._skips[found.number] = found
@@ -735,10 +742,24 @@ class Live:
     def _nothing_to_skip(self) -> str:
         """A skip with the auto playhead on no cue: no GO cue is ahead, but a timed cue may be,
         and the operator skips one by standing the playhead on it (the lock is held)."""
-        if any(not cue.go and self._open(cue) for cue in self.cues):
+        if self._timed_open():
             return "nothing to skip under the playhead (no GO cue ahead): to skip a timed cue, move the playhead " \
                    "onto it (Up/Down, j, /choreo/playhead/CUE), then skip"
         return "nothing to skip: no cue ahead"
+
+    def _timed_open(self) -> bool:
+        """Is a timed cue not yet run? Looked for from where the last look found one, as
+        `_next_ahead` does (a timed cue once run is open again only when it resets too): a skip
+        refused at the end of a 10,000-cue show walked every cue under the lock the runners
+        need. The lock is held."""
+        cues = self.cues.cues
+        for at in range(self._timed_from, len(cues)):
+            cue = cues[at]
+            if not cue.go and self._open(cue):
+                self._timed_from = at
+                return True
+        self._timed_from = len(cues)
+        return False
 
     def _gone_by(self, cue: Cue, state: str) -> str:
         """Why a cue can no longer be skipped or stood on (the lock is held)."""

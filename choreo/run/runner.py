@@ -216,19 +216,29 @@ class Runner:
         if step.go:
             cursor = self._await_go(step, cursor)
         due = max(step.at, cursor) - self._lead(step) if step.at is not None else cursor
-        # a skip given while the robot sleeps towards the cue ends the sleep (the Live wakes
-        # the dozers): the robot passes the cue then, not at its time
-        if not sleep_until_show(self.clock, self.show, due, lambda: self.stop() or self._skipping(step),
-                                on_idle=self.on_idle):
-            if self._skipping(step) and not self.stop():
-                return None
-            raise Interrupted(self.stop.reason)
+        if not self._sleep_to_cue(step, due):
+            return None
         if self.live is not None:  # not paused: one attribute read, and one set look-up for a cue
             if not self.live.await_running(self.stop, self.robot or SOLO):
                 raise Interrupted(self.stop.reason)
             if self._skipping(step):
                 return None
         return due
+
+    def _sleep_to_cue(self, step: PlannedStep, due: float) -> bool:
+        """Sleep until `due`; False: `step` was skipped on the way. A skip given while the robot
+        sleeps towards the cue ends the sleep (the Live wakes the dozers): the robot passes the
+        cue then, not at its time. Only a stop interrupts: a skip undone between the sleep's
+        look and the look after (the sleep ended for a skip no longer there) sleeps on, as the
+        undo's answer promised the cue would run, where it played the abort motion."""
+        while not sleep_until_show(self.clock, self.show, due, lambda: self.stop() or self._skipping(step),
+                                   on_idle=self.on_idle):
+            if self.stop():  # a stop stands once requested: the sleep ended for it, or it came since
+                raise Interrupted(self.stop.reason)
+            if self._skipping(step):
+                return False
+            # else the sleep ended for a skip undone since: sleep on
+        return True
 
     def _skipping(self, step: PlannedStep) -> bool:
         """Is `step` a cue the operator skipped?"""

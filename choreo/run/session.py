@@ -101,11 +101,12 @@ class Session:
         with contextlib.ExitStack() as wiring:  # the log's wiring, for the run's time only
             if self.recorder is not None:
                 wiring.enter_context(self.recorder.stopping(stop))
-                if live is not None:
-                    wiring.enter_context(live.subscribe(self.recorder))
-                    wiring.callback(live.flush_reports, force=True)  # held-back commands summed up while it hears
             if live is not None:
-                live.recording(self.recorder)  # commands are taken from now on: the log hears each
+                # commands are taken from now on: the log hears each (subscribed by `recording`,
+                # under the lock a panic given as the show opens takes, so it hears that once)
+                wiring.enter_context(live.recording(self.recorder))
+                if self.recorder is not None:
+                    wiring.callback(live.flush_reports, force=True)  # held-back commands summed up while it hears
                 live.use_section(self.settings.sections.starts, self.settings.sections.ends)
             if live is not None and not live.await_start():
                 self.result = RunResult("aborted", 0, 0, 0.0)
