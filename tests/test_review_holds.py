@@ -334,3 +334,33 @@ def test_the_png_shades_each_hold_and_pause_and_marks_each_command(held, tmp_pat
     marked = sorted(x for line in ax.lines for x, y in zip(line.get_xdata(), line.get_ydata(), strict=True) if y == row)
     assert marked == pytest.approx(sorted(m.drawn_at for m in timeline.commands))
     assert len(marked) == 6  # pause, skip, resume, GO, the skipped cue passed, panic
+
+
+FIRST_SKIPPED = """\
+version: 1
+steps:
+  - play: 1
+    at: 0
+    label: opener
+  - play: 2
+    at: 2
+    label: two
+  - play: 3
+    at: go
+    label: three
+"""
+
+
+@pytest.mark.parametrize("skip", [["skip opener"], []])
+def test_a_show_whose_first_cue_is_skipped_ran_from_its_start(tmp_path, skip):
+    """The first cue skipped (its step logs `skip`, not `start`): the show clock still ran from
+    0 to the second cue at 2 s, and every review says it ran 2 s, not from 2 s."""
+    from test_pause import VirtualRun
+    run = VirtualRun(tmp_path, FIRST_SKIPPED, before=skip)
+    run.curtain()
+    run.finish()
+    lengths = summarize(run.log_path).lengths
+    assert lengths is not None and lengths.start_s == 0.0
+    assert lengths.ran_s == pytest.approx(lengths.show_s) and lengths.show_s == pytest.approx(2.0, abs=0.02)
+    with LogReader(run.log_path) as reader:
+        assert build(reader).lengths == lengths

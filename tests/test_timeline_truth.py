@@ -210,3 +210,39 @@ def test_a_cut_line_is_exactly_the_width_with_an_ellipsis():
 
     assert fit("abcdef", 4) == "abc…" and fit("abcdef", 1) == "…" and fit("abc", 3) == "abc"
     assert fit("a" * 500, None) == "a" * 500  # no width (a pipe): whole
+
+
+SPIN = """\
+version: 1
+motions:
+  spin: {number: 3, duration: 3.0}
+steps:
+  - play: spin
+  - wait: 1.0
+  - wait: done
+  - play: 5
+    at: go
+    label: curtain
+"""
+
+
+def test_a_motion_running_through_a_pause_is_as_long_in_the_timeline_as_in_the_summary(tmp_path):
+    """A 3 s spin paused 1 s in, resumed 6 s later: the status query that finds its end comes
+    after the pause, at the show time the pause stood at. Its length is from log times (when it
+    started and ended), in the summary, the drawing and the timeline's `actual` column alike."""
+    from test_pause import VirtualRun
+    run = VirtualRun(tmp_path, SPIN, at={(1, "end"): ["pause"]})  # the runner's own thread: 1.0 s in
+    run.held()
+    run.source.advance(6.0)
+    assert run.say("resume").ok
+    run.curtain()
+    run.finish()
+    played = next(p for p in summarize(run.log_path).plays if p.motion == 3)
+    assert played.duration_s is not None and played.duration_s > 6.0  # ran on through the pause
+    timeline = timeline_of(run.log_path)
+    spin = next(r for r in timeline.runs if r.motion == 3)
+    assert spin.end_s == pytest.approx(1.0, abs=0.01)  # the show time its end was seen at: the pause's
+    assert spin.actual_s == pytest.approx(played.duration_s, abs=1e-6)
+    assert spin.start_at is not None and spin.drawn_end_at == pytest.approx(spin.start_at + played.duration_s)
+    row = next(line for line in render_text(timeline, 120) if "motion 3 spin" in line)
+    assert f"{spin.start_s:.3f}-{spin.start_s + played.duration_s:.3f}" in row, row

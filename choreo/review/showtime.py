@@ -61,6 +61,11 @@ LOOKAHEAD_MESSAGES = 10_000
 MACHINE = "machine"  # the clock source that holds at a GO cue and never drifts
 
 
+def _planned(step: StepRecord) -> float:
+    """A step's planned time, as where a run began: the first step's is 0 (a lead-in is no part)."""
+    return max(0.0, float(step.estimated_s)) if step.index else 0.0
+
+
 def show_zero_ns(reader: LogReader) -> int | None:
     """The run's start as the metadata gives it (wall-clock ns), before a step says better."""
     return reader.info.start_ns
@@ -114,12 +119,15 @@ class ShowTimes:
     def anchor(self, reader: LogReader) -> None:
         """Read ahead to the show clock's first sample or step start and fix the zero by it, and
         on to the first step start: where the run began (`start_s`): 0 for a show from its first
-        step; --from's (or --loop's) step's planned time for one begun later. The show clock starts
+        step; --from's (or --loop's) step's planned time for one begun later; a step skipped
+        before the first start is where the run began too (the first cue skipped: the clock ran
+        from 0 to the second cue, and that is run time). The show clock starts
         a moment before (a lead-in, a show for several robots starting its threads): no part of it.
 
         A message that does not parse, or holds no number, is left for the review's own pass
         to report."""
         messages = reader.messages()
+        skipped = math.inf  # the earliest planned time of a step skipped before the first start
         try:
             for count, (topic, log_time, data) in enumerate(messages):
                 if count >= LOOKAHEAD_MESSAGES:
@@ -132,8 +140,10 @@ class ShowTimes:
                     continue
                 if isinstance(record, StepRecord):
                     self.see_step(log_time, record)
-                    if record.event == "start" and self.anchored:
-                        self.start_s = max(0.0, float(record.estimated_s)) if record.index else 0.0
+                    if record.event == "skip":
+                        skipped = min(skipped, _planned(record))
+                    elif record.event == "start" and self.anchored:
+                        self.start_s = min(skipped, _planned(record))
                         return
                 elif isinstance(record, ClockRecord):
                     self.see_start(log_time, record.show_s)

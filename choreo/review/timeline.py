@@ -95,9 +95,11 @@ class MotionRun:
 
     @property
     def actual_s(self) -> float | None:
-        if self.start_s is None or self.end_s is None:
+        """How long it ran: from its start's log time to its end's (on `elapsed`), as the
+        summary measures it; not by show times, which stand still through a hold or pause."""
+        if self.start_at is None or self.end_at is None:
             return None
-        return self.end_s - self.start_s
+        return self.end_at - self.start_at
 
     def title(self) -> str:
         named = f" {self.name}" if self.name else ""
@@ -453,7 +455,9 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
         elif run.start_s is None:
             actual = "not started"
         else:
-            actual = _span(run.start_s, run.end_s) if run.measured else _span(run.start_s, None) + "?"
+            ran = run.actual_s  # through a hold or pause the end's show time stands: its start plus how long it ran
+            ran_to = run.start_s + ran if run.measured and ran is not None else None
+            actual = _span(run.start_s, ran_to) if ran_to is not None else _span(run.start_s, None) + "?"
         step = str(run.step) if run.step is not None else "abort"
         yield _row(step, run.title(), planned, actual, _bar(run, scale, width), figures)
     if not timeline.runs:
