@@ -7,6 +7,8 @@ mistyped cue answered with the nearest one. No terminal: screens as values, draw
 from __future__ import annotations
 
 import io
+import os
+import time
 from pathlib import Path
 
 import pytest
@@ -17,7 +19,7 @@ from rich.console import Console as RichConsole
 from choreo.cli import screen
 
 from choreo.cli.console import Console
-from choreo.cli.keys import KeyParser, unmarked_paste
+from choreo.cli.keys import PASTE_WAIT_S, KeyParser, KeyReader, unmarked_paste
 from choreo.cli.screen import (
     LEGEND,
     PAUSED_LEGEND,
@@ -346,6 +348,7 @@ def test_text_pasted_where_the_terminal_does_not_mark_it_gives_no_go_skip_or_sto
     run.wait_for("GO fires cue 1 'applause'")
     run.keys("-l", "a note pasted: qy p s and  spaces\r")  # one write, as a terminal sends a paste unmarked
     run.wait_for("a paste is no key")
+    time.sleep(2 * PASTE_WAIT_S)  # keys before a pause would be the paste's rest
     run.keys("q", "y")
     assert run.exit_code() == 130
     assert commands_in(tmp_path) == [("stop", "key", "ok")]
@@ -375,3 +378,118 @@ def test_an_unknown_address_stays_whole_in_its_message(width):
                "resume, skip, playhead/next|previous|CUE, cue/CUE/go, status, thump, updates)")
     line = fit_message(f"{'0.0':>7} s  {message}", width, "osc udp 127.0.0.1:54446")
     assert line.startswith("    0.0 s  unknown command /choreo/skip/2 (cho") and line.endswith("thump, updates)")
+
+
+# -- pastes longer than a read, and an input method's word after j -----------------------------
+
+
+def read_all(data: bytes, on_key, **kwargs) -> KeyReader:
+    """`data` in one write, then the end of input: the reader reads it all, then stops."""
+    read, write = os.pipe()
+    reader = KeyReader(read, on_key, **kwargs)
+    try:
+        os.write(write, data)
+    finally:
+        os.close(write)
+    reader.start()
+    reader._thread.join(10.0)
+    os.close(read)
+    assert not reader._thread.is_alive()
+    return reader
+
+
+@pytest.mark.parametrize("length", (65, 68, 200, 5000, 60000))
+def test_an_unmarked_paste_longer_than_a_read_is_one_paste_with_no_key_after(length):
+    """The 64 bytes of the first read make it a paste; its tail (` s p`: GO, skip, GO, pause)
+    came after as keys."""
+    text = (b"Lorem ipsum dolor sit amet, consectetur adipiscing elit, sed do eiusmod " * 1000)[:length - 4] + b" s p"
+    keys: list[str] = []
+    read_all(text, keys.append)
+    assert keys == ["paste"]
+
+
+def wait_until(condition, timeout_s: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.005)
+
+
+def test_after_a_pause_an_unmarked_paste_is_over_and_keys_are_keys():
+    read, write = os.pipe()
+    keys: list[str] = []
+    reader = KeyReader(read, keys.append, paste_wait_s=0.05)
+    reader.start()
+    try:
+        os.write(write, b"notes for the show: qy s p " * 10)
+        wait_until(lambda: keys == ["paste"] and not reader._unmarked)
+        os.write(write, b" ")
+        wait_until(lambda: len(keys) > 1)
+        assert keys == ["paste", "space"]
+    finally:
+        os.close(write)
+        reader.close()
+        os.close(read)
+
+
+def ime_evening(tmp_path: Path, label: str) -> tuple[Console, Live]:
+    body = EVENING.replace("label: finale", f"label: {label}")
+    session = Session.prepare(RunRequest(str(write_show(tmp_path, body)), no_log=True))
+    live = Live(StopRequest(), cues=cue_list(session.settings.plans))
+    console = Console(session, live, out=io.StringIO(), keys=io.StringIO())
+    live.subscribe(console)
+    return console, live
+
+
+@pytest.mark.parametrize("after", (b"", b" s p s p s p s p"))
+def test_a_label_an_input_method_commits_in_one_write_after_j_is_typed_not_a_paste(tmp_path, after):
+    """An input method sends `フィナーレのお辞儀` as one write: 9 characters, more than a hand
+    types between two reads, yet typed. Once Enter ends the prompt, keys are commands again and
+    the paste rule holds (a pasted tail gives no GO)."""
+    console, live = ime_evening(tmp_path, "フィナーレのお辞儀")
+    read, write = os.pipe()
+    keys: list[str] = []
+    reader = KeyReader(read, lambda key: (keys.append(key), console.on_key(key)), text_wanted=console.typing)
+    reader.start()
+    try:
+        os.write(write, b"j")
+        wait_until(console.typing)
+        os.write(write, "フィナーレのお辞儀".encode() + b"\r" + after)
+    finally:
+        os.close(write)
+        reader._thread.join(10.0)
+        os.close(read)
+    assert live.playhead is not None and live.playhead.number == "13"
+    assert keys[-1] == ("paste" if after else "enter")
+    jumped = "playhead: cue 13 'フィナーレのお辞儀'"
+    assert console.screen().notes[-1].text == ("a paste is no key: ignored (type a cue's number after j)"
+                                               if after else jumped)
+
+
+# -- after a panic or a stop: no robot row says done or a step it will not finish --------------
+
+
+@pytest.mark.parametrize("command", ("panic", "stop"))
+def test_after_a_panic_or_stop_the_rows_say_aborted_or_stopped_not_done(tmp_path, command):
+    """`left` was cut off on its last step (the runner ends it `aborted`): it said `done`;
+    `right`, mid-show and cut off between steps, said its last step and what came next."""
+    console, session, live, status = evening(tmp_path)
+    live.command(Command("start", "key"))
+    last = len(session.settings.plans["left"].steps) - 1
+    for index in range(last):
+        status.on_step(step_event(session, "left", index))
+        status.on_step(step_event(session, "left", index, "end"))
+    status.on_step(step_event(session, "left", last))
+    status.on_step(step_event(session, "right", 2))
+    status.on_step(step_event(session, "right", 2, "end"))
+    assert live.command(Command(command, "key")).ok
+    status.on_step(StepEvent(session.settings.plans["left"].steps[last], "end", 9.0, 9.0, 0, outcome="aborted",
+                             robot="left"))
+    console.close()
+    screen = console.screen()
+    rows = {row.robot: (row.now, row.next) for row in screen.rows}
+    assert rows == {"left": ("aborted: wait until motion 0 is done (timeout 60 s)", "-"), "right": ("stopped", "-")}
+    assert {row["robot"]: row["state"] for row in (r.to_json() for r in status.robots())} == {
+        "left": "aborted", "right": "between"}
+    assert screen.legend == ("the show was stopped by panic; keys off" if command == "panic"
+                             else "the show was stopped; keys off")

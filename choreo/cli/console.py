@@ -174,7 +174,7 @@ class Console:
         self._mode = TerminalMode(fd)
         self._mode.enter()
         self._bracket_pastes(True)
-        self._reader = KeyReader(fd, self.on_key)
+        self._reader = KeyReader(fd, self.on_key, text_wanted=self.typing)
         self._reader.start()
 
     def close(self) -> None:
@@ -361,6 +361,12 @@ class Console:
             self._type("")
         elif len(typed) < MAX_TYPED and (key == "space" or len(key) == 1 and key.isprintable()):
             self._type(typed + (" " if key == "space" else key))
+
+    def typing(self) -> bool:
+        """Whether a cue reference is being typed after `j`: the reader then hands on what
+        comes as typed (an input method commits a whole word in one write: no paste)."""
+        with self._lock:
+            return self._typed is not None
 
     def _ask(self, asking: bool) -> None:
         with self._lock:
@@ -557,18 +563,34 @@ class Console:
 
     def _row(self, robot: RobotRow, groups: list[tuple[tuple[str, ...], str]]) -> Row:
         cue = next((name for names, name in groups if robot.robot in names), None)
-        step = robot.step
-        if cue is not None:
-            now, style = f"waits for GO: {cue}", WAITING_STYLE
-        elif step is None:
-            now, style = "not started", "dim"
-        elif robot.done:
-            now, style = "done", "green"
-        else:  # a step over is dim: the robot is between steps (a play's motion may still run)
-            now, style = _step_text(step), "dim" if robot.ended else ""
-        following = robot.next_step
+        stopped = not robot.done and (robot.aborted or self._stopped())  # its steps will not all end
+        now, style = self._stopped_now(robot) if stopped else self._now(robot, cue)
+        following = None if stopped else robot.next_step
         return Row(robot.robot, now, _step_text(following) if following is not None else "-", robot.latency_ms,
                    robot.retries, style, bool(robot.retries or robot.failed))
+
+    @staticmethod
+    def _stopped_now(robot: RobotRow) -> tuple[str, str]:
+        """A robot the stop or panic cut off (`aborted`, and its step) or kept from its steps."""
+        if robot.aborted and robot.step is not None:
+            return f"aborted: {_step_text(robot.step)}", "bold red"
+        return "stopped", "bold red"
+
+    @staticmethod
+    def _now(robot: RobotRow, cue: str | None) -> tuple[str, str]:
+        step = robot.step
+        if cue is not None:
+            return f"waits for GO: {cue}", WAITING_STYLE
+        if step is None:
+            return "not started", "dim"
+        if robot.done:
+            return "done", "green"
+        # a step over is dim: the robot is between steps (a play's motion may still run)
+        return _step_text(step), "dim" if robot.ended else ""
+
+    def _stopped(self) -> bool:
+        """The show was stopped (stop or panic): a robot not done will not go on."""
+        return self.live.panicked or bool(self.live.stop())
 
     def _legend(self) -> str:
         """The keys (p says what it does now), or how the show ended."""

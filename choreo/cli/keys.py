@@ -290,15 +290,21 @@ class KeyReader:
     """Reads the terminal in a thread of its own and hands each key to `on_key` by name
     (`KeyParser` tells keys from sequences): it waits ESCAPE_WAIT_S after an Esc for the rest
     of a sequence before taking it for the Esc key, and PASTE_WAIT_S for the rest of a paste
-    (a pause in a big one must not turn its spaces into GOs)."""
+    (a pause in a big one must not turn its spaces into GOs). A read judged an unmarked paste
+    (`unmarked_paste`) makes all that follows it without a pause of PASTE_WAIT_S paste too: a
+    paste longer than one read must not end in keys. `text_wanted` says whether text is being
+    typed (the console's `j` prompt): then keys are handed on as they come, an input method's
+    whole word in one write no paste, up to the key that ends the typing."""
 
     def __init__(self, fd: int, on_key: Callable[[str], None], escape_wait_s: float = ESCAPE_WAIT_S,
-                 paste_wait_s: float = PASTE_WAIT_S) -> None:
+                 paste_wait_s: float = PASTE_WAIT_S, text_wanted: Callable[[], bool] | None = None) -> None:
         self.fd = fd
         self.on_key = on_key
         self.escape_wait_s = escape_wait_s
         self.paste_wait_s = paste_wait_s
+        self.text_wanted = text_wanted if text_wanted is not None else (lambda: False)
         self.parser = KeyParser()
+        self._unmarked = False  # an unmarked paste is under way: what comes before a pause is paste
         self._done = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="choreo-keys", daemon=True)
 
@@ -312,12 +318,28 @@ class KeyReader:
 
     def _loop(self) -> None:
         while not self._done.is_set():
-            pending, pasting = self.parser.pending, self.parser.pasting
+            pending, pasting = self.parser.pending, self.parser.pasting or self._unmarked
             data = self._read(self.paste_wait_s if pasting else self.escape_wait_s if pending else KEY_POLL_S,
                               4096 if pasting else 64)
+            if data is None and self._unmarked:
+                self._unmarked = False  # the pause that ends an unmarked paste
             keys = self.parser.feed(data) if data is not None else self.parser.timeout() if pending else []
-            for key in unmarked_paste(keys):
-                self.on_key(key)
+            self._hand_on(keys)
+
+    def _hand_on(self, keys: list[str]) -> None:
+        """The keys of one read to `on_key`: typed text as it comes, else by the paste rule."""
+        while keys and not self._unmarked and self.text_wanted():
+            self.on_key(keys.pop(0))  # Enter or Esc may end the typing: the rest are command keys
+        if not keys:
+            return
+        if self._unmarked:  # the rest of a paste: no key of it but a hurried Esc
+            if "escape" in keys:
+                self.on_key("escape")
+            return
+        judged = unmarked_paste(keys)
+        self._unmarked = judged[:1] == ["paste"]
+        for key in judged:
+            self.on_key(key)
 
     def _read(self, timeout: float, size: int) -> bytes | None:
         """What the terminal has (None if nothing came within `timeout`); the end of input

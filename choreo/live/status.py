@@ -41,11 +41,14 @@ class RobotRow:
     failed: int  # tries without a good reply
     due_s: tuple[float, ...] = ()  # show times its runner next wakes to send (`_Robot.dues_s`)
     cue_step: PlannedStep | None = None  # the cue's step it is on, or comes to next: where it is in the cue list
+    aborted: bool = False  # a step of it was cut off (stop, panic): its steps did not all end
 
     @property
     def state(self) -> str:
         if self.step is None:
             return "not_started"
+        if self.aborted:
+            return "aborted"
         if self.done:
             return "done"
         return "between" if self.ended else "running"
@@ -76,6 +79,7 @@ class _Robot:
     steps: tuple[PlannedStep, ...]  # its own steps, from where it starts
     at: int = -1  # position in `steps` of its current step (-1: none started)
     ended: bool = False
+    aborted: bool = False  # a step ended `aborted`: the robot was stopped mid-show
     started_s: float = 0.0
     latencies_ms: deque[float] = field(default_factory=lambda: deque(maxlen=LATENCIES))
     retries: int = 0
@@ -107,11 +111,13 @@ class _Robot:
         self.ended = ended
         self.started_s = show_s
 
-    def step_ended(self, step: PlannedStep) -> None:
-        """A step ended: its own current one (another robot's shared step is not its end)."""
+    def step_ended(self, step: PlannedStep, outcome: str | None = None) -> None:
+        """A step ended: its own current one (another robot's shared step is not its end);
+        one cut off (`aborted`) is no done, even as the last."""
         current = self.current
         if current is not None and current.index == step.index:
             self.ended = True
+            self.aborted = self.aborted or outcome == "aborted"
 
     def replied(self, latency_ms: float, ok: bool) -> None:
         if ok:
@@ -152,9 +158,9 @@ class _Robot:
 
     def row(self, skipped: Skipped) -> RobotRow:
         latency = statistics.median(self.latencies_ms) if self.latencies_ms else None
-        done = self.ended and self.at == len(self.steps) - 1
+        done = self.ended and self.at == len(self.steps) - 1 and not self.aborted
         return RobotRow(self.name, self.current, self.ended, done, self.following(skipped), self.started_s, latency,
-                        self.retries, self.failed, self.dues_s(skipped), self.cue_step())
+                        self.retries, self.failed, self.dues_s(skipped), self.cue_step(), self.aborted)
 
 
 @dataclass
@@ -194,7 +200,7 @@ class ShowStatus:
             elif event.event == "skip":
                 robot.moved_to(event.step, event.actual_s, ended=True)
             else:
-                robot.step_ended(event.step)
+                robot.step_ended(event.step, event.outcome)
 
     def on_log(self, level: int, message: str, time_ns: int) -> None:
         """Log lines say nothing of where a robot is."""
