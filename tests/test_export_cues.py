@@ -119,3 +119,60 @@ def test_a_cue_of_two_robots_is_a_row_each_in_cue_order_released_by_the_one_go(t
         ("1", "a", "go osc udp 127.0.0.1:53001"), ("1", "b", "go osc udp 127.0.0.1:53001"),
         ("2", "a", "time"), ("2", "b", "time")]
     assert rows[2]["actual_s"] == rows[3]["actual_s"] == pytest.approx(1.994, abs=0.01)  # the hold is not in it
+
+
+PANICKED = """\
+version: 1
+motions:
+  spin: {number: 3, duration: 3.0}
+steps:
+  - {play: spin, at: go, cue: 30, label: spin}
+  - wait: done
+  - {play: 5, at: go, cue: 40, label: bow}
+  - wait: done
+"""
+
+
+def test_a_cue_never_reached_is_not_reached_and_only_a_cue_waited_at_is_waiting(tmp_path):
+    """GO on cue 30, then a panic 1 s into its motion: the `wait: done` ends aborted, and cue 40
+    was never reached (no robot logged that it waits for GO there): `not reached`, not waiting."""
+    from runlog import wait_for
+    from test_pause import VirtualRun
+    run = VirtualRun(tmp_path, PANICKED)
+    assert wait_for(lambda: bool(run.live.waiting), 10, 0.001)
+    assert run.say("cue_go", "30").ok
+    assert wait_for(lambda: (1, "start") in run.hook.seen, 10, 0.001)  # polling the spin's end
+    run.source.advance(1.0)
+    assert run.say("panic").ok
+    run.finish()
+    with LogReader(run.log_path) as reader:
+        rows = cue_rows(reader)
+    assert [(r["number"], r["released"]) for r in rows] == [("30", "go test"), ("40", "not reached")]
+
+
+LATE = """\
+version: 1
+motions:
+  spin: {number: 3, duration: 3.5}
+steps:
+  - play: spin
+  - wait: done
+  - {play: 5, at: 3, label: late}
+  - {play: 6, at: go, label: curtain}
+"""
+
+
+def test_a_late_timed_cues_planned_time_is_its_cue_time_and_actual_less_planned_is_its_lateness(tmp_path):
+    """Cue `at: 3` after a 3.5 s motion waited for: the plan starts its step at 3.5, but the cue
+    is due at 3, and late from there: planned_s 3.0, actual_s - planned_s = late_ms (the plan's
+    3.5 made it 500 ms less)."""
+    from test_pause import VirtualRun
+    run = VirtualRun(tmp_path, LATE)
+    run.curtain()
+    run.finish()
+    with LogReader(run.log_path) as reader:
+        rows = cue_rows(reader)
+    late = next(r for r in rows if r["label"] == "late")
+    assert late["released"] == "time" and late["planned_s"] == 3.0 and late["late_ms"] > 400
+    # late from the cue less the play's lead (its first frames go out a few ms ahead of the cue)
+    assert (late["actual_s"] - late["planned_s"]) * 1e3 == pytest.approx(late["late_ms"], abs=10.0), late

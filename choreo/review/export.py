@@ -16,13 +16,14 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
 from bisect import bisect_left
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import TextIO
 
-from choreo.log.format import (COMMAND_TOPIC, STEP_TOPIC, CommandRecord, LogLayouts, Record, Result, StepRecord,
-                               frame_meaning, parse, reply_meaning)
+from choreo.log.format import (COMMAND_TOPIC, LOG_TOPIC, STEP_TOPIC, CommandRecord, LogLayouts, LogRecord, Record,
+                               Result, StepRecord, frame_meaning, parse, reply_meaning)
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import Exchange, exchanges
 from choreo.review.showtime import ShowTimes
@@ -150,6 +151,9 @@ GO = "go"  # a GO cue's row until the pass is over: which GO released it is foun
 WAITING = "waiting (stopped)"  # a GO cue a robot stood at, waiting for its GO, when the run ended
 NOT_REACHED = "not reached"
 NOT_IN_RUN = "not in this run"  # before --from's step, or outside --loop's section
+# the runner's line as a robot reaches a GO cue (choreo.run.runner: `[robot R: ]step N['label'] waits for GO`)
+WAITS_FOR_GO = re.compile(r"(?:robot (.+?): )?step (\d{1,9})(?: '.*')? waits for GO", re.S)
+WAITS_LINE_MAX = 2000  # longer lines are no runner's: not matched (a hostile log's cost stays bounded)
 
 
 @dataclass
@@ -185,8 +189,12 @@ class _CuePass:
     at: dict[tuple[str, int, int], int] = field(default_factory=dict)  # a GO cue's row: its step's log time
     robots: dict[str, _Whereabouts] = field(default_factory=dict)
     gos: dict[str | None, list[tuple[int, str]]] = field(default_factory=dict)  # cue (None: all) -> GOs' (time, source)
+    waits: dict[str, int] = field(default_factory=dict)  # robot -> the GO cue's step it waits at, as last logged
 
     def see(self, record: Record, log_time: int) -> None:
+        if isinstance(record, LogRecord):
+            self._waits(record.message)
+            return
         if isinstance(record, CommandRecord):
             if record.command in GO_COMMANDS and record.status == "ok" and record.count is None:
                 for named in {record.cue, None}:
@@ -196,6 +204,7 @@ class _CuePass:
             return
         where = self.robots.setdefault(record.robot or "", _Whereabouts())
         where.see(record)
+        self.waits.pop(record.robot or "", None)  # a step began or ended since: it waits no longer
         key = (record.robot or "", record.index, where.passes)
         cue = self.numbers.get(key[:2])
         if record.event == "end" or key in self.rows or \
@@ -205,6 +214,15 @@ class _CuePass:
         self.rows[key] = _cue_row(record, cue, released, self.tempo, where.passes)
         if released == GO:
             self.at[key] = log_time
+
+    def _waits(self, message: object) -> None:
+        """A robot waits for GO at a step: only the runner's line says so (a step that ended,
+        aborted by a panic, is no GO cue reached)."""
+        if not isinstance(message, str) or len(message) > WAITS_LINE_MAX:
+            return
+        said = WAITS_FOR_GO.fullmatch(message)
+        if said is not None:
+            self.waits[said.group(1) or ""] = int(said.group(2))
 
     def released_by(self) -> None:
         """Each GO cue's row names the GO that released it: of that cue (by number), else any
@@ -221,15 +239,23 @@ class _CuePass:
 def _cue_row(record: StepRecord, cue: Cue | None, released: str, tempo: Tempo | None, passes: int) -> dict:
     skipped = released == "skipped"
     return {"number": record.cue_number or (cue.number if cue else None), "label": record.label,
-            "robot": record.robot, "pass": passes, "planned_s": _ms(record.estimated_s),
+            "robot": record.robot, "pass": passes, "planned_s": _ms(_planned(record, released)),
             "actual_s": None if skipped else _ms(record.actual_s),
             "late_ms": None if skipped or record.go else round(record.late_ms, 3), "released": released,
             "bar_beat": _bar_beat(cue, tempo, record.estimated_s)}
 
 
+def _planned(record: StepRecord, released: str) -> float:
+    """A timed cue's planned time is its cue time (`at`): what it is late from; the plan's start
+    for its step may be later (a `wait: done` before it). A GO cue's: where the plan put it."""
+    timed = released != GO and not record.go and isinstance(record.cue, (int, float))
+    return float(record.cue) if timed and record.cue is not None else record.estimated_s
+
+
 def _unreached(cue: Cue, robot: str, passes: int, released: str, tempo: Tempo | None) -> dict:
+    planned = cue.at if not cue.go and cue.at is not None else cue.planned_s
     return {"number": cue.number, "label": cue.label, "robot": robot or None, "pass": passes,
-            "planned_s": _ms(cue.planned_s), "actual_s": None, "late_ms": None, "released": released,
+            "planned_s": _ms(planned), "actual_s": None, "late_ms": None, "released": released,
             "bar_beat": _bar_beat(cue, tempo, cue.planned_s)}
 
 
@@ -262,7 +288,7 @@ def cue_rows(reader: LogReader, show: AttachedShow | None = None) -> list[dict]:
     seen = _CuePass({step: cue for cue in cues or () for step in cue.steps}, tempo)
     topic, number = None, 0
     try:
-        for topic, log_time, data in reader.messages((STEP_TOPIC, COMMAND_TOPIC)):
+        for topic, log_time, data in reader.messages((STEP_TOPIC, COMMAND_TOPIC, LOG_TOPIC)):
             number += 1
             seen.see(parse(topic, data), log_time)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
@@ -317,7 +343,8 @@ def _not_reached(seen: _CuePass, cues: CueList | None, ended: _Ended, tempo: Tem
                 continue
             for pass_ in range(1, passes + 1):
                 if (robot, index, pass_) not in seen.rows:
-                    waiting = pass_ == passes and cue.go and ended.before.get(robot) == index
+                    waiting = pass_ == passes and cue.go and ended.before.get(robot) == index \
+                        and seen.waits.get(robot) == index
                     rows.append(_unreached(cue, robot, pass_, WAITING if waiting else NOT_REACHED, tempo))
     return rows
 
