@@ -493,3 +493,14 @@ def test_after_a_panic_or_stop_the_rows_say_aborted_or_stopped_not_done(tmp_path
         "left": "aborted", "right": "between"}
     assert screen.legend == ("the show was stopped by panic; keys off" if command == "panic"
                              else "the show was stopped; keys off")
+
+
+def test_with_the_playhead_on_a_skipped_cue_while_one_waits_the_go_line_says_go_fires_the_waiting_one(tmp_path):
+    console, session, live, status = evening(tmp_path)
+    live.command(Command("start", "key"))
+    for robot in ("left", "right"):
+        live.await_go(session.settings.plans[robot].steps[0], robot, reached_s=0.0, should_stop=lambda: True)
+    assert live.command(Command("skip", "key", label="2")).ok
+    assert live.command(Command("playhead", "key", label="2")).ok  # back onto the skipped cue
+    assert console.screen().go == ("GO fires cue 1 'applause' (the playhead's cue 2 'hello world' is skipped): "
+                                   "press Space or Enter")

@@ -535,8 +535,10 @@ class Console:
             return "next GO: none ahead", False
         if states.get(head) == "waiting":
             return f"GO fires {head.name}: press Space or Enter", True
-        if waits is not None and not head.go:  # GO on a timed cue fires the earliest cue waiting (Live)
-            return f"GO fires {waits} (the playhead's {head.name} is timed): press Space or Enter", True
+        skipped = states.get(head) == "skipped"
+        if waits is not None and (skipped or not head.go):  # GO then fires the earliest cue waiting (Live)
+            why = "skipped" if skipped else "timed"
+            return f"GO fires {waits} (the playhead's {head.name} is {why}): press Space or Enter", True
         if waits is not None:
             # GO would do nothing: the playhead's GO cue is not reached yet
             return f"playhead on {head.name}, not reached yet; {waits} waits: Up/Down to it", True
