@@ -6,6 +6,7 @@ deadline (Pane.wait_for) and asserts what happened, never how long it took."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
@@ -182,13 +183,29 @@ def fits(screen: str, width: int) -> list[str]:
     return lines[title[0]:legend[0] + 1]
 
 
+def settled(run: Pane, text: str, width: int, timeout: float = 10.0) -> str:
+    """The first screen showing `text` that is drawn whole (tmux may capture a redraw half
+    done: its top lines new, its lower ones the screen before), and the same on a second look."""
+    deadline = time.monotonic() + timeout
+    while True:
+        screen = run.wait_for(text, max(0.1, deadline - time.monotonic()))
+        try:
+            fits(screen, width)
+            if run.screen() == screen:
+                return screen
+        except AssertionError:
+            if time.monotonic() > deadline:
+                raise
+        time.sleep(0.05)
+
+
 @needs_tmux
 @pytest.mark.parametrize("width", (60, 80))
 def test_eight_robots_and_the_cue_list_fit_a_24_line_terminal(tmp_path, pane, width):  # noqa: F811 - the fixture
     run: Pane = pane(EIGHT_ROBOTS, width)
-    fits(run.wait_for("left, right +6 wait for GO: cue 1 'cue-0-of-the-show'"), width)
+    fits(settled(run, "left, right +6 wait for GO: cue 1 'cue-0-of-the-show'", width), width)
     run.keys("Space")
-    console = fits(run.wait_for("next GO: cue 4 "), width)  # every robot on a row of its own now
+    console = fits(settled(run, "next GO: cue 4 ", width), width)  # every robot on a row of its own now
     assert [line.split()[0] for line in console if line.split()[0] in EIGHT] == EIGHT
     assert any("GO: cue 1 'cue-0-of-the-show'" in line for line in console)  # and a message still fits
     run.keys("Escape")
