@@ -455,12 +455,17 @@ class Pane:
         return self._tmux("capture-pane", "-p", "-t", "run")
 
     def wait_for(self, text: str, timeout: float = 10.0) -> str:
+        """The first screen showing `text` that is drawn whole: the same on a second look a
+        moment later (tmux may capture a redraw half done: its top lines new, the ones below
+        still the screen before, which a test reading those lines would take for the console's)."""
         deadline = time.monotonic() + timeout
         while True:
             screen = self.screen()
             if text in screen:
-                return screen
-            assert time.monotonic() < deadline, f"{text!r} never appeared; the screen:\n{screen}"
+                time.sleep(0.03)
+                if self.screen() == screen:
+                    return screen
+            assert time.monotonic() < deadline, f"{text!r} never appeared (drawn whole); the screen:\n{screen}"
             time.sleep(0.02)
 
     def exit_code(self, timeout: float = 10.0) -> int:
