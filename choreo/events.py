@@ -271,6 +271,7 @@ class GoCue:
     reached_s: float
     released: bool = False
     key: object = None
+    told: bool = False  # its hold is in the log and its listeners have heard it
 
     def reached_by(self, robot: str) -> None:
         """`robot` waits at it too (the live controls call it, under their lock)."""
@@ -279,6 +280,10 @@ class GoCue:
     def release(self) -> None:
         """Its GO was given (the live controls call it, under their lock)."""
         self.released = True
+
+    def tell(self) -> None:
+        """Its hold is logged and its listeners told (the live controls call it, under their lock)."""
+        self.told = True
 
     @property
     def name(self) -> str:

@@ -337,17 +337,24 @@ class Live:
                 show.hold_at(reached_s)
             self._changed.notify_all()
         if new:
-            if isinstance(show, HoldingShowClock):
-                self._clock_changed()  # the log marks where the clock began to hold
-            for listener in self.listeners:
-                if isinstance(listener, WaitingListener):  # optional: the console, OSC notify, progress lines
-                    listener.on_waiting(cue)
+            self._announce(cue, show)
         with self._changed:
             while not cue.released:
                 if should_stop():
                     return None
                 self._changed.wait(0.05)
         return show.show_at(self._now()) if show is not None else cue.reached_s
+
+    def _announce(self, cue: GoCue, show: ShowClock | None) -> None:
+        """A GO cue newly waiting: the log marks where the clock began to hold, its listeners
+        hear it, and only then does `waiting` show it (outside the lock, then under it)."""
+        if isinstance(show, HoldingShowClock):
+            self._clock_changed()
+        for listener in self.listeners:
+            if isinstance(listener, WaitingListener):  # optional: the console, OSC notify, progress lines
+                listener.on_waiting(cue)
+        with self._changed:
+            cue.tell()
 
     def new_pass(self) -> None:
         """A --loop pass begins: its GO cues wait for a GO of their own again, its cues are
@@ -380,9 +387,11 @@ class Live:
 
     @property
     def waiting(self) -> list[GoCue]:
-        """The GO cues waiting now, the earliest first."""
+        """The GO cues waiting now whose hold the log has (a GO does not wait for that: it
+        releases any cue waiting), the earliest first. Whoever watches the show sees a cue wait
+        once the log says so: an operator (or a test on virtual time) acting on it acts after."""
         with self._changed:
-            return self._in_order()
+            return [cue for cue in self._in_order() if cue.told]
 
     def _in_order(self) -> list[GoCue]:
         """The lock is held. A cue given its GO leaves `_waiting` at once (`_release`)."""
