@@ -32,7 +32,7 @@ from choreo.events import (PANIC, STOPPED, Answer, Command, CommandEvent, Comman
                            StepEvent, StopRequest, Subscription, WaitingListener)
 from choreo.live.limits import LIMITS, Held, Limits, ReportGate
 from choreo.log.format import UNLOGGED
-from choreo.show.cues import Cue, CueList, CueNotFound
+from choreo.show.cues import Cue, CueList, CueNotFound, quoted
 from choreo.show.model import SOLO, PlannedStep
 from choreo.textfit import fit
 
@@ -40,7 +40,6 @@ if TYPE_CHECKING:
     from choreo.live.status import ShowStatus
 
 LOCKOUT_S = 0.5  # a second GO this soon after one is taken for a double press, and refused
-REF_CHARS = 40  # the most of a cue reference typed or sent that an answer repeats
 NO_CUES = CueList()  # a show run without its cue list (GO still fires the earliest GO cue waiting)
 RESUME_FIRST = "paused: resume first (p or /choreo/resume)"
 
@@ -154,16 +153,6 @@ class HoldingShowClock:
 def _order(cue: GoCue) -> tuple[float, float, int]:
     """GO cues waiting, the earliest first: by when they were reached, then as planned."""
     return cue.reached_s, cue.step.planned_s, cue.step.index
-
-
-def _ref(text: str) -> str:
-    """A cue reference from outside, as an answer repeats it: visible and bounded."""
-    return repr(fit(text, REF_CHARS))
-
-
-def cue_json(cue: Cue) -> dict[str, Any]:
-    """A cue as `/choreo/status` and the answers give it: as every JSON output does."""
-    return cue.to_json()
 
 
 class Live:
@@ -501,13 +490,13 @@ class Live:
         show = self.show
         with self._changed:
             playhead = self._playhead()
-            waiting = [{**cue_json(self._cue_of(w)), "robots": sorted(w.robots), "reached_s": round(w.reached_s, 3)}
+            waiting = [{**self._cue_of(w).to_json(), "robots": sorted(w.robots), "reached_s": round(w.reached_s, 3)}
                        for w in self._in_order()]
         rows = self.status_of_robots.robots(self.skipped) if self.status_of_robots is not None else ()
         return {"state": self.state,
                 "show_s": round(show.show_at(self._now()), 3) if show is not None else None,
                 "clock": self.clock,
-                "playhead": cue_json(playhead) if playhead is not None else None,
+                "playhead": playhead.to_json() if playhead is not None else None,
                 "waiting": waiting, "paused": self._paused,
                 "robots": {row.robot: row.to_json() for row in rows}}
 
@@ -691,7 +680,7 @@ class Live:
                     return self._cue_of(waiting)
             if not self.cues:
                 at = ", ".join(repr(w.name) for w in self._in_order()) or "no cue"
-                return Answer("error", f"cue {_ref(ref)} is not waiting for GO (waiting: {at})")
+                return Answer("error", f"cue {quoted(ref)} is not waiting for GO (waiting: {at})")
             return Answer("error", fit(str(exc), 200))
 
     def _answer(self, verb: str, waiting: GoCue, note: str = "") -> Answer:

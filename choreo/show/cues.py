@@ -106,13 +106,13 @@ class CueList:
         named = index.labels.get(unicodedata.normalize("NFC", ref), ())  # é typed or sent either way
         if len(named) > 1:
             numbers = ", ".join(cue.number for cue in named[:12]) + (", ..." if len(named) > 12 else "")
-            raise CueNotFound(f"cue {_shown(ref)} is ambiguous: cues {numbers} are all labelled so; give the number")
+            raise CueNotFound(f"cue {quoted(ref)} is ambiguous: cues {numbers} are all labelled so; give the number")
         if named:
             return named[0]
         known = ", ".join(cue.number for cue in self.cues[:12]) + (", ..." if len(self.cues) > 12 else "")
         near = _nearest(self.cues, ref)
         meant = f": did you mean {near.name}?" if near is not None else ""
-        raise CueNotFound(f"no cue {_shown(ref)} in this show (cues: {known or 'none'}){meant}")
+        raise CueNotFound(f"no cue {quoted(ref)} in this show (cues: {known or 'none'}){meant}")
 
 
 @dataclass(frozen=True)
@@ -168,12 +168,13 @@ NEAREST_AMONG = 100  # cues a mistyped reference is compared with (difflib) for 
 NEAREST_CHARS = 24  # of a reference, compared for a suggestion (a label longer than that is typed by number)
 
 
-def _shown(ref: str) -> str:
-    """A reference as a message quotes it: escaped (`repr`) and cut, since it was typed or sent."""
-    return repr(ref) if len(ref) <= _SHOWN_CHARS else repr(ref[:_SHOWN_CHARS]) + "…"
+def quoted(ref: str) -> str:
+    """A cue reference as every message quotes it (the cue list's and the live controls'):
+    escaped (`repr`) and cut, since it was typed or sent."""
+    return repr(ref) if len(ref) <= SHOWN_CHARS else repr(ref[:SHOWN_CHARS]) + "…"
 
 
-_SHOWN_CHARS = 40
+SHOWN_CHARS = 40  # of a typed or sent cue reference, repeated in a message
 
 
 def _value(number: str) -> Decimal | None:
