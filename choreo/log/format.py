@@ -31,6 +31,12 @@ LOG_TOPIC = "/choreo/log"
 CLOCK_TOPIC = "/choreo/clock"
 CLOCK_EVERY_S = 0.5  # how often (show time) /choreo/clock samples the show clock
 CLOCK_STATES = (RUNNING, HELD, PAUSED)  # a /choreo/clock sample's `state`
+CLOCK_SOURCES = ("machine", "music", "link")  # what keeps the show clock (a /choreo/clock sample's `source`)
+# What a /choreo/clock sample on the Link clock marks (absent: a periodic sample): the show's
+# start on a bar line, a peer's tempo change, peers joining or leaving, the session's transport
+# stopping or playing, and a jump of the session's timeline (a peer's clock jumped, or the
+# session was rejoined) that moved the beat by more than LINK_JUMP_BEATS.
+LINK_EVENTS = ("start", "tempo", "peers", "stopped", "playing", "jump")
 COMMAND_TOPIC = "/choreo/command"
 # topic -> (schema name, schema file under schemas/)
 CHANNELS = {
@@ -367,14 +373,24 @@ class ClockRecord(_Record):
     topic: ClassVar[str] = CLOCK_TOPIC
     show_s: float
     monotonic_ns: int
-    source: str = "machine"  # machine | music: what keeps the show clock
+    source: str = "machine"  # machine | music | link: what keeps the show clock
     state: str | None = None  # running | held (a GO cue waits) | paused; absent: running (logs before pause)
+    # On the Link clock (source link) only: the session as this host saw it at that instant
+    link_us: int | None = None  # Link's clock in microseconds (CLOCK_MONOTONIC_RAW on Linux: not monotonic_ns's)
+    beat: float | None = None  # the show's beat: 0 at show time 0 (bar 1 beat 1), the same on every host
+    session_beat: float | None = None  # Link's own beat count on this host (a whole number of bars off others')
+    tempo: float | None = None  # the session's tempo, beats a minute
+    peers: int | None = None  # other Link peers seen
+    event: str | None = None  # what the sample marks (LINK_EVENTS); absent: a periodic sample
 
     def _checked(self) -> Any:
-        """As every record's, and a state that is one of the clock's (a review places time by it)."""
+        """As every record's, and a state, source and event that are the clock's (a review
+        places time by them)."""
         _Record._checked(self)
-        if self.state is not None and self.state not in CLOCK_STATES:
-            raise ValueError(f"field 'state' holds {self.state!r:.40}, none of {', '.join(CLOCK_STATES)}")
+        for name, allowed in (("state", CLOCK_STATES), ("source", CLOCK_SOURCES), ("event", LINK_EVENTS)):
+            value = getattr(self, name)
+            if value is not None and value not in allowed:
+                raise ValueError(f"field {name!r} holds {value!r:.40}, none of {', '.join(allowed)}")
         return self
 
 
