@@ -14,6 +14,11 @@ from typing import Any, TypedDict
 from choreo.show.model import (
     DEFAULT_DONE_TIMEOUT_S,
     GO,
+    LINK,
+    LINK_METER,
+    MACHINE,
+    NOMINAL_BPM,
+    LinkClock,
     Motion,
     Music,
     Repeat,
@@ -50,6 +55,9 @@ def build_show(file: str, source: bytes, doc: Doc, folder: Path | None = None) -
         tracks={name: steps.build(track, ("tracks", name)) for name, track in (data.get("tracks") or {}).items()},
         tempo=tempo,
         music=_music(data.get("music"), folder),
+        clock=data.get("clock", MACHINE),
+        link=link_clock(data.get("tempo")) if data.get("clock") == LINK else None,
+        hosts={name: tuple(robots) for name, robots in (data.get("hosts") or {}).items()},
     )
 
 
@@ -59,7 +67,17 @@ def tempo_of(entry: dict[str, Any]) -> Tempo:
     meter = int(entry.get("meter", 4))
     if "bars" in entry:
         return Tempo.of_bars(tuple(float(start) for start in entry["bars"]), meter)
-    return Tempo(float(entry["bpm"]), float(entry.get("offset", 0.0)), meter)
+    bpm = NOMINAL_BPM if entry["bpm"] == LINK else float(entry["bpm"])  # `bpm: link`: a plan at a nominal tempo
+    return Tempo(bpm, float(entry.get("offset", 0.0)), meter)
+
+
+def link_clock(tempo: dict[str, Any] | None) -> LinkClock:
+    """A show's Link clock from its `tempo:` (checked: one tempo, no offset): the tempo it
+    proposes (None for `bpm: link`, or no `tempo:`: the session's) and its meter."""
+    if not tempo:
+        return LinkClock(None, LINK_METER)
+    bpm = tempo.get("bpm")
+    return LinkClock(None if bpm in (None, LINK) else float(bpm), int(tempo.get("meter", LINK_METER)))
 
 
 def _music(entry: dict[str, Any] | None, folder: Path | None) -> Music | None:

@@ -19,6 +19,11 @@ from choreo.show.build import cue_text, tempo_of
 from choreo.show.cues import MAX_NUMBER_CHARS, NUMBER_RE, number_key
 from choreo.show.model import (
     GO,
+    LINK,
+    LINK_NO_GO,
+    LINK_NO_MAP,
+    LINK_NO_MUSIC,
+    LINK_NO_OFFSET,
     MAX_BPM,
     MAX_CUE_S,
     MUSIC_FORMATS,
@@ -49,6 +54,7 @@ class _Walk:
     declared: tuple[str, ...] = ()  # `robots:` (empty for a one-robot show)
     in_track: bool = False
     tempo: Tempo | None = None  # the show's tempo when it is usable (checked)
+    link: bool = False  # `clock: link`: the Link session's beat keeps the show clock
 
     def ok(self, path: JsonPath) -> bool:
         """Whether the value at `path` passed the schema (so it is the type it should be)."""
@@ -80,7 +86,10 @@ def check_meaning(doc: Doc, report: Report, folder: Path | None = None) -> None:
     if "on_abort" in data and walk.ok(("on_abort",)):
         _check_motion_ref(walk, ("on_abort",), data["on_abort"])
     _check_robots(walk)
-    _check_music(walk, folder)
+    _check_link(walk)
+    _check_hosts(walk)
+    if not walk.link:  # on the Link clock `music:` is refused, its file not looked for
+        _check_music(walk, folder)
     walk.tempo = _checked_tempo(walk)
     steps = data.get("steps")
     if isinstance(steps, list) and walk.ok(("steps",)):
@@ -130,7 +139,8 @@ def _check_robots(walk: _Walk) -> None:
     if not isinstance(robots, dict) or not walk.ok(("robots",)):
         return
     walk.declared = tuple(robots)
-    ports: dict[str, str] = {}
+    ports: dict[tuple[str | None, str], str] = {}
+    host_of = _host_of(data.get("hosts"))  # robots on different hosts (computers) may each have a ttyUSB0
     for name, settings in robots.items():
         here = ("robots", name)
         if not isinstance(settings, dict) or not walk.ok(here):
@@ -140,9 +150,89 @@ def _check_robots(walk: _Walk) -> None:
         port = settings.get("port")
         if not isinstance(port, str) or is_simulator(port.strip()):
             continue  # every simulator is a board of its own
-        first = ports.setdefault(same_port(port), name)
+        first = ports.setdefault((host_of.get(name), same_port(port)), name)
         if first != name:
             walk.problem(here + ("port",), f"port {port} is already robot {first}'s: each robot needs its own port")
+
+
+def _host_of(hosts: Any) -> dict[str, str]:
+    """Each robot's host as `hosts:` says (the first that names it), before its checks."""
+    if not isinstance(hosts, dict):
+        return {}
+    return {name: host for host, robots in reversed(hosts.items()) if isinstance(robots, list)
+            for name in robots if isinstance(name, str)}
+
+
+# --------------------------------------------------------------------------- the Link clock, hosts
+
+
+def _check_link(walk: _Walk) -> None:
+    """`clock: link`: the session's beat keeps the show clock, so nothing else may: no music,
+    no tempo map, no offset to bar 1 (GO cues: `_check_cue`). `bpm: link` needs the session."""
+    data = walk.doc.data
+    walk.link = data.get("clock") == LINK and walk.ok(("clock",))
+    tempo = data.get("tempo")
+    tempo = tempo if isinstance(tempo, dict) and walk.ok(("tempo",)) else {}
+    if tempo.get("bpm") == LINK and not walk.link:
+        walk.problem(("tempo", "bpm"), "`bpm: link` takes the Ableton Link session's tempo: add `clock: link`, "
+                                       "or give the beats a minute")
+    if not walk.link:
+        return
+    offset = tempo.get("offset")
+    if _number(offset) and offset != 0 and walk.ok(("tempo", "offset")):
+        walk.problem(("tempo", "offset"), f"{LINK_NO_OFFSET}: leave out `offset:` (or write 0), or use "
+                                          "`clock: machine`")
+    if "bars" in tempo:
+        walk.key_problem(("tempo", "bars"), f"{LINK_NO_MAP}: give one tempo (`bpm: 120`, or `bpm: link`: the "
+                                            "session's), or use `clock: machine`")
+    if "music" in data:
+        walk.key_problem(("music",), f"{LINK_NO_MUSIC}: leave out `music:` (a peer such as Live plays it), or "
+                                     "use `clock: machine`")
+
+
+def _check_hosts(walk: _Walk) -> None:
+    """`hosts:` shares the show's `robots:` among computers on the Link clock: each robot on
+    exactly one host, every name a robot's."""
+    data = walk.doc.data
+    hosts = data.get("hosts")
+    if not isinstance(hosts, dict) or not walk.ok(("hosts",)):
+        return
+    if "robots" not in data:
+        walk.key_problem(("hosts",), "`hosts:` shares a show's `robots:` among computers, and this show has one "
+                                     "robot (`robot:`): leave out `hosts:`")
+        return
+    if not walk.link:
+        walk.key_problem(("hosts",), "hosts play in unison on the Ableton Link session's beat: add `clock: link` "
+                                     "(`choreo run --clock machine` still rehearses one host's robots)")
+    if not walk.declared:
+        return  # `robots:` is wrong: the schema has said how
+    seen: dict[str, JsonPath] = {}
+    complete = all(_check_host_list(walk, host, robots, seen) for host, robots in hosts.items())
+    missing = [name for name in walk.declared if name not in seen]
+    if complete and missing:
+        walk.key_problem(("hosts",), f"robot {missing[0]!r} is on no host: add it to the list of the host that "
+                                     "drives it")
+
+
+def _check_host_list(walk: _Walk, host: str, robots: Any, seen: dict[str, JsonPath]) -> bool:
+    """One host's robots: each a robot of the show, on no other host (`seen`: where each was
+    named first). False when the list is unreadable (the schema has said why)."""
+    here = ("hosts", host)
+    if not isinstance(robots, list) or not walk.ok(here):
+        return False
+    for index, name in enumerate(robots):
+        path = here + (index,)
+        if not isinstance(name, str) or not walk.ok(path):
+            continue
+        if name not in walk.declared:
+            walk.problem(path, _unknown_robot(name, walk.declared, f"host {host!r} drives"))
+            continue
+        first = seen.setdefault(name, path)
+        if first != path:
+            line = walk.doc.mark(first)[0]
+            walk.problem(path, f"robot {name!r} is already on host {first[1]!r} (line {line}): one host drives "
+                               "each robot: keep it on one list")
+    return True
 
 
 def _check_tracks(walk: _Walk, tracks: dict[str, Any]) -> None:
@@ -278,6 +368,8 @@ def _check_repeat(walk: _Walk, step: dict[str, Any], here: JsonPath, robots: tup
 def _check_cue(walk: _Walk, step: dict[str, Any], here: JsonPath, looping: bool) -> None:
     at = step.get("at")
     path = here + ("at",)
+    if at == GO and walk.link and walk.ok(path):
+        walk.problem(path, f"{LINK_NO_GO}: cue the step in bars and beats or in seconds, or use `clock: machine`")
     if at is None or not walk.ok(path) or isinstance(at, bool) or at == GO:
         return  # a GO cue may be anywhere: in a repeat, every pass waits for its GO
     if isinstance(at, dict):

@@ -63,6 +63,11 @@ def _is_letter(ch: str) -> bool:
 
 
 SOLO = "robot"  # the name a one-robot show's robot goes by (`robot:`)
+MACHINE, LINK = "machine", "link"  # `clock:`: the machine's clock (or the music's), or the Ableton Link session's
+CLOCKS = (MACHINE, LINK)
+NOMINAL_BPM = 120.0  # `tempo: {bpm: link}`: the tempo a plan is drawn at (the session's is known only at run time)
+HOST_NAME_MAX = 32  # characters of a `hosts:` name; the schema's pattern says the same
+LINK_METER = 4  # beats a bar (Link's quantum) of a show on the Link clock without `tempo:`
 ON_FAULT = ("stop", "continue")  # what the show does when one robot's link fails
 GO = "go"  # `at: go`: the cue that waits for the operator's GO, not a time
 
@@ -261,6 +266,22 @@ class Music:
 
 
 @dataclass(frozen=True)
+class LinkClock:
+    """A show on the Ableton Link clock (`clock: link`): the tempo it proposes to the session
+    and its meter, which is Link's quantum (the show starts on a bar line of the session)."""
+
+    bpm: float | None  # the tempo proposed; None: the session's (`tempo: {bpm: link}`)
+    meter: int = LINK_METER
+
+
+# Why a show on the Link clock cannot have these, for the located checks and `--clock link` alike.
+LINK_NO_GO = "the Link session's beat never stops: a GO cue cannot hold it"
+LINK_NO_MUSIC = "the session's beat keeps the show clock, and music is not stretched to a tempo another peer sets"
+LINK_NO_MAP = "a tempo map follows a recording's drift, and on the Link clock the session sets the tempo"
+LINK_NO_OFFSET = "on the Link clock bar 1 starts at show time 0, on a bar line of the session"
+
+
+@dataclass(frozen=True)
 class Show:
     """A loaded, checked show file."""
 
@@ -273,8 +294,11 @@ class Show:
     steps: tuple[Step | Repeat, ...] = ()  # the steps as written; `compile_plan` flattens them
     robots: dict[str, RobotSettings] = field(default_factory=dict)  # `robots:`, in file order; {} for `robot:`
     tracks: dict[str, tuple[Step | Repeat, ...]] = field(default_factory=dict)  # `tracks:`, by robot
-    tempo: Tempo | None = None
+    tempo: Tempo | None = None  # with `bpm: link`, at `NOMINAL_BPM`: the plan's, not the run's
     music: Music | None = None
+    clock: str = MACHINE  # `clock:`, one of `CLOCKS`
+    link: LinkClock | None = None  # the Link clock's settings (None: not `clock: link`)
+    hosts: dict[str, tuple[str, ...]] = field(default_factory=dict)  # `hosts:`: each host's robots; {}: one host
 
     @property
     def ensemble(self) -> bool:
@@ -285,6 +309,10 @@ class Show:
     def cast(self) -> dict[str, RobotSettings]:
         """Every robot by name: `robots:`, or the one robot of a `robot:` show as `robot`."""
         return dict(self.robots) if self.robots else {SOLO: self.robot}
+
+    def host_of(self, robot: str) -> str | None:
+        """The host (`hosts:`) that drives `robot`; None in a show for one host."""
+        return next((host for host, robots in self.hosts.items() if robot in robots), None)
 
     def abort_motion(self, robot: str) -> int | None:
         """What `robot` plays when the show is stopped: its own `on_abort`, else the show's."""

@@ -163,6 +163,9 @@ def _property_name(error: _Error, data: Any) -> list[_Said] | None:
     if "propertyNames" not in error.schema_path:
         return None
     name = error.instance
+    if error.schema_path[1:2] == ("hosts",):
+        return [(error.path + (str(name),), f"host name {name!r} must hold only letters, digits, `_` and `-` "
+                                            "(1 to 32 characters)", True)]
     if error.schema_path[1:2] in (("robots",), ("tracks",)):
         return [(error.path + (str(name),), _robot_name_problem(name), True)]
     if error.validator == "maxLength":
@@ -212,6 +215,8 @@ def _one_of_forms(error: _Error, data: Any) -> list[_Said] | None:
         return [_cue_problem(error)]
     if error.leaf == "cue":
         return [(error.path, _cue_number_problem(error), False)]
+    if error.path == ("tempo", "bpm"):
+        return [(error.path, _bpm_problem(error), False)]
     return [(error.path, _either_problem(error), False)]
 
 
@@ -235,6 +240,12 @@ def _cue_problem(error: _Error) -> _Said:
             return path, _simple_problem(path, e.validator, e.instance, e.expected), False
     return path, (f"expected seconds (a number) or a bar and beat (`{{bar: 12, beat: 3}}`), "
                   f"not {kind_text(instance)}"), False
+
+
+def _bpm_problem(error: _Error) -> str:
+    """`bpm:` is beats a minute (its range is checked on its own, as before `link` was one) or `link`."""
+    return (f"the tempo is beats a minute (more than 0, at most 400) or `link` (with `clock: link`: the "
+            f"session's), not {value_text(error.instance)}")
 
 
 def _cue_number_problem(error: _Error) -> str:
@@ -342,6 +353,9 @@ def _simple_problem(path: JsonPath, validator: str, instance: Any, expected: Any
 
 def _robot_list_problem(path: JsonPath, validator: str, instance: Any, expected: Any) -> str | None:
     """`robots:`/`tracks:` at the top, or a step's `robots:`: what is wrong with the list."""
+    hosts = _host_list_problem(path, validator, instance, expected)
+    if hosts is not None:
+        return hosts
     if validator in _ROBOT_LISTS:
         said = _ROBOT_LISTS[validator].format(expected=expected)
         if len(path) == 1 and path[0] in ("robots", "tracks"):
@@ -350,6 +364,22 @@ def _robot_list_problem(path: JsonPath, validator: str, instance: Any, expected:
             return f"a step's `robots:` {said}"
     if validator == "pattern" and len(path) >= 2 and path[-2] == "robots" and isinstance(path[-1], int):
         return _robot_name_problem(instance)
+    return None
+
+
+def _host_list_problem(path: JsonPath, validator: str, instance: Any, expected: Any) -> str | None:
+    """`hosts:` (empty, too many), one host's list of robots (empty, a robot twice), a name in it."""
+    if path == ("hosts",) and validator in ("minProperties", "maxProperties"):
+        return ("`hosts:` is empty: name each host and its robots, or leave it out (one host)"
+                if validator == "minProperties" else f"`hosts:` names more than {expected} hosts")
+    if len(path) == 3 and path[0] == "hosts" and validator == "pattern":
+        return _robot_name_problem(instance)
+    if len(path) != 2 or path[0] != "hosts":
+        return None
+    if validator == "minItems":
+        return f"host {path[1]!r} drives no robot: list its robots, or leave the host out"
+    if validator == "uniqueItems":
+        return f"host {path[1]!r} names a robot twice: list each once"
     return None
 
 
