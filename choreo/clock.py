@@ -425,6 +425,17 @@ class PausableShowClock(ShowClock, Protocol):
         """Go on from where it stood (a GO cue still waiting keeps the machine's clock held)."""
 
 
+@runtime_checkable
+class BeatGrid(Protocol):
+    """A show clock whose bars and beats are not fixed show times: an Ableton Link session's,
+    whose tempo any peer may change mid-show. A cue written in bars and beats is placed on it
+    as it stands when the runner looks (and looks again as it sleeps towards it); a cue in
+    seconds stays on seconds."""
+
+    def at_beat(self, bar: int, beat: float) -> float:
+        """Show time at which bar `bar`, beat `beat` (counted from 1) falls now."""
+
+
 @dataclass(frozen=True)
 class MachineShowClock:
     """The machine's clock: show time 0 is one fixed monotonic instant."""
@@ -438,10 +449,15 @@ class MachineShowClock:
         return mono - self.zero
 
 
-def sleep_until_show(clock: RunClock, show: ShowClock, show_s: float,
+def sleep_until_show(clock: RunClock, show: ShowClock, show_s: float | Callable[[], float],
                      should_stop: Callable[[], bool] = lambda: False,
                      on_idle: Callable[[], None] | None = None) -> bool:
-    """Sleep until show time `show_s` on `show`; False if told to stop."""
+    """Sleep until show time `show_s` on `show`; False if told to stop. A show time given as a
+    function (a cue in bars on a `BeatGrid`) is read again as the sleep goes on."""
+    if callable(show_s):
+        due = show_s
+        return clock.sleep_until(lambda: show.mono_at(due()), should_stop, on_idle=on_idle)
     if isinstance(show, MachineShowClock):
         return clock.sleep_until(show.zero + show_s, should_stop, on_idle=on_idle)
-    return clock.sleep_until(lambda: show.mono_at(show_s), should_stop, on_idle=on_idle)
+    fixed = show_s
+    return clock.sleep_until(lambda: show.mono_at(fixed), should_stop, on_idle=on_idle)

@@ -404,6 +404,10 @@ ALLOWED = {
     "self._screen.size": "rich's Console.size setter, on the console this object made",
     "self.line.settings": "the simulator's own line, held by the port that made it",
     "setattr(sys)": "the process entry gives Python a stream on a standard descriptor found closed at start-up",
+    "link.quantum": "aalink's Link is set up by its properties (the binding's only way), on the peer the session made",
+    "link.start_stop_sync_enabled": "aalink's Link is set up by its properties, on the peer the session made",
+    "link.enabled": "aalink's Link joins and leaves by its `enabled` property, on the peer the session made",
+    "link.tempo": "aalink's Link proposes a tempo to the session by its `tempo` property, on the session's peer",
     "serial.protocol_handler_packages.append": "pyserial's documented way to find URL handlers by package name "
                                                "(register_url_handlers adds choreo.sim once)",
 }

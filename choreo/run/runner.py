@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Protocol
 
 from choreo.board.link import Link, Played
-from choreo.clock import MachineShowClock, RunClock, ShowClock, sleep_until_show
+from choreo.clock import BeatGrid, MachineShowClock, RunClock, ShowClock, sleep_until_show
 from choreo.errors import ChoreoError, Interrupted, LinkError
 from choreo.events import RunListener, RunResult, RxEvent, StepEvent, StopRequest, Tag, TxEvent, never
 from choreo.log.format import ABORT_LABEL, ERROR, INFO, LATE_MS, WARNING
@@ -74,6 +74,7 @@ class Runner:
         self.poll_s = poll_s
         self.on_idle: Callable[[], None] | None = None  # given by each run (see `run`)
         self.show: ShowClock = MachineShowClock(0.0)
+        self._grid: BeatGrid | None = None  # the show clock, if its bars move (a Link session's tempo)
         self._last_play_done: float | None = None  # monotonic time the last restore was answered
         self._last_motion: int | None = None
         self._played = Played(1, 0.0)  # how the last play sequence went
@@ -97,6 +98,7 @@ class Runner:
         preroll = self.preroll_s()
         cursor = self._origin() - preroll  # a first play cued at the start may go out before it
         self.show = show if show is not None else MachineShowClock(self.clock.mono() - cursor)
+        self._grid = self.show if isinstance(self.show, BeatGrid) else None  # asked once: isinstance is slow
         self.cues, self.on_idle = cues, on_idle
         with self.link.subscribe(_RetryReporter(self)), self.link.stopping_on(self.stop):
             try:
@@ -141,6 +143,13 @@ class Runner:
             return 0.0
         return max(0.0, self.link.start_lead_s(first.motion) - (first.at - self._origin()))
 
+    def _at(self, step: PlannedStep) -> float | None:
+        """A step's cue in show time: as planned, or for a cue in bars on a clock whose tempo
+        moves, where that bar falls now."""
+        if step.at_beat is not None and self._grid is not None:
+            return self._grid.at_beat(*step.at_beat)
+        return step.at
+
     def _sleep_until(self, show_s: float) -> bool:
         return sleep_until_show(self.clock, self.show, show_s, self.stop, on_idle=self.on_idle)
 
@@ -167,17 +176,18 @@ class Runner:
         started = self.show_time()
         # A cue is measured against its own time: one the show has already overrun (a motion
         # ran long before it) starts at once and counts as late by the overrun.
-        planned = step.at - lead if step.at is not None else due
+        at = self._at(step)
+        planned = at - lead if at is not None else due
         # An uncued step waits for the step before to be answered (a play's frames take the
         # wire's time after its start): it is late only by what came after that.
-        late_ms = (started - (planned if step.at is not None else max(planned, self._ready_s))) * 1e3
+        late_ms = (started - (planned if at is not None else max(planned, self._ready_s))) * 1e3
         self._emit(StepEvent(step, "start", planned, started, self._now_ns(), late_ms, robot=self.robot))
         self._run += 1
         if late_ms > LATE_MS and step.kind is StepKind.PLAY:
             # Only a play's lateness shows on stage; a wait after a play always starts once the
             # play's frames are answered, and its end stays on the absolute schedule anyway.
             self._late += 1
-            cue = f" (cue at {step.at:g} s)" if step.at is not None else ""
+            cue = f" (cue at {at:g} s)" if at is not None else ""
             self._log(WARNING, f"{step_ref(step)}{cue} started {late_ms:.1f} ms late")
         outcome = "failed"
         slip_ms = 0.0
@@ -215,9 +225,20 @@ class Runner:
             return None
         if step.go:
             cursor = self._await_go(step, cursor)
-        due = max(step.at, cursor) - self._lead(step) if step.at is not None else cursor
-        if not self._sleep_to_cue(step, due):
-            return None
+        lead = self._lead(step)
+        if step.at_beat is not None and self._grid is not None:
+            # a cue in bars on a clock whose tempo moves: where it falls is read again as the sleep goes on
+            grid, (bar, beat) = self._grid, step.at_beat
+
+            def moving() -> float:
+                return max(grid.at_beat(bar, beat), cursor) - lead
+            if not self._sleep_to_cue(step, moving):
+                return None
+            due = moving()
+        else:
+            due = max(step.at, cursor) - lead if step.at is not None else cursor
+            if not self._sleep_to_cue(step, due):
+                return None
         if self.live is not None:  # not paused: one attribute read, and one set look-up for a cue
             if not self.live.await_running(self.stop, self.robot or SOLO):
                 raise Interrupted(self.stop.reason)
@@ -225,7 +246,7 @@ class Runner:
                 return None
         return due
 
-    def _sleep_to_cue(self, step: PlannedStep, due: float) -> bool:
+    def _sleep_to_cue(self, step: PlannedStep, due: float | Callable[[], float]) -> bool:
         """Sleep until `due`; False: `step` was skipped on the way. A skip given while the robot
         sleeps towards the cue ends the sleep (the Live wakes the dozers): the robot passes the
         cue then, not at its time. Only a stop interrupts: a skip undone between the sleep's
@@ -247,7 +268,8 @@ class Runner:
     def _pass(self, step: PlannedStep, cursor: float) -> None:
         """A skipped cue's step: one `skip` event (no start, no end), nothing sent."""
         self._log(INFO, f"{step_ref(step)} skipped (cue {step.cue}): not run")
-        planned = step.at if step.at is not None else cursor
+        at = self._at(step)
+        planned = at if at is not None else cursor
         self._emit(StepEvent(step, "skip", planned, self.show_time(), self._now_ns(), outcome="skipped",
                              robot=self.robot))
 

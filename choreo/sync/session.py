@@ -1,0 +1,313 @@
+"""This host's peer in an Ableton Link session, on a thread of its own, sampled.
+
+The aalink binding gives the session's state only as "now" (beat now, tempo now, Link's clock
+now) and needs an asyncio loop running beside it. So a `LinkSession` runs one loop on its own
+thread, and every SAMPLE_S reads the session: Link's clock between two reads of the monotonic
+clock (a `ClockPair`), the beat at Link's clock (a `Timeline`), the tempo, the peers, whether
+the transport plays. The latest sample is a frozen `LinkSnapshot` that any thread reads without
+a lock; a runner maps a beat to a monotonic deadline with it.
+
+What changes between samples is told to the session's listeners as a `LinkEvent` (a peer
+changed the tempo, peers joined or left, the transport started or stopped, the beat count
+jumped), on the Link thread: a listener only queues (the recorder) or wakes (the runners).
+
+Link numbers beats locally. A jump of the count by whole bars (this host renumbered, or
+rejoined) keeps the phase, and is taken out of the snapshot's beats, which stay continuous: a
+show's bar 9 is still bar 9. A jump that moves the phase (the session moved under a peer's
+clock jump) is followed: the cues still to come move with the session's beat.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from datetime import timedelta
+from typing import Protocol
+
+from choreo.errors import ChoreoError, UsageError
+from choreo.sync.timeline import ClockPair, Timeline, tighter, whole_bars
+
+SAMPLE_S = 0.01  # how often the session is read: a tempo change reaches the runners within this
+PAIR_AGE_NS = 500_000_000  # a clock pair this old is replaced even by a looser one (NTP slews one clock)
+OPEN_TIMEOUT_S = 5.0  # joining never takes this long: past it, something is wrong with the binding
+CALL_TIMEOUT_S = 2.0
+JUMP_BEATS = 0.02  # a beat count off its prediction by more than this (a tempo change aside) jumped
+DEFAULT_TEMPO = 120.0  # what a peer alone proposes when the show names no tempo (Link's own default)
+INSTALL_HINT = "pip install 'choreo[link]'"
+
+
+class LinkUnavailable(UsageError):
+    """The Link binding (aalink) is not installed."""
+
+
+class LinkPeer(Protocol):
+    """What choreo uses of aalink's `Link`."""
+
+    enabled: bool
+    quantum: float
+    start_stop_sync_enabled: bool
+    tempo: float
+
+    @property
+    def beat(self) -> float: ...
+
+    @property
+    def time(self) -> timedelta: ...
+
+    @property
+    def num_peers(self) -> int: ...
+
+    @property
+    def playing(self) -> bool: ...
+
+    def set_is_playing_and_request_beat_at_time(self, playing: bool, at: timedelta, beat: float) -> None: ...
+
+    def request_beat_at_start_playing_time(self, beat: float) -> None: ...
+
+
+@dataclass(frozen=True)
+class LinkSnapshot:
+    """The session as one sample saw it. `timeline` counts continuous beats: the session's own
+    count less `shift` (the whole bars it was renumbered by since this host joined)."""
+
+    timeline: Timeline
+    pair: ClockPair
+    peers: int
+    playing: bool
+    shift: float = 0.0
+
+    @property
+    def tempo(self) -> float:
+        return self.timeline.tempo
+
+    def mono_of_beat(self, beat: float) -> float:
+        """Monotonic seconds at which continuous `beat` falls (on this sample's tempo)."""
+        return self.pair.mono_of(self.timeline.time_at(beat))
+
+    def beat_at_mono(self, mono: float) -> float:
+        return self.timeline.beat_at(self.pair.link_of(mono))
+
+    def link_us_at_mono(self, mono: float) -> int:
+        return round(self.pair.link_of(mono))
+
+
+@dataclass(frozen=True)
+class LinkEvent:
+    """A change seen between two samples: `kind` is one of the log's LINK_EVENTS."""
+
+    kind: str
+    snapshot: LinkSnapshot
+    message: str
+
+
+LinkListener = Callable[[LinkEvent], None]
+
+
+def _us(delta: timedelta) -> float:
+    return delta / timedelta(microseconds=1)
+
+
+def make_aalink(tempo: float) -> LinkPeer:
+    """aalink's Link (inside the session's running loop, as aalink requires)."""
+    try:
+        from aalink import Link  # an optional extra: imported only for a show on the Link clock
+    except ImportError as exc:
+        raise LinkUnavailable(f"the Link clock needs the aalink package ({exc}): {INSTALL_HINT}") from None
+    peer: LinkPeer = Link(tempo)
+    return peer
+
+
+class LinkSession:
+    """This host's Link peer, joined on `open` and left on `close` (whoever opens it closes it)."""
+
+    def __init__(self, quantum: int, tempo: float | None = None, *, sample_s: float = SAMPLE_S,
+                 make_link: Callable[[float], LinkPeer] = make_aalink) -> None:
+        self.quantum = quantum
+        self._tempo = tempo or DEFAULT_TEMPO
+        self._sample_s = sample_s
+        self._make_link = make_link
+        self._listeners: list[LinkListener] = []
+        self._listeners_lock = threading.Lock()
+        self._snapshot: LinkSnapshot | None = None
+        self._ready = threading.Event()
+        self._closing = threading.Event()
+        self._failure: BaseException | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._link: LinkPeer | None = None
+        self._pair: ClockPair | None = None
+
+    # -- opening and closing -----------------------------------------------------------------
+
+    def open(self) -> LinkSession:
+        """Join the session: the Link thread runs and has taken its first sample."""
+        self._thread = threading.Thread(target=self._thread_main, name="choreo-link", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(OPEN_TIMEOUT_S):
+            self.close()
+            raise ChoreoError(f"Link: no answer from the aalink binding in {OPEN_TIMEOUT_S:g} s")
+        if self._failure is not None:
+            failure, self._failure = self._failure, None
+            self.close()
+            if isinstance(failure, ChoreoError):
+                raise failure
+            raise ChoreoError(f"Link: could not join a session: {failure}")
+        return self
+
+    def close(self) -> None:
+        """Leave the session (the thread disables the peer and ends)."""
+        self._closing.set()
+        if self._thread is not None:
+            self._thread.join(OPEN_TIMEOUT_S)
+            self._thread = None
+
+    def __enter__(self) -> LinkSession:
+        return self.open()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # -- reading -----------------------------------------------------------------------------
+
+    def snapshot(self) -> LinkSnapshot:
+        """The latest sample (at most SAMPLE_S old)."""
+        snapshot = self._snapshot
+        assert snapshot is not None, "open the session first"
+        return snapshot
+
+    def subscribe(self, listener: LinkListener) -> Callable[[], None]:
+        """`listener` hears each LinkEvent (on the Link thread) until the returned undo."""
+        with self._listeners_lock:
+            self._listeners.append(listener)
+
+        def undo() -> None:
+            with self._listeners_lock:
+                if listener in self._listeners:
+                    self._listeners.remove(listener)
+        return undo
+
+    # -- asking the session ------------------------------------------------------------------
+
+    def propose_tempo(self, bpm: float) -> None:
+        """Set the session's tempo (every peer's)."""
+        def propose(link: LinkPeer) -> None:
+            link.tempo = bpm
+        self._call(propose)
+
+    def start_playing(self, beat: float) -> None:
+        """Start the session's transport on continuous `beat` (a bar line ahead): peers that
+        follow start/stop (Live with Start Stop Sync on, other choreo hosts) start there too."""
+        def start(link: LinkPeer) -> None:
+            snapshot = self.snapshot()
+            at_us = snapshot.timeline.time_at(beat)
+            link.set_is_playing_and_request_beat_at_time(True, timedelta(microseconds=at_us), beat + snapshot.shift)
+        self._call(start)
+        self._resample()
+
+    def count_from_start(self) -> None:
+        """Renumber this host's beats so that the session's start (its transport's start time)
+        falls on the first bar line at or after beat 0: every host that does so counts the same."""
+        self._call(lambda link: link.request_beat_at_start_playing_time(0.0))
+        self._resample(renumbered=True)
+
+    def _call(self, action: Callable[[LinkPeer], None]) -> None:
+        loop = self._loop
+        if loop is None or self._closing.is_set():
+            raise ChoreoError("Link: the session is closed")
+
+        async def run() -> None:
+            assert self._link is not None
+            action(self._link)
+        asyncio.run_coroutine_threadsafe(run(), loop).result(CALL_TIMEOUT_S)
+
+    def _resample(self, renumbered: bool = False) -> None:
+        """A fresh sample now (after this host changed the session); `renumbered`: this host
+        renumbered its beats on purpose, so the count starts over with no shift."""
+        loop = self._loop
+        if loop is None:
+            return
+
+        async def sample() -> None:
+            assert self._link is not None
+            if renumbered:
+                self._snapshot = None
+            self._sample(self._link)
+        asyncio.run_coroutine_threadsafe(sample(), loop).result(CALL_TIMEOUT_S)
+
+    # -- the Link thread ---------------------------------------------------------------------
+
+    def _thread_main(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except BaseException as exc:  # noqa: B902 reported to open(), never lost on a thread
+            self._failure = exc
+            self._ready.set()
+
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        link = self._make_link(self._tempo)
+        self._link = link
+        link.quantum = self.quantum
+        link.start_stop_sync_enabled = True
+        link.enabled = True
+        try:
+            self._sample(link)
+            self._ready.set()
+            while not self._closing.is_set():
+                await asyncio.sleep(self._sample_s)
+                self._sample(link)
+        finally:
+            link.enabled = False
+            self._loop = None
+
+    def _sample(self, link: LinkPeer) -> None:
+        before = self._snapshot
+        m1 = time.monotonic_ns()
+        t1 = _us(link.time)
+        m2 = time.monotonic_ns()
+        beat = link.beat
+        t2 = _us(link.time)
+        self._pair = tighter(self._pair, ClockPair((m1 + m2) // 2, t1, m2 - m1), PAIR_AGE_NS)
+        shift = before.shift if before is not None else 0.0
+        timeline = Timeline((t1 + t2) / 2, beat - shift, float(link.tempo))
+        now = LinkSnapshot(timeline, self._pair, int(link.num_peers), bool(link.playing), shift)
+        if before is not None:
+            now = self._changes(before, now)
+        self._snapshot = now
+
+    def _changes(self, before: LinkSnapshot, now: LinkSnapshot) -> LinkSnapshot:
+        """Tell the listeners what changed since `before`; the snapshot with a whole-bar
+        renumbering taken out of its beats."""
+        events: list[tuple[str, str]] = []
+        expected = before.timeline.beat_at(now.timeline.link_us)
+        slack = JUMP_BEATS + abs(now.tempo - before.tempo) * (now.timeline.link_us - before.timeline.link_us) / 60e6
+        jump = now.timeline.beat - expected
+        if abs(jump) > slack:
+            bars = whole_bars(jump, self.quantum)
+            if bars:
+                shift = now.shift + bars * self.quantum
+                now = replace(now, timeline=replace(now.timeline, beat=now.timeline.beat - bars * self.quantum),
+                              shift=shift)
+                events.append(("jump", f"Link renumbered this host's beats by {bars} bars (the phase kept)"))
+            else:
+                events.append(("jump", f"the session's beat jumped by {jump:+.3f} beats: cues in bars follow it"))
+        if abs(now.tempo - before.tempo) > 1e-6:
+            events.append(("tempo", f"the session's tempo went from {before.tempo:.2f} to {now.tempo:.2f} bpm"))
+        if now.peers != before.peers:
+            events.append(("peers", f"Link peers: {before.peers} -> {now.peers}"))
+        if now.playing != before.playing:
+            events.append(("playing", "the session's transport plays") if now.playing
+                          else ("stopped", "the session's transport stopped"))
+        for kind, message in events:
+            self._tell(LinkEvent(kind, now, message))
+        return now
+
+    def _tell(self, event: LinkEvent) -> None:
+        with self._listeners_lock:
+            listeners = list(self._listeners)
+        for listener in listeners:
+            listener(event)
+

@@ -1,0 +1,108 @@
+"""The bar line a show on the Link clock starts on, and who starts the session's transport.
+
+- A show that does not wait (one host, no --wait-start): if the session plays already, the
+  show starts on its next bar line; if not, this host starts the transport on the next bar line
+  (with the show's tempo proposed first), and peers that follow start/stop start with it. Alone
+  in the session, it starts alone as the session's first peer, and says so.
+- A show that waits (--wait-start, or a show for several hosts): it starts on the first bar
+  line at or after the session's transport starts (Live's play button, another host's start),
+  or when this host's operator starts it, which starts the transport as above. Every host that
+  counts its beats from the transport's start (Link's start time is shared state) picks the
+  same bar line, whenever it heard of the start. A start heard more than MISSED_S after its bar
+  line is missed (the show runs on the other hosts): said in one line, and the host waits for
+  the next start.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from choreo.sync.session import SAMPLE_S, LinkSession
+from choreo.sync.timeline import bar_at_or_after
+
+START_LEAD_S = 0.3  # this host's start of the transport is announced this far ahead of its bar line
+MISSED_S = 0.5  # a start heard this long after its bar line is missed: the show runs elsewhere
+
+
+@dataclass(frozen=True)
+class LinkStart:
+    """How a show starts on the session."""
+
+    waits: bool  # for the session's start or the operator's (else: at once)
+    tempo: float | None  # proposed when this host starts the transport (None: the session's)
+    lead_s: float  # the runners' preroll: the bar line is at least this far ahead
+
+
+def find_start(session: LinkSession, how: LinkStart, started: Callable[[], bool],
+               stop: Callable[[], bool], tell: Callable[[str], None]) -> float | None:
+    """The continuous beat of the show's first bar line; None if stopped while waiting.
+    `started`: the operator started this host (a waiting show); `tell`: one line for the log."""
+    if not how.waits:
+        return _start_here(session, how, tell)
+    snapshot = session.snapshot()
+    tell(f"link: waiting for the session to play ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
+         "start it from a peer (Live's play), another host, or this host's start")
+    was_playing = snapshot.playing
+    while not stop():
+        if started():
+            return _start_here(session, how, tell)
+        playing = session.snapshot().playing
+        if playing and not was_playing:
+            bar = _joined(session, tell)
+            if bar is not None:
+                return bar
+        was_playing = playing
+        time.sleep(SAMPLE_S)
+    return None
+
+
+def _start_here(session: LinkSession, how: LinkStart, tell: Callable[[str], None]) -> float:
+    """Start on the next bar line at least `lead_s` ahead, starting the transport if it is not
+    playing (the show's tempo proposed first)."""
+    snapshot = session.snapshot()
+    if snapshot.playing:
+        bar = bar_at_or_after(snapshot.beat_at_mono(time.monotonic() + how.lead_s), session.quantum)
+        tell(f"link: the session plays ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
+             f"the show starts on its next bar line")
+        return bar
+    if how.tempo is not None and abs(snapshot.tempo - how.tempo) > 1e-3:
+        session.propose_tempo(how.tempo)
+        snapshot = session.snapshot()
+    lead = how.lead_s + START_LEAD_S
+    bar = bar_at_or_after(snapshot.beat_at_mono(time.monotonic() + lead), session.quantum)
+    start_mono = snapshot.mono_of_beat(bar)
+    alone = "alone, as the session's first peer" if snapshot.peers == 0 else f"with {_peers(snapshot.peers)}"
+    tell(f"link: starting the session's transport {alone}, at {snapshot.tempo:.2f} bpm, on a bar line "
+         f"{start_mono - time.monotonic():.2f} s ahead")
+    session.start_playing(bar)
+    session.count_from_start()
+    return _bar_nearest(session, start_mono)
+
+
+def _joined(session: LinkSession, tell: Callable[[str], None]) -> float | None:
+    """The transport just started elsewhere: count beats from its start; its first bar line,
+    or None (said) if that is already MISSED_S gone."""
+    session.count_from_start()
+    snapshot = session.snapshot()
+    first = bar_at_or_after(0.0, session.quantum)
+    late = time.monotonic() - snapshot.mono_of_beat(first)
+    if late > MISSED_S:
+        tell(f"link: the session started playing {late:.1f} s before this host heard it: the show runs "
+             "elsewhere; waiting for the next start (stop the session's transport and play it again)")
+        return None
+    tell(f"link: the session plays ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
+         "the show starts on the bar line its transport started on")
+    return first
+
+
+def _bar_nearest(session: LinkSession, mono: float) -> float:
+    """The bar line nearest monotonic `mono` in the session's count now (a renumbering moved
+    the count, not the instant)."""
+    beat = session.snapshot().beat_at_mono(mono)
+    return round(beat / session.quantum) * session.quantum
+
+
+def _peers(count: int) -> str:
+    return "no other peers" if count == 0 else "1 peer" if count == 1 else f"{count} peers"
