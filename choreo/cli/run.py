@@ -54,6 +54,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="seconds to wait for a reply, 0 < S <= 10 (default 0.2)")
     parser.add_argument("--retries", type=int, metavar="N",
                         help="retries of a failed frame or play sequence, 0..10 (default 2: 3 tries)")
+    parser.add_argument("--host", metavar="NAME", help="in a show with `hosts:`, the host this computer is: "
+                        "it drives that host's robots only (the others' hosts drive theirs)")
+    parser.add_argument("--clock", choices=("link", "machine"), help="the show clock, instead of the show's "
+                        "`clock:`: link (the Ableton Link session's beat) or machine (a rehearsal of a Link show "
+                        "on this computer's clock)")
     music = parser.add_mutually_exclusive_group()
     music.add_argument("--no-music", action="store_true", help="do not play the show's music: run "
                        "silent on the machine's clock")
@@ -120,7 +125,7 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
                          no_log=args.no_log, from_step=args.from_step, timeout=args.timeout,
                          retries=args.retries, layout=args.layout, robot_ports=robot_ports,
                          no_music=args.no_music, audio_device=args.audio_device, loop=args.loop,
-                         rehearse=args.rehearse)
+                         rehearse=args.rehearse, host=args.host, clock=args.clock)
     session = Session.prepare(request, args.time_source)
     report.prepared(session)
     console = _wants_console(args)
@@ -220,8 +225,11 @@ def _live(args: argparse.Namespace, stop: StopRequest, console: bool,
 
     settings = session.settings
     status = ShowStatus(settings.plans, settings.sections.starts)
-    return Live(stop, cues=cue_list(settings.plans), status=status, clock="music" if settings.song else "machine",
-                wait_start=args.wait_start, opening=True), status
+    clock = "link" if settings.link is not None else "music" if settings.song else "machine"
+    # a show for several hosts starts when the session's transport does (or this host's start)
+    waits = args.wait_start or (settings.link is not None and bool(settings.show.hosts))
+    return Live(stop, cues=cue_list(settings.plans), status=status, clock=clock, wait_start=waits,
+                opening=True), status
 
 
 @contextmanager

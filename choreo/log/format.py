@@ -104,6 +104,7 @@ class Info:
     PLATFORM = "platform"
     ROBOTS = "robots"  # a show for several: their names, comma-separated
     UNISON = "unison"  # YES or NO
+    SHOW_HOST = "show_host"  # the show's `hosts:` entry this run drove (absent: a show for one host)
     YES, NO = "yes", "no"
 
 

@@ -113,9 +113,11 @@ class RunInfo:
     layout: str = DEFAULT_LAYOUT
     robots: tuple[RobotInfo, ...] = ()
     unison: bool = False  # the robots share their steps (a unison play's starts are comparable)
+    show_host: str | None = None  # the show's `hosts:` entry this run drove (None: a show for one host)
 
     def metadata(self) -> dict[str, str]:
-        return {key: _utf8(value) for key, value in {**self._run(), **self._robots()}.items()}
+        host = {Info.SHOW_HOST: self.show_host} if self.show_host is not None else {}
+        return {key: _utf8(value) for key, value in {**self._run(), **self._robots(), **host}.items()}
 
     def _robots(self) -> dict[str, str]:
         """`robots: left,right` and `robot.left.port` etc.: MCAP metadata is flat text."""

@@ -17,6 +17,13 @@ Faults: a robot whose link fails either stops the show (`on_fault: stop`, the de
 others play their abort motions, the run fails naming the robot) or drops out
 (`on_fault: continue`: the gates stop waiting for it and the others finish; the run still fails
 at the end, saying who dropped out and when).
+
+Hosts: in a show played by several hosts (`hosts:`, `choreo run --host NAME`), a run's parts
+are its host's robots only, and its gates know no others (`Gates.live`: this run's robots). A
+robot on another host is absent, which is not a dropout: no gate ever waits for it, none says
+it dropped out, and a shared step that is its alone ends where the plan says (`through`'s
+`idle`). The hosts line up on the show's cues (on the Link clock, the session's beat), not on
+each other's robots.
 """
 
 from __future__ import annotations
@@ -53,7 +60,8 @@ class _Gate:
 
 
 class Gates:
-    """Shared steps: step i + 1 starts when every robot still in the show is through step i."""
+    """Shared steps: step i + 1 starts when every robot still in the show is through step i
+    (`robots`: this run's; another host's robots are never awaited)."""
 
     def __init__(self, robots: list[str], clock: RunClock, show: ShowClock, stop: StopRequest) -> None:
         self.live = set(robots)

@@ -28,9 +28,26 @@ from choreo.log.recorder import RobotInfo, RunInfo, default_log_path
 from choreo.music.player import Output, Song, pick_output
 from choreo.run.sections import Sections, select
 from choreo.show.load import load_show
-from choreo.show.model import DEFAULT_MOTION_S, SIM_URL, Plan, RobotSettings, Show, is_simulator, same_port
+from choreo.show.model import (
+    CLOCKS,
+    DEFAULT_MOTION_S,
+    LINK_METER,
+    LINK_NO_GO,
+    LINK_NO_MAP,
+    LINK_NO_MUSIC,
+    LINK_NO_OFFSET,
+    MACHINE,
+    SIM_URL,
+    LinkClock,
+    Plan,
+    RobotSettings,
+    Show,
+    is_simulator,
+    same_port,
+)
 from choreo.show.plan import compile_plans
 from choreo.sim.options import SimUrl, durations_text, ms_text
+from choreo.textfit import visible
 from choreo.wire.layouts import SEED, Layout, layout_named
 from choreo.wire.protocol import BAUDS, DEFAULT_BAUD, baud_refusal
 
@@ -60,6 +77,8 @@ class RunRequest:
     audio_device: str | None = None  # `--audio-device`: an output from `choreo devices`
     loop: str | None = None  # `--loop FROM..TO`: labels (or indices) of a section to repeat until stopped
     rehearse: bool = False  # `--rehearse`: every robot on the simulator, whatever the show or --port say
+    host: str | None = None  # `--host NAME`: the show's `hosts:` entry this run drives
+    clock: str | None = None  # `--clock link|machine`: overrides the show's `clock:`
 
 
 @dataclass(frozen=True)
@@ -108,6 +127,8 @@ class RunSettings:
     unique_log: bool = False  # a default log name already taken gets a suffix instead of a refusal
     song: Song | None = None  # the music that keeps the show clock (None: the machine's clock)
     output: Output | None = None  # where it plays (None: the default output)
+    host: str | None = None  # the `hosts:` entry driven (its robots only); None: a show for one host
+    link: LinkClock | None = None  # the Ableton Link clock's settings; None: not on the Link clock
 
     @classmethod
     def settle(cls, request: RunRequest, time_source: TimeSource | None = None, *,
@@ -115,20 +136,24 @@ class RunSettings:
         """Load and check the show (unless `loaded` already) and settle every setting; opens
         nothing. A virtual `time_source` refuses music (it plays in real time)."""
         show = loaded if loaded is not None else load_show(request.show_path)
-        _check_robot_ports(show, request)
-        drafts = {name: _link_settings(name, robot, request, show.ensemble) for name, robot in show.cast.items()}
+        host = _host(show, request.host)
+        _check_robot_ports(show, request, host)
+        cast = {name: robot for name, robot in show.cast.items() if host is None or name in show.hosts[host]}
+        drafts = {name: _link_settings(name, robot, request, show.ensemble) for name, robot in cast.items()}
         _check_shared_ports(drafts)
-        plans = compile_plans(show, {n: link.layout for n, link in drafts.items()},
+        every = compile_plans(show, {n: link.layout for n, link in drafts.items()},
                               {n: link.baud for n, link in drafts.items()})
+        link = _link_clock(show, every, request)
+        plans = {name: every[name] for name in cast}  # another host's robots are its business
         links = {name: _for_robot(name, show, partial(_with_durations, show, plans[name], link))
                  for name, link in drafts.items()}
-        sections = select(show, plans, request.from_step, request.loop)
-        song, output = _music(show, request, time_source)
+        sections = _only(select(show, every, request.from_step, request.loop), cast)
+        song, output = _music(show, request, time_source) if link is None else (None, None)
         if song is not None and (request.loop is not None or request.from_step is not None):
             given = f"--loop {request.loop}" if request.loop is not None else f"--from {request.from_step}"
             _check_in_song(song, sections.origin, given)
         return cls(show, plans, links, sections, _log_path(show, request), unique_log=request.log_path is None,
-                   song=song, output=output)
+                   song=song, output=output, host=host, link=link)
 
     def run_info(self, start_ns: int) -> RunInfo:
         """What the log's metadata says of the run: the show, the first robot's link (a one-robot
@@ -137,7 +162,61 @@ class RunSettings:
         robots = tuple(RobotInfo(name, link.port, link.baud, link.layout.name) for name, link in self.links.items()) \
             if show.ensemble else ()
         return RunInfo(show.path, show.name, show.source, first.port, first.baud, start_ns, first.layout.name, robots,
-                       self.plans[first.robot].unison)
+                       self.plans[first.robot].unison, show_host=self.host)
+
+
+def _host(show: Show, given: str | None) -> str | None:
+    """The host this run drives: `--host`, one of the show's `hosts:` (and only in a show that
+    has them: every robot of it is some host's, so a run without --host would drive them all)."""
+    names = ", ".join(show.hosts)
+    if given is None:
+        if show.hosts:
+            raise UsageError(f"this show is played by several hosts ({names}): give --host NAME for the one "
+                             "this computer drives")
+        return None
+    if not show.hosts:
+        raise UsageError(f"--host {visible(given)}: the show names no `hosts:` (one computer drives all its "
+                         "robots): leave out --host")
+    if given not in show.hosts:
+        raise UsageError(f"--host {visible(given)}: the show has no host {visible(given)!r}"
+                         f"{did_you_mean(given, list(show.hosts))}; its hosts: {names}")
+    return given
+
+
+def _link_clock(show: Show, plans: Mapping[str, Plan], request: RunRequest) -> LinkClock | None:
+    """The run's Link clock (None: the machine's, or the music's): the show's `clock:`, or
+    `--clock`'s. `--clock link` takes a show written for the machine's clock onto the session's
+    when nothing in it needs a clock that stops or a tempo of its own (the show's checks say the
+    same of a show written `clock: link`); `--clock machine` rehearses a Link show without one."""
+    clock = show.clock if request.clock is None else request.clock
+    if clock not in CLOCKS:
+        raise UsageError(f"--clock {visible(clock)}: give {' or '.join(CLOCKS)}")
+    if clock == MACHINE:
+        return None
+    if show.link is not None:
+        return show.link
+    tempo = show.tempo
+    refusal = (f"the show has `music:`; {LINK_NO_MUSIC}: add --no-music" if show.music and not request.no_music
+               else f"the show has a tempo map; {LINK_NO_MAP}" if tempo is not None and tempo.bars
+               else f"the show's bar 1 is at {tempo.offset:g} s; {LINK_NO_OFFSET}: make `tempo.offset` 0"
+               if tempo is not None and tempo.offset else _go_refusal(plans))
+    if refusal is not None:
+        raise UsageError(f"--clock link: {refusal} (or leave out --clock link)")
+    return LinkClock(tempo.bpm, tempo.meter) if tempo is not None else LinkClock(None, LINK_METER)
+
+
+def _go_refusal(plans: Mapping[str, Plan]) -> str | None:
+    step = next((step for plan in plans.values() for step in plan.steps if step.go), None)
+    if step is None:
+        return None
+    return f"step {step.name} (line {step.line}) waits for GO; {LINK_NO_GO}: cue it in bars and beats or in seconds"
+
+
+def _only(sections: Sections, robots: Mapping[str, object]) -> Sections:
+    """The section, chosen on every robot's plan (a label may be in another host's track), for
+    this run's robots."""
+    return replace(sections, starts={name: i for name, i in sections.starts.items() if name in robots},
+                   ends={name: i for name, i in sections.ends.items() if name in robots})
 
 
 def _log_path(show: Show, request: RunRequest) -> Path | None:
@@ -297,8 +376,8 @@ def split_robot_port(value: str) -> tuple[str, str] | None:
     return (match.group(1), match.group(2)) if match else None
 
 
-def _check_robot_ports(show: Show, request: RunRequest) -> None:
-    """`--port URL` is for a one-robot show, `--port NAME=URL` for one of several."""
+def _check_robot_ports(show: Show, request: RunRequest, host: str | None = None) -> None:
+    """`--port URL` is for a one-robot show, `--port NAME=URL` for one of several (of this host's)."""
     if show.ensemble and request.port is not None:
         names = ", ".join(show.cast)
         raise UsageError(f"--port {request.port}: this show has several robots ({names}): "
@@ -310,6 +389,9 @@ def _check_robot_ports(show: Show, request: RunRequest) -> None:
         if name not in show.cast:
             raise UsageError(f"--port {name}=...: the show has no robot {name!r}"
                              f"{did_you_mean(name, list(show.cast))}; its robots: {', '.join(show.cast)}")
+        if host is not None and name not in show.hosts[host]:
+            raise UsageError(f"--port {name}=...: robot {name} is driven by host {show.host_of(name)}, not by "
+                             f"this run's (--host {host}: {', '.join(show.hosts[host])})")
 
 
 def check_output_folder(path: Path, option: str) -> None:
