@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from choreo.cli.terminal import StatusWriter
 from choreo.cli.terminal import columns as terminal_columns
-from choreo.log.format import ERROR, WARNING
+from choreo.log.format import ERROR, LINK_PREFIX, WARNING
 from choreo.music.player import output_name
 from choreo.textfit import fit
 from choreo.wire.layouts import LAYOUT_NAMES
@@ -199,8 +199,12 @@ class Progress:
         return live_line(current, show_s, self.estimated, columns)
 
     def on_log(self, level: int, message: str, time_ns: int | None = None) -> None:
-        if level < WARNING or level >= ERROR:
+        if level >= ERROR:
             return  # errors reach the user once, as the command's final line
+        if level < WARNING:
+            if message.startswith(LINK_PREFIX):  # the Link session: whom the show waits for, tempo changes
+                self._say_line(message)
+            return
         self._say_line(f"warning: {message}")
 
     def on_waiting(self, cue: GoCue) -> None:

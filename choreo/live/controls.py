@@ -809,6 +809,9 @@ class Live:
     # -- pause and resume --------------------------------------------------------------------
 
     def _pause(self, command: Command) -> Answer:
+        if self.clock == "link":
+            return Answer("error", "the Link session's beat never stops: no pause on the Link clock "
+                                   "(skip, stop and panic work)")
         if not self._started:
             return Answer("error", "the show has not started: nothing to pause")
         with self._pausing:

@@ -37,6 +37,7 @@ CLOCK_SOURCES = ("machine", "music", "link")  # what keeps the show clock (a /ch
 # stopping or playing, and a jump of the session's timeline (a peer's clock jumped, or the
 # session was rejoined) that moved the beat by more than LINK_JUMP_BEATS.
 LINK_EVENTS = ("start", "tempo", "peers", "stopped", "playing", "jump")
+LINK_PREFIX = "link: "  # how the log's lines about the Link session begin (the progress output shows them)
 COMMAND_TOPIC = "/choreo/command"
 # topic -> (schema name, schema file under schemas/)
 CHANNELS = {

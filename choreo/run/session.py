@@ -11,15 +11,16 @@ from __future__ import annotations
 import contextlib
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import TracebackType
 
 from choreo.clock import (MachineShowClock, PausableShowClock, RunClock, ShowClock, SystemTime, TimeSource,
                           quick_thread_switches, sleep_until_show)
-from choreo.events import PlayOutListener, RunListener, RunResult, StopRequest
+from choreo.events import Command, PlayOutListener, RunListener, RunResult, StopRequest
 from choreo.live.controls import HoldingShowClock, Live
-from choreo.log.format import CLOCK_EVERY_S, INFO, WARNING, ClockRecord, Result, result_metadata
+from choreo.log.format import CLOCK_EVERY_S, INFO, LINK_PREFIX, WARNING, ClockRecord, Result, result_metadata
 from choreo.log.recorder import Recorder
 from choreo.music.player import LEAD_IN_S, Player
 from choreo.run.ensemble import Ensemble, Part
@@ -27,6 +28,11 @@ from choreo.run.runner import Runner
 from choreo.run.sections import section_end
 from choreo.run.settings import RunRequest, RunSettings
 from choreo.run.stage import Stage
+from choreo.sync.clock import LinkShowClock
+from choreo.sync.session import LinkEvent, LinkSession
+from choreo.sync.start import LinkStart, find_start
+
+LINK_LEAD_S = 0.25  # a show on the Link clock starts on a bar line at least this far ahead (the runners' preroll)
 
 
 @dataclass
@@ -40,6 +46,8 @@ class Session:
     result: RunResult | None = None
     dropouts: list = field(default_factory=list)  # robots that dropped out (on_fault: continue)
     player: Player | None = None  # while the music plays
+    link: LinkSession | None = None  # this host's Link peer while the session is open (a show on the Link clock)
+    _first_bar: float | None = None  # the session's beat the show starts on, once found
 
     @classmethod
     def prepare(cls, request: RunRequest, time_source: TimeSource | None = None) -> Session:
@@ -63,6 +71,10 @@ class Session:
 
     def __enter__(self) -> Session:
         settings = self.settings
+        if settings.link is not None:
+            # joined before anything opens (a missing binding stops the run with nothing open),
+            # and early: peers are found while the ports open
+            self.link = LinkSession(settings.link.meter, settings.link.bpm).open()
         self.stage = Stage(settings.run_info(self.clock.wall_anchor_ns), settings.log_path, self.clock,
                            list(settings.links.values()), unique_log=settings.unique_log, named=settings.show.ensemble)
         self.stage.__enter__()
@@ -70,8 +82,13 @@ class Session:
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
-        if self.stage is not None:
-            self.stage.__exit__(exc_type, exc, tb)
+        try:
+            if self.stage is not None:
+                self.stage.__exit__(exc_type, exc, tb)
+        finally:
+            if self.link is not None:
+                self.link.close()
+                self.link = None
 
     # -- running ---------------------------------------------------------------------------
 
@@ -108,7 +125,7 @@ class Session:
                 if self.recorder is not None:
                     wiring.callback(live.flush_reports, force=True)  # held-back commands summed up while it hears
                 live.use_section(self.settings.sections.starts, self.settings.sections.ends)
-            if live is not None and not live.await_start():
+            if not self._await_start(everyone, stop, live):
                 self.result = RunResult("aborted", 0, 0, 0.0)
             else:
                 self.result = self._run_passes(everyone, stop, live)
@@ -116,6 +133,19 @@ class Session:
             self.recorder.check()
         self.stage.finished(result_metadata(self.result))
         return self.result
+
+    def _await_start(self, everyone: list[RunListener], stop: StopRequest, live: Live | None) -> bool:
+        """Wait for the show's start (--wait-start: the operator's; on the Link clock the first
+        bar line the session's transport or this host starts on); False if stopped first."""
+        if self.link is None:
+            return live is None or live.await_start()
+        waits = (live is not None and not live.started) or bool(self.settings.show.hosts)
+        how = LinkStart(waits, self.settings.link.bpm if self.settings.link else None, LINK_LEAD_S)
+        self._first_bar = find_start(self.link, how, started=lambda: live is not None and live.started,
+                                     stop=stop, tell=lambda message: self._tell(everyone, INFO, LINK_PREFIX + message))
+        if self._first_bar is not None and live is not None and not live.started:
+            live.command(Command("start", "link session"))  # the session started it: the log and status say so
+        return self._first_bar is not None
 
     def _run_passes(self, everyone: list[RunListener], stop: StopRequest, live: Live | None) -> RunResult:
         """One pass of the show, or with --loop as many of its section as run before a stop."""
@@ -144,14 +174,18 @@ class Session:
             show = self._start_show_clock(preroll, everyone, music, holding=live is not None)
             if live is not None:
                 live.use_clock(show, self.clock.source.notify)  # a stop or panic ends the runners' dozes
-            sampler = ClockSampler(self.recorder, self.clock, show, "music" if self.player else "machine") \
+            sampler = ClockSampler(self.recorder, self.clock, show, self._clock_source()) \
                 if self.recorder is not None else None
+            if isinstance(show, LinkShowClock):
+                music.enter_context(self._hearing_link(show, sampler, everyone))
             if sampler is not None and live is not None:
                 # the log marks each change of the clock's state (a GO cue holds it, a GO, a pause, a
                 # resume): the reviews draw holds and pauses, and place later frames, by them
                 music.enter_context(live.on_clock_change(lambda: sampler.sample(force=True)))
             if sampler is not None:
                 sampler.sample(force=True)
+                if isinstance(show, LinkShowClock):
+                    sampler.sample(force=True, event="start", mono_ns=round(show.mono_at(0.0) * 1e9))
             result = solo.run(show, on_idle=sampler) if ensemble is None \
                 else self._run_ensemble(ensemble, show, sampler)
             if result.outcome == "done" and self.settings.sections.loop is None:
@@ -194,10 +228,12 @@ class Session:
         log's metadata gets show time 0 as wall-clock and monotonic nanoseconds either way."""
         assert self.stage is not None
         song, origin = self.settings.song, self.settings.sections.origin
-        if song is None:
+        if self.link is not None:
+            show: ShowClock = self._link_clock(origin)
+        elif song is None:
             zero = self.clock.mono() - (origin - preroll)
             # live, the machine's clock holds while a GO cue waits
-            show: ShowClock = HoldingShowClock(zero, self.clock.mono, self.clock.source.notify) if holding \
+            show = HoldingShowClock(zero, self.clock.mono, self.clock.source.notify) if holding \
                 else MachineShowClock(zero)
         else:
             # a resume wakes the runners dozing towards a cue at once (not a sleep slice later)
@@ -215,12 +251,48 @@ class Session:
             self._tell(listeners, INFO, f"music: {self.player.describe()}")
         zero_ns = round(show.mono_at(0.0) * 1e9)
         self.stage.add_to_outcome({
-            Result.CLOCK: "music" if self.player else "machine", Result.SHOW_ZERO_MONOTONIC_NS: str(zero_ns),
+            Result.CLOCK: self._clock_source(), Result.SHOW_ZERO_MONOTONIC_NS: str(zero_ns),
             Result.SHOW_ZERO_WALL_NS: str(self.clock.wall_ns(zero_ns))})
         if song is not None:
             self.stage.add_to_outcome({Result.MUSIC_FILE: song.music.file, Result.MUSIC_START: f"{song.music.start:g}",
                                        Result.AUDIO_BACKEND: self.player.backend if self.player else ""})
         return show
+
+    @contextlib.contextmanager
+    def _hearing_link(self, show: LinkShowClock, sampler: ClockSampler | None,
+                      listeners: list[RunListener]) -> Iterator[None]:
+        """For a pass: each change of the session (a peer's tempo, peers, the transport, a
+        jump) is a clock sample and a log line, and wakes the runners sleeping towards a cue in
+        bars (where it falls has moved)."""
+        def heard(event: LinkEvent) -> None:
+            self.clock.source.notify()
+            if sampler is not None:
+                sampler.sample(force=True, event=event.kind)
+            self._tell(listeners, WARNING if event.kind in ("jump", "stopped") else INFO, LINK_PREFIX + event.message)
+        undo = show.session.subscribe(heard)
+        try:
+            yield
+        finally:
+            undo()
+
+    def _clock_source(self) -> str:
+        return "link" if self.link is not None else "music" if self.player else "machine"
+
+    def _link_clock(self, origin: float) -> LinkShowClock:
+        """The show clock on the session: show time `origin` (0, or --from's step) on the bar
+        line found for this pass (a --loop pass after the first: the next bar line)."""
+        assert self.link is not None and self.settings.link is not None
+        bar = self._first_bar
+        self._first_bar = None
+        if bar is None:
+            bar = find_start(self.link, LinkStart(False, None, LINK_LEAD_S), lambda: True, lambda: False,
+                             lambda message: None)
+            assert bar is not None
+        start = self.link.snapshot().mono_of_beat(bar)
+        # --from's step is that many of the plan's beats into the show (its tempo's, or 120)
+        tempo = self.settings.show.tempo
+        beats_in = origin * (tempo.bpm if tempo is not None else 120.0) / 60.0
+        return LinkShowClock(self.link, start - origin, bar - beats_in, self.settings.link.meter)
 
     def _play_out(self, show: ShowClock, stop: StopRequest, sampler: ClockSampler | None,
                   listeners: list[RunListener]) -> None:
@@ -265,6 +337,7 @@ class ClockSampler:
 
     def __init__(self, recorder: Recorder, clock: RunClock, show: ShowClock, source: str,
                  every_s: float = CLOCK_EVERY_S) -> None:
+        self._link = show if isinstance(show, LinkShowClock) else None  # its samples carry the session
         self.recorder = recorder
         self.clock = clock
         self.show = show
@@ -280,9 +353,11 @@ class ClockSampler:
         self.sample()
         self.recorder.on_idle()
 
-    def sample(self, force: bool = False) -> None:
+    def sample(self, force: bool = False, event: str | None = None, mono_ns: int | None = None) -> None:
+        """A sample now (or at `mono_ns`: the show's start, placed on its bar line); `event`:
+        what it marks on the Link clock."""
         with self._lock:
-            mono_ns = self.clock.mono_ns()
+            mono_ns = self.clock.mono_ns() if mono_ns is None else mono_ns
             show_s = self.show.show_at(mono_ns / 1e9)
             if not force and self._last is not None and show_s - self._last < self.every_s:
                 return
@@ -290,5 +365,16 @@ class ClockSampler:
             state = self._pausable.state if self._pausable is not None else None  # running | held | paused
             # queued under the lock (a queue's append): a runner's sample and the operator's forced
             # one at a pause reach the log in the order they were read, never the older one last
-            self.recorder.on_clock(ClockRecord(round(show_s, 6), mono_ns, self.source, state),
-                                   self.clock.wall_ns(mono_ns))
+            record = ClockRecord(round(show_s, 6), mono_ns, self.source, state)
+            if self._link is not None:
+                record = self._with_session(record, self._link, mono_ns, event)
+            self.recorder.on_clock(record, self.clock.wall_ns(mono_ns))
+
+    @staticmethod
+    def _with_session(record: ClockRecord, link: LinkShowClock, mono_ns: int, event: str | None) -> ClockRecord:
+        """The sample with the session as this host saw it at that instant."""
+        snapshot = link.session.snapshot()
+        beat = snapshot.beat_at_mono(mono_ns / 1e9)
+        return replace(record, link_us=snapshot.link_us_at_mono(mono_ns / 1e9), beat=round(beat - link.first_bar, 6),
+                       session_beat=round(beat + snapshot.shift, 6), tempo=round(snapshot.tempo, 6),
+                       peers=snapshot.peers, event=event)

@@ -196,6 +196,7 @@ class LinkSession:
         def propose(link: LinkPeer) -> None:
             link.tempo = bpm
         self._call(propose)
+        self._resample()
 
     def start_playing(self, beat: float) -> None:
         """Start the session's transport on continuous `beat` (a bar line ahead): peers that

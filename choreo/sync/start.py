@@ -42,7 +42,7 @@ def find_start(session: LinkSession, how: LinkStart, started: Callable[[], bool]
     if not how.waits:
         return _start_here(session, how, tell)
     snapshot = session.snapshot()
-    tell(f"link: waiting for the session to play ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
+    tell(f"waiting for the session to play ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
          "start it from a peer (Live's play), another host, or this host's start")
     was_playing = snapshot.playing
     while not stop():
@@ -64,7 +64,7 @@ def _start_here(session: LinkSession, how: LinkStart, tell: Callable[[str], None
     snapshot = session.snapshot()
     if snapshot.playing:
         bar = bar_at_or_after(snapshot.beat_at_mono(time.monotonic() + how.lead_s), session.quantum)
-        tell(f"link: the session plays ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
+        tell(f"the session plays ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
              f"the show starts on its next bar line")
         return bar
     if how.tempo is not None and abs(snapshot.tempo - how.tempo) > 1e-3:
@@ -74,7 +74,7 @@ def _start_here(session: LinkSession, how: LinkStart, tell: Callable[[str], None
     bar = bar_at_or_after(snapshot.beat_at_mono(time.monotonic() + lead), session.quantum)
     start_mono = snapshot.mono_of_beat(bar)
     alone = "alone, as the session's first peer" if snapshot.peers == 0 else f"with {_peers(snapshot.peers)}"
-    tell(f"link: starting the session's transport {alone}, at {snapshot.tempo:.2f} bpm, on a bar line "
+    tell(f"starting the session's transport {alone}, at {snapshot.tempo:.2f} bpm, on a bar line "
          f"{start_mono - time.monotonic():.2f} s ahead")
     session.start_playing(bar)
     session.count_from_start()
@@ -89,10 +89,10 @@ def _joined(session: LinkSession, tell: Callable[[str], None]) -> float | None:
     first = bar_at_or_after(0.0, session.quantum)
     late = time.monotonic() - snapshot.mono_of_beat(first)
     if late > MISSED_S:
-        tell(f"link: the session started playing {late:.1f} s before this host heard it: the show runs "
+        tell(f"the session started playing {late:.1f} s before this host heard it: the show runs "
              "elsewhere; waiting for the next start (stop the session's transport and play it again)")
         return None
-    tell(f"link: the session plays ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
+    tell(f"the session plays ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
          "the show starts on the bar line its transport started on")
     return first
 
