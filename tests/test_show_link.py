@@ -194,3 +194,15 @@ def test_choreo_run_clock_link_refusal_exits_2(tmp_path, capsys):
     with pytest.raises(SystemExit) as caught:  # argparse's own refusal
         vmain(["run", str(path), "--clock", "midi", "--no-log"])
     assert caught.value.code == 2
+
+
+def test_choreo_plan_says_the_plan_is_drawn_at_a_nominal_tempo(tmp_path, capsys):
+    path = write_show(tmp_path, "version: 1\nclock: link\ntempo: {bpm: link, meter: 3}\nsteps:\n  - play: 1\n"
+                                "    at: {bar: 2}\n")
+    assert vmain(["plan", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "clock: Ableton Link, 3 beats a bar; tempo: the session's (planned here at 120 bpm)" in out
+    assert "1.500 s (at 1.5 = bar 2 beat 1)" in out
+    path.write_text("version: 1\nclock: link\ntempo: {bpm: 96}\nsteps: [{play: 1}]\n")
+    assert vmain(["plan", str(path)]) == 0
+    assert "clock: Ableton Link, 4 beats a bar; tempo: 96 bpm proposed to the session" in capsys.readouterr().out

@@ -102,7 +102,13 @@ def _clock_lines(show: Show) -> list[str]:
     if show.music is not None:
         lines.append(f"music: {show.music.file} from {show.music.start:g} s: show time is the music's position "
                      "(--no-music: the machine's clock)")
-    if show.tempo is not None:
+    if show.link is not None:  # the session's tempo, when the show takes it, is known only at run time
+        from choreo.show.model import NOMINAL_BPM
+
+        tempo = f"{show.link.bpm:g} bpm proposed to the session" if show.link.bpm is not None \
+            else f"the session's (planned here at {NOMINAL_BPM:g} bpm)" if show.tempo is not None else "the session's"
+        lines.append(f"clock: Ableton Link, {show.link.meter} beats a bar; tempo: {tempo}")
+    elif show.tempo is not None:
         lines.append(tempo_line(show.tempo))
     return lines
 
