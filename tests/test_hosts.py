@@ -156,6 +156,7 @@ def test_from_a_label_picks_the_same_moment_on_every_host(tmp_path):
 def test_the_cli_runs_one_host(tmp_path, capsys):
     path = write_show(tmp_path, SHOW)
     log = tmp_path / "right.mcap"
-    assert vmain(["run", str(path), "--host", "right", "--clock", "machine", "--log", str(log), "-q"]) == 0
+    assert vmain(["run", str(path), "--host", "right", "--clock", "machine", "--log", str(log), "--no-console"]) == 0
+    assert "host: right, driving c; other hosts drive a, b" in capsys.readouterr().err
     meta = read_log(log).metadata["choreo"]
     assert meta["show_host"] == "right" and meta["robots"] == "c"

@@ -78,6 +78,10 @@ def opening_lines(settings: RunSettings) -> list[str]:
     lines = _robot_lines(settings) if settings.show.ensemble else [
         _port_line(solo(settings)), _layout_line(solo(settings))]
     lines.append(_show_line(settings))
+    if settings.host is not None:  # `--host`: the show's other robots are other computers' to drive
+        others = [name for name in settings.show.cast if name not in settings.links]
+        lines.append(f"host: {settings.host}, driving {', '.join(settings.links)}"
+                     + (f"; other hosts drive {', '.join(others)}" if others else ""))
     if settings.show.music is not None:
         lines.append(_music_line(settings))
     return lines
