@@ -160,3 +160,10 @@ def test_the_cli_runs_one_host(tmp_path, capsys):
     assert "host: right, driving c; other hosts drive a, b" in capsys.readouterr().err
     meta = read_log(log).metadata["choreo"]
     assert meta["show_host"] == "right" and meta["robots"] == "c"
+
+
+def test_choreo_plan_names_each_robots_host(tmp_path, capsys):
+    assert vmain(["plan", str(write_show(tmp_path, SHOW))]) == 0
+    robots = [line for line in capsys.readouterr().out.splitlines() if line.startswith("robot ")]
+    assert robots == ["robot a (host left): layout seed", "robot b (host left): layout seed",
+                      "robot c (host right): layout seed"]

@@ -222,7 +222,8 @@ def ensemble_lines(show: Show, plans: dict[str, Plan]) -> list[str]:
     lines = [f"{show.name} ({show.path}): {len(plans)} robots, {form}, one show clock", *_clock_lines(show)]
     for name, plan in plans.items():
         lines.append("")
-        lines.append(f"robot {name}: layout {plan.layout}{_layout_note(plan)}")
+        host = f" (host {show.host_of(name)})" if show.hosts else ""
+        lines.append(f"robot {name}{host}: layout {plan.layout}{_layout_note(plan)}")
         mine = [step for step in plan.steps if step.is_for(name)]
         lines.extend(_step_table(mine, show.tracks == {} and show.ensemble, show.tempo))
     total = max(plan.estimated_s for plan in plans.values())
