@@ -159,7 +159,8 @@ def test_the_metadata_keys_are_the_ones_logs_have_always_had():
     """The names on disk do not change with the code: old logs read, and older choreo reads new ones."""
     assert _metadata_keys() == {
         "version", "show", "show_path", "show_sha256", "port", "baud", "layout", "start_time", "start_ns", "host",
-        "python", "platform", "robots", "unison", "show_host", "outcome", "steps_run", "late_steps", "show_s", "error",
+        "python", "platform", "robots", "unison", "show_host", "hosts", "shift_ns", "spread_ns", "aligned_by",
+        "outcome", "steps_run", "late_steps", "show_s", "error",
         "exit_code", "stop_reason", "clock", "show_zero_monotonic_ns", "show_zero_wall_ns", "music.file",
         "music.start", "audio.backend", "replay_of", "speed", "frames", "differences"}
 

@@ -121,3 +121,24 @@ def test_the_logs_format_is_spelled_in_one_module():
                  for number, line in enumerate(path.read_text().splitlines(), 1)
                  if spelled.search(line) and "show/" not in str(path.relative_to(package))]
     assert offenders == []
+
+
+def test_a_merged_log_of_two_hosts_decodes_on_every_topic(tmp_path):
+    """`choreo log merge` (issue 25): every channel carries its JSON schema and every message on
+    it validates against that schema as stored in the file (what Foxglove decodes with), no null."""
+    from mcap.reader import make_reader
+
+    from hostlogs import merged_hosts
+
+    merged = merged_hosts(tmp_path).merged
+    topics = set()
+    with open(merged, "rb") as f:
+        reader = make_reader(f)
+        for schema, channel, message in reader.iter_messages():
+            assert schema is not None and schema.encoding == "jsonschema" and channel.message_encoding == "json"
+            decoded = json.loads(message.data)
+            jsonschema.validate(decoded, json.loads(schema.data))
+            assert None not in decoded.values(), (channel.topic, decoded)
+            topics.add(channel.topic)
+    assert {"/rcb4/lead/tx", "/rcb4/follow/rx", "/choreo/follow/step", "/choreo/stageleft/clock",
+            "/choreo/stageright/clock"} <= topics

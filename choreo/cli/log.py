@@ -49,6 +49,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _frames_parser(commands)
     _timeline_parser(commands)
     _export_parser(commands)
+    _merge_parser(commands)
     _replay_parser(subparsers)
 
 
@@ -119,6 +120,34 @@ def _export_parser(commands: argparse._SubParsersAction) -> None:
                         help="one row a cue a robot instead: number, label, planned and actual show time, "
                         "lateness, how it was released (time, whose GO, skipped, not reached), bar.beat")
     export.set_defaults(handler=run_export)
+
+
+def _merge_parser(commands: argparse._SubParsersAction) -> None:
+    """`log merge A B... -o SHOW`: the logs of one show's hosts as one log."""
+    merge = commands.add_parser(
+        "merge", help="join the logs of one show's hosts into one log every review reads",
+        description="Join the logs of one show's hosts (each a choreo run with its own robots, on one Link "
+        "session) into one MCAP log: every robot on its own topics, each host's log, clock and commands on "
+        "topics of its own, the first log's time the axis, each other log lined up on its clock samples.")
+    merge.add_argument("logs", nargs="+", metavar="LOG", help="the hosts' .mcap logs, the time axis's first")
+    merge.add_argument("-o", "--output", required=True, metavar="FILE", help="the merged log to write (.mcap)")
+    merge.set_defaults(handler=run_merge)
+
+
+def run_merge(args: argparse.Namespace) -> int:
+    """Say how each host was lined up (shift and spread) and what was written."""
+    from choreo.log.merge import merge_logs
+    from choreo.run.settings import check_output_folder
+
+    check_output_folder(Path(args.output), "-o")
+    report = merge_logs(args.logs, args.output)
+    for alignment in report.alignments:
+        print(visible(alignment.describe()))
+    for warning in report.warnings:
+        print(f"warning: {visible(warning)}", file=sys.stderr)
+    hosts = ", ".join(f"{log.host} ({', '.join(log.robots)})" for log in report.hosts)
+    print(visible(f"merged {len(report.hosts)} logs, {report.messages} messages, hosts {hosts}: {report.output}"))
+    return 0
 
 
 def _replay_parser(subparsers: argparse._SubParsersAction) -> None:

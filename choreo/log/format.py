@@ -62,13 +62,46 @@ def robot_topic(topic: str, robot: str | None) -> str:
 
 
 def base_topic(topic: str) -> str:
-    """`/rcb4/left/tx` -> `/rcb4/tx`: what kind of message a topic carries, whoever's it is."""
+    """`/rcb4/left/tx` -> `/rcb4/tx`, `/choreo/stage/log` -> `/choreo/log`: what kind of message
+    a topic carries, whoever's it is (a robot's, or in a merged log a host's)."""
     parts = topic.split("/")
     if len(parts) == 4:
         joined = f"/{parts[1]}/{parts[3]}"
-        if joined in PER_ROBOT:
+        if joined in PER_ROBOT or joined in PER_HOST:
             return joined
     return topic
+
+
+# A merged log (`choreo log merge`): each host's shared topics on their own, `/choreo/stage/log`.
+PER_HOST = (LOG_TOPIC, CLOCK_TOPIC, COMMAND_TOPIC)
+
+
+def host_topic(topic: str, host: str) -> str:
+    """A host's own shared topic in a merged log: `/choreo/clock` -> `/choreo/stage/clock`."""
+    head, _, tail = topic.rpartition("/")
+    return f"{head}/{host}/{tail}"
+
+
+def clock_topic(run_info: Mapping[str, str]) -> str:
+    """The clock topic the reviews read show time by: `/choreo/clock`, or in a merged log its
+    first host's (the other hosts' clocks are kept, but one show is timed by one clock)."""
+    hosts = LoggedRun(run_info).hosts
+    return host_topic(CLOCK_TOPIC, hosts[0]) if hosts else CLOCK_TOPIC
+
+
+def robot_message(topic: str, data: bytes, robot: str | None) -> tuple[str | None, bytes]:
+    """A robot's message (tx, rx, step; `topic` its kind) as a merged log keeps it: the robot
+    it names and the bytes to write. `robot` given (a one-robot log, whose records name none):
+    the record is made to name it. ValueError, TypeError: not a JSON object, or a robot no name."""
+    message = decode(data)
+    if not isinstance(message, dict):
+        raise TypeError(f"a JSON object, not {type(message).__name__}")
+    if robot is None:
+        named = message.get("robot")
+        if named is not None and not isinstance(named, str):
+            raise TypeError(f"field 'robot' holds {type(named).__name__}, not str")
+        return named, data
+    return robot, _encode({**message, "robot": robot}).encode()
 
 
 def channels_for(robots: tuple[str, ...] = ()) -> dict[str, tuple[str, str]]:
@@ -104,6 +137,8 @@ class Info:
     PYTHON = "python"
     PLATFORM = "platform"
     ROBOTS = "robots"  # a show for several: their names, comma-separated
+    HOSTS = "hosts"  # a merged log (`choreo log merge`): its hosts, comma-separated; the first's time is its axis
+    SHIFT_NS, SPREAD_NS, ALIGNED_BY = "shift_ns", "spread_ns", "aligned_by"  # host_key(host, ...): its alignment
     UNISON = "unison"  # YES or NO
     SHOW_HOST = "show_host"  # the show's `hosts:` entry this run drove (absent: a show for one host)
     YES, NO = "yes", "no"
@@ -143,6 +178,11 @@ def robot_key(robot: str, what: str) -> str:
     return f"robot.{robot}.{what}"
 
 
+def host_key(host: str, what: str) -> str:
+    """A host's key in a merged log's `choreo` metadata (`host.stage.shift_ns`)."""
+    return f"host.{host}.{what}"
+
+
 def layout_key(robot: str | None) -> str:
     """The metadata key of a robot's board layout (`layout` in a one-robot log)."""
     return Info.LAYOUT if robot is None else robot_key(robot, Info.LAYOUT)
@@ -172,6 +212,11 @@ class LoggedRun:
     @property
     def robots(self) -> list[str]:
         return logged_robots(self.text)
+
+    @property
+    def hosts(self) -> list[str]:
+        """A merged log's hosts (`choreo log merge`), the first's time its axis; empty: one host's run."""
+        return [name for name in str(self.text.get(Info.HOSTS, "")).split(",") if name]
 
     @property
     def unison(self) -> bool:
@@ -469,6 +514,9 @@ RECORD_TYPES: dict[str, type[_Record]] = {TX_TOPIC: TxRecord, RX_TOPIC: RxRecord
 
 # The C scanner json.loads itself calls; typeshed leaves the attribute out of JSONDecoder's stub.
 _scan_once: Callable[[str, int], tuple[Any, int]] = json.JSONDecoder().scan_once  # type: ignore[attr-defined]  # not in typeshed
+
+
+_encode = json.JSONEncoder(separators=(",", ":")).encode  # as the recorder writes a message
 
 
 def decode(data: bytes) -> dict:

@@ -33,8 +33,8 @@ from pathlib import Path
 from typing import IO
 
 from choreo.errors import InputError, LogError
-from choreo.log.format import (CHOREO_TOPICS, METADATA_NAME, RESULT_METADATA_NAME, SHOW_MEDIA_TYPE, base_topic,
-                               LoggedRun)
+from choreo.log.format import (CHOREO_TOPICS, CLOCK_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, SHOW_MEDIA_TYPE,
+                               base_topic, clock_topic, LoggedRun)
 from choreo.userfile import open_input, reading
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -392,6 +392,8 @@ class LogReader:
         channel = self.channels.get(channel_id)
         # a robot's own topic (`/rcb4/left/tx`) reads as its kind; the record names the robot
         topic = base_topic(channel.topic) if channel else f"channel {channel_id}"
+        if channel and topic == CLOCK_TOPIC and channel.topic != clock_topic(self.run_info):
+            topic = channel.topic  # a merged log's other hosts' clocks: kept, but one clock times the show
         routes[channel_id] = topic if wanted is None or topic in wanted else None
         return routes[channel_id]
 

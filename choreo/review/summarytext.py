@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from choreo.log.format import COMMAND_TOPIC, ERROR, LATE_MS, Info, LogLayouts, Result
+from choreo.log.format import COMMAND_TOPIC, ERROR, LATE_MS, Info, LoggedRun, LogLayouts, Result, host_key
+from choreo.numtext import whole_number
 from choreo.review.summary import FRAME_KINDS, LISTED_PLAYS, Summary
 from choreo.review.timeline import stood_text
 
@@ -59,6 +60,23 @@ def _render_run(summary: Summary) -> Iterable[str]:
                f"{run.get(Info.BAUD, '?')} baud, layout {LogLayouts.of(run).describe(None)} {made}")
     else:
         yield "run       no `choreo` metadata: not a log written by choreo run"
+    yield from _render_hosts(run)
+
+
+def _render_hosts(run: dict[str, str]) -> Iterable[str]:
+    """A merged log (`choreo log merge`): its hosts, and how each was lined up on the first's time."""
+    hosts = LoggedRun(run).hosts
+    if not hosts:
+        return
+    placed = []
+    for host in hosts[1:]:
+        shift = run.get(host_key(host, Info.SHIFT_NS), "")
+        size, spread = whole_number(shift.removeprefix("-")), whole_number(run.get(host_key(host, Info.SPREAD_NS), ""))
+        by = run.get(host_key(host, Info.ALIGNED_BY), "?")
+        how = f"spread {spread / 1e6:.3f} ms" if spread is not None and by == "clock" else f"by {by}"
+        moved = f"{(-size if shift.startswith('-') else size) / 1e9:+.6f} s" if size is not None else "?"
+        placed.append(f"{host} shifted {moved} ({how})")
+    yield f"hosts     {len(hosts)} merged: {hosts[0]} (the time axis, its clock times the show), {', '.join(placed)}"
 
 
 def _render_outcome(summary: Summary) -> Iterable[str]:

@@ -1,0 +1,459 @@
+"""`choreo log merge`: the logs of one show's hosts joined into one log every review reads.
+
+A show across hosts is several choreo processes, each with its own robots and its own log, all
+on one Ableton Link session. A reviewer wants the show, not the hosts: one log with every robot
+on one time line. The merge is two passes over each input, in bounded memory:
+
+- the first reads each log's clock samples (and checks it whole: a damaged, foreign or already
+  merged log is one line before anything is written) and lines the logs up: the first input's
+  log time is the axis; each other input is shifted by the median, over its clock samples, of
+  (the first input's log time at that show time, interpolated) minus (its own log time at it).
+  On the Link clock show time 0 is one bar line of the shared session on every host, so equal
+  show times are the same instant, whatever each machine's wall clock says. With no sample in
+  the first's range (no overlap) the runs' recorded show starts (`show_zero_wall_ns`) line them
+  up instead, as far as the machines' wall clocks agree: said in a warning.
+- the second streams every input's messages in log-time order (a heap merge: one message an
+  input in memory) into a new MCAP written beside the output and renamed onto it when whole, so
+  a merge that fails leaves nothing half written.
+
+Topics: robots' own topics stay (robot names are unique across a show's hosts; a one-robot
+log's `/rcb4/tx` becomes its robot's, and its records are made to name the robot); each host's
+shared topics become its own (`/choreo/HOST/log`, `/clock`, `/command`). The reviews time the
+show by the first host's clock (`format.clock_topic`): the others are kept, never counted twice.
+Metadata: a `choreo` record for the whole (the first host's, with every robot, the hosts and
+each one's shift), each input's own records kept under `choreo.host.NAME`, the show attached once.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from bisect import bisect_right
+from contextlib import ExitStack, suppress
+import os
+import re
+import stat
+import tempfile
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from statistics import median
+from typing import IO
+
+from mcap.writer import CompressionType, Writer
+
+from choreo import __version__
+from choreo.clock import RUNNING
+from choreo.errors import UsageError
+from choreo.log.format import (CHANNELS, CHOREO_TOPICS, CLOCK_TOPIC, METADATA_NAME, PER_HOST, PER_ROBOT,
+                               RESULT_METADATA_NAME, SHOW_MEDIA_TYPE, ClockRecord, Info, Result, host_key, host_topic,
+                               layout_key, parse, robot_key, robot_message, robot_topic)
+from choreo.log.reader import LogReader
+from choreo.log.recorder import CHUNK_SIZE, schema_text
+from choreo.show.read import MAX_BYTES as SHOW_MAX_BYTES
+from choreo.textfit import visible
+
+MAX_INPUTS = 64  # logs one merge takes: each is an open file while the messages stream
+MAX_SAMPLES = 200_000  # clock samples kept a log for the alignment (28 hours at two a second)
+HOST_METADATA = "choreo.host."  # + host (+ `.result`, ...): each input's own metadata, kept
+NAME = re.compile(r"[^\s/,\x00-\x1f\x7f]{1,64}")  # a host or robot name a topic and a list can hold
+OUTCOMES = ("failed", "interrupted", "aborted", "done")  # a merged run's outcome: its hosts' worst
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """How one input was placed on the first's time line."""
+
+    host: str
+    shift_ns: int  # added to its log times
+    spread_ns: int  # max - min of the per-sample offsets (0: one sample, or the axis itself)
+    samples: int  # clock samples that placed it (0: the show starts placed it)
+    by: str  # axis | clock | show start
+
+    def describe(self) -> str:
+        if self.by == "axis":
+            return f"host {self.host}: the time axis"
+        how = (f"spread {self.spread_ns / 1e6:.3f} ms over {self.samples} clock samples" if self.by == "clock"
+               else "by the runs' recorded show starts")
+        return f"host {self.host}: shifted {self.shift_ns / 1e9:+.6f} s ({how})"
+
+
+@dataclass
+class HostLog:
+    """One input as the first pass found it."""
+
+    path: Path
+    host: str
+    robots: tuple[str, ...]  # its robots (a one-robot log: the name its robot is given)
+    solo: bool  # a one-robot log: its records name no robot
+    metadata: dict[str, dict[str, str]]
+    samples: list[tuple[float, int]]  # running clock samples: (show time, log time)
+    sources: set[str]  # what kept its show clock (the samples' `source`)
+    cut: str | None  # why it ends early (a killed run), if it does
+    show: tuple[str, bytes] | None  # its attached show: name, bytes
+
+
+@dataclass
+class MergeReport:
+    """What `merge_logs` did, for the command to say."""
+
+    output: Path
+    hosts: list[HostLog]
+    alignments: list[Alignment]
+    messages: int = 0
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def robots(self) -> list[str]:
+        return [robot for log in self.hosts for robot in log.robots]
+
+
+def merge_logs(paths: Sequence[str | Path], output: str | Path) -> MergeReport:
+    """Merge the hosts' logs `paths` into `output` (UsageError or LogError, one line, if not)."""
+    target = Path(output)
+    _check_inputs(paths, target)
+    logs = [survey(Path(path)) for path in paths]
+    _check_hosts(logs)
+    report = MergeReport(target, logs, align(logs))
+    report.warnings += _warnings(logs, report.alignments)
+    _write_atomically(report)
+    return report
+
+
+def _check_inputs(paths: Sequence[str | Path], target: Path) -> None:
+    if len(paths) < 2:
+        raise UsageError("log merge: give the logs of at least two hosts of one show")
+    if len(paths) > MAX_INPUTS:
+        raise UsageError(f"log merge: {len(paths)} logs given; at most {MAX_INPUTS} hosts' logs make one "
+                         "show (merge the logs of one show, not a folder of runs)")
+    try:
+        info = os.stat(target)
+    except OSError:
+        info = None
+    except ValueError:
+        raise UsageError(f"-o {visible(str(target))}: not a file name") from None
+    if info is not None and not stat.S_ISREG(info.st_mode):
+        raise UsageError(f"-o {visible(str(target))}: not a regular file (give the path of a new .mcap)")
+    for path in paths:
+        if info is not None and _same_file(Path(path), info):
+            raise UsageError(f"-o {visible(str(target))}: is one of the logs merged ({visible(str(path))}); "
+                             "write the merged log to a new file")
+
+
+def _same_file(path: Path, target: os.stat_result) -> bool:
+    try:
+        mine = os.stat(path)
+    except (OSError, ValueError):
+        return False
+    return (mine.st_dev, mine.st_ino) == (target.st_dev, target.st_ino)
+
+
+# -- the first pass: what each log is, and its clock ---------------------------------------------
+
+
+def survey(path: Path) -> HostLog:
+    """One input read through once: its host, robots, metadata, clock samples and show."""
+    with LogReader(path) as reader:
+        if reader.info.hosts:
+            raise UsageError(f"log {visible(str(path))}: a merged log already (hosts "
+                             f"{visible(', '.join(reader.info.hosts))}); merge the hosts' own logs")
+        samples, sources = _clock_samples(reader)
+        if reader.cut is not None and reader.cut.damaged:
+            raise UsageError(f"log {visible(str(path))}: damaged, not merged: {reader.cut}")
+        run_info = reader.run_info
+        host = _name(run_info.get(Info.SHOW_HOST) or path.stem, "host", path)
+        named = tuple(_name(robot, "robot", path) for robot in reader.robots)
+        show = reader.show_attachment()
+        shown = (show.name, reader.attachment_data(show)) if show and show.size <= SHOW_MAX_BYTES else None
+        return HostLog(path, host, named or (host,), not named, {k: dict(v) for k, v in reader.metadata.items()},
+                       samples, sources, str(reader.cut) if reader.cut else None, shown)
+
+
+def _clock_samples(reader: LogReader) -> tuple[list[tuple[float, int]], set[str]]:
+    """The running show clock's samples, (show time, log time), a sample that does not parse or
+    holds no finite time passed over (the reviews report such a message)."""
+    samples: list[tuple[float, int]] = []
+    sources: set[str] = set()
+    for _, log_time, data in reader.messages((CLOCK_TOPIC,)):
+        try:
+            sample = parse(CLOCK_TOPIC, data)
+        except (KeyError, TypeError, ValueError, AttributeError):
+            continue
+        if not isinstance(sample, ClockRecord) or sample.state not in (None, RUNNING):
+            continue
+        if math.isfinite(sample.show_s) and len(samples) < MAX_SAMPLES:
+            samples.append((float(sample.show_s), log_time))
+            sources.add(sample.source)
+    return samples, sources
+
+
+def _name(text: str, what: str, path: Path) -> str:
+    if not NAME.fullmatch(text):
+        raise UsageError(f"log {visible(str(path))}: its {what} name {visible(text[:70])!r} cannot name a topic "
+                         "(1-64 characters, no space, '/' or ','): rename the file")
+    return text
+
+
+def _check_hosts(logs: list[HostLog]) -> None:
+    hosts: dict[str, Path] = {}
+    robots: dict[str, str] = {}
+    for log in logs:
+        if log.host in hosts:
+            raise UsageError(f"log merge: {visible(str(hosts[log.host]))} and {visible(str(log.path))} are both "
+                             f"host {visible(log.host)}: give each host's log once")
+        hosts[log.host] = log.path
+        for robot in log.robots:
+            if robot in robots:
+                raise UsageError(f"log merge: robot {visible(robot)} is in the logs of hosts {visible(robots[robot])} "
+                                 f"and {visible(log.host)}: a show's hosts drive different robots")
+            robots[robot] = log.host
+
+
+# -- lining the logs up --------------------------------------------------------------------------
+
+
+def align(logs: list[HostLog]) -> list[Alignment]:
+    """Each input's shift onto the first's time line (see the module's docstring)."""
+    axis = _increasing(logs[0].samples)
+    out = [Alignment(logs[0].host, 0, 0, 0, "axis")]
+    for log in logs[1:]:
+        offsets = sorted(offsets_to(axis, log.samples))
+        if offsets:
+            out.append(Alignment(log.host, round(median(offsets)), offsets[-1] - offsets[0], len(offsets), "clock"))
+        else:
+            out.append(Alignment(log.host, _by_show_start(logs[0], log), 0, 0, "show start"))
+    return out
+
+
+def _increasing(samples: list[tuple[float, int]]) -> list[tuple[float, int]]:
+    """The samples whose show time goes on from the one before (a loop's rewind left out): the
+    axis a show time is interpolated on."""
+    kept: list[tuple[float, int]] = []
+    for show_s, log_time in samples:
+        if not kept or (show_s > kept[-1][0] and log_time > kept[-1][1]):
+            kept.append((show_s, log_time))
+    return kept
+
+
+def offsets_to(axis: list[tuple[float, int]], samples: list[tuple[float, int]]) -> Iterator[int]:
+    """(the axis's log time at each sample's show time) - (the sample's log time), in ns, for the
+    samples within the axis's span of show time."""
+    if len(axis) < 2:
+        return
+    times = [show_s for show_s, _ in axis]
+    for show_s, log_time in samples:
+        if not times[0] <= show_s <= times[-1]:
+            continue
+        at = min(max(bisect_right(times, show_s), 1), len(axis) - 1)
+        (s0, t0), (s1, t1) = axis[at - 1], axis[at]
+        yield round(t0 + (t1 - t0) * (show_s - s0) / (s1 - s0)) - log_time
+
+
+def _by_show_start(first: HostLog, log: HostLog) -> int:
+    zeros = [_show_zero(one) for one in (first, log)]
+    if zeros[0] is None or zeros[1] is None:
+        raise UsageError(f"log merge: cannot line host {visible(log.host)} up with {visible(first.host)}: no clock "
+                         "samples at the same show times, and a run without a recorded show start")
+    return zeros[0] - zeros[1]
+
+
+def _show_zero(log: HostLog) -> int | None:
+    return whole_ns(log.metadata.get(RESULT_METADATA_NAME, {}).get(Result.SHOW_ZERO_WALL_NS, ""))
+
+
+def _warnings(logs: list[HostLog], alignments: list[Alignment]) -> list[str]:
+    said = []
+    for log, alignment in zip(logs, alignments, strict=True):
+        if alignment.by == "show start":
+            said.append(f"host {log.host}: no clock samples at show times host {logs[0].host}'s log has: lined up by "
+                        "the runs' recorded show starts, as far apart as the machines' wall clocks")
+        elif alignment.by == "clock" and not (log.sources | logs[0].sources) <= {"link"}:
+            said.append(f"host {log.host}: not both on the Link clock "
+                        f"({'/'.join(sorted(logs[0].sources | log.sources))}): show time 0 taken as the same instant")
+        if log.cut is not None:
+            said.append(f"host {log.host}: its log is unfinished ({log.cut}): merged as far as it goes")
+    return said
+
+
+# -- the second pass: writing the merged log -----------------------------------------------------
+
+
+def _write_atomically(report: MergeReport) -> None:
+    """The merged log, written beside the output and renamed onto it once whole: a merge that
+    fails (a log damaged since the first pass, a full disk) leaves no half-written file."""
+    target = report.output
+    shown = visible(str(target))
+    try:
+        fd, temp = tempfile.mkstemp(prefix=f".{target.name[:100]}.", suffix=".merging", dir=target.parent)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"-o {shown}: cannot write: {getattr(exc, 'strerror', None) or exc}") from None
+    done = False
+    try:
+        os.fchmod(fd, 0o644)  # a log as readable as the runs' (mkstemp makes it the owner's alone)
+        with os.fdopen(fd, "wb") as file:
+            _write(report, file)
+        os.replace(temp, target)
+        done = True
+    except OSError as exc:
+        raise UsageError(f"-o {shown}: cannot write: {exc.strerror or exc}") from None
+    finally:
+        if not done:
+            with suppress(OSError):
+                os.unlink(temp)
+
+
+def _write(report: MergeReport, file: IO[bytes]) -> None:
+    writer = Writer(file, chunk_size=CHUNK_SIZE, compression=CompressionType.NONE)
+    writer.start(profile="", library=f"choreo {__version__}")
+    channels = _register(writer, report.hosts)
+    writer.add_metadata(METADATA_NAME, merged_info(report))
+    for log in report.hosts:
+        for name, record in log.metadata.items():
+            writer.add_metadata(host_metadata_name(log.host, name), record)
+    attached: set[bytes] = set()
+    for log in report.hosts:
+        if log.show is not None and log.show[1] not in attached:  # the show file once
+            attached.add(log.show[1])
+            start = whole_ns(log.metadata.get(METADATA_NAME, {}).get(Info.START_NS, "")) or 0
+            writer.add_attachment(start, start, log.show[0], SHOW_MEDIA_TYPE, log.show[1])
+    _stream(writer, report, channels)
+    result = merged_result(report.hosts)
+    if result is not None:
+        writer.add_metadata(RESULT_METADATA_NAME, result)
+    writer.finish()
+
+
+def host_metadata_name(host: str, name: str) -> str:
+    """Where an input's metadata record is kept: `choreo` -> `choreo.host.HOST`, `choreo.result`
+    -> `choreo.host.HOST.result`, another `NAME` -> `choreo.host.HOST.NAME`."""
+    tail = name[len(METADATA_NAME):] if name.startswith(METADATA_NAME + ".") or name == METADATA_NAME else f".{name}"
+    return f"{HOST_METADATA}{host}{tail}"
+
+
+def _register(writer: Writer, logs: list[HostLog]) -> dict[str, int]:
+    """Each robot's and each host's topics, each with its JSON schema (Foxglove decodes them)."""
+    schemas: dict[str, int] = {}
+    channels: dict[str, int] = {}
+    for log in logs:
+        topics = [(robot_topic(kind, robot), kind) for robot in log.robots for kind in PER_ROBOT]
+        for topic, kind in topics + [(host_topic(kind, log.host), kind) for kind in PER_HOST]:
+            name, filename = CHANNELS[kind]
+            if name not in schemas:
+                schemas[name] = writer.register_schema(name=name, encoding="jsonschema", data=schema_text(filename))
+            channels[topic] = writer.register_channel(topic=topic, message_encoding="json", schema_id=schemas[name])
+    return channels
+
+
+def _stream(writer: Writer, report: MergeReport, channels: dict[str, int]) -> None:
+    """Every input's messages on the one time line, in log-time order: one message an input in
+    memory (heapq.merge keeps each input's own order, ties go to the earlier input)."""
+    dropped = [0] * len(report.hosts)
+    with ExitStack() as stack:
+        readers = [stack.enter_context(LogReader(log.path)) for log in report.hosts]
+        placed = zip(readers, report.hosts, report.alignments, strict=True)
+        streams = [_shifted(reader, log, alignment, dropped, number)
+                   for number, (reader, log, alignment) in enumerate(placed)]
+        sequence = 0
+        for log_time, topic, data in heapq.merge(*streams, key=lambda message: message[0]):
+            sequence += 1
+            writer.add_message(channels[topic], log_time, data, log_time, sequence % 2 ** 32)
+        for reader, log in zip(readers, report.hosts, strict=True):
+            if reader.cut is not None and reader.cut.damaged:
+                raise UsageError(f"log {visible(str(log.path))}: damaged, not merged: {reader.cut}")
+    report.messages = sequence
+    for log, count in zip(report.hosts, dropped, strict=True):
+        if count:
+            report.warnings.append(f"host {log.host}: {count} messages on topics choreo does not write left out")
+
+
+def _shifted(reader: LogReader, log: HostLog, alignment: Alignment, dropped: list[int],
+             number: int) -> Iterator[tuple[int, str, bytes]]:
+    """One input's messages as the merged log has them: (log time on the axis, topic, data)."""
+    count = 0
+    for topic, log_time, data in reader.messages():
+        count += 1
+        try:
+            merged_topic, data = _place(topic, data, log)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise reader.not_choreo(topic, count, exc) from None
+        if merged_topic is None:
+            dropped[number] += 1
+            continue
+        time = log_time + alignment.shift_ns
+        if not 0 <= time < 2 ** 64:
+            raise UsageError(f"log {visible(str(log.path))}: message {count} falls outside MCAP's time range "
+                             f"once shifted by {alignment.shift_ns / 1e9:+.3f} s to line up with the others")
+        yield time, merged_topic, data
+
+
+def _place(topic: str, data: bytes, log: HostLog) -> tuple[str | None, bytes]:
+    """A message's topic in the merged log (None: not choreo's, left out), and its bytes, checked
+    as the reviews will read it (a message no review can read is no message to merge)."""
+    if topic in CHOREO_TOPICS:
+        parse(topic, data)
+    if topic in PER_ROBOT:
+        robot, data = robot_message(topic, data, log.robots[0] if log.solo else None)
+        if robot not in log.robots:
+            raise ValueError(f"robot {robot!r:.40} is none of its log's robots")
+        return robot_topic(topic, robot), data
+    if topic in PER_HOST:
+        return host_topic(topic, log.host), data
+    return None, data
+
+
+# -- the merged log's metadata -------------------------------------------------------------------
+
+
+def merged_info(report: MergeReport) -> dict[str, str]:
+    """The `choreo` record of the whole: the first host's run, every robot, the hosts in order
+    (the first's time the axis) and each one's shift onto it."""
+    logs = report.hosts
+    info = {key: value for key, value in logs[0].metadata.get(METADATA_NAME, {}).items() if key != Info.SHOW_HOST}
+    info.update({Info.ROBOTS: ",".join(report.robots), Info.HOSTS: ",".join(log.host for log in logs),
+                 Info.UNISON: Info.YES if _unison(logs) else Info.NO})
+    for log, alignment in zip(logs, report.alignments, strict=True):
+        own = log.metadata.get(METADATA_NAME, {})
+        for robot in log.robots:
+            for what in (Info.PORT, Info.BAUD, Info.LAYOUT):
+                key = (what if what != Info.LAYOUT else layout_key(None)) if log.solo else robot_key(robot, what)
+                if key in own:
+                    info[robot_key(robot, what)] = own[key]
+        info.update({host_key(log.host, Info.SHIFT_NS): str(alignment.shift_ns),
+                     host_key(log.host, Info.SPREAD_NS): str(alignment.spread_ns),
+                     host_key(log.host, Info.ALIGNED_BY): alignment.by})
+    return info
+
+
+def _unison(logs: list[HostLog]) -> bool:
+    """The hosts played one show whose steps their robots share: its plays' starts compare
+    across hosts (the summary's unison skew is then host to host too)."""
+    infos = [log.metadata.get(METADATA_NAME, {}) for log in logs]
+    shows = {info.get(Info.SHOW_SHA256, "") for info in infos}
+    said = {info.get(Info.UNISON) for info in infos}
+    return len(shows) == 1 and "" not in shows and Info.YES in said and Info.NO not in said
+
+
+def merged_result(logs: list[HostLog]) -> dict[str, str] | None:
+    """The first host's result (its clock times the show) with the hosts' worst outcome and
+    their steps summed; None when the first host's run recorded none (it never closed its log)."""
+    results = [log.metadata.get(RESULT_METADATA_NAME) for log in logs]
+    first = results[0]
+    if first is None:
+        return None
+    merged = dict(first)
+    outcomes = [(result or {}).get(Result.OUTCOME, "interrupted") for result in results]
+    worst = min(range(len(logs)), key=lambda i: OUTCOMES.index(outcomes[i]) if outcomes[i] in OUTCOMES else 9)
+    if outcomes[worst] in OUTCOMES and outcomes[worst] != merged.get(Result.OUTCOME):
+        merged[Result.OUTCOME] = outcomes[worst]
+        error = (results[worst] or {}).get(Result.ERROR) or "its log has no result"
+        merged[Result.ERROR] = f"host {logs[worst].host}: {error}"
+    for key in (Result.STEPS_RUN, Result.LATE_STEPS):
+        counts = [whole_ns((result or {}).get(key, "")) for result in results]
+        if all(count is not None for count in counts):
+            merged[key] = str(sum(count or 0 for count in counts))
+    return merged
+
+
+def whole_ns(text: str) -> int | None:
+    """A whole number from the metadata (hostile text: None for anything else)."""
+    return int(text) if text.isascii() and text.isdigit() and len(text) < 20 else None
