@@ -28,6 +28,7 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 from choreo.clock import HELD, PAUSED, RUNNING, PausableShowClock, ShowClock
+from choreo.sync.clock import LinkShowClock
 from choreo.events import (PANIC, STOPPED, Answer, Command, CommandEvent, CommandListener, GoCue, Listeners,
                            StepEvent, StopRequest, Subscription, WaitingListener)
 from choreo.live.limits import LIMITS, Held, Limits, ReportGate
@@ -498,7 +499,8 @@ class Live:
                 "clock": self.clock,
                 "playhead": playhead.to_json() if playhead is not None else None,
                 "waiting": waiting, "paused": self._paused,
-                "robots": {row.robot: row.to_json() for row in rows}}
+                "robots": {row.robot: row.to_json() for row in rows},
+                **({"link": link_status(show, self._now())} if isinstance(show, LinkShowClock) else {})}
 
     # -- what the operator says --------------------------------------------------------------
 
@@ -886,3 +888,10 @@ def summary_of(held: Held) -> tuple[Command, Answer]:
     records them as the record's `count` and `counts`)."""
     return (Command(UNLOGGED, held.source),
             Answer("error", held.message(), {"count": held.count, "counts": held.counts}))
+
+
+def link_status(show: LinkShowClock, mono: float) -> dict[str, Any]:
+    """The Link session in a status reply: what an operator checks when a peer changed something."""
+    snapshot = show.session.snapshot()
+    return {"tempo": round(snapshot.tempo, 3), "peers": snapshot.peers, "playing": snapshot.playing,
+            "beat": round(show.show_beat(mono), 3), "meter": show.meter}

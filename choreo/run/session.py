@@ -18,6 +18,7 @@ from types import TracebackType
 
 from choreo.clock import (MachineShowClock, PausableShowClock, RunClock, ShowClock, SystemTime, TimeSource,
                           quick_thread_switches, sleep_until_show)
+from choreo.errors import UsageError
 from choreo.events import Command, PlayOutListener, RunListener, RunResult, StopRequest
 from choreo.live.controls import HoldingShowClock, Live
 from choreo.log.format import CLOCK_EVERY_S, INFO, LINK_PREFIX, WARNING, ClockRecord, Result, result_metadata
@@ -72,12 +73,19 @@ class Session:
     def __enter__(self) -> Session:
         settings = self.settings
         if settings.link is not None:
+            if self.clock.virtual:
+                raise UsageError("the Link clock runs in real time, as its peers do: not on virtual time "
+                                 "(rehearse a Link show with --clock machine)")
             # joined before anything opens (a missing binding stops the run with nothing open),
             # and early: peers are found while the ports open
             self.link = LinkSession(settings.link.meter, settings.link.bpm).open()
         self.stage = Stage(settings.run_info(self.clock.wall_anchor_ns), settings.log_path, self.clock,
                            list(settings.links.values()), unique_log=settings.unique_log, named=settings.show.ensemble)
-        self.stage.__enter__()
+        try:
+            self.stage.__enter__()
+        except BaseException:
+            self._leave_link()  # what opened first is closed too: the with statement never reaches __exit__
+            raise
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
@@ -86,9 +94,12 @@ class Session:
             if self.stage is not None:
                 self.stage.__exit__(exc_type, exc, tb)
         finally:
-            if self.link is not None:
-                self.link.close()
-                self.link = None
+            self._leave_link()
+
+    def _leave_link(self) -> None:
+        if self.link is not None:
+            self.link.close()
+            self.link = None
 
     # -- running ---------------------------------------------------------------------------
 
