@@ -6,6 +6,7 @@ on virtual time against in-process simulators, one host after the other."""
 
 from __future__ import annotations
 
+import json
 import threading
 from pathlib import Path
 
@@ -167,3 +168,6 @@ def test_choreo_plan_names_each_robots_host(tmp_path, capsys):
     robots = [line for line in capsys.readouterr().out.splitlines() if line.startswith("robot ")]
     assert robots == ["robot a (host left): layout seed", "robot b (host left): layout seed",
                       "robot c (host right): layout seed"]
+    assert vmain(["plan", str(tmp_path / "show.yaml"), "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert record["hosts"] == {"left": ["a", "b"], "right": ["c"]} and record["link"] == {"bpm": 120.0, "meter": 4}

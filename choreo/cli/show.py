@@ -93,6 +93,10 @@ def _clock_record(show: Show) -> dict[str, Any]:
         tempo = show.tempo
         record["tempo"] = {"bpm": tempo.bpm, "offset": tempo.offset, "meter": tempo.meter,
                            **({"bars": list(tempo.bars)} if tempo.bars else {})}
+    if show.link is not None:  # `tempo.bpm` is then the plan's; `link.bpm` None: the session's, at run time
+        record["link"] = {"bpm": show.link.bpm, "meter": show.link.meter}
+    if show.hosts:
+        record["hosts"] = {host: list(robots) for host, robots in show.hosts.items()}
     return record
 
 
