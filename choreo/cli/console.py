@@ -22,6 +22,7 @@ it fits any width from 60 columns; everything goes to `out` (stderr): stdout is 
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import termios
@@ -58,6 +59,7 @@ from choreo.live.status import RobotRow, ShowStatus
 from choreo.log.format import ERROR, INFO, WARNING
 from choreo.show.cues import Cue, CueList
 from choreo.show.model import PlannedStep, beat_text
+from choreo.sync.clock import LinkShowClock
 from choreo.textfit import fit
 
 REFRESH_S = 0.2  # five looks a second: the show time moves smoothly enough (and is drawn to 0.1 s)
@@ -483,12 +485,25 @@ class Console:
     def _bar(self, show_s: float | None) -> tuple[int, int] | None:
         """Bar and beat now on the show's `tempo:` (through its map, if it has one)."""
         tempo = self.session.settings.show.tempo
-        if tempo is None or show_s is None:
+        if show_s is None:
+            return None
+        show = self.live.show
+        if isinstance(show, LinkShowClock):  # the session's beat: a peer may have changed the tempo
+            beats = show.show_beat(show.mono_at(show_s))
+            bar, within = divmod(math.floor(beats), show.meter)
+            return bar + 1, within + 1
+        if tempo is None:
             return None
         bar, beat = tempo.position(show_s)
         return bar, int(beat)
 
     def _clock_text(self, stopping: bool) -> str:
+        show = self.live.show
+        if isinstance(show, LinkShowClock):
+            snapshot = show.session.snapshot()
+            peers = "no other peers" if snapshot.peers == 0 else f"{snapshot.peers} peer" + \
+                ("s" if snapshot.peers > 1 else "")
+            return f"link clock, {snapshot.tempo:.2f} bpm, {peers}"
         clock = "music" if self.session.settings.song is not None else "machine"
         if self.live.paused and not stopping:
             return f"{clock} clock, PAUSED"
