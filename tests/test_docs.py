@@ -48,7 +48,7 @@ README_MAX_LINES = 250
 
 SHOW_KINDS = {"yaml"}
 COMMAND_KINDS = {"sh", "console"}
-PLAIN_KINDS = {"text", "python"}
+PLAIN_KINDS = {"text", "python", "sql"}  # sql: the README's DuckDB query, run by tests/test_export_parquet.py
 _FENCE = re.compile(r"^(?P<indent> *)(?P<fence>```+)(?P<info>.*)$")
 _SHOW_LINE = re.compile(r"^(version|steps|tracks):", re.M)
 _SUBSTITUTION = re.compile(r"\$\(([^()]*)\)")

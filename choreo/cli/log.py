@@ -112,13 +112,17 @@ def _export_parser(commands: argparse._SubParsersAction) -> None:
         "export", help="one row a frame with all its fields, as CSV or JSON",
         description="Write one row a frame (the frame's and its reply's fields, times as wall-clock ns "
         "and show-clock s) for spreadsheets and pandas. FILE '-' is stdout.")
-    export.add_argument("log", help="the run's .mcap log")
+    export.add_argument("log", nargs="+", help="the run's .mcap log (--parquet: several logs, or folders of them)")
     export.add_argument("--csv", metavar="FILE", help="write CSV to FILE")
     export.add_argument("--json", metavar="FILE", help="write a JSON array to FILE")
     export.add_argument("--jsonl", metavar="FILE", help="write JSON Lines (one object a row) to FILE")
     export.add_argument("--cues", action="store_true",
                         help="one row a cue a robot instead: number, label, planned and actual show time, "
                         "lateness, how it was released (time, whose GO, skipped, not reached), bar.beat")
+    export.add_argument("--parquet", metavar="DIR",
+                        help="write each log's frames, steps, cues and commands as Parquet tables into DIR "
+                        "(DIR/<log>.frames.parquet ...), every row with its run's id: many runs, one query "
+                        "(needs pyarrow: choreo[parquet])")
     export.set_defaults(handler=run_export)
 
 
@@ -337,13 +341,17 @@ def run_export(args: argparse.Namespace) -> int:
 
     targets = [(name, value) for name, value in (("csv", args.csv), ("json", args.json),
                                                  ("jsonl", args.jsonl)) if value]
+    if args.parquet is not None:
+        return _export_parquet(args, bool(targets))
+    if len(args.log) > 1:
+        raise UsageError("log export: one log at a time with --csv, --json and --jsonl (--parquet DIR takes several)")
     if not targets:
         raise UsageError("log export: say where: --csv, --json and/or --jsonl FILE ('-' for stdout)")
     if sum(1 for _, value in targets if value == "-") > 1:
         raise UsageError("log export: only one of --csv, --json and --jsonl can go to stdout ('-')")
     sink_of: dict[str, type[CsvSink | JsonSink | JsonLinesSink]] = {"csv": CsvSink, "json": JsonSink,
                                                                      "jsonl": JsonLinesSink}
-    with LogReader(args.log) as reader, ExitStack() as files:
+    with LogReader(args.log[0]) as reader, ExitStack() as files:
         sinks: list[CsvSink | JsonSink | JsonLinesSink] = []
         for name, value in targets:
             out = sys.stdout if value == "-" else cast(TextIO, files.enter_context(  # opened in text mode
@@ -357,6 +365,45 @@ def run_export(args: argparse.Namespace) -> int:
         what = "cue rows" if args.cues else "frames"
         print(f"exported {count} {what} to {written}{note}", file=sys.stderr)
     return 0
+
+
+def _export_parquet(args: argparse.Namespace, other_targets: bool) -> int:
+    """`log export LOG... --parquet DIR`: each log's four tables, a line on stderr a log; a log
+    that cannot be read is its one line and the others are still exported (exit 2 at the end).
+    DIR must exist, as any output folder must; pyarrow is checked before any log is read."""
+    from choreo.errors import InputError, LogError
+    from choreo.log.reader import LogReader
+    from choreo.review.parquet import export_parquet, require_pyarrow, stem
+
+    if other_targets or args.cues:
+        raise UsageError("log export --parquet writes every table (frames, steps, cues, commands) on its own: "
+                         "leave out --csv, --json, --jsonl and --cues")
+    require_pyarrow()
+    folder = Path(args.parquet)
+    if not _is_folder(folder):
+        what = "is not a folder" if os.path.lexists(folder) else "does not exist"
+        raise UsageError(f"log export --parquet {args.parquet}: folder {what} (create it first)")
+    logs = _logs_in(args.log)
+    named: dict[str, Path] = {}
+    for path in logs:
+        other = named.setdefault(stem(path), path)
+        if other != path:
+            raise UsageError(f"log export --parquet: {other} and {path} would write the same tables "
+                             f"({stem(path)}.*.parquet): export them to different folders")
+    failed = 0
+    for path in dict.fromkeys(logs):
+        try:
+            with LogReader(path) as reader:
+                done = export_parquet(reader, folder)
+                cut = f" (log {reader.cut.state}: {reader.cut.reason})" if reader.cut else ""
+        except (LogError, InputError) as exc:
+            failed += 1
+            for line in exc.lines():
+                print(line, file=sys.stderr)
+            continue
+        counts = ", ".join(f"{count} {kind if count != 1 else kind[:-1]}" for kind, count in done.counts.items())
+        print(visible(f"exported {path}: {counts} to {folder / stem(path)}.*.parquet{cut}"), file=sys.stderr)
+    return 2 if failed else 0
 
 
 @contextmanager
