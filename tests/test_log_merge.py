@@ -277,3 +277,29 @@ def test_a_message_that_is_no_choreo_message_fails_the_merge_and_leaves_nothing(
     err = _refused(capsys, [str(hosts[LEFT]), str(bad), "-o", str(tmp_path / "m.mcap")])
     assert "is not a choreo /rcb4/tx message" in err
     assert os.listdir(tmp_path) == ["bad.mcap"]
+
+
+def test_a_log_cut_short_is_merged_as_far_as_it_goes_with_a_warning(hosts, tmp_path):
+    cut = tmp_path / "cut.mcap"
+    data = hosts[RIGHT].read_bytes()
+    cut.write_bytes(data[:len(data) // 2])  # a killed run: no footer, a chunk cut in half
+    report = merge_logs([hosts[LEFT], cut], tmp_path / "m.mcap")
+    assert any("its log is unfinished" in warning for warning in report.warnings)
+    assert report.alignments[1].by == "clock"
+    summary = summarize(tmp_path / "m.mcap")
+    assert list(summary.robots) == ["lead", "follow"] and summary.complete  # the merge itself is whole
+    assert 0 < summary.robots["follow"].frames_sent < summarize(hosts[RIGHT]).frames_sent
+
+
+def test_the_merged_result_is_the_first_hosts_with_the_worst_outcome_and_the_steps_summed():
+    from choreo.log.merge import merged_result
+
+    first, second = _host("a", []), _host("b", [])
+    first.metadata[RESULT_METADATA_NAME] = {Result.OUTCOME: "done", Result.STEPS_RUN: "4", Result.SHOW_S: "9.5"}
+    second.metadata[RESULT_METADATA_NAME] = {Result.OUTCOME: "failed", Result.STEPS_RUN: "3",
+                                             Result.ERROR: "port: no reply"}
+    assert merged_result([first, second]) == {Result.OUTCOME: "failed", Result.STEPS_RUN: "7", Result.SHOW_S: "9.5",
+                                              Result.ERROR: "host b: port: no reply"}
+    del second.metadata[RESULT_METADATA_NAME]
+    assert merged_result([first, second])[Result.OUTCOME] == "interrupted"
+    assert merged_result([second, first]) is None  # the first host's run recorded no result

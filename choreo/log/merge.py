@@ -445,7 +445,7 @@ def merged_result(logs: list[HostLog]) -> dict[str, str] | None:
     worst = min(range(len(logs)), key=lambda i: OUTCOMES.index(outcomes[i]) if outcomes[i] in OUTCOMES else 9)
     if outcomes[worst] in OUTCOMES and outcomes[worst] != merged.get(Result.OUTCOME):
         merged[Result.OUTCOME] = outcomes[worst]
-        error = (results[worst] or {}).get(Result.ERROR) or "its log has no result"
+        error = (results[worst] or {}).get(Result.ERROR) or "its run recorded no result (its log is unfinished)"
         merged[Result.ERROR] = f"host {logs[worst].host}: {error}"
     for key in (Result.STEPS_RUN, Result.LATE_STEPS):
         counts = [whole_ns((result or {}).get(key, "")) for result in results]
