@@ -82,7 +82,10 @@ def opening_lines(settings: RunSettings) -> list[str]:
         others = [name for name in settings.show.cast if name not in settings.links]
         lines.append(f"host: {settings.host}, driving {', '.join(settings.links)}"
                      + (f"; other hosts drive {', '.join(others)}" if others else ""))
-    if settings.show.music is not None:
+    if settings.link is not None:
+        tempo = f"proposing {settings.link.bpm:g} bpm" if settings.link.bpm is not None else "the session's tempo"
+        lines.append(f"clock: Ableton Link session, {settings.link.meter} beats a bar, {tempo}")
+    elif settings.show.music is not None:
         lines.append(_music_line(settings))
     return lines
 
@@ -98,7 +101,8 @@ def _show_line(settings: RunSettings) -> str:
         steps = len(settings.plans[solo(settings).robot].steps)
         return f"show: {show.name}: {steps} steps{first}, about {estimated:.1f} s"
     form = "tracks" if show.tracks else "shared steps"
-    return f"show: {show.name}: {len(settings.links)} robots, {form}{first}, about {estimated:.1f} s"
+    robots = f"{len(settings.links)} robot" + ("s" if len(settings.links) != 1 else "")
+    return f"show: {show.name}: {robots}, {form}{first}, about {estimated:.1f} s"
 
 
 def _robot_lines(settings: RunSettings) -> list[str]:
