@@ -303,3 +303,28 @@ def test_the_merged_result_is_the_first_hosts_with_the_worst_outcome_and_the_ste
     del second.metadata[RESULT_METADATA_NAME]
     assert merged_result([first, second])[Result.OUTCOME] == "interrupted"
     assert merged_result([second, first]) is None  # the first host's run recorded no result
+
+
+def test_a_missing_or_unreadable_input_is_one_line(hosts, tmp_path, capsys):
+    output = str(tmp_path / "m.mcap")
+    assert "nothing.mcap" in _refused(capsys, [str(hosts[LEFT]), str(tmp_path / "nothing.mcap"), "-o", output])
+    assert "a folder" in _refused(capsys, [str(hosts[LEFT]), str(tmp_path), "-o", output])
+    named = tmp_path / "two words.mcap"  # no show_host: the file's name names the host, and a topic
+    with open(named, "wb") as f:
+        writer = Writer(f)
+        writer.start(library="choreo 0.1.0")
+        writer.add_metadata(METADATA_NAME, {Info.SHOW: "x"})
+        writer.finish()
+    assert "cannot name a topic" in _refused(capsys, [str(hosts[LEFT]), str(named), "-o", output])
+    assert os.listdir(tmp_path) == ["two words.mcap"]
+
+
+def test_only_hosts_not_both_on_the_link_clock_are_warned_of():
+    from choreo.log.merge import _warnings
+
+    axis = [(0.0, 0), (1.0, 1_000_000_000)]
+    logs = [_host("a", axis), _host("b", axis)]
+    assert _warnings(logs, align(logs)) == []  # both on Link: show time 0 is one bar line
+    logs[1].sources = {"machine"}
+    assert _warnings(logs, align(logs)) == ["host b: not both on the Link clock (link/machine): show time 0 "
+                                            "taken as the same instant"]
