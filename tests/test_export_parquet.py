@@ -205,3 +205,24 @@ def test_a_step_record_that_is_not_choreos_is_the_reviews_one_line(tmp_path, cap
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and "not a choreo /choreo/step message" in err[0], err
     assert not list(tmp_path.glob("*.parquet*"))
+
+
+def test_the_logs_of_two_hosts_and_their_merge_are_three_runs_the_merge_holding_both_hosts_rows(tmp_path):
+    from hostlogs import merged_hosts
+
+    made = merged_hosts(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    assert vmain(["log", "export", *map(str, made.logs.values()), str(made.merged), "--parquet", str(out)]) == 0
+    found = duckdb.connect().execute(
+        f"SELECT run_id, host, robot, number, late_ms FROM read_parquet('{out}/*.cues.parquet', union_by_name = true)"
+        " ORDER BY host, robot, number").fetchall()
+    hosts = {host: {row[0] for row in found if row[1] == host} for host in {row[1] for row in found}}
+    assert sorted(hosts) == ["stageleft", "stageleft,stageright", "stageright"]
+    assert all(len(ids) == 1 for ids in hosts.values()) and len(set.union(*hosts.values())) == 3
+    assert next(iter(hosts["stageleft"])).startswith("duo@") and next(iter(hosts["stageleft"])).endswith("@stageleft")
+    by_host = {host: [row[2:] for row in found if row[1] == host] for host in hosts}
+    assert {row[0] for row in by_host["stageleft,stageright"]} == {"lead", "follow"}
+    assert sorted(by_host["stageleft,stageright"]) == sorted(by_host["stageleft"] + by_host["stageright"])
+    frames = {path.name: pq.read_table(path).num_rows for path in out.glob("*.frames.parquet")}
+    assert frames["show.frames.parquet"] == frames["stageleft.frames.parquet"] + frames["stageright.frames.parquet"] > 0

@@ -295,7 +295,7 @@ def cue_rows(reader: LogReader, show: AttachedShow | None = None) -> list[dict]:
         raise reader.not_choreo(topic, number, exc) from None
     seen.released_by()
     ended = _Ended.of(reader, seen, plans)
-    rows = list(seen.rows.values()) + _not_reached(seen, cues, ended, tempo)
+    rows = list(seen.rows.values()) + _not_reached(seen, cues, ended, tempo, set(reader.robots))
     return _in_cue_order(rows, cues, reader.robots)
 
 
@@ -331,11 +331,16 @@ def _stood_before(where: _Whereabouts | None, plan: Plan | None, robot: str, pas
     return _next_step(plan, robot, where.last) if where.between else None
 
 
-def _not_reached(seen: _CuePass, cues: CueList | None, ended: _Ended, tempo: Tempo | None) -> list[dict]:
-    """A row for each cue a robot did not run in a pass (one for a cue outside the run)."""
+def _not_reached(seen: _CuePass, cues: CueList | None, ended: _Ended, tempo: Tempo | None,
+                 robots: set[str]) -> list[dict]:
+    """A row for each cue a robot did not run in a pass (one for a cue outside the run). Only
+    the log's robots (`robots`; empty: every robot of the show): a host's run (`--host`) drives
+    its own, and another host's cues are that host's log's to tell, not "not reached" here."""
     rows = []
     for cue in cues or ():
         for robot, index in cue.steps:
+            if robots and robot and robot not in robots:
+                continue
             where, passes = seen.robots.get(robot), ended.passes.get(robot, 1)
             if where is not None and where.first is not None and (
                     index < where.first or (passes > 1 and index > where.highest)):
