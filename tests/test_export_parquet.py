@@ -172,6 +172,11 @@ def test_a_missing_folder_or_two_logs_of_one_name_are_refused_before_anything_is
         err = capsys.readouterr().err.splitlines()
         assert len(err) == 1 and says in err[0], err
     assert not (tmp_path / "nosuch").exists() and not list(tmp_path.rglob("*.parquet*"))
+    (tmp_path / "live.cues.parquet").mkdir()  # a folder where a table goes: refused before any table is written
+    assert vmain(["log", "export", str(tmp_path / "live.mcap"), "--parquet", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "live.cues.parquet: cannot write: it is a folder" in err[0], err
+    assert [p.name for p in tmp_path.rglob("*.parquet*")] == ["live.cues.parquet"]
 
 
 def test_a_hostile_log_is_one_line_its_tables_are_gone_and_the_others_still_export(tmp_path, capsys):

@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import stat
 import time
 from collections.abc import Iterable, Iterator
 from contextlib import suppress
@@ -37,7 +38,7 @@ from choreo.log.format import (COMMAND_TOPIC, STEP_TOPIC, TX_TOPIC, CommandRecor
 from choreo.log.reader import LogReader
 from choreo.review.export import COLUMNS, CUE_COLUMNS, cue_rows, row
 from choreo.review.frames import exchanges
-from choreo.userfile import open_input, reading
+from choreo.userfile import kind_of, open_input, reading
 
 INSTALL = "pip install 'choreo[parquet]'"
 KINDS = ("frames", "steps", "cues", "commands")
@@ -112,8 +113,9 @@ def export_parquet(reader: LogReader, folder: Path) -> Exported:
     or holds a value no column can (a table of it is left nowhere); UsageError: a table cannot be
     written (the folder, the disk)."""
     pa, pq = require_pyarrow()
-    run = run_values(reader)
     paths = table_paths(folder, reader.path)
+    _check_targets(paths.values())
+    run = run_values(reader)
     parts = {kind: path.with_name(path.name + PART) for kind, path in paths.items()}
     counts: dict[str, int] = {}
     try:
@@ -320,6 +322,20 @@ def _create(part: Path) -> BinaryIO:
         return os.fdopen(os.open(part, _CREATE_FLAGS, 0o666), "wb")
     except OSError as exc:
         raise UsageError(f"log export --parquet {part.parent}: cannot write: {exc.strerror or exc}") from None
+
+
+def _check_targets(paths: Iterable[Path]) -> None:
+    """Each table's name is free or a file to replace: a folder (or a pipe) there is refused
+    before anything is written, not found at the renames with half the run's tables in place."""
+    for path in paths:
+        try:
+            mode = os.lstat(path).st_mode
+        except FileNotFoundError:
+            continue
+        except OSError as exc:
+            raise UsageError(f"log export --parquet {path}: cannot write: {exc.strerror or exc}") from None
+        if not (stat.S_ISREG(mode) or stat.S_ISLNK(mode)):
+            raise UsageError(f"log export --parquet {path}: cannot write: it is {kind_of(mode)}")
 
 
 def _rename(part: Path, path: Path) -> None:
