@@ -27,7 +27,7 @@ BENCH = Path(__file__).resolve().parent
 if str(BENCH) not in sys.path:
     sys.path.insert(0, str(BENCH))
 
-# (module, what it measures), in the order of issue 6, then issue 23's.
+# (module, what it measures), in the order of issue 6, then issue 23's and issue 25's.
 BENCHMARKS = (
     ("cues", "1. cue accuracy"),
     ("drift", "2. drift"),
@@ -43,6 +43,7 @@ BENCHMARKS = (
     ("go_key", "12. GO by a key on the console to the wire"),
     ("beats", "13. beat finding on songs with known beats (issue 23)"),
     ("heldout", "14. beat finding on a held-out set, never tuned on"),
+    ("link", "15. two hosts on one Ableton Link session (issue 25)"),
 )
 RESULTS = BENCH / "RESULTS.md"
 
