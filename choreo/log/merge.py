@@ -54,7 +54,7 @@ from choreo.show.read import MAX_BYTES as SHOW_MAX_BYTES
 from choreo.textfit import visible
 
 MAX_INPUTS = 64  # logs one merge takes: each is an open file while the messages stream
-MAX_SAMPLES = 200_000  # clock samples kept a log for the alignment (28 hours at two a second)
+MAX_SAMPLES = 20_000  # clock samples a log lines it up by, its first (2.8 hours at two a second): a shift is one number
 HOST_METADATA = "choreo.host."  # + host (+ `.result`, ...): each input's own metadata, kept
 NAME = re.compile(r"[^\s/,\x00-\x1f\x7f]{1,64}")  # a host or robot name a topic and a list can hold
 OUTCOMES = ("failed", "interrupted", "aborted", "done")  # a merged run's outcome: its hosts' worst
