@@ -28,7 +28,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "With SHOW (and the options `choreo run` would get), everything that show needs: the show loads, "
         "each robot's port opens and its board answers (baud, layout, no motion running), the music "
         "decodes and outlasts the last cue, its output opens, the OSC port is free, the log's folder "
-        "takes the log; nothing moves.",
+        "takes the log; on the Link clock, the Ableton Link session (peers, tempo, whether multicast reaches "
+        "them); nothing moves.",
     )
     parser.add_argument("show", nargs="?", help="the show file to check everything for (YAML)")
     parser.add_argument("--port", action="append", metavar="URL|NAME=URL",
@@ -56,6 +57,10 @@ def _show_options(parser: argparse.ArgumentParser) -> None:
     show.add_argument("--no-music", action="store_true", help="the run plays no music")
     show.add_argument("--from", dest="from_step", metavar="STEP", help="the run starts at this step")
     show.add_argument("--loop", metavar="FROM..TO", help="the run rehearses this section")
+    show.add_argument("--host", metavar="NAME", help="in a show with `hosts:`, the host this computer is (its "
+                      "robots are checked, the others' are their hosts' business)")
+    show.add_argument("--clock", choices=("link", "machine"), help="the show clock, instead of the show's `clock:`; "
+                      "on link, the Ableton Link session is joined (for a moment) and reported")
     show.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for a reply (default 0.2)")
     show.add_argument("--retries", type=int, metavar="N", help="retries of a failed frame (default 2)")
     show.add_argument("--osc", metavar="PORT", help="the OSC port the run will listen on (UDP and TCP)")
@@ -100,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 SHOW_ONLY = ("baud", "layout", "log", "no_log", "no_music", "from_step", "loop", "timeout", "retries", "osc",
-             "osc_allow", "osc_notify")
+             "osc_allow", "osc_notify", "host", "clock")
 
 
 def _machine_only(args: argparse.Namespace) -> None:
@@ -125,7 +130,7 @@ def _show(args: argparse.Namespace) -> int:
     request = RunRequest(args.show, port=port, baud=args.baud, log_path=args.log, no_log=args.no_log,
                          from_step=args.from_step, timeout=args.timeout, retries=args.retries, layout=args.layout,
                          robot_ports=robot_ports, no_music=args.no_music, audio_device=args.audio_device,
-                         loop=args.loop)
+                         loop=args.loop, host=args.host, clock=args.clock)
     osc = OscAsk(args.osc, args.osc_host, tuple(args.osc_allow), tuple(args.osc_notify))
     report = preflight(request, osc, Machine(time_source=args.time_source, talk=not args.no_probe))
     if args.json:

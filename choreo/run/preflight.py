@@ -11,13 +11,18 @@ as far as the show needs it (its header's length is only a claim: a file cut sho
 whole one's) past the show's last cue; its output opens; the OSC port is free (the run's own
 `OscServer.bind`, then closed) and its allow-list parses; the log's folder takes a file and has
 room for what the recorder holds as it writes the plan's log (`log_estimate`: more than the
-finished log, or the run stops on a full disk).
+finished log, or the run stops on a full disk). On the Link clock the session is joined as the
+run joins it (its quantum; a joiner takes the session's tempo), its peers waited for a moment,
+and left: its tempo and transport against the show's proposal, and whether Link's discovery
+(multicast) has a way out of this host; with `hosts:`, which robots this host drives.
 
 A port that hangs (a driver stuck in open, a network port that never answers) cannot hang the
 preflight: on the machine's time each robot's port is checked on a thread of its own and
 whatever has not answered by `Machine.deadline_s` is a problem; so are a sound output that hangs
-as it opens and a song that hangs as it decodes. On virtual time (the in-process simulator only,
-which cannot hang) the checks run in turn, deterministic.
+as it opens and a song that hangs as it decodes, and a Link check (always on the machine's time,
+on a thread of its own beside the boards' probes) still at it after `Machine.link_deadline_s`.
+On virtual time (the in-process simulator only, which cannot hang) the other checks run in turn,
+deterministic.
 
 What the checks read of the machine (the probe, the port's open, free space, the audio output)
 comes in through `Machine`, so tests give them a machine of their own.
@@ -30,6 +35,8 @@ import math
 import os
 import shlex
 import shutil
+import socket
+import sys
 import tempfile
 import threading
 import time
@@ -48,9 +55,10 @@ from choreo.log.recorder import (BATCH, CHUNK_BOUND, CHUNK_BUDGET, CHUNK_SIZE, F
                                  RESERVE_AHEAD, SUMMARY_SLACK, schema_text)
 from choreo.run.runner import POLL_S
 from choreo.run.settings import LinkSettings, RunRequest, RunSettings
-from choreo.show.model import Plan, Show, StepKind, is_simulator
+from choreo.show.model import LinkClock, Plan, Show, StepKind, is_simulator
 from choreo.show.read import MAX_BYTES
 from choreo.show.report import format_path
+from choreo.sync.session import INSTALL_HINT, SAMPLE_S, LinkSession, LinkSnapshot
 from choreo.wire.protocol import BAUDS
 
 if TYPE_CHECKING:  # the music loads when the show has some
@@ -81,6 +89,13 @@ CHUNK_CHANNEL_BYTES = 25
 START_BYTES = 6 * 1024
 MUSIC_FILE = format_path(("music", "file"))  # where a show's problem with its music file is
 ROOM_MARGIN = 2  # less free space than twice the run's reserve is a note: little to spare for another writer
+LINK_GROUP, LINK_PORT = "224.76.78.75", 20808  # where Link's peers discover each other (UDP multicast)
+LINK_WAIT_S = 1.5  # peers already in a session answer a joiner's first announcement at once (on a LAN, ms)
+LINK_DEADLINE_S = 8.0  # the whole Link check: joining gives up at 5 s (session.OPEN_TIMEOUT_S)
+ECHO_WAIT_S = 0.3  # this host's own multicast comes back in microseconds when it does at all
+TEMPO_SAME = 0.01  # bpm: a session at the show's tempo, as Link rounds it
+ROUTES = Path("/proc/net/route")  # Linux's main routing table
+ROUTE_UP = 0x1  # RTF_UP
 
 
 @dataclass(frozen=True)
@@ -132,6 +147,18 @@ def _free(folder: Path) -> int:
     return shutil.disk_usage(folder).free
 
 
+def _link_binding() -> str:
+    """aalink's version (ImportError: not installed)."""
+    import importlib.metadata
+
+    import aalink  # noqa: F401 - imported to know it loads (a wheel for another Python does not)
+
+    try:
+        return importlib.metadata.version("aalink")
+    except importlib.metadata.PackageNotFoundError:
+        return "(version unknown)"
+
+
 @dataclass(frozen=True)
 class Machine:
     """What the checks read of the machine (tests give their own). `talk`: False leaves the
@@ -146,6 +173,10 @@ class Machine:
     free_bytes: Callable[[Path], int] = _free
     sysfs: Path = SYSFS
     deadline_s: float = PORT_DEADLINE_S
+    link_binding: Callable[[], str] = _link_binding
+    multicast: Callable[[], Multicast] = lambda: _multicast_path()
+    link_wait_s: float = LINK_WAIT_S  # how long to wait for a Link session's peers (less once they show)
+    link_deadline_s: float = LINK_DEADLINE_S
 
     @property
     def virtual(self) -> bool:
@@ -189,7 +220,10 @@ def preflight(request: RunRequest, osc: OscAsk = OscAsk(), machine: Machine = Ma
     estimate = None
     if settings is not None:
         estimate = run_log_estimate(settings)
+        link = _link_started(settings, machine) if settings.link is not None else None
+        findings += _host(settings)
         findings += _robots(settings, machine)
+        findings += link() if link is not None else []
         if not any(f.check == "music" for f in findings):  # a music file not found is said already
             findings += _music(settings, request, machine)
     findings += _osc(osc, settings)
@@ -201,7 +235,9 @@ def _settle(request: RunRequest) -> tuple[RunSettings | None, list[Finding]]:
     """The show as `run` settles it, less what the other checks look at (the music, the log).
     A show whose only problem is its music file is the music's problem: the show is settled
     without looking for the file, so the robots are still checked."""
-    asked = replace(request, no_music=True, no_log=True, log_path=None, audio_device=None)
+    # on the Link clock (--clock link) the music is refused unless --no-music: left to the run's own refusal
+    no_music = request.no_music if request.clock == "link" else True
+    asked = replace(request, no_music=no_music, no_log=True, log_path=None, audio_device=None)
     music: list[Finding] = []
     try:
         settings = RunSettings.settle(asked)
@@ -368,6 +404,223 @@ def _hung(link: LinkSettings, machine: Machine) -> Finding:
     return Finding(PROBLEM, "port", f"{link.given_port}: no answer within {machine.deadline_s:g} s (the port "
                    "or its driver hangs)", "unplug the adapter and plug it in again; then choreo probe --port "
                    f"{shlex.quote(link.given_port)}", link.robot)
+
+
+# --------------------------------------------------------------------------- Link
+
+
+def _host(settings: RunSettings) -> list[Finding]:
+    """A show for several hosts: which robots this host (--host) drives, and who drives the rest."""
+    if settings.host is None:
+        return []
+    others = [f"{name}: {', '.join(robots)}" for name, robots in settings.show.hosts.items() if name != settings.host]
+    return [Finding(OK, "host", f"this computer is host {settings.host}: it drives {', '.join(settings.links)}; "
+                    f"the others drive theirs ({'; '.join(others) or 'none'})")]
+
+
+@dataclass(frozen=True)
+class Multicast:
+    """Whether Link's discovery can leave and reach this host: the interface the kernel routes
+    Link's group through (None: no route; `why` says so), and this host hearing its own
+    multicast on it (`echo`: None if heard, else why not)."""
+
+    interface: str | None
+    address: str | None
+    why: str | None
+    echo: str | None
+
+    @property
+    def loopback(self) -> bool:
+        return self.interface in ("lo", "lo0") or (self.address or "").startswith("127.")
+
+    def where(self) -> str:
+        named = [part for part in (self.interface, self.address) if part and part != "0.0.0.0"]
+        return f"{named[0]} ({named[1]})" if len(named) == 2 else named[0] if named else "an interface"
+
+
+@dataclass(frozen=True)
+class LinkSeen:
+    """What the Link check saw: aalink's version (None: not installed), the session as joined
+    and how long its peers took to show (`snapshot` None: not joined, `failure` says why), and
+    the multicast path."""
+
+    version: str | None
+    snapshot: LinkSnapshot | None = None
+    waited_s: float = 0.0
+    failure: str | None = None
+    multicast: Multicast | None = None
+
+
+def _link_started(settings: RunSettings, machine: Machine) -> Callable[[], list[Finding]]:
+    """The Link check, started now on a thread of its own (its discovery wait overlaps the boards'
+    probes); the returned call gives its findings, the check's thread abandoned at its deadline
+    (Link in a wedged network stack, a binding that hangs: doctor never does)."""
+    assert settings.link is not None
+    clock = settings.link
+    seen: list[LinkSeen] = []
+    thread = threading.Thread(target=lambda: seen.append(_look(clock, machine)), daemon=True, name="doctor link")
+    thread.start()
+
+    def findings() -> list[Finding]:
+        thread.join(machine.link_deadline_s)
+        if not seen:
+            return [Finding(PROBLEM, "link session", f"no answer from the Link session within "
+                            f"{machine.link_deadline_s:g} s (the binding or the network stack hangs)",
+                            "choreo doctor SHOW again; if it hangs again, reinstall aalink: "
+                            f"{INSTALL_HINT}")]
+        return _link_findings(settings, seen[0])
+    return findings
+
+
+def _look(clock: LinkClock, machine: Machine) -> LinkSeen:
+    """Join the session as the run would (its quantum, its tempo proposed to nobody: a joiner
+    takes the session's), wait for peers up to `machine.link_wait_s`, leave; and the multicast path."""
+    try:
+        version = machine.link_binding()
+    except ImportError:
+        return LinkSeen(None)
+    multicast = machine.multicast()
+    start = time.monotonic()
+    try:
+        session = LinkSession(clock.meter, clock.bpm).open()
+    except ChoreoError as exc:
+        return LinkSeen(version, failure=exc.lines()[0], multicast=multicast)
+    try:
+        while session.snapshot().peers == 0 and time.monotonic() - start < machine.link_wait_s:
+            time.sleep(SAMPLE_S)
+        return LinkSeen(version, session.snapshot(), time.monotonic() - start, multicast=multicast)
+    finally:
+        session.close()
+
+
+def _link_findings(settings: RunSettings, seen: LinkSeen) -> list[Finding]:
+    """The binding, the session joined and its peers, its tempo against the show's, the multicast path."""
+    if seen.version is None:
+        return [Finding(PROBLEM, "link", "the show runs on the Ableton Link clock and the aalink package (its "
+                        "binding) is not installed", INSTALL_HINT)]
+    found = [Finding(OK, "link", f"aalink {seen.version} (Ableton Link) is installed")]
+    if seen.snapshot is None:
+        return found + [Finding(PROBLEM, "link session", f"could not join: {seen.failure}",
+                                f"reinstall the binding ({INSTALL_HINT}); check that UDP sockets can be opened")]
+    snapshot = seen.snapshot
+    assert settings.link is not None
+    return [*found, _peers(settings, snapshot, seen.waited_s), _tempo(settings.link, snapshot),
+            *([_multicast(seen.multicast, snapshot.peers)] if seen.multicast is not None else [])]
+
+
+def _peers(settings: RunSettings, snapshot: LinkSnapshot, waited_s: float) -> Finding:
+    assert settings.link is not None
+    joined = f"joined (a bar is {settings.link.meter} beats)"
+    if snapshot.peers:
+        plural = "s" if snapshot.peers > 1 else ""
+        return Finding(OK, "link session", f"{joined}: {snapshot.peers} peer{plural}, seen after {waited_s:.2f} s")
+    if settings.host is not None:
+        others = ", ".join(host for host in settings.show.hosts if host != settings.host)
+        alone = (f"no other host ({others}) is in the session yet: this host would wait for the session's start "
+                 "(a peer's, another host's, or its own)")
+    else:
+        alone = "this host would start the session alone, as its first peer"
+    return Finding(NOTE, "link session", f"{joined}: no peer within {waited_s:.1f} s: {alone}",
+                   f"other hosts and apps must be on this host's subnet with multicast allowed (UDP {LINK_PORT})")
+
+
+def _tempo(clock: LinkClock, snapshot: LinkSnapshot) -> Finding:
+    """The session's tempo and transport against the tempo the show proposes (when this host
+    starts the transport: a show joining a session that plays keeps the session's tempo)."""
+    transport = "its transport plays" if snapshot.playing else "its transport is stopped"
+    said = f"the session's tempo is {snapshot.tempo:.2f} bpm, {transport}"
+    if not snapshot.peers and not snapshot.playing:  # the session is this host's own
+        taken = "the show's" if clock.bpm is not None else "Link's default: the show takes the session's"
+        return Finding(OK, "link tempo", f"alone, this host would start the session at {snapshot.tempo:.2f} bpm "
+                       f"({taken})")
+    if clock.bpm is None:
+        return Finding(OK, "link tempo", f"{said}; the show takes the session's tempo")
+    if abs(clock.bpm - snapshot.tempo) < TEMPO_SAME:
+        return Finding(OK, "link tempo", f"{said}, as the show proposes")
+    if snapshot.playing:
+        return Finding(NOTE, "link tempo", f"{said}; the show proposes {clock.bpm:g} bpm, but a show joining a "
+                       f"session that plays keeps its tempo: its bars and beats at {snapshot.tempo:.2f} bpm",
+                       f"set the session's tempo to {clock.bpm:g} bpm (Live's tempo field), or tempo: {{bpm: link}}")
+    return Finding(NOTE, "link tempo", f"{said}; the show proposes {clock.bpm:g} bpm: this host's start moves "
+                   f"every peer to {clock.bpm:g} bpm", "tempo: {bpm: link} in the show keeps the session's tempo")
+
+
+def _multicast(multicast: Multicast, peers: int) -> Finding:
+    """Whether Link's discovery (multicast to LINK_GROUP) leaves this host. Peers found say it
+    does; with none, a missing route, a silent echo or the loopback only say why none may come."""
+    group = f"{LINK_GROUP}:{LINK_PORT}"
+    if peers:
+        return Finding(OK, "multicast", f"Link's discovery ({group}) reaches {peers} peer{'s' if peers > 1 else ''}"
+                       + (f", through {multicast.where()}" if multicast.interface or multicast.address else ""))
+    fix = f"a route for multicast on the stage network's interface (Linux: ip route add 224.0.0.0/4 dev IFACE); " \
+          f"a firewall letting UDP {LINK_PORT} in and out"
+    if multicast.why is not None:
+        return Finding(NOTE, "multicast", f"this host has no route for Link's discovery ({group}: "
+                       f"{multicast.why}): peers on other computers may not find this one", fix)
+    if multicast.echo is not None:
+        return Finding(NOTE, "multicast", f"{group} goes out through {multicast.where()}, but this host does not hear "
+                       f"its own multicast there: {multicast.echo}", fix)
+    if multicast.loopback:
+        return Finding(NOTE, "multicast", f"{group} goes out through {multicast.where()}, the loopback: only peers "
+                       "on this computer can be found", fix)
+    return Finding(OK, "multicast", f"{group} goes out through {multicast.where()}, and this host hears its own "
+                   "multicast there (no peer answered: see link session)")
+
+
+def _multicast_path() -> Multicast:
+    """The kernel's route for Link's group (a UDP connect sends nothing), then one datagram to
+    the group on a port of this host's own with a TTL of 0 (never leaves the host), heard back."""
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect((LINK_GROUP, LINK_PORT))
+            address = probe.getsockname()[0]
+    except OSError as exc:
+        return Multicast(_route_interface(LINK_GROUP), None, exc.strerror or str(exc), None)
+    return Multicast(_route_interface(LINK_GROUP), address, None, _echo(address))
+
+
+def _echo(address: str) -> str | None:
+    """None if a datagram to LINK_GROUP comes back to this host, else why not."""
+    token = os.urandom(8)
+    group = socket.inet_aton(LINK_GROUP)
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as ear, \
+                socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as mouth:
+            ear.bind(("", 0))
+            ear.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, group + socket.inet_aton(address))
+            mouth.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+            mouth.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+            mouth.sendto(token, (LINK_GROUP, ear.getsockname()[1]))
+            ear.settimeout(ECHO_WAIT_S)
+            for _ in range(8):  # another program's datagram to the same port is not ours
+                if ear.recv(64) == token:
+                    return None
+            return "only others' datagrams came back"
+    except TimeoutError:
+        return f"nothing came back within {ECHO_WAIT_S:g} s"
+    except OSError as exc:
+        return exc.strerror or str(exc)
+
+
+def _route_interface(address: str, table: Path = ROUTES) -> str | None:
+    """The interface Linux routes `address` through (the longest prefix, then the lowest
+    metric, in the main table); None where there is no such table (macOS, Windows) or no route."""
+    try:
+        rows = [line.split() for line in table.read_text(errors="replace").splitlines()[1:]]
+    except OSError:
+        return None
+    target = int.from_bytes(socket.inet_aton(address), sys.byteorder)
+    best: tuple[tuple[int, int], str] | None = None
+    for row in rows:
+        try:
+            name, destination, flags = row[0], int(row[1], 16), int(row[3], 16)
+            metric, mask = int(row[6]), int(row[7], 16)
+        except (IndexError, ValueError):
+            continue
+        rank = (bin(mask).count("1"), -metric)
+        if flags & ROUTE_UP and target & mask == destination and (best is None or rank > best[0]):
+            best = (rank, name)
+    return best[1] if best is not None else None
 
 
 # --------------------------------------------------------------------------- music
