@@ -17,9 +17,11 @@ from choreo.board.doctor import NOTE, OK, PROBLEM
 from choreo.clock import VirtualTime
 from choreo.cli.doctor import table
 from choreo.errors import UsageError
-from choreo.run.preflight import LinkSeen, Machine, Multicast, OscAsk, _route_interface, preflight
+from choreo.run.preflight import LinkSeen, Machine, Multicast, OscAsk, _route_interface, _tempo, preflight
 from choreo.run.settings import RunRequest
-from choreo.sync.session import INSTALL_HINT
+from choreo.show.model import LinkClock
+from choreo.sync.session import INSTALL_HINT, LinkSnapshot
+from choreo.sync.timeline import ClockPair, Timeline
 from linkns import Job, choreo_argv, output_has, peer_argv, run_in_namespace
 from runlog import vmain, write_show
 
@@ -100,8 +102,8 @@ def test_alone_in_the_session_is_a_note_and_the_host_drives_its_robots(tmp_path:
 
 def test_a_peer_at_another_tempo_is_seen_and_the_shows_proposal_noted(tmp_path: Path) -> None:
     show = write_show(tmp_path, ONE_HOST_SHOW)
-    peer = Job("peer", peer_argv("--tempo", "97", "--timeout", "25"), signal="TERM",
-               signal_when=output_has(tmp_path, "doctor", '"findings"'))
+    peer = Job("peer", peer_argv("--tempo", "97", "--timeout", "25"),
+               signals=(("TERM", output_has(tmp_path, "doctor", '"findings"')),))
     # Link keeps the older of two sessions that meet, but two started within half a second of each
     # other are tied (and drawn by id): the peer's session is made older than that, as Live's is
     driver = Job("doctor", [sys.executable, "-c", DRIVER, str(show), str(tmp_path / "show.mcap")],
@@ -232,3 +234,21 @@ def test_peers_found_make_the_multicast_row_ok_whatever_the_route() -> None:
     deaf = _multicast(Multicast("eth0", "192.0.2.2", None, "nothing came back within 0.3 s"), 0)
     assert deaf.level == NOTE and "does not hear its own multicast" in deaf.text
     assert LinkSeen(None).snapshot is None
+
+
+def snapshot(tempo: float, peers: int, playing: bool) -> LinkSnapshot:
+    return LinkSnapshot(Timeline(1e6, 8.0, tempo), ClockPair(10**9, 1e6, 1000), peers, playing)
+
+
+def test_the_tempo_row_says_what_the_show_would_do_to_the_session() -> None:
+    proposes = LinkClock(124.0, 4)
+    playing = _tempo(proposes, snapshot(97.0, 2, True))
+    assert playing.level == NOTE and "plays" in playing.text and "keeps its tempo" in playing.text
+    assert "97.00 bpm" in playing.text and "124" in playing.fix
+    stopped = _tempo(proposes, snapshot(97.0, 1, False))
+    assert stopped.level == NOTE and "moves every peer to 124 bpm" in stopped.text
+    assert _tempo(proposes, snapshot(124.0, 1, True)).level == OK
+    takes = _tempo(LinkClock(None, 4), snapshot(97.0, 1, True))
+    assert takes.level == OK and "takes the session's tempo" in takes.text
+    alone = _tempo(LinkClock(None, 4), snapshot(120.0, 0, False))
+    assert alone.level == OK and "alone" in alone.text and "Link's default" in alone.text
