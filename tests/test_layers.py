@@ -30,7 +30,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("choreo.wire",),  # frames and replies as bytes and values; layouts as data
     ("choreo.show",),  # the show model, reading and checking a show file, the plan, HTH4 import
     ("choreo.events",),  # every event and listener a run has; the stop request
-    ("choreo.music", "choreo.board", "choreo.sim", "choreo.sync"),  # the music clock; links to boards; the simulator; Link
+    ("choreo.music", "choreo.board", "choreo.sim", "choreo.sync"),  # music clock; boards; simulator; Link
     ("choreo.log",),  # the log's format, its recorder and its reader
     ("choreo.live",),  # the operator's controls and OSC
     ("choreo.review",),  # reviews: read a log, never run

@@ -670,7 +670,7 @@ def test_a_log_disk_that_fills_up_stops_the_run_with_one_line(tmp_path):
           - wait: done
     """)
     log_path = tmp_path / "full.mcap"
-    limit = 22 * 1024  # the header, schemas (the clock's with its Link fields) and show fit; three seconds of polls do not
+    limit = 22 * 1024  # the header, schemas (the clock's Link fields too) and show fit; 3 s of polls do not
 
     def small_files() -> None:
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
