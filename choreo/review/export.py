@@ -27,6 +27,7 @@ from choreo.log.format import (COMMAND_TOPIC, LOG_TOPIC, STEP_TOPIC, CommandReco
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import Exchange, exchanges
 from choreo.review.showtime import ShowTimes
+from choreo.review.timeline import link_cue_times
 from choreo.log.reader import LogReader
 from choreo.show.cues import Cue, CueList, cue_list
 from choreo.show.model import Plan, Tempo, beat_text
@@ -296,6 +297,9 @@ def cue_rows(reader: LogReader, show: AttachedShow | None = None) -> list[dict]:
     seen.released_by()
     ended = _Ended.of(reader, seen, plans)
     rows = list(seen.rows.values()) + _not_reached(seen, cues, ended, tempo, set(reader.robots))
+    placed = link_cue_times(show, ended.times)  # on Link: a cue in bars where the session put it
+    for cue_row in rows:
+        cue_row["planned_s"] = _ms(placed[cue_row["number"]]) if cue_row["number"] in placed else cue_row["planned_s"]
     return _in_cue_order(rows, cues, reader.robots)
 
 
@@ -307,6 +311,7 @@ class _Ended:
 
     passes: dict[str, int]
     before: dict[str, int | None]
+    times: ShowTimes  # the log's show times (its Link session, on Link)
 
     @classmethod
     def of(cls, reader: LogReader, seen: _CuePass, plans: Mapping[str, Plan]) -> _Ended:
@@ -319,7 +324,7 @@ class _Ended:
             where = seen.robots.get(robot)
             passes[robot] = max(total, where.passes if where is not None else 1)
             before[robot] = None if done else _stood_before(where, plans.get(robot), robot, total, times.start_s)
-        return cls(passes, before)
+        return cls(passes, before, times)
 
 
 def _stood_before(where: _Whereabouts | None, plan: Plan | None, robot: str, passes: int, start_s: float) -> int | None:

@@ -35,6 +35,13 @@ Two more turns of the clock are the reviews' to know:
   where the first sample after it says show time began to move again (its show time less the
   pause's, back from its log time): so that gap is pause, not drift, in every review.
 
+On an Ableton Link session (samples of source `link`) show time runs in real seconds from the
+show's first bar line, but a cue written in bars and beats falls where the session's beat
+timeline put it, and a peer's tempo change moves it: `LinkTimes` keeps what the samples say of
+the session (its tempos, peers, transport, jumps) and places a beat on show time by them. Within
+a tempo the beat runs straight, so a few samples a tempo are enough: one every LINK_THIN_S,
+the last, and each change's (memory bounded by the show's length and its changes, not its samples).
+
 Besides show time, a review may draw on `elapsed`: show time with the time the clock stood
 still put back in. It moves with the wall clock (less the music's drift), so a motion that ran
 through a hold has its real length there, and with no hold it is show time itself.
@@ -59,6 +66,9 @@ BREAK_S = 0.001  # a clock sample this far from the mapping's prediction starts 
 # more has no start to find and the reading ahead costs a bounded time.
 LOOKAHEAD_MESSAGES = 10_000
 MACHINE = "machine"  # the clock source that holds at a GO cue and never drifts
+LINK = "link"  # the clock source of an Ableton Link session: bars move with its tempo
+LINK_THIN_S = 5.0  # Link samples on one line closer than this to the one kept before: the last is kept
+LINK_CHANGES = 1000  # the session's changes kept one by one (each counted)
 
 
 def _planned(step: StepRecord) -> float:
@@ -105,6 +115,7 @@ class ShowTimes:
         self._stood: list[float] = [0.0]  # time stood still before each stand began (prefix sums)
         # `elapsed_of_show`'s table, made once: (end_ns, stands' show times in order, time stood up to each)
         self._by_show: tuple[int | None, list[float], list[float]] | None = None
+        self.link: LinkTimes | None = None  # the Link session, if samples of source link came
 
     @classmethod
     def of(cls, reader: LogReader) -> ShowTimes:
@@ -183,6 +194,10 @@ class ShowTimes:
             self.disordered += 1
             return
         self.see_start(log_time, sample.show_s)
+        if sample.source == LINK:
+            if self.link is None:
+                self.link = LinkTimes()
+            self.link.see(sample)
         if self._restart is not None:
             self._restarted(log_time, sample)
         if self._last is not None and sample.show_s < self._last[1] - BREAK_S:
@@ -320,6 +335,135 @@ class ShowTimes:
             self._by_show = (end_ns, [stand.show_s for stand in ordered], stood)
         _, shows, stood = self._by_show
         return show_s + stood[bisect_right(shows, show_s)]
+
+
+@dataclass(frozen=True)
+class SessionChange:
+    """A change of the Link session, where a clock sample marks it on the show clock."""
+
+    show_s: float
+    kind: str  # tempo | peers | stopped | playing | jump
+    text: str  # `tempo 120.00 -> 150.00 bpm`, `peers 2 -> 1`, `transport stopped`
+
+    def to_json(self) -> dict:
+        return {"show_s": round(self.show_s, 3), "kind": self.kind, "text": self.text}
+
+
+_SESSION_TEXT = {"stopped": "transport stopped", "playing": "transport playing again", "jump": "beat timeline jumped"}
+
+
+def _number(value: object) -> float | None:
+    """A sample's number (a log's field may be absent or, where no type is checked, anything)."""
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+
+
+class LinkTimes:
+    """The Link session over a run, as its /choreo/clock samples tell it: the tempo and each
+    change of it, the peers seen, the transport's stops, the timeline's jumps, and where a show
+    beat fell on the show clock (`show_of_beat`: what a cue in bars was planned at, on Link)."""
+
+    def __init__(self) -> None:
+        self.samples = 0
+        self.tempos: list[tuple[float, float]] = []  # (show s, bpm): the first, then each change
+        self.changes: list[SessionChange] = []  # the first LINK_CHANGES, in show order
+        self.counts: dict[str, int] = {}  # kind -> how many changes of it
+        self.peers: tuple[int, int] | None = None  # the fewest and most other peers seen
+        self.joined = self.left = 0
+        self._peers: int | None = None
+        self._tempo: float | None = None
+        self._heard: float | None = None  # a tempo event's sample, before a sample carried the new tempo
+        # the beat map: samples kept (show s, beat, tempo), in beat order
+        self._shows: list[float] = []
+        self._beats: list[float] = []
+        self._tempos: list[float] = []
+
+    def see(self, sample: ClockRecord) -> None:
+        self.samples += 1
+        show_s, tempo, beat = sample.show_s, _number(sample.tempo), _number(sample.beat)
+        tempo = tempo if tempo is not None and 0 < tempo < 1e6 else None
+        if sample.event == "tempo" and self._heard is None:
+            self._heard = show_s
+        self._see_tempo(show_s, tempo)
+        peers = sample.peers
+        if isinstance(peers, int) and not isinstance(peers, bool) and peers >= 0:
+            self._see_peers(show_s, peers)
+        if sample.event in _SESSION_TEXT:
+            self._change(show_s, str(sample.event), _SESSION_TEXT[str(sample.event)])
+        if beat is not None and tempo is not None:
+            self._map(show_s, beat, tempo)
+
+    def _change(self, show_s: float, kind: str, text: str) -> None:
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+        if len(self.changes) < LINK_CHANGES:
+            self.changes.append(SessionChange(show_s, kind, text))
+
+    def _see_tempo(self, show_s: float, tempo: float | None) -> None:
+        if tempo is None:
+            return
+        if self._tempo is None or abs(tempo - self._tempo) > 1e-6:
+            at = show_s if self._heard is None else self._heard  # heard there, if a tempo event said so
+            if self._tempo is not None:
+                self._change(at, "tempo", f"tempo {self._tempo:.2f} -> {tempo:.2f} bpm")
+            if len(self.tempos) < LINK_CHANGES:
+                self.tempos.append((at, tempo))
+            self._heard = None
+        self._tempo = tempo
+
+    def _see_peers(self, show_s: float, peers: int) -> None:
+        low, high = self.peers if self.peers is not None else (peers, peers)
+        self.peers = (min(low, peers), max(high, peers))
+        if self._peers is not None and peers != self._peers:
+            self.joined += max(0, peers - self._peers)
+            self.left += max(0, self._peers - peers)
+            self._change(show_s, "peers", f"peers {self._peers} -> {peers}")
+        self._peers = peers
+
+    def _map(self, show_s: float, beat: float, tempo: float) -> None:
+        """Keep the sample for `show_of_beat`: a run of samples on one straight line (one tempo,
+        no jump) keeps one a LINK_THIN_S and its last; a beat behind the last (a --loop pass, a
+        jump back) starts the map again (the cues still to come are placed on what followed)."""
+        beats, shows, tempos = self._beats, self._shows, self._tempos
+        if beats and beat < beats[-1]:
+            for kept in (shows, beats, tempos):
+                kept.clear()
+        n = len(beats)
+        if n >= 2 and tempos[n - 2] == tempos[n - 1] == tempo and shows[n - 1] - shows[n - 2] < LINK_THIN_S \
+                and abs(shows[n - 2] + (beat - beats[n - 2]) * 60.0 / tempo - show_s) <= BREAK_S:
+            shows[n - 1], beats[n - 1] = show_s, beat
+            return
+        shows.append(show_s)
+        beats.append(beat)
+        tempos.append(tempo)
+
+    def show_of_beat(self, beat: float) -> float | None:
+        """The show time the session put show beat `beat` at (0: bar 1 beat 1), None without a
+        sample. Between two samples on one line, by the nearer; across a tempo change, by the
+        line of the tempo the beat fell in (the two lines meet where the tempo changed: a
+        change's own sample may still carry the tempo before it); past the last, at its tempo."""
+        beats, shows = self._beats, self._shows
+        if not beats:
+            return None
+        i = bisect_right(beats, beat) - 1
+        if i < 0 or i == len(beats) - 1:
+            near = max(i, 0)
+        else:
+            k_i, k_j = 60.0 / self._tempos[i], 60.0 / self._tempos[i + 1]
+            if abs(shows[i] + (beats[i + 1] - beats[i]) * k_i - shows[i + 1]) <= BREAK_S or k_i == k_j:
+                near = i if beat - beats[i] <= beats[i + 1] - beat else i + 1
+            else:
+                meet = (shows[i + 1] - shows[i] + beats[i] * k_i - beats[i + 1] * k_j) / (k_i - k_j)
+                near = i if beat <= meet else i + 1
+        return shows[near] + (beat - beats[near]) * 60.0 / self._tempos[near]
+
+    def show_of_bar(self, bar: int, beat: float, meter: int) -> float | None:
+        """`show_of_beat` of a cue as a show writes it (bar 1 beat 1 is show beat 0)."""
+        return self.show_of_beat((bar - 1) * meter + (beat - 1))
+
+    def to_json(self) -> dict:
+        low, high = self.peers if self.peers is not None else (None, None)
+        return {"samples": self.samples, "tempos": [{"show_s": round(s, 3), "bpm": bpm} for s, bpm in self.tempos],
+                "peers": {"min": low, "max": high, "joined": self.joined, "left": self.left},
+                "changes": [change.to_json() for change in self.changes], "counts": self.counts}
 
 
 @dataclass(frozen=True)

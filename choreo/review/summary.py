@@ -18,7 +18,8 @@ from choreo.log.format import (CHOREO_TOPICS, ERROR, WARNING, ClockRecord, Comma
                                Info, MotionPlay, MotionTracker, Record, Result, RxRecord, StepRecord, TxRecord,
                                is_late, parse, robot_key, slipped)
 from choreo.log.reader import Cut, LogReader
-from choreo.review.showtime import Durations, ShowTimes, StandNote, StandNotes, durations, see_for_stands
+from choreo.review.showtime import (Durations, LinkTimes, ShowTimes, StandNote, StandNotes, durations,
+                                    see_for_stands)
 from choreo.wire.protocol import FrameKind, ReplyKind
 # counted (and shown) even at 0: the frames every run sends, and every reply (the wire's names)
 FRAME_KINDS = tuple(kind.value for kind in (FrameKind.STOP, FrameKind.PLAY, FrameKind.RESTORE, FrameKind.STATUS))
@@ -199,6 +200,7 @@ class Summary:
     robots: dict[str, Summary] = field(default_factory=dict)  # a show for several robots: each one's figures
     skew: Distribution = field(default_factory=Distribution)  # ms, unison plays: first to last motion start
     clock: ClockSpan | None = None  # the show clock against the machine's (/choreo/clock)
+    link: LinkTimes | None = None  # on an Ableton Link session: its tempos, peers, stops and jumps
     commands: list[CommandRecord] = field(default_factory=list)  # the operator's, the first LISTED_COMMANDS records
     commands_total: int = 0  # every command, those `unlogged` records sum up included
     commands_refused: int = 0  # of those, refused or ignored
@@ -252,7 +254,8 @@ def summary_record(summary: Summary) -> dict:
             "ran_s": round(summary.clock.ran_s, 6), "drift_ms": round(summary.clock.drift_ms, 3),
             "disordered": summary.clock_disordered,
             Result.SHOW_ZERO_MONOTONIC_NS: _int(summary.result, Result.SHOW_ZERO_MONOTONIC_NS),
-            Result.SHOW_ZERO_WALL_NS: _int(summary.result, Result.SHOW_ZERO_WALL_NS)},
+            Result.SHOW_ZERO_WALL_NS: _int(summary.result, Result.SHOW_ZERO_WALL_NS),
+            **({"link": summary.link.to_json()} if summary.link is not None else {})},
         "motions": [{"motion": m.motion, "plays": m.plays, "measured": m.measured, "median_s": m.median_s}
                     for m in sorted(summary.motions.values(), key=lambda m: m.motion)],
         "commands": [{**command.to_json(), "what": command.what} for command in summary.commands],
@@ -330,6 +333,7 @@ def summarize_reader(reader: LogReader) -> Summary:
     for part in [solo, *parts.values()]:
         part.finish()
     tally.fill(summary)
+    summary.link = tally.times.link
     if parts:
         order = [name for name in reader.robots if name in parts]
         summary.robots = {name: parts[name].summary for name in order + [n for n in parts if n not in order]}
@@ -485,7 +489,7 @@ class _Tally:
             self.times.see_start(log_time, step.actual_s)
             return
         if step.kind == "play" and step.cue is not None and step.start_s is not None:
-            self.motion_starts.add((step.start_s - step.cue) * 1e3)
+            self.motion_starts.add((step.start_s - placed_cue(step, self.times)) * 1e3)
         late_at_start = self.late_at_start.pop(key, False)
         self.outcomes[step.outcome or "?"] = self.outcomes.get(step.outcome or "?", 0) + 1
         if key in self.retried:
@@ -520,6 +524,14 @@ class _Tally:
         summary.steps_aborted = self.outcomes.get("aborted", 0)
         summary.steps_skipped = self.outcomes.get("skipped", 0)
         summary.steps_unfinished = len(self.late_at_start)
+
+
+def placed_cue(step: StepRecord, times: ShowTimes) -> float:
+    """A cued play's cue time: as written, or on a Link session where the runner placed it (a cue
+    in bars moves with the session's tempo): its due time and lead, from its end record."""
+    if times.link is not None and step.lead_ms is not None and step.cue is not None:
+        return step.planned_s + step.lead_ms / 1e3
+    return float(step.cue) if step.cue is not None else step.planned_s
 
 
 def _add_plays(summary: Summary, plays: list[MotionPlay], times: ShowTimes) -> None:

@@ -12,7 +12,7 @@ from collections.abc import Iterable
 from choreo.log.format import COMMAND_TOPIC, ERROR, LATE_MS, Info, LoggedRun, LogLayouts, Result, host_key
 from choreo.numtext import whole_number
 from choreo.review.summary import FRAME_KINDS, LISTED_PLAYS, Summary
-from choreo.review.timeline import stood_text
+from choreo.review.timeline import link_text, stood_text
 
 def _ms(value: float | None) -> str:
     return "-" if value is None else f"{value:.3f} ms"
@@ -155,6 +155,8 @@ def _render_clock(summary: Summary) -> Iterable[str]:
         music = f"the music ({result.get(Result.MUSIC_FILE, '?')} from {result.get(Result.MUSIC_START, '0')} s"
         backend = result.get(Result.AUDIO_BACKEND)
         kept = music + (f", on {backend})" if backend else ")")
+    elif summary.link is not None:
+        kept = link_text(summary.link)
     else:
         kept = "the machine's"
     ran = f" it ran (of {clock.span_s:.1f} s; the rest held or paused)" if clock.stood_s > 0 else ""
@@ -162,7 +164,7 @@ def _render_clock(summary: Summary) -> Iterable[str]:
              if clock.samples > 1 else "")
     disordered = (f"; {summary.clock_disordered} out of order, passed over"
                   if summary.clock_disordered else "")
-    yield f"clock     {kept}: {clock.samples} samples{drift}{disordered}"
+    yield f"clock     {kept}{'; ' if summary.link is not None else ': '}{clock.samples} samples{drift}{disordered}"
 
 
 def _render_commands(summary: Summary) -> Iterable[str]:

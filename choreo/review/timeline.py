@@ -8,6 +8,12 @@ reply other than ACK or status; error lines) are marked where they happened, and
 times the show clock stood still (held at a GO cue, paused), the operator's commands (GO, pause,
 skip, panic...) and the skipped cues.
 
+On an Ableton Link session a cue in bars and beats is planned where the session put that beat
+(`showtime.LinkTimes`, by the clock samples: a peer's tempo change moves it), a step after it
+keeps its place after the cue, and the session's changes (tempo, peers, transport, jumps) are
+marks of their own. A host's log (`choreo run --host`) holds only its own robots: the attached
+show's other robots are another host's, said once, never drawn as plays not played.
+
 The figures are show times (`showtime`, the one definition every review shares). The bars are
 drawn on `elapsed` time: the show clock with its holds and pauses put back in, so a motion that
 ran through a hold is as long as it really was, and a hold is a span of its own (shaded, labelled
@@ -20,17 +26,21 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
-from typing import Any, BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 from choreo.errors import ChoreoError
 from choreo.review.attached import AttachedShow, attached_show
-from choreo.review.showtime import Durations, ShowTimes, StandNote, StandNotes, durations, see_for_stands
+from choreo.review.showtime import (Durations, LinkTimes, ShowTimes, StandNote, StandNotes, durations,
+                                    see_for_stands)
 from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC,
                                STEP_TOPIC, TX_TOPIC, ClockRecord, CommandRecord, LogLayouts, LogRecord, MotionPlay,
-                               MotionTracker, Record, Result, RxRecord, StepRecord, TxRecord, cue_name, is_late, parse,
-                               slipped)
+                               MotionTracker, Info, Record, Result, RxRecord, StepRecord, TxRecord, cue_name, is_late,
+                               parse, slipped)
 from choreo.log.reader import Cut, LogReader
 from choreo.textfit import fit, visible
+
+if TYPE_CHECKING:  # for the types only, as `attached` does
+    from choreo.show.model import Plan
 
 
 class PlotUnavailable(ChoreoError):
@@ -112,7 +122,7 @@ class Mark:
     an error line, a hold or pause, an operator's command, a skipped cue."""
 
     show_s: float
-    kind: str  # late | fault | failure | abort | error | held | paused | command | skip
+    kind: str  # late | fault | failure | abort | error | held | paused | command | skip | session
     text: str
     at: float | None = None  # where it is drawn (`elapsed`); None: at its show time
     length_s: float = 0.0  # a hold's or pause's length
@@ -127,6 +137,9 @@ LISTED_MARKS = 200  # of each kind of mark, listed one a line (text) or labelled
 LISTED_CUES = 100
 STAND_KINDS = ("held", "paused")
 COMMAND_KINDS = ("command", "skip")
+SESSION = "session"  # a change of the Link session: tempo, peers, transport, a jump
+# each change's cell on the timeline's link row, by how its text begins (`showtime.SessionChange`)
+SESSION_CELLS = {"tempo": "t", "peers": "p", "transport stopped": "|", "transport playing": ">", "beat timeline": "j"}
 
 
 @dataclass(frozen=True)
@@ -162,6 +175,9 @@ class Timeline:
     show_problem: str | None = None
     lengths: Durations | None = None  # the show's duration, holds, pauses, wall time (`showtime`)
     end_at: float = 0.0  # the end on the drawing's axis (`elapsed`)
+    link: LinkTimes | None = None  # the Link session, on the Link clock
+    host: str | None = None  # the show's host this run drove (`choreo run --host`)
+    elsewhere: list[str] = field(default_factory=list)  # the attached show's robots other hosts drove
 
     @property
     def late(self) -> list[Mark]:
@@ -180,6 +196,11 @@ class Timeline:
     def commands(self) -> list[Mark]:
         """The operator's commands and the cues skipped."""
         return [m for m in self.marks if m.kind in COMMAND_KINDS]
+
+    @property
+    def session(self) -> list[Mark]:
+        """The Link session's changes."""
+        return [m for m in self.marks if m.kind == SESSION]
 
     @property
     def span_s(self) -> float:
@@ -204,6 +225,7 @@ class _Step:
 
     start: StepRecord
     late_ms: float = 0.0
+    placed: float | None = None  # a cued play's cue as the runner placed it (its end record: due + lead)
 
 
 def build(reader: LogReader, show: AttachedShow | None = None) -> Timeline:
@@ -284,23 +306,113 @@ class _Pass:
         timeline.end_at = clock.elapsed(self.last_ns) or 0.0 if self.last_ns is not None else 0.0
         notes = self.notes.notes if self.notes is not None else [StandNote(stand) for stand in clock.stands]
         timeline.marks.extend(_stand_mark(note, clock, self.last_ns) for note in notes)
+        placed = _Placed.of(show, clock.link)
+        timeline.link = clock.link
+        timeline.marks.extend(_session_marks(clock, self.last_ns))
         order: dict[str | None, int] = {name: i for i, name in enumerate(reader.robots)}
         for robot, tracker in self.trackers.items():
             for play in tracker.finish(self.last_ns):
                 known = self.steps.get((robot, play.step)) if play.step is not None else None
-                timeline.runs.append(_run_of(play, known, show, clock, robot))
+                timeline.runs.append(_run_of(play, known, show, clock, robot, placed.planned(robot, play.step, known)))
         stood_end = self.last_ns
         timeline.runs.sort(key=lambda r: (order.get(r.robot, len(order)),  # as drawn: --loop's passes in turn
                                           r.start_at if r.start_at is not None else
                                           r.start_s if r.start_s is not None else r.due_s or 0.0))
         timeline.marks.sort(key=lambda m: m.show_s)
-        robots = list(show.plans) if show.plans else [None]
+        robots = _hosted(timeline, show, reader)
+        unplayed = [placed.unplayed(run) for robot in robots for run in _unplayed(show, self.steps, robot)]
         timeline.unplayed = [replace(run, planned_at=clock.elapsed_of_show(run.planned_s or 0.0, stood_end))
-                             for robot in robots for run in _unplayed(show, self.steps, robot)]
+                             for run in unplayed]
+        timeline.cues = [placed.cue(cue) for cue in timeline.cues]
         timeline.cut = reader.cut
         timeline.outcome = (reader.result or {}).get(Result.OUTCOME)
         if timeline.outcome in ("aborted", "interrupted") and not any(m.kind == "abort" for m in timeline.marks):
             timeline.marks.append(Mark(timeline.end_s, "abort", f"show {timeline.outcome}", timeline.end_at))
+
+
+@dataclass
+class _Placed:
+    """On the Link clock, the plan where the session put it: a cue in bars at its beat on the
+    session's timeline (`LinkTimes.show_of_bar`), a cue in seconds at its time, a step between
+    cues as far after the cue before it as the plan has it. Off Link: empty, the plan's own."""
+
+    link: bool = False
+    steps: dict[tuple[str | None, int], float] = field(default_factory=dict)
+    cues: dict[str, float] = field(default_factory=dict)  # cue number -> show s
+
+    @classmethod
+    def of(cls, show: AttachedShow, link: LinkTimes | None) -> _Placed:
+        if link is None:
+            return cls()
+        meter = show_meter(show)
+        steps: dict[tuple[str | None, int], float] = {}
+        cues: dict[str, float] = {}
+        plans: dict[str | None, Plan] = {None: show.plan} if show.plan is not None else {}
+        if show.plans:
+            plans = {robot: plan for robot, plan in show.plans.items()}
+        for robot, plan in plans.items():
+            shift = 0.0
+            for step in plan.steps:
+                cue = None if step.go else link.show_of_bar(*step.at_beat, meter) if step.at_beat else step.at
+                if cue is not None:
+                    shift = cue - step.planned_s
+                    if step.cue is not None:
+                        cues[step.cue] = cue
+                steps[(robot, step.index)] = cue if cue is not None else step.planned_s + shift
+        return cls(True, steps, cues)
+
+    def planned(self, robot: str | None, index: int | None, known: _Step | None) -> float | None:
+        """A play's planned time on Link: by the plan as placed, else (no show attached) its cue as
+        the runner placed it; None: off Link, or nothing known."""
+        if not self.link:
+            return None
+        if index is not None and (robot, index) in self.steps:
+            return self.steps[(robot, index)]
+        return known.placed if known is not None else None
+
+    def unplayed(self, run: MotionRun) -> MotionRun:
+        placed = self.steps.get((run.robot, run.step)) if run.step is not None else None
+        return run if placed is None else replace(run, planned_s=placed)
+
+    def cue(self, cue: Cue) -> Cue:
+        placed = self.cues.get(cue.number) if cue.number is not None else None
+        return cue if placed is None else replace(cue, show_s=placed)
+
+
+def link_cue_times(show: AttachedShow, times: ShowTimes) -> dict[str, float]:
+    """On a Link session (`times.link`), each timed cue's planned time where the session put it,
+    by cue number (`_Placed`); off Link, none: the cue times as written stand."""
+    return _Placed.of(show, times.link).cues
+
+
+def show_meter(show: AttachedShow) -> int:
+    """The beats a bar the show's cues in bars count by on Link (its quantum)."""
+    attached = show.show
+    if attached is not None and attached.link is not None:
+        return attached.link.meter
+    return attached.tempo.meter if attached is not None and attached.tempo is not None else 4
+
+
+def _hosted(timeline: Timeline, show: AttachedShow, reader: LogReader) -> list[str | None]:
+    """The attached show's robots this log's run drove (its metadata's `robots`): a host's run
+    (`--host`) drives its own, and the show's others are other hosts' (`Timeline.elsewhere`)."""
+    if not show.plans:
+        return [None]
+    ran = set(reader.robots)
+    timeline.host = reader.run_info.get(Info.SHOW_HOST) or None
+    if not ran:
+        return list(show.plans)
+    timeline.elsewhere = [robot for robot in show.plans if robot not in ran]
+    return [robot for robot in show.plans if robot in ran]
+
+
+def _session_marks(clock: ShowTimes, end_ns: int | None) -> list[Mark]:
+    """The Link session's changes (tempo, peers, transport, jumps) where the samples mark them."""
+    link = clock.link
+    if link is None:
+        return []
+    return [Mark(change.show_s, SESSION, change.text, clock.elapsed_of_show(change.show_s, end_ns))
+            for change in link.changes]
 
 
 def command_text(record: CommandRecord) -> str:
@@ -334,6 +446,8 @@ def _see_step(timeline: Timeline, steps: dict[tuple[str | None, int], _Step], st
                                                         f"(due {step.planned_s:.3f} s)", at))
         return
     known: _Step | None = steps.get((step.robot, step.index))
+    if known is not None and step.cue is not None and step.lead_ms is not None:
+        known.placed = step.planned_s + step.lead_ms / 1e3  # due is the cue less the lead
     if known is not None and slipped(step, late_at_start=known.late_ms > 0):
         known.late_ms = step.late_ms
         timeline.marks.append(Mark(now, "late", f"{whose}{step.ref}: motion {step.motion} started "
@@ -351,12 +465,13 @@ def _fault(rx: RxRecord, now: float, at: float | None) -> Mark:
 
 
 def _run_of(play: MotionPlay, step: _Step | None, show: AttachedShow, clock: ShowTimes,
-            robot: str | None = None) -> MotionRun:
+            robot: str | None = None, placed: float | None = None) -> MotionRun:
+    """`placed`: its planned time where the Link session put it (None: the plan's)."""
     start = step.start if step is not None else None
     motion = play.motion if play.motion is not None else -1
     end_s = clock.seconds(play.end_ns) if play.start_ns is not None else None
     end_at = clock.elapsed(play.end_ns) if play.start_ns is not None else None
-    planned = start.estimated_s if start else None
+    planned = placed if placed is not None else start.estimated_s if start else None
     return MotionRun(motion, show.name_of(play.motion), play.step, play.label,
                      planned, show.expected_s(motion),
                      start.planned_s if start else None, clock.seconds(play.start_ns),
@@ -437,13 +552,7 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
     end = f"{span:.1f} s"
     ruler = f"0 s{'':{max(width - 3 - len(end), 1)}}{end}"[:width]
     yield _row("step", "motion", "planned", "actual", ruler, figures)
-    if timeline.cues:
-        row = [" "] * width
-        for cue in timeline.cues:
-            row[_cells(cue.drawn_at, cue.drawn_at, scale, width)[0]] = "v"
-        yield _row("", "cues", "", "", "".join(row), figures)
-    if timeline.stands or timeline.commands:
-        yield _row("", "holds/cmds", "", "", _marks_row(timeline, scale, width), figures)
+    yield from _mark_rows(timeline, scale, width, figures)
     lane = object()
     for run in sorted(timeline.runs + timeline.unplayed, key=_lane_order(timeline)):
         if run.robot is not None and run.robot != lane:
@@ -475,13 +584,54 @@ def _head(timeline: Timeline, span: float, width: int) -> Iterator[str]:
     stood = stood_text(timeline.lengths)
     if stood:
         yield stood
+    if timeline.link is not None:
+        yield f"clock: {link_text(timeline.link)}"
+    if timeline.host is not None or timeline.elsewhere:
+        yield hosted_text(timeline.host, timeline.elsewhere)
     drawn = " (drawn with the holds and pauses in)" if timeline.stands else ""
     yield f"one column = {span / width * 1000:.0f} ms{drawn}"
     yield "bars: '-' planned, '#' actual, '=' both, '!' late, ':' not played, 'v' cue"
     if timeline.stands or timeline.commands:
         yield "marks: '~' held or paused, '^' command, 'x' command refused, 's' cue skipped"
+    if timeline.session:
+        yield "session: 't' tempo, 'p' peers, '|' transport stopped, '>' playing again, 'j' timeline jumped"
     if timeline.show_problem:
         yield f"(planned lengths: {timeline.show_problem}; 1 s each assumed)"
+
+
+LISTED_TEMPOS = 5  # tempo changes (and transport stops, jumps) named in the clock's line
+
+
+def link_text(link: LinkTimes) -> str:
+    """`the Link session's: 120.00 bpm, 150.00 from 1.48 s; 2 other peers; 13 samples`, with
+    the peers' joins and leaves, the transport's stops and the timeline's jumps."""
+    tempos = link.tempos
+    text = "the Link session's: " + (f"{tempos[0][1]:.2f} bpm" if tempos else "no tempo sampled")
+    text += "".join(f", {bpm:.2f} from {show_s:.2f} s" for show_s, bpm in tempos[1:LISTED_TEMPOS + 1])
+    more = link.counts.get("tempo", 0) - min(len(tempos) - 1, LISTED_TEMPOS)
+    text += f", ... ({more} more tempo changes)" if more > 0 else ""
+    if link.peers is not None:
+        low, high = link.peers
+        many = "no other peer" if high == 0 else f"{low if low == high else f'{low}..{high}'} other peer" + \
+            ("s" if high > 1 else "")
+        moved = ", ".join(f"{n} {word}" for n, word in ((link.joined, "joined"), (link.left, "left")) if n)
+        text += f"; {many}" + (f" ({moved})" if moved else "")
+    for kind, word in (("stopped", "transport stopped"), ("playing", "playing again"), ("jump", "timeline jumped")):
+        count = link.counts.get(kind, 0)
+        if count:
+            times = [change.show_s for change in link.changes if change.kind == kind][:LISTED_TEMPOS]
+            text += f"; {word} at " + ", ".join(f"{at:.2f} s" for at in times) + \
+                (f" ({count} times)" if count > len(times) else "")
+    return text
+
+
+def hosted_text(host: str | None, elsewhere: list[str]) -> str:
+    """`host left: the show's other robots (b) are other hosts'` (a `choreo run --host` log)."""
+    who = f"host {host}" if host else "this run"
+    if not elsewhere:
+        return f"{who}: every robot of the show"
+    return (f"{who}: the show's other robots ({', '.join(elsewhere)}) are "
+            f"{'other hosts' if host else 'not in this run'}': not reviewed here")
 
 
 def stood_text(lengths: Durations | None) -> str:
@@ -522,6 +672,28 @@ def _marks_row(timeline: Timeline, scale: float, width: int) -> str:
     return "".join(row)
 
 
+def _mark_rows(timeline: Timeline, scale: float, width: int, figures: bool) -> Iterator[str]:
+    """The rows above the motions: the cues, the holds and commands, the Link session's changes."""
+    if timeline.cues:
+        row = [" "] * width
+        for cue in timeline.cues:
+            row[_cells(cue.drawn_at, cue.drawn_at, scale, width)[0]] = "v"
+        yield _row("", "cues", "", "", "".join(row), figures)
+    if timeline.stands or timeline.commands:
+        yield _row("", "holds/cmds", "", "", _marks_row(timeline, scale, width), figures)
+    if timeline.session:
+        yield _row("", "link", "", "", _session_row(timeline, scale, width), figures)
+
+
+def _session_row(timeline: Timeline, scale: float, width: int) -> str:
+    """The Link session's changes, each a cell by its kind (`SESSION_CELLS`)."""
+    row = [" "] * width
+    for mark in timeline.session:
+        cell = next((c for start, c in SESSION_CELLS.items() if mark.text.startswith(start)), "*")
+        row[_cells(mark.drawn_at, mark.drawn_at, scale, width)[0]] = cell
+    return "".join(row)
+
+
 def _lane_order(timeline: Timeline) -> Callable[[MotionRun], tuple[int, int]]:
     """Runs lane by lane (robots in the order they first played), then as they were."""
     robots: dict[str | None, int] = {}
@@ -545,7 +717,8 @@ def _listed(timeline: Timeline) -> Iterator[str]:
         yield "cues: " + ", ".join(f"{c.name} at {round(c.show_s, 3):g} s" for c in timeline.cues[:LISTED_CUES]) \
             + (f", ... and {more} more" if more > 0 else "")
     for title, marks in (("late plays", timeline.late), ("faults", timeline.faults),
-                         ("holds and pauses", timeline.stands), ("commands", timeline.commands)):
+                         ("holds and pauses", timeline.stands), ("commands", timeline.commands),
+                         ("Link session changes", timeline.session)):
         if marks or title in ("late plays", "faults"):
             yield f"{title}: {len(marks) or 'none'}"
         for mark in marks[:LISTED_MARKS]:
@@ -644,7 +817,8 @@ def _draw_marks(ax: Any, timeline: Timeline, first_y: int) -> list[str]:  # ax: 
     cues' lines, the holds' and pauses' shaded spans labelled with the show time they stood at."""
     rows: list[str] = []
     faults, commands = timeline.faults, timeline.commands
-    for name, marks, styles in (("faults", faults, _MARK_STYLES), ("commands", commands, _COMMAND_STYLES)):
+    for name, marks, styles in (("faults", faults, _MARK_STYLES), ("commands", commands, _COMMAND_STYLES),
+                                ("Link session", timeline.session, _SESSION_STYLES)):
         if not marks:
             continue
         y = first_y + len(rows)
@@ -654,6 +828,9 @@ def _draw_marks(ax: Any, timeline: Timeline, first_y: int) -> list[str]:  # ax: 
             if at:
                 ax.plot(at, [y] * len(at), marker=marker, color=colour, markersize=9, markeredgewidth=2,
                         linestyle="")
+    for mark in timeline.session[:LISTED_MARKS]:
+        ax.annotate(visible(mark.text), (mark.drawn_at, first_y + rows.index("Link session") - 0.25),
+                    fontsize="x-small", color="#9467bd")
     if timeline.cues:  # the lines in one artist, the first few labelled: a log of thousands draws at once
         ax.vlines([cue.drawn_at for cue in timeline.cues], 0, 1, transform=ax.get_xaxis_transform(),
                   colors="#555555", linestyles="--", linewidth=0.8)
@@ -673,6 +850,7 @@ def _draw_marks(ax: Any, timeline: Timeline, first_y: int) -> list[str]:  # ax: 
 PLANNED, UNPLAYED, MEASURED, UNMEASURED, RED = "#b8c4d6", "#dddddd", "#2f6db5", "#8c6bb1", "#d62728"
 STOOD = "#f0e0a0"  # a hold's or pause's span
 _COMMAND_STYLES = (("command", "^", "#2ca02c"), ("skip", "s", "#7f7f7f"))
+_SESSION_STYLES = ((SESSION, "D", "#9467bd"),)
 _MARK_STYLES = (("fault", "x", RED), ("error", "x", "#8b0000"), ("failure", "X", "#8b0000"),
                 ("abort", "s", "#ff7f0e"))
 
@@ -719,4 +897,5 @@ def _legend() -> list:
             Line2D([], [], marker="s", color="#ff7f0e", linestyle="", label="aborted"),
             Patch(facecolor=STOOD, label="held / paused"),
             Line2D([], [], marker="^", color="#2ca02c", linestyle="", label="command"),
-            Line2D([], [], marker="s", color="#7f7f7f", linestyle="", label="cue skipped")]
+            Line2D([], [], marker="s", color="#7f7f7f", linestyle="", label="cue skipped"),
+            Line2D([], [], marker="D", color="#9467bd", linestyle="", label="Link session change")]
