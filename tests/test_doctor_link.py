@@ -252,3 +252,16 @@ def test_the_tempo_row_says_what_the_show_would_do_to_the_session() -> None:
     assert takes.level == OK and "takes the session's tempo" in takes.text
     alone = _tempo(LinkClock(None, 4), snapshot(120.0, 0, False))
     assert alone.level == OK and "alone" in alone.text and "Link's default" in alone.text
+
+
+def test_a_link_check_that_fails_unforeseen_is_one_problem_row(tmp_path: Path) -> None:
+    def binding() -> str:
+        raise ValueError("a wheel for another machine")
+
+    request = RunRequest(str(write_show(tmp_path, ONE_HOST_SHOW)), log_path=str(tmp_path / "show.mcap"))
+    report = preflight(request, OscAsk(), Machine(time_source=VirtualTime(), talk=False, link_binding=binding,
+                                                  **_no_network()))
+    found = {f.name: f for f in report.findings}
+    assert found["link session"].level == PROBLEM
+    assert "could not join: ValueError: a wheel for another machine" in found["link session"].text
+    assert "link" not in found and report.exit_code == 1

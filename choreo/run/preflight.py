@@ -458,7 +458,14 @@ def _link_started(settings: RunSettings, machine: Machine) -> Callable[[], list[
     assert settings.link is not None
     clock = settings.link
     seen: list[LinkSeen] = []
-    thread = threading.Thread(target=lambda: seen.append(_look(clock, machine)), daemon=True, name="doctor link")
+
+    def work() -> None:
+        try:
+            seen.append(_look(clock, machine))
+        except Exception as exc:  # noqa: BLE001 - a check failing in a way nobody foresaw is one finding
+            seen.append(LinkSeen("", failure=f"{type(exc).__name__}: {exc}"))
+
+    thread = threading.Thread(target=work, daemon=True, name="doctor link")
     thread.start()
 
     def findings() -> list[Finding]:
@@ -498,7 +505,7 @@ def _link_findings(settings: RunSettings, seen: LinkSeen) -> list[Finding]:
     if seen.version is None:
         return [Finding(PROBLEM, "link", "the show runs on the Ableton Link clock and the aalink package (its "
                         "binding) is not installed", INSTALL_HINT)]
-    found = [Finding(OK, "link", f"aalink {seen.version} (Ableton Link) is installed")]
+    found = [Finding(OK, "link", f"aalink {seen.version} (Ableton Link) is installed")] if seen.version else []
     if seen.snapshot is None:
         return found + [Finding(PROBLEM, "link session", f"could not join: {seen.failure}",
                                 f"reinstall the binding ({INSTALL_HINT}); check that UDP sockets can be opened")]
