@@ -1,0 +1,237 @@
+"""The Link clock for real (issue 25): choreo hosts and scripted peers (linkpeer.py) in one
+Ableton Link session, each test in a loopback-only network namespace of its own (linkns.py), so
+no test talks to the machine's network and the tests run in parallel. Where namespaces are
+unavailable the tests fail saying so.
+
+Every assertion reads the logs (the /choreo/clock samples carry the session: Link's time, the
+show's beat, the session's beat, tempo, peers, and the event a sample marks) and the peers'
+reports. Shows are short and fast (240 bpm: a bar a second). Timing is compared with tolerances
+a loaded two-core machine keeps (TOLERANCE_S, past the lateness the run measured itself): a
+wrong tempo or a wrong bar line is off by hundreds of milliseconds; the real skew between
+hosts is bench/link.py's to measure.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+from pathlib import Path
+
+from linkns import Job, choreo_argv, ended, output_has, peer_argv, run_in_namespace
+from runlog import RunLog, read_log, write_show
+
+TOLERANCE_S = 0.015
+PHASE_BEATS = 0.03  # two views of the session's phase agree this closely (7.5 ms at 240 bpm)
+BPM = 240.0
+METER = 4
+
+SHOW = """
+version: 1
+name: {name}
+clock: link
+tempo: {{bpm: 240, meter: 4}}
+{hosts}robots:
+{robots}
+motions:
+  home: {{number: 0, duration: 0.1}}
+  wave: {{number: 4, duration: 0.15}}
+on_abort: home
+tracks:
+{tracks}
+"""
+
+
+def _show(directory: Path, name: str, a: tuple[str, ...], b: tuple[str, ...] = (), hosts: str = "") -> Path:
+    """A show at 240 bpm in 4 whose robot a (and b, if given cues) waves at each of the cues."""
+    tracks = {robot: cues for robot, cues in (("a", a), ("b", b)) if cues}
+    robots = "\n".join(f"  {robot}: {{layout: hth4-2.2}}" for robot in tracks)
+    lines = "\n".join(f"  {robot}:\n" + "\n".join(f"    - play: wave\n      at: {at}" for at in cues)
+                      for robot, cues in tracks.items())
+    return write_show(directory, SHOW.format(name=name, hosts=hosts, robots=robots, tracks=lines))
+
+
+def _run(show: Path, log: Path, *more: str, robots: str = "a") -> list[str]:
+    ports = [arg for robot in robots for arg in ("--port", f"{robot}=sim://")]
+    return choreo_argv("run", str(show), *ports, "--log", str(log), "--no-console", *more)
+
+
+def _peer_lines(stdout: str) -> list[dict]:
+    return [json.loads(line) for line in stdout.splitlines() if line.startswith("{")]
+
+
+def _clock(log: RunLog) -> list[dict]:
+    return log.topic("/choreo/clock")
+
+
+def _start_sample(log: RunLog) -> dict:
+    [start] = [sample for sample in _clock(log) if sample.get("event") == "start"]
+    return start
+
+
+def _motion_starts(log: RunLog, robot: str) -> list[tuple[dict, float]]:
+    """Each play's end record and the show time its motion started, less however late the run
+    measured its own wake-up (a loaded machine's scheduler, which the log says)."""
+    steps = log.topic(f"/choreo/{robot}/step")
+    late = {s["index"]: max(0.0, s["late_ms"] / 1e3) for s in steps if s["event"] == "start"}
+    return [(s, s["start_s"] - late.get(s["index"], 0.0)) for s in steps if s["event"] == "end"]
+
+
+def _phase_off(beat: float) -> float:
+    """How far `beat` is from the nearest bar line, in beats."""
+    phase = beat % METER
+    return min(phase, METER - phase)
+
+
+def _peer_beat(line: dict, link_us: float) -> float:
+    """The peer's beat at Link time `link_us` on the timeline its report saw."""
+    return line["beat"] + (link_us - line["link_us"]) * line["tempo"] / 60e6
+
+
+def _ok(ended, what: str) -> None:
+    assert ended.returncode == 0, f"{what} exited {ended.returncode}: {ended.stderr[-800:]}"
+
+
+def _is_180(sample: dict) -> bool:
+    return abs(sample.get("tempo", 0.0) - 180.0) < 0.01  # Link's tempo, a float that went through its wire
+
+
+def test_two_hosts_play_in_unison_each_with_its_own_robots(tmp_path):
+    """A show with hosts: run by two choreo processes (--host left, --host right), started by a
+    peer's transport, through a tempo change: each log holds its host's robot only, and the same
+    cue's motion starts at the same instant on both."""
+    hosts = "hosts:\n  left: [a]\n  right: [b]\n"
+    cues = ("{bar: 1, beat: 2}", "{bar: 2, beat: 1}", "{bar: 3, beat: 1}", "2.75")
+    show = _show(tmp_path, "duo", cues, cues, hosts)
+    waiting = "waiting for the session to play"
+    run = run_in_namespace(tmp_path, [
+        Job("left", _run(show, tmp_path / "left.mcap", "--host", "left", robots="a")),
+        Job("right", _run(show, tmp_path / "right.mcap", "--host", "right", robots="b")),
+        Job("peer", peer_argv("--tempo", "240", "--tempo-to", "200"),
+            signals=(("USR2", f"{output_has(tmp_path, 'left', waiting)} && {output_has(tmp_path, 'right', waiting)}"),
+                     ("USR1", output_has(tmp_path, "left", "a: step 0 ")), ("TERM", ended(tmp_path, "left", "right")))),
+    ])
+    for host in ("left", "right"):
+        _ok(run[host], host)
+    left, right = read_log(tmp_path / "left.mcap"), read_log(tmp_path / "right.mcap")
+    for log, mine, other in ((left, "a", "b"), (right, "b", "a")):
+        assert log.metadata["choreo"]["robots"] == mine
+        assert [t for t in log.messages if f"/{mine}/" in t] and not [t for t in log.messages if f"/{other}/" in t]
+    assert abs(_start_sample(left)["link_us"] - _start_sample(right)["link_us"]) < TOLERANCE_S * 1e6
+    assert abs(_start_sample(left)["beat"]) < 1e-3 and abs(_start_sample(right)["beat"]) < 1e-3
+    zero = {name: int(log.metadata["choreo.result"]["show_zero_monotonic_ns"]) / 1e9
+            for name, log in (("left", left), ("right", right))}
+    on_left, on_right = _motion_starts(left, "a"), _motion_starts(right, "b")
+    assert len(on_left) == len(on_right) == len(cues)
+    for (end_l, l_s), (end_r, r_s) in zip(on_left, on_right, strict=True):
+        skew = (zero["left"] + l_s) - (zero["right"] + r_s)
+        assert abs(skew) < TOLERANCE_S, (end_l, end_r, skew)
+
+
+def test_choreo_starts_a_peers_transport_on_a_bar_line_of_the_session(tmp_path):
+    """One host, no --wait-start, a peer there not playing: choreo starts the transport on a
+    bar line; the show's beat 0 is the session's bar line, and the peer plays with it."""
+    show = _show(tmp_path, "on a bar", ("{bar: 1, beat: 1}", "{bar: 2, beat: 1}"))
+    run = run_in_namespace(tmp_path, [
+        Job("peer", peer_argv("--tempo", "240"), signals=(("TERM", ended(tmp_path, "host")),)),
+        Job("host", _run(show, tmp_path / "host.mcap"), after=output_has(tmp_path, "peer", "joined")),
+    ])
+    _ok(run["host"], "choreo")
+    assert "starting the session's transport" in run["host"].stderr
+    lines = _peer_lines(run["peer"].stdout)
+    assert not [line for line in lines if line["event"] == "started"]
+    [playing] = [line for line in lines if line["event"] == "playing"]
+    log = read_log(tmp_path / "host.mcap")
+    start = _start_sample(log)
+    assert start["show_s"] == 0.0 and start["beat"] == 0.0 and start["tempo"] == BPM
+    assert _phase_off(start["session_beat"]) < 1e-3, start
+    # the peer's own count (a whole number of bars off choreo's) has a bar line there too
+    assert _phase_off(_peer_beat(playing, start["link_us"])) < PHASE_BEATS, (playing, start)
+    [(first, started), _] = _motion_starts(log, "a")
+    assert abs(started) < TOLERANCE_S, first
+
+
+def test_a_peers_tempo_change_moves_the_cues_in_bars_and_not_those_in_seconds(tmp_path):
+    """A peer changes the tempo (240 -> 180 bpm) as the show's first cue plays: each cue in bars still
+    to come starts where the session's new tempo puts its beat; a cue in seconds keeps its
+    second; the change is a 'tempo' sample carrying the new tempo."""
+    bars = ("{bar: 1, beat: 1}", "{bar: 2, beat: 1}", "{bar: 2, beat: 3}", "{bar: 3, beat: 1}", "{bar: 3, beat: 3}")
+    show = _show(tmp_path, "tempo change", bars, ("0.5", "2.25"))
+    run = run_in_namespace(tmp_path, [
+        Job("peer", peer_argv("--tempo", "240", "--tempo-to", "180"),
+            signals=(("USR1", output_has(tmp_path, "host", "a: step 0 ")), ("TERM", ended(tmp_path, "host")))),
+        Job("host", _run(show, tmp_path / "host.mcap", robots="ab"), after=output_has(tmp_path, "peer", "joined")),
+    ])
+    _ok(run["host"], "choreo")
+    [tempo_set] = [line for line in _peer_lines(run["peer"].stdout) if line["event"] == "tempo_set"]
+    log = read_log(tmp_path / "host.mcap")
+    samples = _clock(log)
+    assert [s for s in samples if s.get("event") == "tempo" and _is_180(s)], samples
+    # Link's beat after the change, as the host sampled it (periodic samples), and as the peer has it
+    after = [s for s in samples if s.get("event") is None and _is_180(s)]
+    assert after, samples
+    for sample in after:
+        assert _phase_off(_peer_beat(tempo_set, sample["link_us"]) - sample["session_beat"]) < PHASE_BEATS
+    changed_s = min(s["show_s"] for s in samples if _is_180(s))
+    line = after[-1]
+    checked = 0
+    for end, started in _motion_starts(log, "a")[1:]:
+        beat = (end["cue"]) * BPM / 60.0  # the plan's cue is at its beat on the show's written tempo
+        due = line["show_s"] + (beat - line["beat"]) * 60.0 / 180.0
+        if due > changed_s + 0.1:
+            checked += 1
+            assert abs(started - due) < TOLERANCE_S, (end, due, line)
+    assert checked >= 2, (changed_s, log.topic("/choreo/a/step"))
+    seconds = [started for _end, started in _motion_starts(log, "b")]
+    assert len(seconds) == 2 and abs(seconds[1] - 2.25) < TOLERANCE_S, seconds
+
+
+def test_a_peer_leaving_mid_show_is_a_peers_sample_and_the_show_goes_on(tmp_path):
+    """The peer leaves as the show's second cue plays: a 'peers' sample says so (none left),
+    and the show plays on to its end."""
+    show = _show(tmp_path, "leaving", ("{bar: 1, beat: 1}", "{bar: 2, beat: 1}", "{bar: 3, beat: 1}"))
+    run = run_in_namespace(tmp_path, [
+        Job("peer", peer_argv("--tempo", "240"), signals=(("TERM", output_has(tmp_path, "host", "a: step 1 ")),)),
+        Job("host", _run(show, tmp_path / "host.mcap"), after=output_has(tmp_path, "peer", "joined")),
+    ])
+    _ok(run["host"], "choreo")
+    assert "Link peers: 1 -> 0" in run["host"].stderr
+    log = read_log(tmp_path / "host.mcap")
+    left = [s for s in _clock(log) if s.get("event") == "peers" and s["show_s"] > 0]
+    assert [s["peers"] for s in left] == [0], _clock(log)
+    assert log.metadata["choreo.result"]["outcome"] == "done"
+    assert len(_motion_starts(log, "a")) == 3
+
+
+def test_alone_a_show_starts_as_the_sessions_first_peer_and_says_so(tmp_path):
+    show = _show(tmp_path, "alone", ("{bar: 1, beat: 1}", "{bar: 1, beat: 3}"))
+    run = run_in_namespace(tmp_path, [Job("host", _run(show, tmp_path / "host.mcap"))])
+    _ok(run["host"], "choreo")
+    said = [line for line in run["host"].stderr.splitlines() if "alone, as the session's first peer" in line]
+    assert len(said) == 1, run["host"].stderr
+    log = read_log(tmp_path / "host.mcap")
+    assert _start_sample(log)["peers"] == 0 and log.metadata["choreo.result"]["outcome"] == "done"
+
+
+def _waits_alone_then(tmp_path: Path, sig: signal.Signals) -> None:
+    """A show for several hosts with no peer at all waits, says so once, and a signal stops it
+    cleanly (exit 130, as for any interrupted run), never a hang."""
+    show = _show(tmp_path, "waits", ("{bar: 1, beat: 1}",), ("{bar: 1, beat: 1}",),
+                 "hosts:\n  left: [a]\n  right: [b]\n")
+    waiting = "waiting for the session to play"
+    run = run_in_namespace(tmp_path, [
+        Job("host", _run(show, tmp_path / "host.mcap", "--host", "left"),
+            signals=((sig.name[3:], output_has(tmp_path, "host", waiting)),)),
+    ], timeout=20)
+    ended = run["host"]
+    assert ended.returncode == 130, ended.stderr
+    assert len([line for line in ended.stderr.splitlines() if waiting in line]) == 1, ended.stderr
+    assert "Traceback" not in ended.stderr
+    assert read_log(tmp_path / "host.mcap").metadata["choreo.result"]["outcome"] == "aborted"
+
+
+def test_a_show_for_hosts_alone_waits_and_sigterm_stops_it(tmp_path):
+    _waits_alone_then(tmp_path, signal.SIGTERM)
+
+
+def test_a_show_for_hosts_alone_waits_and_ctrl_c_stops_it(tmp_path):
+    _waits_alone_then(tmp_path, signal.SIGINT)
