@@ -9,6 +9,9 @@ import json
 import shlex
 import sys
 
+import duckdb  # the test extra installs both, as CI does: missing, this file fails rather than skips
+import pyarrow as pa
+import pyarrow.parquet as pq
 import pytest
 
 from choreo.events import Answer, Command, CommandEvent
@@ -19,9 +22,6 @@ from choreo.review.export import cue_rows, rows
 from choreo.review.parquet import KINDS, RUN_COLUMNS, TABLES
 from runlog import REPO, vmain, write_show
 
-pa = pytest.importorskip("pyarrow")  # the test extra installs both: a skip here is a broken install
-pq = pytest.importorskip("pyarrow.parquet")
-duckdb = pytest.importorskip("duckdb")
 
 # The motion runs 0.5 s on the first night and 1.5 s on the second (the simulator's motion_s): the
 # cue after each `wait: done` starts later, and the last cue later still: late more and more.
