@@ -206,8 +206,9 @@ def test_a_cut_run_plans_the_cues_it_never_reached_on_the_session_timeline(tmp_p
 def test_the_cue_export_plans_bar_cues_on_the_session(link_log, capsys):
     assert main(["log", "export", "--cues", "--json", "-", str(link_log)]) == 0
     rows = json.loads(capsys.readouterr().out)
-    assert [(r["number"], r["robot"], r["planned_s"]) for r in rows] == [
-        ("1", "a", 0.5), ("3", "a", 1.894), ("5", "a", 3.494), ("7", "a", 5.5)]
+    assert [(r["number"], r["robot"], r["planned_s"], r["bar_beat"]) for r in rows] == [
+        ("1", "a", 0.5, "1.2"), ("3", "a", 1.894, "2.1"), ("5", "a", 3.494, "3.1"),
+        ("7", "a", 5.5, "4.2.015")]  # 5.5 s fell on beat 13.015 of the session (3.4 at 120 bpm)
 
 
 def test_a_machine_clock_log_keeps_its_planned_times(tmp_path):

@@ -27,7 +27,7 @@ from choreo.log.format import (COMMAND_TOPIC, LOG_TOPIC, STEP_TOPIC, CommandReco
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import Exchange, exchanges
 from choreo.review.showtime import ShowTimes
-from choreo.review.timeline import link_cue_times
+from choreo.review.timeline import link_cue_fields
 from choreo.log.reader import LogReader
 from choreo.show.cues import Cue, CueList, cue_list
 from choreo.show.model import Plan, Tempo, beat_text
@@ -297,9 +297,9 @@ def cue_rows(reader: LogReader, show: AttachedShow | None = None) -> list[dict]:
     seen.released_by()
     ended = _Ended.of(reader, seen, plans)
     rows = list(seen.rows.values()) + _not_reached(seen, cues, ended, tempo, set(reader.robots))
-    placed = link_cue_times(show, ended.times)  # on Link: a cue in bars where the session put it
+    placed = link_cue_fields(show, ended.times)  # on Link: a cue in bars where the session put it
     for cue_row in rows:
-        cue_row["planned_s"] = _ms(placed[cue_row["number"]]) if cue_row["number"] in placed else cue_row["planned_s"]
+        cue_row.update(placed.get(cue_row["number"], {}))
     return _in_cue_order(rows, cues, reader.robots)
 
 

@@ -440,20 +440,30 @@ class LinkTimes:
         sample. Between two samples on one line, by the nearer; across a tempo change, by the
         line of the tempo the beat fell in (the two lines meet where the tempo changed: a
         change's own sample may still carry the tempo before it); past the last, at its tempo."""
+        near = self._near(beat, by_show=False)
+        return None if near is None else self._shows[near] + (beat - self._beats[near]) * 60.0 / self._tempos[near]
+
+    def beat_of_show(self, show_s: float) -> float | None:
+        """The show beat the session was at, at show time `show_s` (`show_of_beat`'s inverse)."""
+        near = self._near(show_s, by_show=True)
+        return None if near is None else self._beats[near] + (show_s - self._shows[near]) * self._tempos[near] / 60.0
+
+    def _near(self, value: float, by_show: bool) -> int | None:
+        """The kept sample whose line places `value` (a beat, or a show time `by_show`)."""
         beats, shows = self._beats, self._shows
-        if not beats:
+        along = shows if by_show else beats
+        if not along:
             return None
-        i = bisect_right(beats, beat) - 1
-        if i < 0 or i == len(beats) - 1:
-            near = max(i, 0)
-        else:
-            k_i, k_j = 60.0 / self._tempos[i], 60.0 / self._tempos[i + 1]
-            if abs(shows[i] + (beats[i + 1] - beats[i]) * k_i - shows[i + 1]) <= BREAK_S or k_i == k_j:
-                near = i if beat - beats[i] <= beats[i + 1] - beat else i + 1
-            else:
-                meet = (shows[i + 1] - shows[i] + beats[i] * k_i - beats[i + 1] * k_j) / (k_i - k_j)
-                near = i if beat <= meet else i + 1
-        return shows[near] + (beat - beats[near]) * 60.0 / self._tempos[near]
+        i = bisect_right(along, value) - 1
+        if i < 0 or i == len(along) - 1:
+            return max(i, 0)
+        k_i, k_j = 60.0 / self._tempos[i], 60.0 / self._tempos[i + 1]
+        if abs(shows[i] + (beats[i + 1] - beats[i]) * k_i - shows[i + 1]) <= BREAK_S or k_i == k_j:
+            return i if value - along[i] <= along[i + 1] - value else i + 1
+        meet = (shows[i + 1] - shows[i] + beats[i] * k_i - beats[i + 1] * k_j) / (k_i - k_j)  # a beat
+        if by_show:
+            meet = shows[i] + (meet - beats[i]) * k_i
+        return i if value <= meet else i + 1
 
     def show_of_bar(self, bar: int, beat: float, meter: int) -> float | None:
         """`show_of_beat` of a cue as a show writes it (bar 1 beat 1 is show beat 0)."""

@@ -37,6 +37,7 @@ from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, L
                                MotionTracker, Info, Record, Result, RxRecord, StepRecord, TxRecord, cue_name, is_late,
                                parse, slipped)
 from choreo.log.reader import Cut, LogReader
+from choreo.show.model import beat_text
 from choreo.textfit import fit, visible
 
 if TYPE_CHECKING:  # for the types only, as `attached` does
@@ -379,10 +380,25 @@ class _Placed:
         return cue if placed is None else replace(cue, show_s=placed)
 
 
-def link_cue_times(show: AttachedShow, times: ShowTimes) -> dict[str, float]:
-    """On a Link session (`times.link`), each timed cue's planned time where the session put it,
-    by cue number (`_Placed`); off Link, none: the cue times as written stand."""
-    return _Placed.of(show, times.link).cues
+def link_cue_fields(show: AttachedShow, times: ShowTimes) -> dict[str, dict]:
+    """On a Link session (`times.link`), each timed cue's fields as `log export --cues` gives
+    them, by cue number: its planned time where the session put it (`_Placed`), and for a cue in
+    seconds the bar and beat the session was at then (one in bars keeps its bar as written);
+    off Link, none: the cue times and bars of the plan stand."""
+    link = times.link
+    if link is None:
+        return {}
+    meter = show_meter(show)
+    fields: dict[str, dict] = {}
+    written = {step.cue for plan in [*show.plans.values(), show.plan] if plan is not None
+               for step in plan.steps if step.cue is not None and step.at_beat is not None}
+    for number, at in _Placed.of(show, link).cues.items():
+        fields[number] = {"planned_s": round(at, 3)}
+        beat = None if number in written else link.beat_of_show(at)
+        if beat is not None:
+            bar, within = divmod(round(beat, 3), meter)
+            fields[number]["bar_beat"] = f"{int(bar) + 1}.{beat_text(round(within + 1, 3))}"
+    return fields
 
 
 def show_meter(show: AttachedShow) -> int:
