@@ -231,3 +231,23 @@ def test_the_logs_of_two_hosts_and_their_merge_are_three_runs_the_merge_holding_
     assert sorted(by_host["stageleft,stageright"]) == sorted(by_host["stageleft"] + by_host["stageright"])
     frames = {path.name: pq.read_table(path).num_rows for path in out.glob("*.frames.parquet")}
     assert frames["show.frames.parquet"] == frames["stageleft.frames.parquet"] + frames["stageright.frames.parquet"] > 0
+
+
+def test_format_and_output_say_the_same_as_the_format_options(tmp_path, capsys):
+    """`log export --format F -o PATH` (the issue's spelling) is `--F PATH`; the two together,
+    -o alone, or parquet with nowhere to go are one-line errors (exit 2)."""
+    log = tmp_path / "one.mcap"
+    commanded(log)
+    out = tmp_path / "tables"
+    out.mkdir()
+    assert vmain(["log", "export", str(log), "--format", "parquet", "-o", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == [f"one.{kind}.parquet" for kind in ("commands", "cues", "frames",
+                                                                                         "steps")]
+    assert vmain(["log", "export", str(log), "--format", "csv", "-o", str(tmp_path / "f.csv")]) == 0
+    assert (tmp_path / "f.csv").read_text().startswith("seq,")
+    capsys.readouterr()
+    for argv, said in ((["--format", "parquet"], "-o DIR"), (["--format", "csv", "--csv", "x.csv"], "not both"),
+                       (["-o", "x.csv"], "goes with --format")):
+        assert vmain(["log", "export", str(log), *argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and said in err, err

@@ -8,6 +8,7 @@ goes and says where it stops (exit 0): that is the run a reviewer most needs to 
 from __future__ import annotations
 
 import argparse
+import copy
 import errno
 import json
 import os
@@ -123,6 +124,11 @@ def _export_parser(commands: argparse._SubParsersAction) -> None:
                         help="write each log's frames, steps, cues and commands as Parquet tables into DIR "
                         "(DIR/<log>.frames.parquet ...), every row with its run's id: many runs, one query "
                         "(needs pyarrow: choreo[parquet])")
+    export.add_argument("--format", choices=EXPORT_FORMATS,
+                        help="the same as --csv, --json, --jsonl or --parquet with -o's PATH (stdout if none; "
+                        "parquet needs -o DIR)")
+    export.add_argument("-o", "--output", metavar="PATH",
+                        help="with --format: where to write (FILE, or DIR for parquet)")
     export.set_defaults(handler=run_export)
 
 
@@ -335,10 +341,31 @@ def _timeline_png(log: str, png: str) -> int:
     return 0
 
 
+EXPORT_FORMATS = ("csv", "json", "jsonl", "parquet")
+
+
+def _by_format(args: argparse.Namespace) -> argparse.Namespace:
+    """`--format F -o PATH` is `--F PATH` (pandas' and most exporters' spelling); the options
+    as the rest of the command reads them."""
+    if args.format is None:
+        if args.output is not None:
+            raise UsageError("log export: -o PATH goes with --format csv|json|jsonl|parquet")
+        return args
+    given = [name for name in EXPORT_FORMATS if getattr(args, name)]
+    if given:
+        raise UsageError(f"log export: --format {args.format} or --{given[0]} PATH, not both")
+    if args.format == "parquet" and args.output is None:
+        raise UsageError("log export --format parquet: say where: -o DIR (an existing folder)")
+    chosen = copy.copy(args)
+    setattr(chosen, args.format, args.output if args.output is not None else "-")
+    return chosen
+
+
 def run_export(args: argparse.Namespace) -> int:
     from choreo.review.export import CUE_COLUMNS, COLUMNS, CsvSink, JsonLinesSink, JsonSink, export, export_cues
     from choreo.log.reader import LogReader
 
+    args = _by_format(args)
     targets = [(name, value) for name, value in (("csv", args.csv), ("json", args.json),
                                                  ("jsonl", args.jsonl)) if value]
     if args.parquet is not None:
