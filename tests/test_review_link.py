@@ -22,7 +22,7 @@ from choreo.review.export import cue_rows
 from choreo.review.showtime import LinkTimes
 from choreo.review.summary import summarize, summary_record
 from choreo.review.summarytext import render
-from choreo.review.timeline import build, render_text
+from choreo.review.timeline import build, link_text, render_text
 from choreo.wire import protocol
 
 SHOW = b"""\
@@ -150,6 +150,14 @@ def test_a_beat_is_placed_on_the_session_timeline_across_a_tempo_change():
     assert [c.kind for c in times.changes] == ["tempo", "peers", "stopped"]
 
 
+def test_a_sample_with_no_tempo_a_link_could_have_places_nothing():
+    times = LinkTimes()
+    for n, tempo in enumerate((0.0, -120.0, 1e-300, 1e300)):
+        times.see(ClockRecord(float(n), n, "link", beat=float(n), tempo=tempo, peers=-1))
+    assert times.show_of_beat(4) is None and times.tempos == [] and times.peers is None
+    assert link_text(times) == "the Link session's: no tempo sampled"
+
+
 def test_a_long_show_at_one_tempo_keeps_few_samples():
     times = LinkTimes()
     for n in range(20_000):
@@ -165,6 +173,7 @@ def test_the_summary_says_the_session_and_measures_motion_starts_from_the_placed
     assert clock.startswith("clock     the Link session's: 120.00 bpm, 150.00 from 1.48 s; 1..2 other peers "
                             "(1 left); transport stopped at 5.90 s; "), clock
     assert "the machine's" not in text
+    assert "\nhost      left of the show's hosts: its robots only; " in text
     assert summary.motion_starts.max is not None and abs(summary.motion_starts.max) < 0.01  # not -106 ms
     record = summary_record(summary)["clock"]["link"]
     assert record["tempos"] == [{"show_s": -2.5, "bpm": 120.0}, {"show_s": 1.48, "bpm": 150.0}]

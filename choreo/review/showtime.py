@@ -380,7 +380,7 @@ class LinkTimes:
     def see(self, sample: ClockRecord) -> None:
         self.samples += 1
         show_s, tempo, beat = sample.show_s, _number(sample.tempo), _number(sample.beat)
-        tempo = tempo if tempo is not None and 0 < tempo < 1e6 else None
+        tempo = tempo if tempo is not None and 1 <= tempo <= 10_000 else None  # Link's: 20 to 999 bpm
         if sample.event == "tempo" and self._heard is None:
             self._heard = show_s
         self._see_tempo(show_s, tempo)

@@ -67,6 +67,9 @@ def _render_hosts(run: dict[str, str]) -> Iterable[str]:
     """A merged log (`choreo log merge`): its hosts, and how each was lined up on the first's time."""
     hosts = LoggedRun(run).hosts
     if not hosts:
+        if run.get(Info.SHOW_HOST):  # one host's log (`choreo run --host`): its robots only
+            yield (f"host      {run[Info.SHOW_HOST]} of the show's hosts: its robots only; the others' are in "
+                   "their hosts' logs (choreo log merge joins them)")
         return
     placed = []
     for host in hosts[1:]:

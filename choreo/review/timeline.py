@@ -354,7 +354,8 @@ class _Placed:
         for robot, plan in plans.items():
             shift = 0.0
             for step in plan.steps:
-                cue = None if step.go else link.show_of_bar(*step.at_beat, meter) if step.at_beat else step.at
+                cue = link.show_of_bar(*step.at_beat, meter) if step.at_beat and not step.go else None
+                cue = None if step.go else step.at if cue is None else cue  # no beat sampled: as written
                 if cue is not None:
                     shift = cue - step.planned_s
                     if step.cue is not None:
@@ -363,13 +364,13 @@ class _Placed:
         return cls(True, steps, cues)
 
     def planned(self, robot: str | None, index: int | None, known: _Step | None) -> float | None:
-        """A play's planned time on Link: by the plan as placed, else (no show attached) its cue as
-        the runner placed it; None: off Link, or nothing known."""
+        """A play's planned time on Link: its cue as the runner placed it (each --loop pass its
+        own), else by the plan as placed; None: off Link, or nothing known."""
         if not self.link:
             return None
-        if index is not None and (robot, index) in self.steps:
-            return self.steps[(robot, index)]
-        return known.placed if known is not None else None
+        if known is not None and known.placed is not None:
+            return known.placed
+        return self.steps.get((robot, index)) if index is not None else None
 
     def unplayed(self, run: MotionRun) -> MotionRun:
         placed = self.steps.get((run.robot, run.step)) if run.step is not None else None
