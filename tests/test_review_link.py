@@ -158,6 +158,15 @@ def test_a_sample_with_no_tempo_a_link_could_have_places_nothing():
     assert link_text(times) == "the Link session's: no tempo sampled"
 
 
+def test_many_tempo_changes_are_named_a_few_and_counted():
+    times = LinkTimes()
+    for n in range(11):
+        times.see(ClockRecord(float(n), n, "link", beat=float(n), tempo=100.0 + n, peers=0))
+    text = link_text(times)
+    assert text.startswith("the Link session's: 100.00 bpm, 101.00 from 1.00 s, ")
+    assert text.count(" from ") == 5 and text.endswith(", ... (5 more tempo changes); no other peer")
+
+
 def test_a_long_show_at_one_tempo_keeps_few_samples():
     times = LinkTimes()
     for n in range(20_000):

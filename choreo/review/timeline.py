@@ -625,7 +625,7 @@ def link_text(link: LinkTimes) -> str:
     tempos = link.tempos
     text = "the Link session's: " + (f"{tempos[0][1]:.2f} bpm" if tempos else "no tempo sampled")
     text += "".join(f", {bpm:.2f} from {show_s:.2f} s" for show_s, bpm in tempos[1:LISTED_TEMPOS + 1])
-    more = link.counts.get("tempo", 0) - min(len(tempos) - 1, LISTED_TEMPOS)
+    more = link.counts.get("tempo", 0) - min(max(len(tempos) - 1, 0), LISTED_TEMPOS)
     text += f", ... ({more} more tempo changes)" if more > 0 else ""
     if link.peers is not None:
         low, high = link.peers
