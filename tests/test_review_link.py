@@ -236,3 +236,24 @@ def test_a_machine_clock_log_keeps_its_planned_times(tmp_path):
         timeline = build(reader)
     assert timeline.link is None
     assert {run.step: run.planned_s for run in timeline.runs} == {0: 0.5, 1: 2.0, 2: 4.0, 3: 5.5}
+
+
+def test_the_png_draws_the_session_changes_on_a_row_of_their_own(link_log, tmp_path, monkeypatch):
+    import matplotlib.pyplot as plt
+
+    from choreo.review.timeline import render_png
+
+    figures = []
+    close = plt.close
+    monkeypatch.setattr(plt, "close", lambda fig=None: (figures.append(fig), close(fig)))
+    with LogReader(link_log) as reader:
+        timeline = build(reader)
+    with open(tmp_path / "t.png", "wb") as out:
+        render_png(timeline, out)
+    (ax,) = next(fig for fig in figures if not isinstance(fig, str) and fig is not None).axes
+    labels = [label.get_text() for label in ax.get_yticklabels()]
+    assert labels[:2] == ["a: motion 4 wave", "a: motion 20 clap"] and "Link session" in labels
+    row = labels.index("Link session")
+    marked = sorted(x for line in ax.lines for x, y in zip(line.get_xdata(), line.get_ydata(), strict=True) if y == row)
+    assert marked == pytest.approx([1.48, 4.0, 5.9])
+    assert {text.get_text() for text in ax.texts} >= {"tempo 120.00 -> 150.00 bpm", "peers 2 -> 1"}
