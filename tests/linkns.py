@@ -153,4 +153,10 @@ def _read(path: Path) -> str:
 
 
 def _outputs(directory: Path, jobs: list[Job]) -> str:
-    return "; ".join(f"{job.name}: {_read(directory / f'{job.name}.err')[-300:]!r}" for job in jobs)
+    """Each job's state and the end of its output, for a run that never ended."""
+    def one(job: Job) -> str:
+        rc = directory / f"{job.name}.rc"
+        state = f"exit {_read(rc).strip()}" if rc.exists() else "running"
+        return (f"\n--- {job.name} ({state}) stderr: {_read(directory / f'{job.name}.err')[-1500:]}"
+                f"\n--- {job.name} stdout: {_read(directory / f'{job.name}.out')[-600:]}")
+    return "".join(one(job) for job in jobs)

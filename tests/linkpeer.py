@@ -8,8 +8,8 @@ Run it inside a test's network namespace (linkns.py), beside the choreo hosts it
 Its times (`--tempo-change`, `--leave`) count from the moment it saw the session's transport
 play (its own start, or another's), so a loaded machine's slow start of a choreo process moves
 them all together rather than past the show. A test can also cue it by signal, on what the
-choreo hosts print: SIGUSR1 sets the tempo to `--tempo-to`, SIGUSR2 starts the transport (as
-`--start-with-peers` does), SIGTERM makes it leave. It leaves
+choreo hosts print: SIGUSR1 sets the tempo to `--tempo-to`, SIGUSR2 starts the transport (with
+`--start-on-signal`), SIGTERM makes it leave. It leaves
 after `--timeout` seconds whatever happens, so a test never waits on it for ever.
 
 Each line is {"event": ..., "t": seconds since it joined, "link_us": Link's clock, "beat": its
@@ -39,6 +39,8 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     parser.add_argument("--quantum", type=int, default=4)
     parser.add_argument("--start-with-peers", type=int, metavar="N",
                         help="start the transport once N other peers are seen, on a bar line --lead s ahead")
+    parser.add_argument("--start-on-signal", action="store_true",
+                        help="start the transport on SIGUSR2 (and with --start-with-peers, once they are seen)")
     parser.add_argument("--lead", type=float, default=0.5, help="how far ahead its start's bar line is (s)")
     parser.add_argument("--tempo-change", metavar="S:BPM", help="set the tempo S s after the transport played")
     parser.add_argument("--tempo-to", type=float, help="the tempo SIGUSR1 sets")
@@ -99,8 +101,7 @@ class Peer:
                 self.tempo_asked = False
                 self._set_tempo(args.tempo_to)
                 seen = (seen[0], seen[1], link.tempo)
-            with_peers = args.start_with_peers is not None and link.num_peers >= args.start_with_peers
-            if not started and (self.start_asked or with_peers):
+            if not started and self._may_start():
                 started = True
                 self.start()
             since = time.monotonic() - self.played_at if self.played_at is not None else None
@@ -114,6 +115,15 @@ class Peer:
                 break
         link.enabled = False
         self.say("left")
+
+    def _may_start(self) -> bool:
+        """Start now? A peer starts a transport only once the peers it starts are known to it
+        (Link tells a peer that joins later nothing of a transport already playing)."""
+        args = self.args
+        if args.start_with_peers is None and not args.start_on_signal:
+            return False
+        asked = self.start_asked or not args.start_on_signal
+        return asked and (args.start_with_peers is None or self.link.num_peers >= args.start_with_peers)
 
     def _changes(self, seen: tuple[int, bool, float]) -> tuple[int, bool, float]:
         link = self.link
