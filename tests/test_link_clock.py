@@ -14,9 +14,12 @@ hosts is bench/link.py's to measure.
 from __future__ import annotations
 
 import json
+import os
 import signal
 import statistics
 from pathlib import Path
+
+import pytest
 
 from linkns import Job, choreo_argv, ended, output_has, peer_argv, run_in_namespace
 from runlog import RunLog, read_log, write_show
@@ -142,7 +145,10 @@ def test_choreo_starts_a_peers_transport_on_a_bar_line_of_the_session(tmp_path):
     assert "starting the session's transport" in run["host"].stderr
     lines = _peer_lines(run["peer"].stdout)
     assert not [line for line in lines if line["event"] == "started"]
-    [playing] = [line for line in lines if line["event"] == "playing"]
+    # the peer follows start/stop: it saw the transport play (Link tells only the peers it knows)
+    played = [line for line in lines if line["event"] == "playing"]
+    assert len(played) == 1, (run["host"].stderr, run["peer"].stdout)
+    playing = played[0]
     log = read_log(tmp_path / "host.mcap")
     start = _start_sample(log)
     assert start["show_s"] == 0.0 and start["beat"] == 0.0 and abs(start["tempo"] - BPM) < 0.01
@@ -238,3 +244,22 @@ def test_a_show_for_hosts_alone_waits_and_sigterm_stops_it(tmp_path):
 
 def test_a_show_for_hosts_alone_waits_and_ctrl_c_stops_it(tmp_path):
     _waits_alone_then(tmp_path, signal.SIGINT)
+
+
+# -- where namespaces are unavailable, the tests fail (never skip) ----------------------------
+
+def test_without_namespaces_a_link_test_fails_saying_why(tmp_path, monkeypatch):
+    """A machine where unshare is refused (user namespaces off, a container without the
+    capability): the Link test fails with a line saying namespaces are needed."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    for tool, script in (("unshare", "echo 'unshare: unshare failed: Operation not permitted' >&2; exit 1"),
+                         ("ip", "exit 0")):
+        (bin_dir / tool).write_text(f"#!/bin/sh\n{script}\n")
+        (bin_dir / tool).chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
+    with pytest.raises(pytest.fail.Exception, match="need a network namespace .*Operation not permitted"):
+        run_in_namespace(tmp_path, [Job("peer", peer_argv())], timeout=10)
+    monkeypatch.setenv("PATH", str(tmp_path / "nowhere"))
+    with pytest.raises(pytest.fail.Exception, match="need network namespaces: unshare is not installed"):
+        run_in_namespace(tmp_path, [Job("peer", peer_argv())], timeout=10)
