@@ -8,7 +8,6 @@ goes and says where it stops (exit 0): that is the run a reviewer most needs to 
 from __future__ import annotations
 
 import argparse
-import copy
 import errno
 import json
 import os
@@ -344,32 +343,31 @@ def _timeline_png(log: str, png: str) -> int:
 EXPORT_FORMATS = ("csv", "json", "jsonl", "parquet")
 
 
-def _by_format(args: argparse.Namespace) -> argparse.Namespace:
-    """`--format F -o PATH` is `--F PATH` (pandas' and most exporters' spelling); the options
-    as the rest of the command reads them."""
+def _outputs(args: argparse.Namespace) -> dict[str, str | None]:
+    """Where each format goes: `--csv FILE` ..., or `--format F -o PATH` (pandas' and most
+    exporters' spelling: stdout without -o, but parquet, which needs a folder)."""
+    given = {name: getattr(args, name) for name in EXPORT_FORMATS}
     if args.format is None:
         if args.output is not None:
             raise UsageError("log export: -o PATH goes with --format csv|json|jsonl|parquet")
-        return args
-    given = [name for name in EXPORT_FORMATS if getattr(args, name)]
-    if given:
-        raise UsageError(f"log export: --format {args.format} or --{given[0]} PATH, not both")
+        return given
+    named = [name for name, value in given.items() if value]
+    if named:
+        raise UsageError(f"log export: --format {args.format} or --{named[0]} PATH, not both")
     if args.format == "parquet" and args.output is None:
         raise UsageError("log export --format parquet: say where: -o DIR (an existing folder)")
-    chosen = copy.copy(args)
-    setattr(chosen, args.format, args.output if args.output is not None else "-")
-    return chosen
+    return {**given, args.format: args.output if args.output is not None else "-"}
 
 
 def run_export(args: argparse.Namespace) -> int:
     from choreo.review.export import CUE_COLUMNS, COLUMNS, CsvSink, JsonLinesSink, JsonSink, export, export_cues
     from choreo.log.reader import LogReader
 
-    args = _by_format(args)
-    targets = [(name, value) for name, value in (("csv", args.csv), ("json", args.json),
-                                                 ("jsonl", args.jsonl)) if value]
-    if args.parquet is not None:
-        return _export_parquet(args, bool(targets))
+    outputs = _outputs(args)
+    targets = [(name, value) for name, value in outputs.items() if value and name != "parquet"]
+    parquet = outputs["parquet"]
+    if parquet is not None:
+        return _export_parquet(args, parquet, bool(targets))
     if len(args.log) > 1:
         raise UsageError("log export: one log at a time with --csv, --json and --jsonl (--parquet DIR takes several)")
     if not targets:
@@ -394,7 +392,7 @@ def run_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _export_parquet(args: argparse.Namespace, other_targets: bool) -> int:
+def _export_parquet(args: argparse.Namespace, into: str, other_targets: bool) -> int:
     """`log export LOG... --parquet DIR`: each log's four tables, a line on stderr a log; a log
     that cannot be read is its one line and the others are still exported (exit 2 at the end).
     DIR must exist, as any output folder must; pyarrow is checked before any log is read."""
@@ -406,10 +404,10 @@ def _export_parquet(args: argparse.Namespace, other_targets: bool) -> int:
         raise UsageError("log export --parquet writes every table (frames, steps, cues, commands) on its own: "
                          "leave out --csv, --json, --jsonl and --cues")
     require_pyarrow()
-    folder = Path(args.parquet)
+    folder = Path(into)
     if not _is_folder(folder):
         what = "is not a folder" if os.path.lexists(folder) else "does not exist"
-        raise UsageError(f"log export --parquet {args.parquet}: folder {what} (create it first)")
+        raise UsageError(f"log export --parquet {into}: folder {what} (create it first)")
     logs = _logs_in(args.log)
     named: dict[str, Path] = {}
     for path in logs:
