@@ -328,3 +328,19 @@ def test_only_hosts_not_both_on_the_link_clock_are_warned_of():
     logs[1].sources = {"machine"}
     assert _warnings(logs, align(logs)) == ["host b: not both on the Link clock (link/machine): show time 0 "
                                             "taken as the same instant"]
+
+
+def test_a_shifted_hosts_log_lines_keep_their_own_time_with_their_log_time():
+    """Foxglove's log panel shows a line's `timestamp`: it moves with the line's log time."""
+    import json
+
+    from choreo.log.format import LOG_TOPIC, LogRecord
+    from choreo.log.merge import _place
+
+    line = json.dumps(LogRecord.at(3, "late", 5_000_000_000 + 7).to_json()).encode()
+    topic, data = _place(LOG_TOPIC, line, _host("b", []), -6_000_000_000)
+    assert topic == "/choreo/b/log"
+    assert data == line  # moved before 1970: no time, left as written
+    topic, data = _place(LOG_TOPIC, line, _host("b", []), -2_000_000_000)
+    assert json.loads(data)["timestamp"] == {"sec": 3, "nsec": 7}
+    assert _place(LOG_TOPIC, line, _host("b", []), 0)[1] == line  # the axis's own lines: as written

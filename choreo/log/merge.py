@@ -27,6 +27,7 @@ each one's shift), each input's own records kept under `choreo.host.NAME`, the s
 from __future__ import annotations
 
 import heapq
+import json
 import math
 from bisect import bisect_right
 from contextlib import ExitStack, suppress
@@ -35,7 +36,7 @@ import re
 import stat
 import tempfile
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from statistics import median
 from typing import IO
@@ -46,8 +47,8 @@ from choreo import __version__
 from choreo.clock import RUNNING
 from choreo.errors import UsageError
 from choreo.log.format import (CHANNELS, CHOREO_TOPICS, CLOCK_TOPIC, METADATA_NAME, PER_HOST, PER_ROBOT,
-                               RESULT_METADATA_NAME, SHOW_MEDIA_TYPE, ClockRecord, Info, Result, host_key, host_topic,
-                               layout_key, parse, robot_key, robot_message, robot_topic)
+                               RESULT_METADATA_NAME, SHOW_MEDIA_TYPE, ClockRecord, Info, LogRecord, Result, host_key,
+                               host_topic, layout_key, parse, robot_key, robot_message, robot_topic)
 from choreo.log.reader import LogReader
 from choreo.log.recorder import CHUNK_SIZE, schema_text
 from choreo.show.read import MAX_BYTES as SHOW_MAX_BYTES
@@ -373,7 +374,7 @@ def _shifted(reader: LogReader, log: HostLog, alignment: Alignment, dropped: lis
     for topic, log_time, data in reader.messages():
         count += 1
         try:
-            merged_topic, data = _place(topic, data, log)
+            merged_topic, data = _place(topic, data, log, alignment.shift_ns)
         except (KeyError, TypeError, ValueError) as exc:
             raise reader.not_choreo(topic, count, exc) from None
         if merged_topic is None:
@@ -386,11 +387,12 @@ def _shifted(reader: LogReader, log: HostLog, alignment: Alignment, dropped: lis
         yield time, merged_topic, data
 
 
-def _place(topic: str, data: bytes, log: HostLog) -> tuple[str | None, bytes]:
+def _place(topic: str, data: bytes, log: HostLog, shift_ns: int = 0) -> tuple[str | None, bytes]:
     """A message's topic in the merged log (None: not choreo's, left out), and its bytes, checked
     as the reviews will read it (a message no review can read is no message to merge)."""
-    if topic in CHOREO_TOPICS:
-        parse(topic, data)
+    record = parse(topic, data) if topic in CHOREO_TOPICS else None
+    if isinstance(record, LogRecord) and shift_ns:
+        data = _shifted_line(record, shift_ns, data)
     if topic in PER_ROBOT:
         robot, data = robot_message(topic, data, log.robots[0] if log.solo else None)
         if robot not in log.robots:
@@ -399,6 +401,18 @@ def _place(topic: str, data: bytes, log: HostLog) -> tuple[str | None, bytes]:
     if topic in PER_HOST:
         return host_topic(topic, log.host), data
     return None, data
+
+
+def _shifted_line(record: LogRecord, shift_ns: int, data: bytes) -> bytes:
+    """A log line whose own time (`timestamp`, what Foxglove's log panel shows) is moved as its
+    log time is; one whose timestamp holds no time stays as it was written."""
+    sec, nsec = record.timestamp.get("sec"), record.timestamp.get("nsec")
+    if type(sec) is not int or type(nsec) is not int:
+        return data
+    moved = LogRecord.at(record.level, record.message, sec * 1_000_000_000 + nsec + shift_ns)
+    if moved.timestamp["sec"] < 0:
+        return data
+    return json.dumps(replace(record, timestamp=moved.timestamp).to_json(), separators=(",", ":")).encode()
 
 
 # -- the merged log's metadata -------------------------------------------------------------------
