@@ -112,7 +112,7 @@ def _job(directory: Path, job: Job, limit_s: float) -> list[str]:
 
 
 def _script(directory: Path, jobs: list[Job], limit_s: float) -> str:
-    lines = [SETUP, f"touch {shlex.quote(str(directory / READY))}"]
+    lines = [f"{{ {SETUP}; }} && touch {shlex.quote(str(directory / READY))} || exit 1"]  # no network: no jobs
     for job in jobs:
         lines += _job(directory, job, limit_s)
     return "\n".join([*lines, "wait"]) + "\n"
