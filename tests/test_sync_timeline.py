@@ -1,7 +1,8 @@
 """choreo.sync without a network: the pure arithmetic (Timeline, ClockPair, tighter, bar lines,
 whole bars), a LinkSession sampling a fake Link peer (the events it tells, a whole-bar
-renumbering taken out of its beats, a phase jump followed), and find_start's decisions on a
-fake session. The real session is tests/test_link_clock.py's.
+renumbering taken out of its beats, a phase jump followed), find_start's decisions on a fake
+session, and the show clock on a session (seconds kept, bars on the tempo as it is now). The
+real session is tests/test_link_clock.py's.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from typing import Any
 import pytest
 
 from choreo.errors import ChoreoError
+from choreo.sync.clock import LinkShowClock
 from choreo.sync.session import INSTALL_HINT, LinkEvent, LinkSession, LinkSnapshot, LinkUnavailable, make_aalink
 from choreo.sync.start import MISSED_S, START_LEAD_S, LinkStart, find_start
 from choreo.sync.timeline import ClockPair, Timeline, bar_at_or_after, tighter, whole_bars
@@ -410,3 +412,32 @@ def test_a_waiting_show_started_by_its_operator_starts_the_transport_itself():
     assert [call[0] for call in session.calls] == ["play", "count_from_start"]
     assert bar == 0.0 and told[-1].startswith("starting the session's transport with 1 peer")
 
+
+
+# -- the show clock on a session --------------------------------------------------------------
+
+class OneSnapshot:
+    """A session whose snapshot the test sets."""
+
+    def __init__(self, snapshot: LinkSnapshot) -> None:
+        self.now = snapshot
+
+    def snapshot(self) -> LinkSnapshot:
+        return self.now
+
+
+def test_the_show_clock_keeps_seconds_and_places_bars_on_the_sessions_tempo_as_it_is_now():
+    pair = ClockPair(mono_ns=100_000_000_000, link_us=99_750_000.0, window_ns=0)  # Link 250 ms behind
+    session = OneSnapshot(LinkSnapshot(Timeline(99_750_000.0, 16.0, 120.0), pair, 1, True))
+    fake: Any = session
+    show = LinkShowClock(fake, zero=100.0, first_bar=16.0, meter=4)  # the show starts on beat 16, at 100 s
+    assert show.beats_of(1, 1) == 0 and show.beats_of(2, 1) == 4 and show.beats_of(3, 2.5) == 9.5
+    assert show.at_beat(1, 1) == pytest.approx(0.0) and show.at_beat(2, 1) == pytest.approx(2.0)
+    assert show.at_beat(1, 2.5) == pytest.approx(0.75)
+    assert show.show_beat(101.0) == pytest.approx(2.0)
+    # a peer sets 60 bpm at show time 1 s (beat 2 of the show): bars still to come move, seconds do not
+    session.now = LinkSnapshot(Timeline(100_750_000.0, 18.0, 60.0), pair, 1, True)
+    assert show.at_beat(2, 1) == pytest.approx(3.0)  # two beats more at a second each
+    assert show.at_beat(3, 1) == pytest.approx(7.0)
+    assert show.show_beat(104.0) == pytest.approx(5.0)
+    assert show.mono_at(2.5) == 102.5 and show.show_at(102.5) == 2.5
