@@ -23,11 +23,15 @@ show clock; show time 0 is `show_zero_monotonic_ns` of the log's `choreo.result`
   on each side): what a Live on this machine would call the beat, independent of choreo's own
   reading of the session.
 
-Beside them, what the error is made of: where each host's samples put a cue's beat against
-where the peer's Link did (the hosts' reading of the session), and for each cue skewed by more
-than 1 ms whether the later host's step woke late (the scheduler: a busy machine) or the play's
-frames before its start frame took longer than the lead they were given (the exchange with the
-board, here the in-process simulator, slowed down the same way).
+The full run plays the show twice: as `choreo run` runs by default (time-shared with whatever
+else the machine runs), and with the hosts at real-time priority (`chrt -f 20`, as audio software
+runs; where this machine allows it). Beside the figures, what the error is made of: where each
+host's samples put a cue's beat against where the peer's Link did (the hosts' reading of the
+session), and for each cue skewed by more than 1 ms, for the host further from the beat: whether
+its step woke late (the scheduler: a busy machine), or the play's frames before its start frame
+took longer than the lead they were given (the exchange with the board, here the in-process
+simulator, slowed down the same way), or shorter (the lead, a running estimate, still raised by
+an earlier slow play: the start early).
 """
 
 from __future__ import annotations
@@ -56,6 +60,7 @@ MOTION_S = 0.3
 HOSTS = {"left": "a", "right": "b"}
 PEER_SAMPLE_S = 0.005
 READY_TIMEOUT_S = 30.0  # both hosts wait for the session's start within this
+REALTIME = ["chrt", "-f", "20"]  # SCHED_FIFO, as audio software runs: no time-shared process preempts the hosts
 NAMESPACE = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec \"$@\""
 
 
@@ -187,10 +192,18 @@ def check_namespace() -> None:
         raise RuntimeError("needs the aalink package: pip install 'choreo[link]'") from None
 
 
-def play(directory: Path, seconds: float) -> None:
+def realtime_refused() -> str | None:
+    """Why the hosts cannot run at real-time priority here (None: they can)."""
+    if shutil.which("chrt") is None:
+        return "no chrt (util-linux)"
+    probe = subprocess.run([*REALTIME, "true"], capture_output=True, text=True)
+    return None if probe.returncode == 0 else "chrt -f needs CAP_SYS_NICE or an rtprio limit"
+
+
+def play(directory: Path, seconds: float, realtime: bool = False) -> None:
     write_show(directory, show_yaml(plan(seconds).beats))
-    command = ["unshare", "-rn", "sh", "-c", NAMESPACE, "sh", sys.executable, str(Path(__file__).resolve()),
-               "--inside", str(directory), str(seconds)]
+    command = [*(REALTIME if realtime else []), "unshare", "-rn", "sh", "-c", NAMESPACE, "sh", sys.executable,
+               str(Path(__file__).resolve()), "--inside", str(directory), str(seconds)]
     done = subprocess.run(command, capture_output=True, text=True, timeout=seconds * 1.5 + 120)
     if done.returncode != 0:
         outs = " | ".join((directory / f"{h}.out").read_text().strip().splitlines()[-1:][0]
@@ -247,33 +260,34 @@ def mono_of_beat(samples: list[tuple[int, float, float]], beat: float, near_ns: 
     return pick[0] + (beat - pick[1]) * 60e9 / pick[2]
 
 
-def measure(seconds: float) -> dict[str, list[float]]:
-    """Play the show once; skews, cue errors and what made the large skews, ms."""
+def measure(seconds: float, realtime: bool = False) -> dict[str, list[float]]:
+    """Play the show once; skews, cue errors, and what made each skew over 1 ms, ms."""
     show = plan(seconds)
     with temp_dir() as tmp:
-        play(tmp, seconds)
+        play(tmp, seconds, realtime)
         logs = {host: read_host(tmp / f"{host}.mcap") for host in HOSTS}
         peer = json.loads((tmp / "peer.json").read_text())
-    left, right = logs["left"], logs["right"]
-    cues = sorted(set(left.starts) & set(right.starts))
+    cues = sorted(set(logs["left"].starts) & set(logs["right"].starts))
     if len(cues) != len(show.beats):
         raise RuntimeError(f"{len(cues)} of {len(show.beats)} cues ran on both hosts")
     peer_samples = [(round(m), b - peer["start_beat"], t) for m, _, b, t in peer["samples"]]
-    figures: dict[str, list[float]] = {"own": [], "peer": [], "views": [], "woke": [], "exchange": []}
-    for log in logs.values():
+    figures: dict[str, list[float]] = {"own": [], "peer": [], "views": [], "causes": [0, 0, 0]}
+    errors: dict[str, dict[int, float]] = {}
+    for host, log in logs.items():
+        errors[host] = {}
         for cue in cues:
             start = log.starts[cue]
             own = start - mono_of_beat(log.samples, show.beats[cue], start)
-            against_peer = start - mono_of_beat(peer_samples, show.beats[cue], start)
+            errors[host][cue] = (start - mono_of_beat(peer_samples, show.beats[cue], start)) / 1e6
             figures["own"].append(own / 1e6)
-            figures["peer"].append(against_peer / 1e6)
-            figures["views"].append((against_peer - own) / 1e6)
-    figures["skew"] = [(left.starts[cue] - right.starts[cue]) / 1e6 for cue in cues]
+            figures["peer"].append(errors[host][cue])
+            figures["views"].append(errors[host][cue] - own / 1e6)
+    figures["skew"] = [(logs["left"].starts[cue] - logs["right"].starts[cue]) / 1e6 for cue in cues]
     for cue, skew in zip(cues, figures["skew"], strict=True):
-        if abs(skew) > 1.0:  # the later host's: did it wake late, or did its frames take long?
-            late = left if skew > 0 else right
-            figures["woke"].append(late.woke_late_ms[cue])
-            figures["exchange"].append(late.exchange_over_ms[cue])
+        if abs(skew) > 1.0:
+            off = max(HOSTS, key=lambda host: abs(errors[host][cue]))  # the host further from the beat
+            woke, exchange = logs[off].woke_late_ms[cue], logs[off].exchange_over_ms[cue]
+            figures["causes"][0 if woke >= abs(exchange) else 1 if exchange > 0 else 2] += 1
     return figures
 
 
@@ -282,31 +296,38 @@ def _spread(values: list[float]) -> str:
     return f"{median(sizes):.3f} / {percentile(sizes, 99):.3f} / {max(sizes):.3f}"
 
 
+def rows(figures: dict[str, list[float]], seconds: float, how: str) -> list[dict]:
+    skews = [abs(v) for v in figures["skew"]]
+    p99 = percentile(skews, 99)
+    what = f"{len(skews)} cues, {seconds:g} s, {BPM:g} -> {NEW_BPM:g} bpm halfway, {how}"
+    woke, slow, early = figures["causes"]
+    return [
+        row(f"Link, 2 hosts: motion-start skew between hosts, p50 / p99 / max of its size ({what})",
+            _spread(figures["skew"]), "ms", f"p99 <= {GOAL_P99_MS:g}", p99 <= GOAL_P99_MS),
+        row("  cues skewed over 1 ms: the host further from the beat woke late / its frames before the start "
+            "frame ran over their lead / under it (early)", f"{woke} / {slow} / {early}", "cues", None, None),
+        row("  cue error against the host's Link timeline (its /choreo/clock), p50 / p99 / max of its size",
+            _spread(figures["own"]), "ms", None, None),
+        row("  cue error against the scripted peer's Link timeline, p50 / p99 / max of its size; mean (late +)",
+            f"{_spread(figures['peer'])}; {sum(figures['peer']) / len(figures['peer']):+.3f}", "ms", None, None),
+        row("  where a host's samples put a cue's beat against where the peer's Link did, p50 / p99 / max",
+            _spread(figures["views"]), "ms", None, None),
+    ]
+
+
 def run(quick: bool = False) -> list[dict]:
     check_namespace()
     seconds = QUICK_S if quick else FULL_S
     figures = measure(seconds)
-    load = os.getloadavg()[0]
-    skews = [abs(v) for v in figures["skew"]]
-    p99 = percentile(skews, 99)
-    what = f"{len(skews)} cues, {seconds:g} s show, {BPM:g} -> {NEW_BPM:g} bpm halfway, sim://, netns"
-    over = len(figures["woke"])
-    causes = f"{over}; {median(figures['woke']):.2f} / {median(figures['exchange']):.2f}" if over else "0"
-    return [
-        row(f"Link, 2 hosts: motion-start skew between hosts, p50 / p99 / max of its size ({what})",
-            _spread(figures["skew"]), "ms", f"p99 <= {GOAL_P99_MS:g}", p99 <= GOAL_P99_MS),
-        row(f"Link, 2 hosts: cues skewed over 1 ms; the later host's step woke late by / its frames before the "
-            f"start frame took over their lead by, median (load average {load:.1f} at the end)", causes, "cues; ms",
-            None, None),
-        row("Link: cue error against the host's Link timeline (its /choreo/clock), p50 / p99 / max of its size",
-            _spread(figures["own"]), "ms", None, None),
-        row("Link: cue error against the scripted peer's Link timeline, p50 / p99 / max of its size",
-            _spread(figures["peer"]), "ms", None, None),
-        row("Link: cue error against the peer's timeline, mean (late is positive)",
-            round(sum(figures["peer"]) / len(figures["peer"]), 3), "ms", None, None),
-        row("Link: where a host's samples put a cue's beat against where the peer's Link did, p50 / p99 / max",
-            _spread(figures["views"]), "ms", None, None),
-    ]
+    result = rows(figures, seconds, f"as run, load average {os.getloadavg()[0]:.1f} after")
+    if quick:
+        return result
+    refused = realtime_refused()
+    if refused is not None:
+        return [*result, row(f"Link, 2 hosts at real-time priority: not measured ({refused})", None, "", None, None)]
+    figures = measure(seconds, realtime=True)
+    return [*result, *rows(figures, seconds, f"hosts at {' '.join(REALTIME)}, load average "
+                                             f"{os.getloadavg()[0]:.1f} after")]
 
 
 def main(argv: list[str]) -> int:
