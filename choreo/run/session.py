@@ -34,6 +34,7 @@ from choreo.sync.session import LinkEvent, LinkSession
 from choreo.sync.start import LinkStart, find_start
 
 LINK_LEAD_S = 0.25  # a show on the Link clock starts on a bar line at least this far ahead (the runners' preroll)
+REALIGN_LEAD_S = 0.05  # a start moved by the session's bars is at least this far ahead (the first frame's lead)
 
 
 @dataclass
@@ -276,6 +277,12 @@ class Session:
         jump) is a clock sample and a log line, and wakes the runners sleeping towards a cue in
         bars (where it falls has moved)."""
         def heard(event: LinkEvent) -> None:
+            if event.kind == "jump" and show.realign(self.clock.mono() + REALIGN_LEAD_S):
+                # before the show began: it starts on the session's bar line as it now stands
+                self._tell(listeners, INFO, f"{LINK_PREFIX}the session's bars moved before the start: the show "
+                                            f"starts on its bar line {show.zero - self.clock.mono():.3f} s from now")
+                if sampler is not None:
+                    sampler.sample(force=True, event="start", mono_ns=round(show.mono_at(0.0) * 1e9))
             self.clock.source.notify()
             if sampler is not None:
                 sampler.sample(force=True, event=event.kind)

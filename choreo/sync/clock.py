@@ -9,7 +9,10 @@ tempo change by any peer moves every such cue still to come; a frame already sen
 
 from __future__ import annotations
 
+import time
+
 from choreo.sync.session import LinkSession
+from choreo.sync.timeline import bar_at_or_after
 
 
 class LinkShowClock:
@@ -39,3 +42,19 @@ class LinkShowClock:
     def show_beat(self, mono: float) -> float:
         """The show's beat at monotonic time `mono` (what the log's clock samples carry)."""
         return self.session.snapshot().beat_at_mono(mono) - self.first_bar
+
+    def realign(self, earliest: float) -> bool:
+        """Before show time 0, the session's phase moved (a peer found late; Link moved this
+        host onto the session's bars): show time 0 goes onto the session's bar line nearest
+        where it was, at or after monotonic `earliest` (the runners' lead), so the show still
+        starts on a bar line. True if it moved; never once the show has begun."""
+        if time.monotonic() >= self.zero:
+            return False
+        snapshot = self.session.snapshot()
+        first = bar_at_or_after(snapshot.beat_at_mono(max(self.zero - 0.5 * 60.0 / snapshot.tempo, earliest)),
+                                self.meter)
+        zero = snapshot.mono_of_beat(first)
+        if abs(zero - self.zero) < 1e-6 and abs(first - self.first_bar) < 1e-9:
+            return False
+        self.zero, self.first_bar = zero, first
+        return True

@@ -34,6 +34,9 @@ SAMPLE_S = 0.01  # how often the session is read: a tempo change reaches the run
 PAIR_AGE_NS = 500_000_000  # a clock pair this old is replaced even by a looser one (NTP slews one clock)
 OPEN_TIMEOUT_S = 5.0  # joining never takes this long: past it, something is wrong with the binding
 CALL_TIMEOUT_S = 2.0
+READ_TRIES = 3  # reads of the session a sample tries for a tight one
+TIGHT_READ_US = 200.0  # a read of the beat between two reads of Link's clock this tight is taken at once
+DISCOVERY_S = 1.0  # Link finds the peers already in a session within this of joining (seen: 0.3-0.5 s)
 JUMP_BEATS = 0.02  # a beat count off its prediction by more than this (a tempo change aside) jumped
 DEFAULT_TEMPO = 120.0  # what a peer alone proposes when the show names no tempo (Link's own default)
 INSTALL_HINT = "pip install 'choreo[link]'"
@@ -78,6 +81,7 @@ class LinkSnapshot:
     peers: int
     playing: bool
     shift: float = 0.0
+    window_us: float = 0.0  # how long the beat's read took: its time is known within half of it
 
     @property
     def tempo(self) -> float:
@@ -139,11 +143,13 @@ class LinkSession:
         self._thread: threading.Thread | None = None
         self._link: LinkPeer | None = None
         self._pair: ClockPair | None = None
+        self._joined = 0.0  # monotonic time this host joined
 
     # -- opening and closing -----------------------------------------------------------------
 
     def open(self) -> LinkSession:
         """Join the session: the Link thread runs and has taken its first sample."""
+        self._joined = time.monotonic()
         self._thread = threading.Thread(target=self._thread_main, name="choreo-link", daemon=True)
         self._thread.start()
         if not self._ready.wait(OPEN_TIMEOUT_S):
@@ -177,6 +183,15 @@ class LinkSession:
         snapshot = self._snapshot
         assert snapshot is not None, "open the session first"
         return snapshot
+
+    def discover(self, stop: Callable[[], bool] = lambda: False) -> LinkSnapshot:
+        """The session once the peers already in it are found: Link finds them some tenths of a
+        second after joining, so a host that decided alone before would start a transport a peer
+        never hears of, on a phase the session then moves. Waits until a peer is seen or
+        DISCOVERY_S after joining (or a stop)."""
+        while self.snapshot().peers == 0 and time.monotonic() - self._joined < DISCOVERY_S and not stop():
+            time.sleep(self._sample_s)
+        return self.snapshot()
 
     def subscribe(self, listener: LinkListener) -> Callable[[], None]:
         """`listener` hears each LinkEvent (on the Link thread) until the returned undo."""
@@ -265,46 +280,67 @@ class LinkSession:
             self._loop = None
 
     def _sample(self, link: LinkPeer) -> None:
+        """Read the session; publish the snapshot, then tell the listeners what changed (a
+        listener reading the session as it hears of a change reads the change)."""
         before = self._snapshot
-        m1 = time.monotonic_ns()
-        t1 = _us(link.time)
-        m2 = time.monotonic_ns()
-        beat = link.beat
-        t2 = _us(link.time)
-        self._pair = tighter(self._pair, ClockPair((m1 + m2) // 2, t1, m2 - m1), PAIR_AGE_NS)
+        pair, beat_us, beat, window_us = self._read(link)
+        self._pair = tighter(self._pair, pair, PAIR_AGE_NS)
         shift = before.shift if before is not None else 0.0
-        timeline = Timeline((t1 + t2) / 2, beat - shift, float(link.tempo))
-        now = LinkSnapshot(timeline, self._pair, int(link.num_peers), bool(link.playing), shift)
-        if before is not None:
-            now = self._changes(before, now)
-        self._snapshot = now
-
-    def _changes(self, before: LinkSnapshot, now: LinkSnapshot) -> LinkSnapshot:
-        """Tell the listeners what changed since `before`; the snapshot with a whole-bar
-        renumbering taken out of its beats."""
+        now = LinkSnapshot(Timeline(beat_us, beat - shift, float(link.tempo)), self._pair, int(link.num_peers),
+                           bool(link.playing), shift, window_us)
         events: list[tuple[str, str]] = []
-        expected = before.timeline.beat_at(now.timeline.link_us)
-        slack = JUMP_BEATS + abs(now.tempo - before.tempo) * (now.timeline.link_us - before.timeline.link_us) / 60e6
-        jump = now.timeline.beat - expected
-        if abs(jump) > slack:
+        if before is not None:
+            now, events = self._changes(before, now)
+        self._snapshot = now
+        for kind, message in events:
+            self._tell(LinkEvent(kind, now, message))
+
+    @staticmethod
+    def _read(link: LinkPeer) -> tuple[ClockPair, float, float, float]:
+        """Link's clock between two monotonic reads, and the beat between two reads of Link's
+        clock: the tightest of a few tries (a thread put off between two reads on a loaded
+        machine would misplace the beat by half the delay). (pair, Link time of the beat, the
+        beat, the window it was read in, us)."""
+        best: tuple[ClockPair, float, float, float] | None = None
+        for _ in range(READ_TRIES):
+            m1 = time.monotonic_ns()
+            t1 = _us(link.time)
+            m2 = time.monotonic_ns()
+            beat = link.beat
+            t2 = _us(link.time)
+            if best is None or t2 - t1 < best[3]:
+                best = (ClockPair((m1 + m2) // 2, t1, m2 - m1), (t1 + t2) / 2, beat, t2 - t1)
+            if t2 - t1 <= TIGHT_READ_US:
+                break
+        assert best is not None
+        return best
+
+    def _changes(self, before: LinkSnapshot, now: LinkSnapshot) -> tuple[LinkSnapshot, list[tuple[str, str]]]:
+        """What changed since `before`, and the snapshot with a whole-bar renumbering taken out
+        of its beats. A sample in which the tempo changed is not checked for a jump: Link
+        re-phases this host's timeline to the session's as the new tempo arrives, a few
+        milliseconds after the peer changed it, and that is no jump."""
+        events: list[tuple[str, str]] = []
+        tempo_changed = abs(now.tempo - before.tempo) > 1e-6
+        jump = now.timeline.beat - before.timeline.beat_at(now.timeline.link_us)
+        # each sample's beat is placed within half its read window
+        slack = JUMP_BEATS + (now.window_us + before.window_us) / 2 * now.tempo / 60e6
+        if not tempo_changed and abs(jump) > slack:
             bars = whole_bars(jump, self.quantum)
             if bars:
-                shift = now.shift + bars * self.quantum
                 now = replace(now, timeline=replace(now.timeline, beat=now.timeline.beat - bars * self.quantum),
-                              shift=shift)
+                              shift=now.shift + bars * self.quantum)
                 events.append(("jump", f"Link renumbered this host's beats by {bars} bars (the phase kept)"))
             else:
                 events.append(("jump", f"the session's beat jumped by {jump:+.3f} beats: cues in bars follow it"))
-        if abs(now.tempo - before.tempo) > 1e-6:
+        if tempo_changed:
             events.append(("tempo", f"the session's tempo went from {before.tempo:.2f} to {now.tempo:.2f} bpm"))
         if now.peers != before.peers:
             events.append(("peers", f"Link peers: {before.peers} -> {now.peers}"))
         if now.playing != before.playing:
             events.append(("playing", "the session's transport plays") if now.playing
                           else ("stopped", "the session's transport stopped"))
-        for kind, message in events:
-            self._tell(LinkEvent(kind, now, message))
-        return now
+        return now, events
 
     def _tell(self, event: LinkEvent) -> None:
         with self._listeners_lock:

@@ -39,9 +39,9 @@ def find_start(session: LinkSession, how: LinkStart, started: Callable[[], bool]
                stop: Callable[[], bool], tell: Callable[[str], None]) -> float | None:
     """The continuous beat of the show's first bar line; None if stopped while waiting.
     `started`: the operator started this host (a waiting show); `tell`: one line for the log."""
+    snapshot = session.discover(stop)
     if not how.waits:
         return _start_here(session, how, tell)
-    snapshot = session.snapshot()
     tell(f"waiting for the session to play ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
          "start it from a peer (Live's play), another host, or this host's start")
     was_playing = snapshot.playing
