@@ -16,6 +16,7 @@ from typing import Any
 import pytest
 
 from choreo.errors import ChoreoError
+from choreo.sync import session as session_module
 from choreo.sync.clock import LinkShowClock
 from choreo.sync.session import INSTALL_HINT, LinkEvent, LinkSession, LinkSnapshot, LinkUnavailable, make_aalink
 from choreo.sync.start import MISSED_S, START_LEAD_S, LinkStart, find_start
@@ -274,6 +275,21 @@ def test_start_playing_asks_link_for_the_beat_at_its_time_in_links_count(fake):
     assert ("tempo", 90.0) in link.calls and session.snapshot().tempo == 90.0
 
 
+def test_discovery_waits_for_the_peers_already_in_the_session(fake, monkeypatch):
+    """Link finds the peers already there some tenths of a second after joining: discover()
+    waits for one (so a start is never decided alone by mistake), up to DISCOVERY_S."""
+    session, link, heard = fake
+    monkeypatch.setattr(session_module, "DISCOVERY_S", 60.0)  # a wait that would fail the suite's time
+    threading.Timer(0.05, link.peers, (1,)).start()
+    assert session.discover().peers == 1
+    link.peers(0)
+    heard.wait_for("peers", "1 -> 0")
+    monkeypatch.setattr(session_module, "DISCOVERY_S", 0.0)
+    assert session.discover().peers == 0  # alone: past DISCOVERY_S, it says so
+    monkeypatch.setattr(session_module, "DISCOVERY_S", 60.0)
+    assert session.discover(stop=lambda: True).peers == 0  # a stop ends the wait
+
+
 def test_a_session_closed_takes_no_more_calls():
     session = LinkSession(4, make_link=FakeLink).open()
     session.close()
@@ -311,6 +327,10 @@ class FakeSession:
         self.looks += 1
         self.on_snapshot(self.looks)
         return LinkSnapshot(Timeline(*self.origin, self.tempo), self.pair, self.peers, self.playing)
+
+    def discover(self, stop=lambda: False) -> LinkSnapshot:
+        """Peers already in the session are found at once here."""
+        return self.snapshot()
 
     def propose_tempo(self, bpm: float) -> None:
         self.calls.append(("tempo", bpm))
