@@ -22,9 +22,11 @@ from pathlib import Path
 import pytest
 
 from linkns import Job, choreo_argv, ended, output_has, peer_argv, run_in_namespace
-from runlog import RunLog, read_log, write_show
+from choreo.log.merge import merge_logs
+from runlog import RunLog, choreo, read_log, write_show
 
 TOLERANCE_S = 0.015
+MERGE_SPREAD_NS = 2_000_000  # the hosts' samples place one another this closely: arithmetic, not scheduling
 BPM = 240.0
 METER = 4
 PHASE_BEATS = TOLERANCE_S * BPM / 60  # two views of the session's phase agree this closely
@@ -101,8 +103,8 @@ def _is_180(sample: dict) -> bool:
 
 def test_two_hosts_play_in_unison_each_with_its_own_robots(tmp_path):
     """A show with hosts: run by two choreo processes (--host left, --host right), started by a
-    peer's transport, through a tempo change: each log holds its host's robot only, and the same
-    cue's motion starts at the same instant on both."""
+    peer's transport, through a tempo change: each log holds its host's robot only, the same
+    cue's motion starts at the same instant on both, and the logs merge into one show."""
     hosts = "hosts:\n  left: [a]\n  right: [b]\n"
     cues = ("{bar: 1, beat: 2}", "{bar: 2, beat: 1}", "{bar: 3, beat: 1}", "2.75")
     show = _show(tmp_path, "duo", cues, cues, hosts)
@@ -131,6 +133,14 @@ def test_two_hosts_play_in_unison_each_with_its_own_robots(tmp_path):
     for (end_l, l_s), (end_r, r_s) in zip(on_left, on_right, strict=True):
         skew = (zero["left"] + l_s) - (zero["right"] + r_s)
         assert abs(skew) < TOLERANCE_S, (end_l, end_r, skew)
+    # the two hosts' logs merge into one show by their clock samples (show time lines them up),
+    # and a review reads the merged log
+    report = merge_logs([tmp_path / "left.mcap", tmp_path / "right.mcap"], tmp_path / "show.mcap")
+    [axis, placed] = report.alignments
+    assert (axis.host, placed.host, placed.by) == ("left", "right", "clock"), report.alignments
+    assert placed.samples >= 3 and placed.spread_ns < MERGE_SPREAD_NS, placed
+    summary = choreo("log", "summary", str(tmp_path / "show.mcap"), timeout=30)
+    assert summary.returncode == 0, summary.stderr
 
 
 def test_choreo_starts_a_peers_transport_on_a_bar_line_of_the_session(tmp_path):
