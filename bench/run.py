@@ -1,7 +1,7 @@
 """Run every choreo benchmark and print one table; the full run also writes bench/RESULTS.md.
 
     python bench/run.py            # full: a few minutes, writes bench/RESULTS.md
-    python bench/run.py --quick    # under a minute, prints only
+    python bench/run.py --quick    # under 2 minutes (the Link benchmark plays a 30 s show), prints only
     python bench/run.py cues wire  # only some benchmarks (prints only)
 
 Each benchmark module exposes `run(quick: bool = False) -> list[dict]` with rows
@@ -149,7 +149,7 @@ def write_results(sections: list[tuple[str, list[dict]]], info: dict[str, str], 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Run choreo's benchmarks and print one table.")
-    parser.add_argument("--quick", action="store_true", help="smaller sizes, under a minute; writes nothing")
+    parser.add_argument("--quick", action="store_true", help="smaller sizes, under 2 minutes; writes nothing")
     parser.add_argument("only", nargs="*", metavar="NAME",
                         help=f"run only these ({', '.join(name for name, _ in BENCHMARKS)})")
     args = parser.parse_args(argv)
