@@ -5,10 +5,11 @@ unavailable the tests fail saying so.
 
 Every assertion reads the logs (the /choreo/clock samples carry the session: Link's time, the
 show's beat, the session's beat, tempo, peers, and the event a sample marks) and the peers'
-reports. Shows are short and fast (240 bpm: a bar a second). Timing is compared with tolerances
-a loaded two-core machine keeps (TOLERANCE_S, past the lateness the run measured itself): a
-wrong tempo or a wrong bar line is off by hundreds of milliseconds; the real skew between
-hosts is bench/link.py's to measure.
+reports. Shows are short and fast (240 bpm: a bar a second). Each cue is checked where the
+runner placed it (arithmetic on the session's timeline) and, unless the machine stalled that play
+(see Play), where its motion started, within a tolerance a loaded two-core machine keeps
+(TOLERANCE_S): a wrong tempo or a wrong bar line is off by hundreds of milliseconds; the real
+skew between hosts is bench/link.py's to measure.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from linkns import Job, choreo_argv, ended, output_has, peer_argv, run_in_namesp
 from runlog import RunLog, choreo, read_log, write_show
 
 TOLERANCE_S = 0.015
-STALL_S = 0.015  # a play whose run woke later than this was stalled by the machine: its motion is not checked
+STALL_S = 0.005  # a play late or off its lead by more than this was stalled by the machine (see Play)
 MERGE_SPREAD_NS = 2_000_000  # the hosts' samples place one another this closely: arithmetic, not scheduling
 BPM = 240.0
 METER = 4
@@ -79,9 +80,10 @@ def _start_sample(log: RunLog) -> dict:
 @dataclass(frozen=True)
 class Play:
     """A play as its robot's log tells it: where the runner placed its cue (show time, from
-    the session's timeline as it stood), when its motion started (less however late the run
-    measured its own wake-up), and whether the machine stalled the run on it (a wake-up later
-    than STALL_S: a loaded machine's scheduler, which the log says; bench/ measures those)."""
+    the session's timeline as it stood), when its motion started, and whether the machine
+    stalled it: the run woke late, or the frames' exchange took longer or shorter than the
+    lead the runner sent them ahead by (a loaded machine's scheduler, or a lead learnt from
+    an exchange it slowed; the log says both, and bench/ measures them)."""
 
     end: dict
     placed: float
@@ -91,9 +93,15 @@ class Play:
 
 def _plays(log: RunLog, robot: str) -> list[Play]:
     steps = log.topic(f"/choreo/{robot}/step")
-    late = {s["index"]: max(0.0, s["late_ms"] / 1e3) for s in steps if s["event"] == "start"}
-    return [Play(s, s["planned_s"] + s["lead_ms"] / 1e3, s["start_s"] - late.get(s["index"], 0.0),
-                 late.get(s["index"], 0.0) > STALL_S) for s in steps if s["event"] == "end"]
+    began = {s["index"]: s for s in steps if s["event"] == "start"}
+    plays = []
+    for end in (s for s in steps if s["event"] == "end"):
+        start = began[end["index"]]
+        lead_s = end["lead_ms"] / 1e3
+        exchange_s = end["start_s"] - start["actual_s"]  # from the first frame's going out to the motion
+        stalled = start["late_ms"] / 1e3 > STALL_S or abs(exchange_s - lead_s) > STALL_S
+        plays.append(Play(end, end["planned_s"] + lead_s, end["start_s"], stalled))
+    return plays
 
 
 def _lands(play: Play, due: float, context: object = None) -> bool:
