@@ -91,3 +91,18 @@ def test_the_summary_reports_motion_starts_against_their_cues(tmp_path, capsys):
     assert starts["count"] == 8 and abs(starts["median_ms"]) < 0.5 and starts["max_ms"] < 1.0
     assert vmain(["log", "summary", str(tmp_path / "r.mcap")]) == 0
     assert "starts    motion start vs cue (start frame written): median " in capsys.readouterr().out
+
+
+def test_one_slow_play_does_not_make_the_next_plays_start_early(tmp_path):
+    """The lead is the median of the last plays: a play slowed once (a thread put off for 20 ms on
+    a busy machine, measured by bench/link.py) leaves it where the others put it. A running mean
+    moved it by a quarter of the outlier, and the next five plays started early by 5, 4, 3, 2 ms."""
+    show = tmp_path / "show.yaml"
+    show.write_text(SHOW)
+    session = prepare(RunRequest(str(show), port="sim://?motion_s=0.1", log_path=str(tmp_path / "r.mcap")))
+    with session:
+        link = session.stage.links["robot"]
+        for measured in (0.004, 0.0041, 0.0039, 0.004, 0.024, 0.004):
+            link._learn_lead(measured)  # what each play measured (the link calls it after each)
+            if measured < 0.01:
+                assert link.start_lead_s(1) == pytest.approx(0.004, abs=0.0002)

@@ -10,6 +10,8 @@ could push a second return address on the board.
 
 from __future__ import annotations
 
+import statistics
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, replace
@@ -58,7 +60,9 @@ class Played:
     started: float | None = None  # monotonic time the frame that starts the motion was written
 
 
-LEAD_WEIGHT = 0.25  # how much each measured play moves the running estimate of the lead
+# The lead is the median of the last LEAD_PLAYS measured plays: one play slowed by a busy machine
+# (a thread put off for milliseconds) must not make the next few start early, as a running mean did.
+LEAD_PLAYS = 9
 REPLY_DELAY_GUESS_S = 0.0005  # a board's reply delay before any play has been measured
 
 
@@ -188,7 +192,7 @@ class Link:
         self._seq = 0
         self.latency_note = latency_note  # the adapter's latency timer, when it costs time
         self._lead_s: float | None = None  # see `start_lead_s`
-        self._lead_measured = False
+        self._leads: deque[float] = deque(maxlen=LEAD_PLAYS)  # the last plays' measured leads
         self._lost_write: PortLost | None = None  # a write that failed (see `_raise_lost_write`)
 
     @classmethod
@@ -308,11 +312,10 @@ class Link:
         return self._lead_s
 
     def _learn_lead(self, measured_s: float) -> None:
-        """The first measured play replaces the seed; later ones move the estimate a quarter."""
+        """The first measured play replaces the seed; then the median of the last LEAD_PLAYS."""
         if measured_s > 0:
-            known = None if not self._lead_measured else self._lead_s
-            self._lead_s = measured_s if known is None else known + LEAD_WEIGHT * (measured_s - known)
-            self._lead_measured = True
+            self._leads.append(measured_s)
+            self._lead_s = statistics.median(self._leads)
 
     def _start_state(self, motion: int, start_sent: float, tag: Tag | None, what: str) -> StartState:
         """Did the start frame whose reply was lost start the motion? Ask the board.
