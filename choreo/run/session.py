@@ -277,7 +277,7 @@ class Session:
         jump) is a clock sample and a log line, and wakes the runners sleeping towards a cue in
         bars (where it falls has moved)."""
         def heard(event: LinkEvent) -> None:
-            if event.kind == "jump" and show.realign(self.clock.mono() + REALIGN_LEAD_S):
+            if event.kind in ("jump", "tempo") and show.realign(self.clock.mono() + REALIGN_LEAD_S):
                 # before the show began: it starts on the session's bar line as it now stands
                 self._tell(listeners, INFO, f"{LINK_PREFIX}the session's bars moved before the start: the show "
                                             f"starts on its bar line {show.zero - self.clock.mono():.3f} s from now")

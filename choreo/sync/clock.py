@@ -44,10 +44,11 @@ class LinkShowClock:
         return self.session.snapshot().beat_at_mono(mono) - self.first_bar
 
     def realign(self, earliest: float) -> bool:
-        """Before show time 0, the session's phase moved (a peer found late; Link moved this
-        host onto the session's bars): show time 0 goes onto the session's bar line nearest
-        where it was, at or after monotonic `earliest` (the runners' lead), so the show still
-        starts on a bar line. True if it moved; never once the show has begun."""
+        """Before show time 0, the session's bars moved (a peer found late and Link moved this
+        host onto the session's phase, or a peer changed the tempo during the count-in): show
+        time 0 goes onto the session's bar line nearest where it was, at or after monotonic
+        `earliest` (the runners' lead), so the show still starts on a bar line, the same one
+        on every host. True if it moved; never once the show has begun."""
         if time.monotonic() >= self.zero:
             return False
         snapshot = self.session.snapshot()
