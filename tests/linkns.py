@@ -111,20 +111,22 @@ def _job(directory: Path, job: Job, limit_s: float) -> list[str]:
     return lines
 
 
-def _script(directory: Path, jobs: list[Job], limit_s: float) -> str:
-    lines = [f"{{ {SETUP}; }} && touch {shlex.quote(str(directory / READY))} || exit 1"]  # no network: no jobs
+def _script(directory: Path, jobs: list[Job], limit_s: float, setup: str) -> str:
+    lines = [f"{{ {setup}; }} && touch {shlex.quote(str(directory / READY))} || exit 1"]  # no network: no jobs
     for job in jobs:
         lines += _job(directory, job, limit_s)
     return "\n".join([*lines, "wait"]) + "\n"
 
 
-def run_in_namespace(directory: Path, jobs: list[Job], timeout: float = 30.0) -> NamespaceRun:
+def run_in_namespace(directory: Path, jobs: list[Job], timeout: float = 30.0, *,
+                     setup: str | None = None) -> NamespaceRun:
     """Run `jobs` together in a fresh loopback-only network namespace; each one's exit code and
-    output once all ended. The test fails if namespaces are unavailable, or at `timeout`."""
+    output once all ended. The test fails if namespaces are unavailable, or at `timeout`.
+    `setup`: the namespace's network set up another way (SETUP: loopback with a multicast route)."""
     for tool in ("unshare", "ip"):
         if shutil.which(tool) is None:
             pytest.fail(f"the Link tests need network namespaces: {tool} is not installed (util-linux, iproute2)")
-    script = _script(directory, jobs, timeout)
+    script = _script(directory, jobs, timeout, setup if setup is not None else SETUP)
     env = dict(os.environ)
     env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
     # a session of its own: on a timeout every process of the namespace is killed, none left behind
