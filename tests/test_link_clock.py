@@ -209,7 +209,7 @@ def test_choreo_starts_a_peers_transport_on_a_bar_line_of_the_session(tmp_path):
 def test_a_peers_tempo_change_moves_the_cues_in_bars_and_not_those_in_seconds(tmp_path):
     """A peer changes the tempo (240 -> 180 bpm) as the show's first cue plays: each cue in bars still
     to come starts where the session's new tempo puts its beat; a cue in seconds keeps its
-    second; the change is a 'tempo' sample carrying the new tempo."""
+    second; the change is a 'tempo' sample carrying the new tempo, and no jump of the beat."""
     bars = ("{bar: 1, beat: 1}", "{bar: 2, beat: 1}", "{bar: 2, beat: 3}", "{bar: 3, beat: 1}", "{bar: 3, beat: 3}")
     show = _show(tmp_path, "tempo change", bars, ("0.5", "2.25"))
     run = run_in_namespace(tmp_path, [
@@ -222,6 +222,7 @@ def test_a_peers_tempo_change_moves_the_cues_in_bars_and_not_those_in_seconds(tm
     log = read_log(tmp_path / "host.mcap")
     samples = _clock(log)
     assert [s for s in samples if s.get("event") == "tempo" and _is_180(s)], samples
+    assert not [s for s in samples if s.get("event") == "jump"], samples  # a tempo change keeps the beat going
     # Link's beat after the change, as the host sampled it (periodic samples), and as the peer has it
     after = [s for s in samples if s.get("event") is None and _is_180(s)]
     assert after, samples
