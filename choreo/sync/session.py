@@ -37,6 +37,9 @@ CALL_TIMEOUT_S = 2.0
 READ_TRIES = 3  # reads of the session a sample tries for a tight one
 TIGHT_READ_US = 200.0  # a read of the beat between two reads of Link's clock this tight is taken at once
 DISCOVERY_S = 1.0  # Link finds the peers already in a session within this of joining (seen: 0.3-0.5 s)
+SETTLE_S = 0.3  # ...and goes on finding them one by one: the count is taken once none came for this long
+DISCOVERY_MAX_S = 3.0  # however many keep coming, a show decides how to start by then
+REANNOUNCE_S = 5.0  # a peer found this soon after this host started the transport is told of the start again
 JUMP_BEATS = 0.02  # a beat count off its prediction by more than this (a tempo change aside) jumped
 DEFAULT_TEMPO = 120.0  # what a peer alone proposes when the show names no tempo (Link's own default)
 INSTALL_HINT = "pip install 'choreo[link]'"
@@ -144,6 +147,7 @@ class LinkSession:
         self._link: LinkPeer | None = None
         self._pair: ClockPair | None = None
         self._joined = 0.0  # monotonic time this host joined
+        self._started: tuple[float, timedelta, float] | None = None  # this host's start: when, at, session beat
 
     # -- opening and closing -----------------------------------------------------------------
 
@@ -186,10 +190,19 @@ class LinkSession:
 
     def discover(self, stop: Callable[[], bool] = lambda: False) -> LinkSnapshot:
         """The session once the peers already in it are found: Link finds them some tenths of a
-        second after joining, so a host that decided alone before would start a transport a peer
-        never hears of, on a phase the session then moves. Waits until a peer is seen or
-        DISCOVERY_S after joining (or a stop)."""
-        while self.snapshot().peers == 0 and time.monotonic() - self._joined < DISCOVERY_S and not stop():
+        second after joining, one by one, so a host that decided before would start a transport
+        the peers found later never hear of, on a phase the session then moves. Waits DISCOVERY_S
+        after joining, and then until no new peer has come for SETTLE_S (at most DISCOVERY_MAX_S
+        after joining), or a stop."""
+        count, since = self.snapshot().peers, time.monotonic()
+        while not stop():
+            now = time.monotonic()
+            peers = self.snapshot().peers
+            if peers != count:
+                count, since = peers, now
+            joined_for = now - self._joined
+            if joined_for >= DISCOVERY_MAX_S or (joined_for >= DISCOVERY_S and now - since >= SETTLE_S):
+                break
             time.sleep(self._sample_s)
         return self.snapshot()
 
@@ -215,11 +228,14 @@ class LinkSession:
 
     def start_playing(self, beat: float) -> None:
         """Start the session's transport on continuous `beat` (a bar line ahead): peers that
-        follow start/stop (Live with Start Stop Sync on, other choreo hosts) start there too."""
+        follow start/stop (Live with Start Stop Sync on, other choreo hosts) start there too.
+        A peer found within REANNOUNCE_S after is told again (Link tells a peer it finds later
+        nothing of a start made before)."""
         def start(link: LinkPeer) -> None:
             snapshot = self.snapshot()
             at_us = snapshot.timeline.time_at(beat)
-            link.set_is_playing_and_request_beat_at_time(True, timedelta(microseconds=at_us), beat + snapshot.shift)
+            self._started = (time.monotonic(), timedelta(microseconds=at_us), beat + snapshot.shift)
+            link.set_is_playing_and_request_beat_at_time(True, self._started[1], self._started[2])
         self._call(start)
         self._resample()
 
@@ -292,8 +308,17 @@ class LinkSession:
         if before is not None:
             now, events = self._changes(before, now)
         self._snapshot = now
+        if before is not None and now.peers > before.peers:
+            self._announce_again(link)
         for kind, message in events:
             self._tell(LinkEvent(kind, now, message))
+
+    def _announce_again(self, link: LinkPeer) -> None:
+        """A peer found soon after this host started the transport hears of the start (its time
+        and bar line as they were: a new peer that follows start/stop plays in phase)."""
+        started = self._started
+        if started is not None and time.monotonic() - started[0] < REANNOUNCE_S:
+            link.set_is_playing_and_request_beat_at_time(True, started[1], started[2])
 
     @staticmethod
     def _read(link: LinkPeer) -> tuple[ClockPair, float, float, float]:
@@ -317,22 +342,12 @@ class LinkSession:
 
     def _changes(self, before: LinkSnapshot, now: LinkSnapshot) -> tuple[LinkSnapshot, list[tuple[str, str]]]:
         """What changed since `before`, and the snapshot with a whole-bar renumbering taken out
-        of its beats. A sample in which the tempo changed is not checked for a jump: Link
-        re-phases this host's timeline to the session's as the new tempo arrives, a few
-        milliseconds after the peer changed it, and that is no jump."""
+        of its beats (`_jump`)."""
         events: list[tuple[str, str]] = []
         tempo_changed = abs(now.tempo - before.tempo) > 1e-6
-        jump = now.timeline.beat - before.timeline.beat_at(now.timeline.link_us)
-        # each sample's beat is placed within half its read window
-        slack = JUMP_BEATS + (now.window_us + before.window_us) / 2 * now.tempo / 60e6
-        if not tempo_changed and abs(jump) > slack:
-            bars = whole_bars(jump, self.quantum)
-            if bars:
-                now = replace(now, timeline=replace(now.timeline, beat=now.timeline.beat - bars * self.quantum),
-                              shift=now.shift + bars * self.quantum)
-                events.append(("jump", f"Link renumbered this host's beats by {bars} bars (the phase kept)"))
-            else:
-                events.append(("jump", f"the session's beat jumped by {jump:+.3f} beats: cues in bars follow it"))
+        now, jumped = self._jump(before, now, tempo_changed)
+        if jumped is not None:
+            events.append(("jump", jumped))
         if tempo_changed:
             events.append(("tempo", f"the session's tempo went from {before.tempo:.2f} to {now.tempo:.2f} bpm"))
         if now.peers != before.peers:
@@ -341,6 +356,27 @@ class LinkSession:
             events.append(("playing", "the session's transport plays") if now.playing
                           else ("stopped", "the session's transport stopped"))
         return now, events
+
+    def _jump(self, before: LinkSnapshot, now: LinkSnapshot, tempo_changed: bool) -> tuple[LinkSnapshot, str | None]:
+        """The snapshot with a whole-bar renumbering taken out, and what jumped (None: nothing).
+        In the sample a tempo change arrives in, only a jump of half a bar or more counts (a
+        renumbering that came with it); less is Link re-phasing to the new tempo."""
+        jump = now.timeline.beat - before.timeline.beat_at(now.timeline.link_us)
+        # each sample's beat is placed within half its read window
+        slack = JUMP_BEATS + (now.window_us + before.window_us) / 2 * now.tempo / 60e6
+        if tempo_changed:
+            bars: int | None = round(jump / self.quantum) if abs(jump) >= self.quantum / 2 else None
+        elif abs(jump) > slack:
+            bars = whole_bars(jump, self.quantum)
+            if not bars:
+                return now, f"the session's beat jumped by {jump:+.3f} beats: cues in bars follow it"
+        else:
+            bars = None
+        if not bars:
+            return now, None
+        renumbered = replace(now, timeline=replace(now.timeline, beat=now.timeline.beat - bars * self.quantum),
+                             shift=now.shift + bars * self.quantum)
+        return renumbered, f"Link renumbered this host's beats by {bars} bars (the phase kept)"
 
     def _tell(self, event: LinkEvent) -> None:
         with self._listeners_lock:
