@@ -79,6 +79,7 @@ class Limits:
     update_subscribers: int = 4  # senders subscribed to the notifications (/choreo/updates 1) at once
     update_expire_s: float = 61.0  # a subscription ends after this long without a message from it (QLab's)
     update_bytes: Rate = Rate(65536, 16384.0)  # bytes of notifications sent to one UDP subscriber; the rest dropped
+    link_events: Rate = Rate(20, 5.0)  # Link session changes logged (a sample, a line) one by one; the rest summed
 
 
 LIMITS = Limits()

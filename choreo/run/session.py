@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import threading
+import time
 from collections.abc import Sequence
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
@@ -21,6 +22,7 @@ from choreo.clock import (MachineShowClock, PausableShowClock, RunClock, ShowClo
 from choreo.errors import UsageError
 from choreo.events import Command, PlayOutListener, RunListener, RunResult, StopRequest
 from choreo.live.controls import HoldingShowClock, Live
+from choreo.live.limits import LIMITS, Budget, Rate
 from choreo.log.format import CLOCK_EVERY_S, INFO, LINK_PREFIX, WARNING, ClockRecord, Result, result_metadata
 from choreo.log.recorder import Recorder
 from choreo.music.player import LEAD_IN_S, Player
@@ -30,7 +32,7 @@ from choreo.run.sections import section_end
 from choreo.run.settings import RunRequest, RunSettings
 from choreo.run.stage import Stage
 from choreo.sync.clock import LinkShowClock
-from choreo.sync.session import LinkEvent, LinkSession
+from choreo.sync.session import LinkEvent, LinkSession, LinkSnapshot
 from choreo.sync.start import LinkStart, find_start
 
 LINK_LEAD_S = 0.25  # a show on the Link clock starts on a bar line at least this far ahead (the runners' preroll)
@@ -276,6 +278,13 @@ class Session:
         """For a pass: each change of the session (a peer's tempo, peers, the transport, a
         jump) is a clock sample and a log line, and wakes the runners sleeping towards a cue in
         bars (where it falls has moved)."""
+        gate = _LinkEventGate(LIMITS.link_events, LIMITS.summary_every_s)
+
+        def record(kind: str | None, level: int, message: str) -> None:
+            if sampler is not None:
+                sampler.sample(force=True, event=kind)
+            self._tell(listeners, level, LINK_PREFIX + message)
+
         def heard(event: LinkEvent) -> None:
             if event.kind in ("jump", "tempo") and show.realign(self.clock.mono() + REALIGN_LEAD_S):
                 # before the show began: it starts on the session's bar line as it now stands
@@ -283,15 +292,20 @@ class Session:
                                             f"starts on its bar line {show.zero - self.clock.mono():.3f} s from now")
                 if sampler is not None:
                     sampler.sample(force=True, event="start", mono_ns=round(show.mono_at(0.0) * 1e9))
-            self.clock.source.notify()
-            if sampler is not None:
-                sampler.sample(force=True, event=event.kind)
-            self._tell(listeners, WARNING if event.kind in ("jump", "stopped") else INFO, LINK_PREFIX + event.message)
+            self.clock.source.notify()  # the runners follow every change, logged or not
+            if gate.passes():
+                record(event.kind, WARNING if event.kind in ("jump", "stopped") else INFO, event.message)
+            summary = gate.due(event.snapshot)
+            if summary is not None:
+                record(None, INFO, summary)
         undo = show.session.subscribe(heard)
         try:
             yield
         finally:
             undo()
+            summary = gate.due(show.session.snapshot(), force=True)
+            if summary is not None:
+                record(None, INFO, summary)
 
     def _clock_source(self) -> str:
         return "link" if self.link is not None else "music" if self.player else "machine"
@@ -396,3 +410,31 @@ class ClockSampler:
         return replace(record, link_us=snapshot.link_us_at_mono(mono_ns / 1e9), beat=round(beat - link.first_bar, 6),
                        session_beat=round(beat + snapshot.shift, 6), tempo=round(snapshot.tempo, 6),
                        peers=snapshot.peers, event=event)
+
+
+class _LinkEventGate:
+    """How many of a Link session's changes are logged one by one: a peer changing its tempo
+    every 10 ms would otherwise write a clock sample and a line each (and print the line).
+    Past the budget they are counted, and summed up in one line a `every_s` at most."""
+
+    def __init__(self, rate: Rate, every_s: float) -> None:
+        self._budget = Budget.of(rate)
+        self._every_s = every_s
+        self._held = 0
+        self._since = time.monotonic()
+
+    def passes(self) -> bool:
+        if self._budget.take():
+            return True
+        self._held += 1
+        return False
+
+    def due(self, snapshot: LinkSnapshot, force: bool = False) -> str | None:
+        """The summary of the changes held back, once `every_s` has passed (or `force`)."""
+        now = time.monotonic()
+        if not self._held or (not force and now - self._since < self._every_s):
+            return None
+        held, self._held, self._since = self._held, 0, now
+        return (f"{held} more session change{'s' if held != 1 else ''} not logged one by one "
+                f"(now {snapshot.tempo:.2f} bpm, {snapshot.peers} peers, "
+                f"{'playing' if snapshot.playing else 'stopped'})")
