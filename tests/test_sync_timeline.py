@@ -279,12 +279,18 @@ def test_discovery_waits_for_the_peers_already_in_the_session(fake, monkeypatch)
     """Link finds the peers already there some tenths of a second after joining: discover()
     waits for one (so a start is never decided alone by mistake), up to DISCOVERY_S."""
     session, link, heard = fake
-    monkeypatch.setattr(session_module, "DISCOVERY_S", 60.0)  # a wait that would fail the suite's time
+    monkeypatch.setattr(session_module, "DISCOVERY_S", 0.2)
+    monkeypatch.setattr(session_module, "SETTLE_S", 0.4)
+    monkeypatch.setattr(session_module, "DISCOVERY_MAX_S", 60.0)  # a wait that would fail the suite's time
     threading.Timer(0.05, link.peers, (1,)).start()
-    assert session.discover().peers == 1
+    threading.Timer(0.2, link.peers, (2,)).start()  # found one by one: the count settles on the second
+    assert session.discover().peers == 2
+    link.peers(1)
+    heard.wait_for("peers", "2 -> 1")
     link.peers(0)
     heard.wait_for("peers", "1 -> 0")
     monkeypatch.setattr(session_module, "DISCOVERY_S", 0.0)
+    monkeypatch.setattr(session_module, "SETTLE_S", 0.0)
     assert session.discover().peers == 0  # alone: past DISCOVERY_S, it says so
     monkeypatch.setattr(session_module, "DISCOVERY_S", 60.0)
     assert session.discover(stop=lambda: True).peers == 0  # a stop ends the wait
@@ -461,3 +467,59 @@ def test_the_show_clock_keeps_seconds_and_places_bars_on_the_sessions_tempo_as_i
     assert show.at_beat(3, 1) == pytest.approx(7.0)
     assert show.show_beat(104.0) == pytest.approx(5.0)
     assert show.mono_at(2.5) == 102.5 and show.show_at(102.5) == 2.5
+
+
+def test_a_listener_that_fails_is_set_aside_and_the_session_is_still_followed(fake):
+    """A listener's bug on the Link thread must not take this host off the session mid-show."""
+    session, link, heard = fake
+
+    def broken(event: LinkEvent) -> None:
+        raise RuntimeError("a listener's bug")
+    session.subscribe(broken)
+    link.peers(1)
+    heard.wait_for("peers", "0 -> 1")
+    link.tempo = 140.0
+    heard.wait_for("tempo", "to 140.00")  # still sampled and told after the failure
+    assert session.listener_failures and session.snapshot().tempo == 140.0
+
+
+def test_a_session_whose_thread_died_says_so_rather_than_freezing(fake, monkeypatch):
+    """The Link thread ends on an error mid-show: the next read of the session is a ChoreoError
+    naming it (a show on a frozen snapshot would drift off the session without a word)."""
+    session, link, _heard = fake
+
+    def failing() -> timedelta:
+        raise OSError("the binding failed")
+    monkeypatch.setattr(FakeLink, "time", property(lambda self: failing()))
+    deadline = time.monotonic() + WAIT_S
+    while time.monotonic() < deadline:
+        try:
+            session.snapshot()
+        except ChoreoError as exc:
+            assert "lost the session" in str(exc) and "the binding failed" in str(exc)
+            return
+        time.sleep(0.01)
+    raise AssertionError("the session went on as if nothing had happened")
+
+
+def test_a_start_is_told_again_to_a_peer_found_after_it_while_the_transport_plays(fake):
+    """Link tells a peer it finds later nothing of a start made before: the host that started
+    the transport tells it again, at the beat its count gives the start now (no jump), and
+    not once the transport has stopped (that would start it again for everyone)."""
+    session, link, heard = fake
+    snapshot = session.snapshot()
+    bar = bar_at_or_after(snapshot.beat_at_mono(time.monotonic() + 0.5), 4)
+    session.start_playing(bar)
+    session.count_from_start()
+    plays = lambda: [call for call in link.calls if call[0] == "play"]  # noqa: E731 a short look, read twice
+    first = plays()[0]
+    link.peers(1)
+    heard.wait_for("peers", "0 -> 1")
+    again = plays()[1]
+    assert again[1] is True and again[2] == first[2]  # the same start time
+    assert again[3] == pytest.approx(session.snapshot().timeline.beat_at(first[2]), abs=1e-6)
+    link.plays(False)
+    heard.wait_for("stopped")
+    link.peers(2)
+    heard.wait_for("peers", "1 -> 2")
+    assert len(plays()) == 2  # stopped: not started again

@@ -142,12 +142,14 @@ class LinkSession:
         self._ready = threading.Event()
         self._closing = threading.Event()
         self._failure: BaseException | None = None
+        self._lost: str | None = None  # why the Link thread ended while the session was open
+        self.listener_failures: list[Exception] = []  # listeners that raised (set aside, see `_tell`)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._link: LinkPeer | None = None
         self._pair: ClockPair | None = None
         self._joined = 0.0  # monotonic time this host joined
-        self._started: tuple[float, timedelta, float] | None = None  # this host's start: when, at, session beat
+        self._started: tuple[float, timedelta] | None = None  # this host's start of the transport: when, at (Link)
 
     # -- opening and closing -----------------------------------------------------------------
 
@@ -183,9 +185,12 @@ class LinkSession:
     # -- reading -----------------------------------------------------------------------------
 
     def snapshot(self) -> LinkSnapshot:
-        """The latest sample (at most SAMPLE_S old)."""
+        """The latest sample (at most SAMPLE_S old); ChoreoError if the Link thread has died
+        (a show must not go on on a frozen session without a word)."""
         snapshot = self._snapshot
         assert snapshot is not None, "open the session first"
+        if self._lost is not None:
+            raise ChoreoError(f"Link: this host lost the session ({self._lost}): the show cannot follow its beat")
         return snapshot
 
     def discover(self, stop: Callable[[], bool] = lambda: False) -> LinkSnapshot:
@@ -234,8 +239,8 @@ class LinkSession:
         def start(link: LinkPeer) -> None:
             snapshot = self.snapshot()
             at_us = snapshot.timeline.time_at(beat)
-            self._started = (time.monotonic(), timedelta(microseconds=at_us), beat + snapshot.shift)
-            link.set_is_playing_and_request_beat_at_time(True, self._started[1], self._started[2])
+            self._started = (time.monotonic(), timedelta(microseconds=at_us))
+            link.set_is_playing_and_request_beat_at_time(True, self._started[1], beat + snapshot.shift)
         self._call(start)
         self._resample()
 
@@ -264,9 +269,7 @@ class LinkSession:
 
         async def sample() -> None:
             assert self._link is not None
-            if renumbered:
-                self._snapshot = None
-            self._sample(self._link)
+            self._sample(self._link, fresh=renumbered)
         asyncio.run_coroutine_threadsafe(sample(), loop).result(CALL_TIMEOUT_S)
 
     # -- the Link thread ---------------------------------------------------------------------
@@ -274,7 +277,9 @@ class LinkSession:
     def _thread_main(self) -> None:
         try:
             asyncio.run(self._main())
-        except BaseException as exc:  # noqa: B902 reported to open(), never lost on a thread
+        except BaseException as exc:  # noqa: B902 reported to open() or by snapshot(), never lost on a thread
+            if self._ready.is_set():
+                self._lost = f"{type(exc).__name__}: {exc}"[:200]
             self._failure = exc
             self._ready.set()
 
@@ -295,10 +300,11 @@ class LinkSession:
             link.enabled = False
             self._loop = None
 
-    def _sample(self, link: LinkPeer) -> None:
+    def _sample(self, link: LinkPeer, fresh: bool = False) -> None:
         """Read the session; publish the snapshot, then tell the listeners what changed (a
-        listener reading the session as it hears of a change reads the change)."""
-        before = self._snapshot
+        listener reading the session as it hears of a change reads the change). `fresh`: this
+        host renumbered its beats on purpose: the count starts over, with no shift, no jump."""
+        before = None if fresh else self._snapshot
         pair, beat_us, beat, window_us = self._read(link)
         self._pair = tighter(self._pair, pair, PAIR_AGE_NS)
         shift = before.shift if before is not None else 0.0
@@ -308,17 +314,19 @@ class LinkSession:
         if before is not None:
             now, events = self._changes(before, now)
         self._snapshot = now
-        if before is not None and now.peers > before.peers:
-            self._announce_again(link)
+        if before is not None and now.peers > before.peers and now.playing:
+            self._announce_again(link, now)
         for kind, message in events:
             self._tell(LinkEvent(kind, now, message))
 
-    def _announce_again(self, link: LinkPeer) -> None:
-        """A peer found soon after this host started the transport hears of the start (its time
-        and bar line as they were: a new peer that follows start/stop plays in phase)."""
+    def _announce_again(self, link: LinkPeer, now: LinkSnapshot) -> None:
+        """A peer found soon after this host started the transport (still playing) hears of the
+        start: its time as it was, at the beat this host's count now gives it (the count may have
+        been renumbered since: the same beat again is no jump)."""
         started = self._started
         if started is not None and time.monotonic() - started[0] < REANNOUNCE_S:
-            link.set_is_playing_and_request_beat_at_time(True, started[1], started[2])
+            at_us = started[1] / timedelta(microseconds=1)
+            link.set_is_playing_and_request_beat_at_time(True, started[1], now.timeline.beat_at(at_us) + now.shift)
 
     @staticmethod
     def _read(link: LinkPeer) -> tuple[ClockPair, float, float, float]:
@@ -379,8 +387,13 @@ class LinkSession:
         return renumbered, f"Link renumbered this host's beats by {bars} bars (the phase kept)"
 
     def _tell(self, event: LinkEvent) -> None:
+        """Each listener hears the event; one that fails is set aside (counted in
+        `listener_failures`), never the sampling: a show keeps following the session."""
         with self._listeners_lock:
             listeners = list(self._listeners)
         for listener in listeners:
-            listener(event)
+            try:
+                listener(event)
+            except Exception as exc:  # noqa: BLE001 a listener's bug must not take this host off Link mid-show
+                self.listener_failures.append(exc)
 
