@@ -171,3 +171,12 @@ def test_choreo_plan_names_each_robots_host(tmp_path, capsys):
     assert vmain(["plan", str(tmp_path / "show.yaml"), "--json"]) == 0
     record = json.loads(capsys.readouterr().out)
     assert record["hosts"] == {"left": ["a", "b"], "right": ["c"]} and record["link"] == {"bpm": 120.0, "meter": 4}
+
+
+def test_a_loop_is_refused_on_the_link_clock_with_a_host_and_rehearsed_on_the_machines(tmp_path):
+    """Each host would end a --loop pass on its own robots' last motion and start the next on a
+    bar line of its own: the hosts would part. On the machine's clock the section rehearses."""
+    show = str(write_show(tmp_path, SHOW))
+    with pytest.raises(UsageError, match=r"^--loop 0\.\.1: not on the Link clock with --host .*--clock machine"):
+        RunSettings.settle(RunRequest(show, no_log=True, host="left", loop="0..1"))
+    assert RunSettings.settle(RunRequest(show, no_log=True, host="left", loop="0..1", clock="machine")).link is None

@@ -456,7 +456,7 @@ def test_the_show_clock_keeps_seconds_and_places_bars_on_the_sessions_tempo_as_i
     pair = ClockPair(mono_ns=100_000_000_000, link_us=99_750_000.0, window_ns=0)  # Link 250 ms behind
     session = OneSnapshot(LinkSnapshot(Timeline(99_750_000.0, 16.0, 120.0), pair, 1, True))
     fake: Any = session
-    show = LinkShowClock(fake, zero=100.0, first_bar=16.0, meter=4)  # the show starts on beat 16, at 100 s
+    show = LinkShowClock(fake, start=100.0, start_beat=16.0, meter=4)  # the show starts on beat 16, at 100 s
     assert show.beats_of(1, 1) == 0 and show.beats_of(2, 1) == 4 and show.beats_of(3, 2.5) == 9.5
     assert show.at_beat(1, 1) == pytest.approx(0.0) and show.at_beat(2, 1) == pytest.approx(2.0)
     assert show.at_beat(1, 2.5) == pytest.approx(0.75)
@@ -467,6 +467,38 @@ def test_the_show_clock_keeps_seconds_and_places_bars_on_the_sessions_tempo_as_i
     assert show.at_beat(3, 1) == pytest.approx(7.0)
     assert show.show_beat(104.0) == pytest.approx(5.0)
     assert show.mono_at(2.5) == 102.5 and show.show_at(102.5) == 2.5
+
+
+def test_a_start_off_beat_one_keeps_every_later_bar_on_a_bar_of_the_session():
+    """--from a step at bar 3 beat 2 (show beat 9) starts on beat 2 of a session bar (session
+    beat 17 = bar line 16 + 1): the show's bar 4 is then the session's bar line 20, not beat 4."""
+    pair = ClockPair(mono_ns=100_000_000_000, link_us=99_750_000.0, window_ns=0)
+    session = OneSnapshot(LinkSnapshot(Timeline(99_750_000.0, 17.0, 120.0), pair, 1, True))
+    fake: Any = session
+    show = LinkShowClock(fake, start=100.0, start_beat=17.0, meter=4, origin_s=4.5, origin_beats=9.0)
+    assert show.first_bar == 8.0 and (show.first_bar + show.beats_of(4, 1)) % 4 == 0
+    assert show.mono_at(4.5) == pytest.approx(100.0)  # the --from step's own time plays at the start
+    assert show.at_beat(4, 1) == pytest.approx(4.5 + 1.5)  # three beats after bar 3 beat 2, at 120 bpm
+
+
+def test_a_change_of_the_session_before_the_start_moves_the_start_onto_the_same_phase():
+    """A peer changes the tempo during the count-in: the start moves to where the session now
+    puts the same bar line (realign), on every host alike; once the show has begun, never."""
+    now = time.monotonic()
+    pair = ClockPair(mono_ns=round(now * 1e9), link_us=1_000_000.0, window_ns=0)
+    session = OneSnapshot(LinkSnapshot(Timeline(1_000_000.0, 0.0, 120.0), pair, 1, True))
+    fake: Any = session
+    show = LinkShowClock(fake, start=now + 2.0, start_beat=4.0, meter=4)  # bar line 4, two seconds ahead
+    session.now = LinkSnapshot(Timeline(1_000_000.0, 0.0, 240.0), pair, 1, True)  # twice as fast from now
+    assert show.realign(now + 0.05, tempo_changed=True)
+    assert show.first_bar == 4.0 and show.zero == pytest.approx(now + 1.0)  # the same bar line, sooner
+    assert not show.realign(now + 0.05, tempo_changed=True)  # nothing moved since
+    # a jump of the phase by a beat and a half: the bar line of the new phase nearest the start
+    session.now = LinkSnapshot(Timeline(1_000_000.0, 1.5, 240.0), pair, 1, True)
+    assert show.realign(now + 0.05)
+    assert show.first_bar == 4.0 and show.zero == pytest.approx(now + 0.625)  # beat 4 (5.5 was the start's)
+    begun = LinkShowClock(fake, start=now - 1.0, start_beat=0.0, meter=4)
+    assert not begun.realign(now + 0.05)
 
 
 def test_a_listener_that_fails_is_set_aside_and_the_session_is_still_followed(fake):

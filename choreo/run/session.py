@@ -31,9 +31,10 @@ from choreo.run.runner import Runner
 from choreo.run.sections import section_end
 from choreo.run.settings import RunRequest, RunSettings
 from choreo.run.stage import Stage
+from choreo.show.model import NOMINAL_BPM
 from choreo.sync.clock import LinkShowClock
 from choreo.sync.session import LinkEvent, LinkSession, LinkSnapshot
-from choreo.sync.start import LinkStart, find_start
+from choreo.sync.start import LinkStart, find_start, next_bar
 
 LINK_LEAD_S = 0.25  # a show on the Link clock starts on a bar line at least this far ahead (the runners' preroll)
 REALIGN_LEAD_S = 0.05  # a start moved by the session's bars is at least this far ahead (the first frame's lead)
@@ -198,8 +199,8 @@ class Session:
                 music.enter_context(live.on_clock_change(lambda: sampler.sample(force=True)))
             if sampler is not None:
                 sampler.sample(force=True)
-                if isinstance(show, LinkShowClock):
-                    sampler.sample(force=True, event="start", mono_ns=round(show.mono_at(0.0) * 1e9))
+                if isinstance(show, LinkShowClock):  # placed on the show's start (--from's step: its time)
+                    sampler.sample(force=True, event="start", mono_ns=round(show.mono_at(show.origin_s) * 1e9))
             result = solo.run(show, on_idle=sampler) if ensemble is None \
                 else self._run_ensemble(ensemble, show, sampler)
             if result.outcome == "done" and self.settings.sections.loop is None:
@@ -263,10 +264,8 @@ class Session:
             if self.player.note is not None:
                 self._tell(listeners, WARNING, self.player.note)
             self._tell(listeners, INFO, f"music: {self.player.describe()}")
-        zero_ns = round(show.mono_at(0.0) * 1e9)
-        self.stage.add_to_outcome({
-            Result.CLOCK: self._clock_source(), Result.SHOW_ZERO_MONOTONIC_NS: str(zero_ns),
-            Result.SHOW_ZERO_WALL_NS: str(self.clock.wall_ns(zero_ns))})
+        self.stage.add_to_outcome({Result.CLOCK: self._clock_source()})
+        self._note_zero(show)
         if song is not None:
             self.stage.add_to_outcome({Result.MUSIC_FILE: song.music.file, Result.MUSIC_START: f"{song.music.start:g}",
                                        Result.AUDIO_BACKEND: self.player.backend if self.player else ""})
@@ -286,12 +285,14 @@ class Session:
             self._tell(listeners, level, LINK_PREFIX + message)
 
         def heard(event: LinkEvent) -> None:
-            if event.kind in ("jump", "tempo") and show.realign(self.clock.mono() + REALIGN_LEAD_S):
+            if event.kind in ("jump", "tempo") and \
+                    show.realign(self.clock.mono() + REALIGN_LEAD_S, tempo_changed=event.kind == "tempo"):
                 # before the show began: it starts on the session's bar line as it now stands
                 self._tell(listeners, INFO, f"{LINK_PREFIX}the session's bars moved before the start: the show "
                                             f"starts on its bar line {show.zero - self.clock.mono():.3f} s from now")
+                self._note_zero(show)
                 if sampler is not None:
-                    sampler.sample(force=True, event="start", mono_ns=round(show.mono_at(0.0) * 1e9))
+                    sampler.sample(force=True, event="start", mono_ns=round(show.mono_at(show.origin_s) * 1e9))
             self.clock.source.notify()  # the runners follow every change, logged or not
             if gate.passes():
                 record(event.kind, WARNING if event.kind in ("jump", "stopped") else INFO, event.message)
@@ -307,24 +308,44 @@ class Session:
             if summary is not None:
                 record(None, INFO, summary)
 
+    def _note_zero(self, show: ShowClock) -> None:
+        """The log's metadata gets show time 0 as monotonic and wall-clock ns (again when a
+        change of the Link session before the start moved it)."""
+        assert self.stage is not None
+        zero_ns = round(show.mono_at(0.0) * 1e9)
+        self.stage.add_to_outcome({Result.SHOW_ZERO_MONOTONIC_NS: str(zero_ns),
+                                   Result.SHOW_ZERO_WALL_NS: str(self.clock.wall_ns(zero_ns))})
+
     def _clock_source(self) -> str:
         return "link" if self.link is not None else "music" if self.player else "machine"
 
     def _link_clock(self, origin: float) -> LinkShowClock:
-        """The show clock on the session: show time `origin` (0, or --from's step) on the bar
-        line found for this pass (a --loop pass after the first: the next bar line)."""
+        """The show clock on the session for a pass: its start (show time `origin`: 0, or
+        --from's step) on the bar line found for the first pass, or for a --loop pass after it
+        the session's next bar line (the transport is not started again). A start off beat 1
+        (--from a step at bar 3 beat 2) plays on that beat of a session bar, so every later bar
+        of the show is a bar of the session."""
         assert self.link is not None and self.settings.link is not None
+        meter = self.settings.link.meter
         bar = self._first_bar
         self._first_bar = None
         if bar is None:
-            bar = find_start(self.link, LinkStart(False, None, LINK_LEAD_S), lambda: True, lambda: False,
-                             lambda message: None)
-            assert bar is not None
-        start = self.link.snapshot().mono_of_beat(bar)
-        # --from's step is that many of the plan's beats into the show (its tempo's, or 120)
+            bar = next_bar(self.link, LINK_LEAD_S)
+        beats_in = self._beats_to(origin, meter)
+        phase = beats_in % meter
+        start = self.link.snapshot().mono_of_beat(bar + phase)
+        return LinkShowClock(self.link, start, bar + phase, meter, origin, beats_in)
+
+    def _beats_to(self, origin: float, meter: int) -> float:
+        """The show's beats before show time `origin` as the plan counts them (its tempo, or
+        the nominal one a show on the session's tempo is planned at)."""
         tempo = self.settings.show.tempo
-        beats_in = origin * (tempo.bpm if tempo is not None else 120.0) / 60.0
-        return LinkShowClock(self.link, start - origin, bar - beats_in, self.settings.link.meter)
+        if not origin:
+            return 0.0
+        if tempo is None:
+            return origin * NOMINAL_BPM / 60.0
+        bar, beat = tempo.position(origin)
+        return (bar - 1) * meter + (beat - 1)
 
     def _play_out(self, show: ShowClock, stop: StopRequest, sampler: ClockSampler | None,
                   listeners: list[RunListener]) -> None:

@@ -144,6 +144,12 @@ class RunSettings:
         every = compile_plans(show, {n: link.layout for n, link in drafts.items()},
                               {n: link.baud for n, link in drafts.items()})
         link = _link_clock(show, every, request)
+        if link is not None and host is not None and request.loop is not None:
+            # each host would end its pass on its own robots' last motion and start the next on
+            # its own next bar line: the hosts would part
+            raise UsageError(f"--loop {visible(request.loop)}: not on the Link clock with --host (each host would "
+                             "start its next pass on a bar line of its own): rehearse the section with "
+                             "--clock machine, or run it once with --from")
         plans = {name: every[name] for name in cast}  # another host's robots are its business
         links = {name: _for_robot(name, show, partial(_with_durations, show, plans[name], link))
                  for name, link in drafts.items()}

@@ -16,20 +16,37 @@ from choreo.sync.timeline import bar_at_or_after
 
 
 class LinkShowClock:
-    """A ShowClock and a BeatGrid on `session`: show time 0 at monotonic `zero`, which is the
-    session's continuous beat `first_bar` (a bar line), bars of `meter` beats."""
+    """A ShowClock and a BeatGrid on `session`: the show's start (show time `origin_s`, the
+    show's beat `origin_beats`: 0 and 0 for a whole show, --from's step otherwise) plays at
+    monotonic `start`, on the session's continuous beat `start_beat`, bars of `meter` beats.
 
-    def __init__(self, session: LinkSession, zero: float, first_bar: float, meter: int) -> None:
+    Where the show stands on the session is one tuple (show time 0's monotonic time, the
+    session's beat of the show's beat 0), replaced whole: runners on other threads read it
+    while a late change of the session moves the start (`realign`)."""
+
+    def __init__(self, session: LinkSession, start: float, start_beat: float, meter: int,
+                 origin_s: float = 0.0, origin_beats: float = 0.0) -> None:
         self.session = session
-        self.zero = zero
-        self.first_bar = first_bar
         self.meter = meter
+        self.origin_s = origin_s
+        self.origin_beats = origin_beats
+        self._place = (start - origin_s, start_beat - origin_beats)
+
+    @property
+    def zero(self) -> float:
+        """Monotonic time of show time 0."""
+        return self._place[0]
+
+    @property
+    def first_bar(self) -> float:
+        """The session's continuous beat of the show's beat 0 (bar 1 beat 1)."""
+        return self._place[1]
 
     def mono_at(self, show_s: float) -> float:
-        return self.zero + show_s
+        return self._place[0] + show_s
 
     def show_at(self, mono: float) -> float:
-        return mono - self.zero
+        return mono - self._place[0]
 
     def beats_of(self, bar: int, beat: float) -> float:
         """The show's beat (0: bar 1 beat 1) of a bar and beat as a show writes them."""
@@ -37,25 +54,34 @@ class LinkShowClock:
 
     def at_beat(self, bar: int, beat: float) -> float:
         """Show time at which bar `bar`, beat `beat` falls on the session's timeline now."""
-        return self.session.snapshot().mono_of_beat(self.first_bar + self.beats_of(bar, beat)) - self.zero
+        zero, first_bar = self._place
+        return self.session.snapshot().mono_of_beat(first_bar + self.beats_of(bar, beat)) - zero
 
     def show_beat(self, mono: float) -> float:
         """The show's beat at monotonic time `mono` (what the log's clock samples carry)."""
-        return self.session.snapshot().beat_at_mono(mono) - self.first_bar
+        return self.session.snapshot().beat_at_mono(mono) - self._place[1]
 
-    def realign(self, earliest: float) -> bool:
-        """Before show time 0, the session's bars moved (a peer found late and Link moved this
-        host onto the session's phase, or a peer changed the tempo during the count-in): show
-        time 0 goes onto the session's bar line nearest where it was, at or after monotonic
-        `earliest` (the runners' lead), so the show still starts on a bar line, the same one
-        on every host. True if it moved; never once the show has begun."""
-        if time.monotonic() >= self.zero:
+    def realign(self, earliest: float, tempo_changed: bool = False) -> bool:
+        """Before the show's start, the session's bars moved: the start goes back onto them, on
+        every host alike. A tempo change (during the count-in) keeps the session's beat the show
+        was to start on, now sooner or later; a jump of the phase (a peer found late, and Link
+        moved this host onto the session's phase) takes the beat of the same phase nearest where
+        the start was. Either way at or after monotonic `earliest` (the runners' lead), else the
+        next bar's. True if it moved; never once the show has begun."""
+        zero, first_bar = self._place
+        start = zero + self.origin_s
+        if time.monotonic() >= start:
             return False
         snapshot = self.session.snapshot()
-        first = bar_at_or_after(snapshot.beat_at_mono(max(self.zero - 0.5 * 60.0 / snapshot.tempo, earliest)),
-                                self.meter)
-        zero = snapshot.mono_of_beat(first)
-        if abs(zero - self.zero) < 1e-6 and abs(first - self.first_bar) < 1e-9:
+        start_beat = first_bar + self.origin_beats
+        phase = start_beat % self.meter
+        if not tempo_changed:
+            near = snapshot.beat_at_mono(start)
+            start_beat = round((near - phase) / self.meter) * self.meter + phase
+        if snapshot.mono_of_beat(start_beat) < earliest:
+            start_beat = bar_at_or_after(snapshot.beat_at_mono(earliest) - phase, self.meter) + phase
+        moved = (snapshot.mono_of_beat(start_beat) - self.origin_s, start_beat - self.origin_beats)
+        if abs(moved[0] - zero) < 1e-6 and abs(moved[1] - first_bar) < 1e-9:
             return False
-        self.zero, self.first_bar = zero, first
+        self._place = moved
         return True

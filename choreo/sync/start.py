@@ -58,6 +58,12 @@ def find_start(session: LinkSession, how: LinkStart, started: Callable[[], bool]
     return None
 
 
+def next_bar(session: LinkSession, lead_s: float) -> float:
+    """The session's next bar line at least `lead_s` ahead, the transport left as it is (a
+    --loop pass after the first)."""
+    return bar_at_or_after(session.snapshot().beat_at_mono(time.monotonic() + lead_s), session.quantum)
+
+
 def _start_here(session: LinkSession, how: LinkStart, tell: Callable[[str], None]) -> float:
     """Start on the next bar line at least `lead_s` ahead, starting the transport if it is not
     playing (the show's tempo proposed first)."""
