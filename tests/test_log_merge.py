@@ -205,6 +205,33 @@ def test_with_no_samples_in_common_the_recorded_show_starts_line_the_logs_up():
     assert alignments[1] == Alignment("b", 3_000, 0, 0, "show start")
 
 
+def test_a_looped_log_is_lined_up_by_its_first_pass_on_both_sides():
+    """With --loop, show time starts over each pass: each log's samples are taken while their
+    show time goes on (R2: pairing the second log's later passes with the first's first pass
+    shifted it by -10 s with a spread of 20 s)."""
+    def passes(offset_ns: int) -> list[tuple[float, int]]:
+        return [(s * 0.5, offset_ns + (p * 10 + s * 0.5) * 1e9) for p in range(3) for s in range(20)]
+    axis, other = passes(1_000_000_000), passes(1_007_000_000)
+    alignment = align([_host("a", [(k, round(t)) for k, t in axis]), _host("b", [(k, round(t)) for k, t in other])])[1]
+    assert alignment.shift_ns == -7_000_000 and alignment.spread_ns == 0
+
+
+def test_on_link_the_hosts_line_up_by_the_shows_beat_and_their_clocks_drift_is_fitted():
+    """Two machines' crystals drift apart (20 ppm: 72 ms an hour): equal show seconds are not one
+    instant after an hour, equal beats of the session are. The shift follows the drift."""
+    start_a, start_b, rate = 1_000_000_000, 5_000_000_000, 20e-6  # b's clock runs 20 ppm fast
+    a = _host("a", [(k * 2.0, start_a + round(k * 2e9)) for k in range(1800)])  # an hour, a sample each 2 s
+    a.beats = [(k * 4.0, start_a + round(k * 2e9)) for k in range(1800)]  # 120 bpm
+    b = _host("b", [(k * 2.0 * (1 + rate), start_b + round(k * 2e9 * (1 + rate))) for k in range(1800)])
+    b.beats = [(k * 4.0, start_b + round(k * 2e9 * (1 + rate))) for k in range(1800)]
+    alignment = align([a, b])[1]
+    assert alignment.rate == pytest.approx(1 / (1 + rate) - 1, rel=1e-3)
+    for k in (0, 900, 1799):  # the same beat lands on the same instant, all the way through
+        log_time = start_b + round(k * 2e9 * (1 + rate))
+        assert abs(log_time + alignment.shift_at(log_time) - (start_a + round(k * 2e9))) < 1_000
+    assert alignment.spread_ns < 1_000 and "ppm" in alignment.describe()
+
+
 # -- hostile inputs: one line, exit 2, nothing half written -------------------------------------
 
 

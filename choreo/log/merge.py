@@ -7,9 +7,12 @@ on one time line. The merge is two passes over each input, in bounded memory:
 - the first reads each log's clock samples (and checks it whole: a damaged, foreign or already
   merged log is one line before anything is written) and lines the logs up: the first input's
   log time is the axis; each other input is shifted by the median, over its clock samples, of
-  (the first input's log time at that show time, interpolated) minus (its own log time at it).
-  On the Link clock show time 0 is one bar line of the shared session on every host, so equal
-  show times are the same instant, whatever each machine's wall clock says. With no sample in
+  (the first input's log time at that show beat, interpolated) minus (its own log time at it):
+  on the Link clock the show's beat (0 on the bar line the show started on) is the same instant
+  on every host, whatever each machine's wall clock says. Over a minute or more, the rate at
+  which that offset moves is fitted too (two machines' crystals drift 10-50 ppm apart without
+  NTP; a host's seconds drift with its crystal, the session's beats do not). Logs without Link
+  samples are lined up by show time the same way (a --loop log by its first pass). With no sample in
   the first's range (no overlap) the runs' recorded show starts (`show_zero_wall_ns`) line them
   up instead, as far as the machines' wall clocks agree: said in a warning.
 - the second streams every input's messages in log-time order (a heap merge: one message an
@@ -55,7 +58,10 @@ from choreo.show.read import MAX_BYTES as SHOW_MAX_BYTES
 from choreo.textfit import visible
 
 MAX_INPUTS = 64  # logs one merge takes: each is an open file while the messages stream
-MAX_SAMPLES = 20_000  # clock samples a log lines it up by, its first (2.8 hours at two a second): a shift is one number
+FIT_MIN_SAMPLES = 20  # clock samples before a drift between two machines' clocks is fitted
+FIT_MIN_SPAN_NS = 60 * 10**9  # ...over at least this long (less: a shift is one number)
+FIT_MAX_RATE = 1e-3  # a drift past 1000 ppm is no crystal's: not fitted (the median shift stands)
+MAX_SAMPLES = 20_000  # clock samples a log lines it up by, its first (2.8 hours at two a second)
 HOST_METADATA = "choreo.host."  # + host (+ `.result`, ...): each input's own metadata, kept
 NAME = re.compile(r"[^\s/,\x00-\x1f\x7f]{1,64}")  # a host or robot name a topic and a list can hold
 OUTCOMES = ("failed", "interrupted", "aborted", "done")  # a merged run's outcome: its hosts' worst
@@ -70,11 +76,18 @@ class Alignment:
     spread_ns: int  # max - min of the per-sample offsets (0: one sample, or the axis itself)
     samples: int  # clock samples that placed it (0: the show starts placed it)
     by: str  # axis | clock | show start
+    rate: float = 0.0  # how much faster its machine's clock ran than the first's (2e-5: 20 ppm), fitted
+    ref_ns: int = 0  # the log time (its own) at which the shift is `shift_ns`
+
+    def shift_at(self, log_time: int) -> int:
+        """The shift of a message at its own log time (two machines' clocks drift apart)."""
+        return self.shift_ns + (round(self.rate * (log_time - self.ref_ns)) if self.rate else 0)
 
     def describe(self) -> str:
         if self.by == "axis":
             return f"host {self.host}: the time axis"
-        how = (f"spread {self.spread_ns / 1e6:.3f} ms over {self.samples} clock samples" if self.by == "clock"
+        drift = f", its clock {-self.rate * 1e6:+.1f} ppm against the first's" if self.rate else ""
+        how = (f"spread {self.spread_ns / 1e6:.3f} ms over {self.samples} clock samples{drift}" if self.by == "clock"
                else "by the runs' recorded show starts")
         return f"host {self.host}: shifted {self.shift_ns / 1e9:+.6f} s ({how})"
 
@@ -92,6 +105,7 @@ class HostLog:
     sources: set[str]  # what kept its show clock (the samples' `source`)
     cut: str | None  # why it ends early (a killed run), if it does
     show: tuple[str, bytes] | None  # its attached show: name, bytes
+    beats: list[tuple[float, int]] = field(default_factory=list)  # Link clock samples: (show beat, log time)
 
 
 @dataclass
@@ -158,7 +172,7 @@ def survey(path: Path) -> HostLog:
         if reader.info.hosts:
             raise UsageError(f"log {visible(str(path))}: a merged log already (hosts "
                              f"{visible(', '.join(reader.info.hosts))}); merge the hosts' own logs")
-        samples, sources = _clock_samples(reader)
+        samples, sources, beats = _clock_samples(reader)
         if reader.cut is not None and reader.cut.damaged:
             raise UsageError(f"log {visible(str(path))}: damaged, not merged: {reader.cut}")
         run_info = reader.run_info
@@ -167,13 +181,15 @@ def survey(path: Path) -> HostLog:
         show = reader.show_attachment()
         shown = (show.name, reader.attachment_data(show)) if show and show.size <= SHOW_MAX_BYTES else None
         return HostLog(path, host, named or (host,), not named, {k: dict(v) for k, v in reader.metadata.items()},
-                       samples, sources, str(reader.cut) if reader.cut else None, shown)
+                       samples, sources, str(reader.cut) if reader.cut else None, shown, beats)
 
 
-def _clock_samples(reader: LogReader) -> tuple[list[tuple[float, int]], set[str]]:
-    """The running show clock's samples, (show time, log time), a sample that does not parse or
-    holds no finite time passed over (the reviews report such a message)."""
+def _clock_samples(reader: LogReader) -> tuple[list[tuple[float, int]], set[str], list[tuple[float, int]]]:
+    """The running show clock's samples, (show time, log time), and on the Link clock (show
+    beat, log time); a sample that does not parse or holds no finite time passed over (the
+    reviews report such a message)."""
     samples: list[tuple[float, int]] = []
+    beats: list[tuple[float, int]] = []
     sources: set[str] = set()
     for _, log_time, data in reader.messages((CLOCK_TOPIC,)):
         try:
@@ -185,7 +201,9 @@ def _clock_samples(reader: LogReader) -> tuple[list[tuple[float, int]], set[str]
         if math.isfinite(sample.show_s) and len(samples) < MAX_SAMPLES:
             samples.append((float(sample.show_s), log_time))
             sources.add(sample.source)
-    return samples, sources
+            if isinstance(sample.beat, (int, float)) and math.isfinite(sample.beat):
+                beats.append((float(sample.beat), log_time))
+    return samples, sources, beats
 
 
 def _name(text: str, what: str, path: Path) -> str:
@@ -214,16 +232,46 @@ def _check_hosts(logs: list[HostLog]) -> None:
 
 
 def align(logs: list[HostLog]) -> list[Alignment]:
-    """Each input's shift onto the first's time line (see the module's docstring)."""
-    axis = _increasing(logs[0].samples)
-    out = [Alignment(logs[0].host, 0, 0, 0, "axis")]
+    """Each input's shift onto the first's time line (see the module's docstring): by the show's
+    beat where both logs have Link samples (the one thing every host shares: each machine's
+    seconds drift against the others'), else by show time."""
+    first = logs[0]
+    out = [Alignment(first.host, 0, 0, 0, "axis")]
     for log in logs[1:]:
-        offsets = sorted(offsets_to(axis, log.samples))
-        if offsets:
-            out.append(Alignment(log.host, round(median(offsets)), offsets[-1] - offsets[0], len(offsets), "clock"))
+        by_beat = bool(first.beats and log.beats)
+        axis = _increasing(first.beats if by_beat else first.samples)
+        pairs = list(_offset_pairs(axis, _increasing(log.beats if by_beat else log.samples)))
+        if pairs:
+            out.append(_fitted(log.host, pairs))
         else:
-            out.append(Alignment(log.host, _by_show_start(logs[0], log), 0, 0, "show start"))
+            out.append(Alignment(log.host, _by_show_start(first, log), 0, 0, "show start"))
     return out
+
+
+def _fitted(host: str, pairs: list[tuple[int, int]]) -> Alignment:
+    """The shift from (log time, offset) pairs: their median, and over a long enough stretch the
+    rate at which the offset moves (one machine's crystal against the other's, 10-50 ppm without
+    NTP: 144 ms over two hours at 20 ppm), fitted by least squares on the pairs near the median."""
+    offsets = sorted(offset for _, offset in pairs)
+    shift = round(median(offsets))
+    times = [log_time for log_time, _ in pairs]
+    ref = round(median(times))
+    rate = 0.0
+    if len(pairs) >= FIT_MIN_SAMPLES and times[-1] - times[0] >= FIT_MIN_SPAN_NS:
+        rate = _slope([(t - ref, o - shift) for t, o in pairs])
+        if abs(rate) > FIT_MAX_RATE:
+            rate = 0.0
+        shift = round(median(o - rate * (t - ref) for t, o in pairs))
+    residuals = sorted(o - shift - rate * (t - ref) for t, o in pairs)
+    return Alignment(host, shift, round(residuals[-1] - residuals[0]), len(pairs), "clock", rate, ref)
+
+
+def _slope(points: list[tuple[int, int]]) -> float:
+    """Least squares' slope through the points (x, y), x centred already."""
+    mean_x = sum(x for x, _ in points) / len(points)
+    mean_y = sum(y for _, y in points) / len(points)
+    sxx = sum((x - mean_x) ** 2 for x, _ in points)
+    return sum((x - mean_x) * (y - mean_y) for x, y in points) / sxx if sxx else 0.0
 
 
 def _increasing(samples: list[tuple[float, int]]) -> list[tuple[float, int]]:
@@ -239,15 +287,21 @@ def _increasing(samples: list[tuple[float, int]]) -> list[tuple[float, int]]:
 def offsets_to(axis: list[tuple[float, int]], samples: list[tuple[float, int]]) -> Iterator[int]:
     """(the axis's log time at each sample's show time) - (the sample's log time), in ns, for the
     samples within the axis's span of show time."""
+    return (offset for _, offset in _offset_pairs(axis, samples))
+
+
+def _offset_pairs(axis: list[tuple[float, int]], samples: list[tuple[float, int]]) -> Iterator[tuple[int, int]]:
+    """(the sample's log time, its offset) for `offsets_to`: the axis interpolated at each sample's
+    key (a show time, or the show's beat on Link)."""
     if len(axis) < 2:
         return
-    times = [show_s for show_s, _ in axis]
-    for show_s, log_time in samples:
-        if not times[0] <= show_s <= times[-1]:
+    times = [key for key, _ in axis]
+    for key, log_time in samples:
+        if not times[0] <= key <= times[-1]:
             continue
-        at = min(max(bisect_right(times, show_s), 1), len(axis) - 1)
+        at = min(max(bisect_right(times, key), 1), len(axis) - 1)
         (s0, t0), (s1, t1) = axis[at - 1], axis[at]
-        yield round(t0 + (t1 - t0) * (show_s - s0) / (s1 - s0)) - log_time
+        yield log_time, round(t0 + (t1 - t0) * (key - s0) / (s1 - s0)) - log_time
 
 
 def _by_show_start(first: HostLog, log: HostLog) -> int:
@@ -374,13 +428,13 @@ def _shifted(reader: LogReader, log: HostLog, alignment: Alignment, dropped: lis
     for topic, log_time, data in reader.messages():
         count += 1
         try:
-            merged_topic, data = _place(topic, data, log, alignment.shift_ns)
+            merged_topic, data = _place(topic, data, log, alignment.shift_at(log_time))
         except (KeyError, TypeError, ValueError) as exc:
             raise reader.not_choreo(topic, count, exc) from None
         if merged_topic is None:
             dropped[number] += 1
             continue
-        time = log_time + alignment.shift_ns
+        time = log_time + alignment.shift_at(log_time)
         if not 0 <= time < 2 ** 64:
             raise UsageError(f"log {visible(str(log.path))}: message {count} falls outside MCAP's time range "
                              f"once shifted by {alignment.shift_ns / 1e9:+.3f} s to line up with the others")
