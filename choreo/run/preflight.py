@@ -58,7 +58,7 @@ from choreo.run.settings import LinkSettings, RunRequest, RunSettings
 from choreo.show.model import LinkClock, Plan, Show, StepKind, is_simulator
 from choreo.show.read import MAX_BYTES
 from choreo.show.report import format_path
-from choreo.sync.session import INSTALL_HINT, SAMPLE_S, LinkSession, LinkSnapshot
+from choreo.sync.session import DISCOVERY_MAX_S, INSTALL_HINT, LinkSession, LinkSnapshot
 from choreo.wire.protocol import BAUDS
 
 if TYPE_CHECKING:  # the music loads when the show has some
@@ -90,7 +90,6 @@ START_BYTES = 6 * 1024
 MUSIC_FILE = format_path(("music", "file"))  # where a show's problem with its music file is
 ROOM_MARGIN = 2  # less free space than twice the run's reserve is a note: little to spare for another writer
 LINK_GROUP, LINK_PORT = "224.76.78.75", 20808  # where Link's peers discover each other (UDP multicast)
-LINK_WAIT_S = 1.5  # peers already in a session answer a joiner's first announcement at once (on a LAN, ms)
 LINK_DEADLINE_S = 8.0  # the whole Link check: joining gives up at 5 s (session.OPEN_TIMEOUT_S)
 ECHO_WAIT_S = 0.3  # this host's own multicast comes back in microseconds when it does at all
 TEMPO_SAME = 0.01  # bpm: a session at the show's tempo, as Link rounds it
@@ -175,7 +174,7 @@ class Machine:
     deadline_s: float = PORT_DEADLINE_S
     link_binding: Callable[[], str] = _link_binding
     multicast: Callable[[], Multicast] = lambda: _multicast_path()
-    link_wait_s: float = LINK_WAIT_S  # how long to wait for a Link session's peers (less once they show)
+    link_wait_s: float = DISCOVERY_MAX_S  # the longest wait for a Link session's peers (a run's discovery is less)
     link_deadline_s: float = LINK_DEADLINE_S
 
     @property
@@ -493,9 +492,9 @@ def _look(clock: LinkClock, machine: Machine) -> LinkSeen:
     except ChoreoError as exc:
         return LinkSeen(version, failure=exc.lines()[0], multicast=multicast)
     try:
-        while session.snapshot().peers == 0 and time.monotonic() - start < machine.link_wait_s:
-            time.sleep(SAMPLE_S)
-        return LinkSeen(version, session.snapshot(), time.monotonic() - start, multicast=multicast)
+        # the peers found as a run finds them before it decides how to start (LinkSession.discover)
+        found = session.discover(stop=lambda: time.monotonic() - start >= machine.link_wait_s)
+        return LinkSeen(version, found, time.monotonic() - start, multicast=multicast)
     finally:
         session.close()
 
