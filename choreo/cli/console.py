@@ -60,6 +60,7 @@ from choreo.log.format import ERROR, INFO, WARNING
 from choreo.show.cues import Cue, CueList
 from choreo.show.model import PlannedStep, beat_text
 from choreo.sync.clock import LinkShowClock
+from choreo.sync.session import peers_text
 from choreo.textfit import fit
 
 REFRESH_S = 0.2  # five looks a second: the show time moves smoothly enough (and is drawn to 0.1 s)
@@ -501,9 +502,7 @@ class Console:
         show = self.live.show
         if isinstance(show, LinkShowClock):
             snapshot = show.session.snapshot()
-            peers = "no other peers" if snapshot.peers == 0 else f"{snapshot.peers} peer" + \
-                ("s" if snapshot.peers > 1 else "")
-            return f"link clock, {snapshot.tempo:.2f} bpm, {peers}"
+            return f"link clock, {snapshot.tempo:.2f} bpm, {peers_text(snapshot.peers)}"
         clock = "music" if self.session.settings.song is not None else "machine"
         if self.live.paused and not stopping:
             return f"{clock} clock, PAUSED"

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 from choreo.board.usb import KONDO_USB_ID
 from choreo.errors import UsageError
+from choreo.show.model import CLOCKS
 from choreo.textfit import char_width, display_width, pad, visible
 from choreo.wire.layouts import LAYOUT_NAMES
 from choreo.wire.protocol import spell_bauds
@@ -59,7 +60,7 @@ def _show_options(parser: argparse.ArgumentParser) -> None:
     show.add_argument("--loop", metavar="FROM..TO", help="the run rehearses this section")
     show.add_argument("--host", metavar="NAME", help="in a show with `hosts:`, the host this computer is (its "
                       "robots are checked, the others' are their hosts' business)")
-    show.add_argument("--clock", choices=("link", "machine"), help="the show clock, instead of the show's `clock:`; "
+    show.add_argument("--clock", choices=CLOCKS, help="the show clock, instead of the show's `clock:`; "
                       "on link, the Ableton Link session is joined (for a moment) and reported")
     show.add_argument("--timeout", type=float, metavar="S", help="seconds to wait for a reply (default 0.2)")
     show.add_argument("--retries", type=int, metavar="N", help="retries of a failed frame (default 2)")

@@ -10,6 +10,7 @@ from contextlib import ExitStack, closing, contextmanager, nullcontext
 from typing import TYPE_CHECKING
 
 from choreo.errors import ChoreoError, Interrupted, UsageError
+from choreo.show.model import CLOCKS, LINK, MACHINE
 from choreo.signals import STOP_SIGNALS
 from choreo.wire.layouts import LAYOUT_NAMES
 from choreo.wire.protocol import spell_bauds
@@ -56,7 +57,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="retries of a failed frame or play sequence, 0..10 (default 2: 3 tries)")
     parser.add_argument("--host", metavar="NAME", help="in a show with `hosts:`, the host this computer is: "
                         "it drives that host's robots only (the others' hosts drive theirs)")
-    parser.add_argument("--clock", choices=("link", "machine"), help="the show clock, instead of the show's "
+    parser.add_argument("--clock", choices=CLOCKS, help="the show clock, instead of the show's "
                         "`clock:`: link (the Ableton Link session's beat) or machine (a rehearsal of a Link show "
                         "on this computer's clock)")
     music = parser.add_mutually_exclusive_group()
@@ -225,7 +226,7 @@ def _live(args: argparse.Namespace, stop: StopRequest, console: bool,
 
     settings = session.settings
     status = ShowStatus(settings.plans, settings.sections.starts)
-    clock = "link" if settings.link is not None else "music" if settings.song else "machine"
+    clock = LINK if settings.link is not None else "music" if settings.song else MACHINE
     # a show for several hosts starts when the session's transport does (or this host's start)
     waits = args.wait_start or (settings.link is not None and bool(settings.show.hosts))
     return Live(stop, cues=cue_list(settings.plans), status=status, clock=clock, wait_start=waits,

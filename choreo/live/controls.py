@@ -34,7 +34,7 @@ from choreo.events import (PANIC, STOPPED, Answer, Command, CommandEvent, Comman
 from choreo.live.limits import LIMITS, Held, Limits, ReportGate
 from choreo.log.format import UNLOGGED
 from choreo.show.cues import Cue, CueList, CueNotFound, quoted
-from choreo.show.model import SOLO, PlannedStep
+from choreo.show.model import LINK, SOLO, PlannedStep
 from choreo.textfit import fit
 
 if TYPE_CHECKING:
@@ -811,7 +811,7 @@ class Live:
     # -- pause and resume --------------------------------------------------------------------
 
     def _pause(self, command: Command) -> Answer:
-        if self.clock == "link":
+        if self.clock == LINK:
             return Answer("error", "the Link session's beat never stops: no pause on the Link clock "
                                    "(skip, stop and panic work)")
         if not self._started:

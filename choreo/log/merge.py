@@ -54,6 +54,7 @@ from choreo.log.format import (CHANNELS, CHOREO_TOPICS, CLOCK_TOPIC, METADATA_NA
                                host_topic, layout_key, parse, robot_key, robot_message, robot_topic)
 from choreo.log.reader import LogReader
 from choreo.log.recorder import CHUNK_SIZE, schema_text
+from choreo.show.model import LINK
 from choreo.show.read import MAX_BYTES as SHOW_MAX_BYTES
 from choreo.textfit import visible
 
@@ -322,7 +323,7 @@ def _warnings(logs: list[HostLog], alignments: list[Alignment]) -> list[str]:
         if alignment.by == "show start":
             said.append(f"host {log.host}: no clock samples at show times host {logs[0].host}'s log has: lined up by "
                         "the runs' recorded show starts, as far apart as the machines' wall clocks")
-        elif alignment.by == "clock" and not (log.sources | logs[0].sources) <= {"link"}:
+        elif alignment.by == "clock" and not (log.sources | logs[0].sources) <= {LINK}:
             said.append(f"host {log.host}: not both on the Link clock "
                         f"({'/'.join(sorted(logs[0].sources | log.sources))}): show time 0 taken as the same instant")
         if log.cut is not None:

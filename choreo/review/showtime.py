@@ -59,6 +59,7 @@ from choreo.clock import HELD, PAUSED, RUNNING
 from choreo.log.format import (CLOCK_TOPIC, STEP_TOPIC, ClockRecord, CommandRecord, Result, StepRecord, cue_name,
                                parse)
 from choreo.log.reader import LogReader
+from choreo.show.model import LINK
 
 BREAK_S = 0.001  # a clock sample this far from the mapping's prediction starts a new piece
 # How far `ShowTimes.of` reads ahead for the show clock's start: what comes before it is what a
@@ -66,7 +67,6 @@ BREAK_S = 0.001  # a clock sample this far from the mapping's prediction starts 
 # more has no start to find and the reading ahead costs a bounded time.
 LOOKAHEAD_MESSAGES = 10_000
 MACHINE = "machine"  # the clock source that holds at a GO cue and never drifts
-LINK = "link"  # the clock source of an Ableton Link session: bars move with its tempo
 LINK_THIN_S = 5.0  # Link samples on one line closer than this to the one kept before: the last is kept
 LINK_CHANGES = 1000  # the session's changes kept one by one (each counted)
 

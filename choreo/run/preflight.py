@@ -55,7 +55,7 @@ from choreo.log.recorder import (BATCH, CHUNK_BOUND, CHUNK_BUDGET, CHUNK_SIZE, F
                                  RESERVE_AHEAD, SUMMARY_SLACK, schema_text)
 from choreo.run.runner import POLL_S
 from choreo.run.settings import LinkSettings, RunRequest, RunSettings
-from choreo.show.model import LinkClock, Plan, Show, StepKind, is_simulator
+from choreo.show.model import LINK, LinkClock, Plan, Show, StepKind, is_simulator
 from choreo.show.read import MAX_BYTES
 from choreo.show.report import format_path
 from choreo.sync.session import DISCOVERY_MAX_S, INSTALL_HINT, LinkSession, LinkSnapshot
@@ -235,7 +235,7 @@ def _settle(request: RunRequest) -> tuple[RunSettings | None, list[Finding]]:
     A show whose only problem is its music file is the music's problem: the show is settled
     without looking for the file, so the robots are still checked."""
     # on the Link clock (--clock link) the music is refused unless --no-music: left to the run's own refusal
-    no_music = request.no_music if request.clock == "link" else True
+    no_music = request.no_music if request.clock == LINK else True
     asked = replace(request, no_music=no_music, no_log=True, log_path=None, audio_device=None)
     music: list[Finding] = []
     try:

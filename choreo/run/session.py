@@ -31,7 +31,7 @@ from choreo.run.runner import Runner
 from choreo.run.sections import section_end
 from choreo.run.settings import RunRequest, RunSettings
 from choreo.run.stage import Stage
-from choreo.show.model import NOMINAL_BPM
+from choreo.show.model import LINK, MACHINE, NOMINAL_BPM
 from choreo.sync.clock import LinkShowClock
 from choreo.sync.session import LinkEvent, LinkSession, LinkSnapshot
 from choreo.sync.start import LinkStart, find_start, next_bar
@@ -317,7 +317,7 @@ class Session:
                                    Result.SHOW_ZERO_WALL_NS: str(self.clock.wall_ns(zero_ns))})
 
     def _clock_source(self) -> str:
-        return "link" if self.link is not None else "music" if self.player else "machine"
+        return LINK if self.link is not None else "music" if self.player else MACHINE
 
     def _link_clock(self, origin: float) -> LinkShowClock:
         """The show clock on the session for a pass: its start (show time `origin`: 0, or

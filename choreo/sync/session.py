@@ -113,6 +113,11 @@ class LinkEvent:
 LinkListener = Callable[[LinkEvent], None]
 
 
+def peers_text(count: int) -> str:
+    """Other peers in a session, as every line that names them says it."""
+    return "no other peers" if count == 0 else "1 peer" if count == 1 else f"{count} peers"
+
+
 def _us(delta: timedelta) -> float:
     return delta / timedelta(microseconds=1)
 

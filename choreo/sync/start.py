@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from choreo.sync.session import SAMPLE_S, LinkSession
+from choreo.sync.session import SAMPLE_S, LinkSession, peers_text
 from choreo.sync.timeline import bar_at_or_after
 
 START_LEAD_S = 0.3  # this host's start of the transport is announced this far ahead of its bar line
@@ -42,7 +42,7 @@ def find_start(session: LinkSession, how: LinkStart, started: Callable[[], bool]
     snapshot = session.discover(stop)
     if not how.waits:
         return _start_here(session, how, tell)
-    tell(f"waiting for the session to play ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
+    tell(f"waiting for the session to play ({peers_text(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
          "start it from a peer (Live's play), another host, or this host's start")
     was_playing = snapshot.playing
     while not stop():
@@ -70,7 +70,7 @@ def _start_here(session: LinkSession, how: LinkStart, tell: Callable[[str], None
     snapshot = session.snapshot()
     if snapshot.playing:
         bar = bar_at_or_after(snapshot.beat_at_mono(time.monotonic() + how.lead_s), session.quantum)
-        tell(f"the session plays ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
+        tell(f"the session plays ({peers_text(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
              f"the show starts on its next bar line")
         return bar
     if how.tempo is not None and abs(snapshot.tempo - how.tempo) > 1e-3:
@@ -79,7 +79,7 @@ def _start_here(session: LinkSession, how: LinkStart, tell: Callable[[str], None
     lead = how.lead_s + START_LEAD_S
     bar = bar_at_or_after(snapshot.beat_at_mono(time.monotonic() + lead), session.quantum)
     start_mono = snapshot.mono_of_beat(bar)
-    alone = "alone, as the session's first peer" if snapshot.peers == 0 else f"with {_peers(snapshot.peers)}"
+    alone = "alone, as the session's first peer" if snapshot.peers == 0 else f"with {peers_text(snapshot.peers)}"
     tell(f"starting the session's transport {alone}, at {snapshot.tempo:.2f} bpm, on a bar line "
          f"{start_mono - time.monotonic():.2f} s ahead")
     session.start_playing(bar)
@@ -98,7 +98,7 @@ def _joined(session: LinkSession, tell: Callable[[str], None]) -> float | None:
         tell(f"the session started playing {late:.1f} s before this host heard it: the show runs "
              "elsewhere; waiting for the next start (stop the session's transport and play it again)")
         return None
-    tell(f"the session plays ({_peers(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
+    tell(f"the session plays ({peers_text(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
          "the show starts on the bar line its transport started on")
     return first
 
@@ -108,7 +108,3 @@ def _bar_nearest(session: LinkSession, mono: float) -> float:
     the count, not the instant)."""
     beat = session.snapshot().beat_at_mono(mono)
     return round(beat / session.quantum) * session.quantum
-
-
-def _peers(count: int) -> str:
-    return "no other peers" if count == 0 else "1 peer" if count == 1 else f"{count} peers"
