@@ -415,6 +415,17 @@ def test_a_waiting_show_starts_on_the_bar_line_the_sessions_transport_started_on
                         "the show starts on the bar line its transport started on")
 
 
+def test_a_session_already_playing_as_the_wait_begins_is_a_start_just_heard():
+    """The transport started while this host opened its ports, after it joined (R1: both hosts
+    waited for ever for a start they had already heard): its bar line still ahead, the show
+    starts there."""
+    session = FakeSession(beat_now=0.0, playing=True)
+    session.started_at = Timeline(*session.origin, session.tempo).time_at(4.0)  # the next bar line
+    bar, told = _find(session, LinkStart(True, None, 0.25))
+    assert bar == 0.0 and session.calls == [("count_from_start",)]
+    assert told[-1].endswith("the show starts on the bar line its transport started on")
+
+
 def test_a_start_heard_too_late_is_missed_and_the_show_waits_for_the_next():
     session = FakeSession(beat_now=0.0)
     stopping = threading.Event()

@@ -198,9 +198,7 @@ class Session:
                 # resume): the reviews draw holds and pauses, and place later frames, by them
                 music.enter_context(live.on_clock_change(lambda: sampler.sample(force=True)))
             if sampler is not None:
-                sampler.sample(force=True)
-                if isinstance(show, LinkShowClock):  # placed on the show's start (--from's step: its time)
-                    sampler.sample(force=True, event="start", mono_ns=round(show.mono_at(show.origin_s) * 1e9))
+                sampler.sample(force=True)  # on the Link clock, none until the start (`ClockSampler.sample`)
             result = solo.run(show, on_idle=sampler) if ensemble is None \
                 else self._run_ensemble(ensemble, show, sampler)
             if result.outcome == "done" and self.settings.sections.loop is None:
@@ -291,8 +289,6 @@ class Session:
                 self._tell(listeners, INFO, f"{LINK_PREFIX}the session's bars moved before the start: the show "
                                             f"starts on its bar line {show.zero - self.clock.mono():.3f} s from now")
                 self._note_zero(show)
-                if sampler is not None:
-                    sampler.sample(force=True, event="start", mono_ns=round(show.mono_at(show.origin_s) * 1e9))
             self.clock.source.notify()  # the runners follow every change, logged or not
             if gate.passes():
                 record(event.kind, WARNING if event.kind in ("jump", "stopped") else INFO, event.message)
@@ -397,6 +393,7 @@ class ClockSampler:
         self.source = source
         self.every_s = every_s
         self._last: float | None = None
+        self._started = False  # on the Link clock: the start's sample written
         self._lock = threading.Lock()
         # asked once: a runtime-checkable protocol's isinstance costs tens of microseconds, and a
         # forced sample is taken as a GO releases the runners
@@ -406,12 +403,18 @@ class ClockSampler:
         self.sample()
         self.recorder.on_idle()
 
-    def sample(self, force: bool = False, event: str | None = None, mono_ns: int | None = None) -> None:
-        """A sample now (or at `mono_ns`: the show's start, placed on its bar line); `event`:
-        what it marks on the Link clock."""
+    def sample(self, force: bool = False, event: str | None = None) -> None:
+        """A sample now; `event`: what it marks on the Link clock.
+
+        On the Link clock, none before the show's start: until then a change of the session may
+        still move where show time stands (`LinkShowClock.realign`), which would leave earlier
+        samples telling another clock. The first sample at or after the start is preceded by
+        the `start` sample, placed on the start's very instant."""
         with self._lock:
-            mono_ns = self.clock.mono_ns() if mono_ns is None else mono_ns
+            mono_ns = self.clock.mono_ns()
             show_s = self.show.show_at(mono_ns / 1e9)
+            if self._link is not None and self._before_start(show_s):
+                return
             if not force and self._last is not None and show_s - self._last < self.every_s:
                 return
             self._last = show_s
@@ -422,6 +425,26 @@ class ClockSampler:
             if self._link is not None:
                 record = self._with_session(record, self._link, mono_ns, event)
             self.recorder.on_clock(record, self.clock.wall_ns(mono_ns))
+
+    def _before_start(self, show_s: float) -> bool:
+        """Before the Link show's start: no sample. The first one after: the start's sample
+        first (the lock is held)."""
+        link = self._link
+        assert link is not None
+        if show_s < link.origin_s:
+            return True
+        if not self._started:
+            self._started = True
+            start_ns = round(link.mono_at(link.origin_s) * 1e9)
+            record = self._with_session(ClockRecord(round(link.origin_s, 6), start_ns, self.source), link,
+                                        start_ns, "start")
+            # the start is on its beat by definition: the session's timeline read back a moment
+            # later puts it within a few microseconds of a beat, which is the sample's noise
+            assert record.beat is not None and record.session_beat is not None
+            off = record.beat - link.origin_beats
+            record = replace(record, beat=round(link.origin_beats, 6), session_beat=round(record.session_beat - off, 6))
+            self.recorder.on_clock(record, self.clock.wall_ns(start_ns))
+        return False
 
     @staticmethod
     def _with_session(record: ClockRecord, link: LinkShowClock, mono_ns: int, event: str | None) -> ClockRecord:

@@ -44,7 +44,9 @@ def find_start(session: LinkSession, how: LinkStart, started: Callable[[], bool]
         return _start_here(session, how, tell)
     tell(f"waiting for the session to play ({peers_text(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
          "start it from a peer (Live's play), another host, or this host's start")
-    was_playing = snapshot.playing
+    # a session that plays as the wait begins is a start just heard (it may have started while
+    # this host opened its ports, its bar line still ahead): started here, or missed, said
+    was_playing = False
     while not stop():
         if started():
             return _start_here(session, how, tell)
