@@ -42,6 +42,8 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     parser.add_argument("--start-on-signal", action="store_true",
                         help="start the transport on SIGUSR2 (and with --start-with-peers, once they are seen)")
     parser.add_argument("--lead", type=float, default=0.5, help="how far ahead its start's bar line is (s)")
+    parser.add_argument("--start-late-ms", type=float, default=0.0,
+                        help="start the transport this long after the bar line (an app a hair late)")
     parser.add_argument("--tempo-change", metavar="S:BPM", help="set the tempo S s after the transport played")
     parser.add_argument("--tempo-to", type=float, help="the tempo SIGUSR1 sets")
     parser.add_argument("--leave", type=float, metavar="S", help="leave S s after the transport played")
@@ -78,7 +80,7 @@ class Peer:
         link = self.link
         now_us, beat, tempo = link.time / timedelta(microseconds=1), link.beat, link.tempo
         q = self.args.quantum
-        at_beat = math.ceil((beat + self.args.lead * tempo / 60) / q) * q
+        at_beat = math.ceil((beat + self.args.lead * tempo / 60) / q) * q + self.args.start_late_ms / 1e3 * tempo / 60
         at_us = now_us + (at_beat - beat) * 60e6 / tempo
         link.set_is_playing_and_request_beat_at_time(True, timedelta(microseconds=at_us), at_beat)
         self.say("started", at_us=at_us, at_beat=at_beat)

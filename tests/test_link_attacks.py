@@ -49,10 +49,11 @@ class LinkLikeSession(FakeSession):
     the phase, so beat 0 goes to the NEXT time at or after the transport's start at which the
     phase is 0 (seen for real: a start 10 us after a bar line put beat 0 a bar later)."""
 
-    def count_from_start(self) -> None:
+    def count_from_start(self) -> float:
         self.calls.append(("count_from_start",))
         phase = Timeline(*self.origin, self.tempo).beat_at(self.started_at) % self.quantum
         self.origin = (self.started_at, 0.0 if phase < 1e-9 else phase - self.quantum)
+        return self.origin[1]  # the start's beat in the new count (the session measures it)
 
 
 def test_a_transport_started_a_hair_after_its_bar_line_starts_the_show_on_that_bar_line():

@@ -145,7 +145,9 @@ def test_two_hosts_play_in_unison_each_with_its_own_robots(tmp_path):
         Job("right", _run(show, tmp_path / "right.mcap", "--host", "right", robots="b")),
         # the peer starts the transport once both hosts wait for it and it knows them both (Link
         # tells a peer that joins later nothing of a transport already playing)
-        Job("peer", peer_argv("--tempo", "240", "--tempo-to", "200", "--start-on-signal", "--start-with-peers", "2"),
+        # and 2 ms after its bar line, as an app's audio buffer may: the show is on that bar line
+        Job("peer", peer_argv("--tempo", "240", "--tempo-to", "200", "--start-on-signal", "--start-with-peers", "2",
+                              "--start-late-ms", "2"),
             signals=(("USR2", f"{output_has(tmp_path, 'left', waiting)} && {output_has(tmp_path, 'right', waiting)}"),
                      ("USR1", output_has(tmp_path, "left", "a: step 0 ")), ("TERM", ended(tmp_path, "left", "right")))),
     ])
@@ -156,6 +158,9 @@ def test_two_hosts_play_in_unison_each_with_its_own_robots(tmp_path):
         assert log.metadata["choreo"]["robots"] == mine
         assert [t for t in log.messages if f"/{mine}/" in t] and not [t for t in log.messages if f"/{other}/" in t]
     assert abs(_start_sample(left)["link_us"] - _start_sample(right)["link_us"]) < TOLERANCE_S * 1e6
+    [started] = [line for line in _peer_lines(run["peer"].stdout) if line["event"] == "started"]
+    # the bar line the transport started (2 ms late) on, not the next one a bar later
+    assert abs(_start_sample(left)["link_us"] + 2_000 - started["at_us"]) < TOLERANCE_S * 1e6, (started,)
     assert abs(_start_sample(left)["beat"]) < 1e-3 and abs(_start_sample(right)["beat"]) < 1e-3
     zero = {name: int(log.metadata["choreo.result"]["show_zero_monotonic_ns"]) / 1e9
             for name, log in (("left", left), ("right", right))}

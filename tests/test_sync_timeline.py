@@ -349,10 +349,11 @@ class FakeSession:
         self.started_at = Timeline(*self.origin, self.tempo).time_at(beat)
         self.playing = True
 
-    def count_from_start(self) -> None:
-        """Link's renumbering: the transport's start is beat 0 (its bar line)."""
+    def count_from_start(self) -> float:
+        """Link's renumbering: the transport's start is beat 0 (its bar line); the start's beat."""
         self.calls.append(("count_from_start",))
         self.origin = (self.started_at, 0.0)
+        return 0.0
 
 
 def _find(session: FakeSession, how: LinkStart, started=lambda: False, stop=lambda: False):

@@ -34,6 +34,7 @@ SAMPLE_S = 0.01  # how often the session is read: a tempo change reaches the run
 PAIR_AGE_NS = 500_000_000  # a clock pair this old is replaced even by a looser one (NTP slews one clock)
 OPEN_TIMEOUT_S = 5.0  # joining never takes this long: past it, something is wrong with the binding
 CALL_TIMEOUT_S = 2.0
+FINE_QUANTUM = 1 / 64  # beats: the quantum the transport's start time is read with (8 ms at 120 bpm)
 READ_TRIES = 3  # reads of the session a sample tries for a tight one
 TIGHT_READ_US = 200.0  # a read of the beat between two reads of Link's clock this tight is taken at once
 DISCOVERY_S = 1.0  # Link finds the peers already in a session within this of joining (seen: 0.3-0.5 s)
@@ -249,11 +250,34 @@ class LinkSession:
         self._call(start)
         self._resample()
 
-    def count_from_start(self) -> None:
-        """Renumber this host's beats so that the session's start (its transport's start time)
-        falls on the first bar line at or after beat 0: every host that does so counts the same."""
-        self._call(lambda link: link.request_beat_at_start_playing_time(0.0))
+    def count_from_start(self) -> float:
+        """Renumber this host's beats so that beat 0 is the first bar line at or after the
+        session's start (its transport's start time, shared state): every host that does so
+        counts the same. The start itself, as a beat of the new count (in (-quantum, 0]).
+
+        Link maps beat 0 to the first time at or after the start whose phase in the quantum is
+        0, and tells no start time: asked first with a quantum of FINE_QUANTUM beats, it puts
+        beat 0 within that of the start, which is read off, then asked again with the bar."""
+        found: list[float] = []
+
+        def count(link: LinkPeer) -> None:
+            link.quantum = FINE_QUANTUM
+            link.request_beat_at_start_playing_time(0.0)
+            start_us = self._beat_time(link, 0.0)
+            link.quantum = self.quantum
+            link.request_beat_at_start_playing_time(0.0)
+            found.append(-(self._beat_time(link, 0.0) - start_us) * float(link.tempo) / 60e6)
+        self._call(count)
         self._resample(renumbered=True)
+        return found[0]
+
+    @staticmethod
+    def _beat_time(link: LinkPeer, beat: float) -> float:
+        """Link time (us) of `beat` in this host's count, read now."""
+        t1 = _us(link.time)
+        now = link.beat
+        t2 = _us(link.time)
+        return (t1 + t2) / 2 + (beat - now) * 60e6 / float(link.tempo)
 
     def _call(self, action: Callable[[LinkPeer], None]) -> None:
         loop = self._loop

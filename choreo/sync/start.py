@@ -5,7 +5,8 @@
   (with the show's tempo proposed first), and peers that follow start/stop start with it. Alone
   in the session, it starts alone as the session's first peer, and says so.
 - A show that waits (--wait-start, or a show for several hosts): it starts on the first bar
-  line at or after the session's transport starts (Live's play button, another host's start),
+  line at or after the session's transport starts (one a hair before the start, ON_THE_BAR_BEATS
+  at most: an app's start a few milliseconds late is on its bar line) (Live's play button, another host's start),
   or when this host's operator starts it, which starts the transport as above. Every host that
   counts its beats from the transport's start (Link's start time is shared state) picks the
   same bar line, whenever it heard of the start. A start heard more than MISSED_S after its bar
@@ -23,6 +24,7 @@ from choreo.sync.session import SAMPLE_S, LinkSession, peers_text
 from choreo.sync.timeline import bar_at_or_after
 
 START_LEAD_S = 0.3  # this host's start of the transport is announced this far ahead of its bar line
+ON_THE_BAR_BEATS = 0.25  # a transport started this soon after a bar line started on it
 MISSED_S = 0.5  # a start heard this long after its bar line is missed: the show runs elsewhere
 
 
@@ -92,9 +94,11 @@ def _start_here(session: LinkSession, how: LinkStart, tell: Callable[[str], None
 def _joined(session: LinkSession, tell: Callable[[str], None]) -> float | None:
     """The transport just started elsewhere: count beats from its start; its first bar line,
     or None (said) if that is already MISSED_S gone."""
-    session.count_from_start()
+    start = session.count_from_start()
     snapshot = session.snapshot()
-    first = bar_at_or_after(0.0, session.quantum)
+    # Link's beat 0 is the first bar line at or after the start; a start a hair after a bar line
+    # (an audio buffer's rounding, a peer's microseconds) is on that bar line, not the next
+    first = -float(session.quantum) if start <= -session.quantum + ON_THE_BAR_BEATS else 0.0
     late = time.monotonic() - snapshot.mono_of_beat(first)
     if late > MISSED_S:
         tell(f"the session started playing {late:.1f} s before this host heard it: the show runs "
