@@ -66,6 +66,8 @@ def test_clock_link_without_tempo_is_the_sessions_tempo_in_four_and_a_machine_sh
      "the Link session's beat never stops: a GO cue cannot hold it: cue the step in bars and beats or in seconds"),
     ("steps:\n  - repeat: 2\n    at: go\n    steps: [{play: 1}]\n", "5:9: steps[0].at",
      "a GO cue cannot hold it"),
+    ("tempo: {bpm: 5}\nsteps:\n  - play: 1\n", "3:14: tempo.bpm",  # R1: Link took 20 bpm without a word
+     "5 bpm: an Ableton Link session's tempo is 20 bpm at the least"),
 ])
 def test_what_the_link_clock_cannot_keep_is_refused_where_it_is_written(body, where, says):
     [found] = problems("version: 1\nclock: link\n" + body)

@@ -567,3 +567,20 @@ def test_a_start_is_told_again_to_a_peer_found_after_it_while_the_transport_play
     link.peers(2)
     heard.wait_for("peers", "1 -> 2")
     assert len(plays()) == 2  # stopped: not started again
+
+
+def test_a_show_stopped_in_its_count_in_stops_only_the_transport_it_started(fake):
+    """R1: Ctrl-C before show time 0 left the transport this host started playing (a Live with
+    Start Stop Sync played on for a show that never began). One another peer started stays."""
+    session, link, heard = fake
+    link.plays(True)  # another peer's transport
+    heard.wait_for("playing")
+    assert not session.stop_playing() and link.playing
+    link.plays(False)
+    heard.wait_for("stopped")
+    bar = bar_at_or_after(session.snapshot().beat_at_mono(time.monotonic() + 1.0), 4)
+    session.start_playing(bar)
+    assert session.snapshot().playing
+    assert session.stop_playing() and not link.playing
+    assert [call[1] for call in link.calls if call[0] == "play"] == [True, False]
+    assert not session.stop_playing()  # once

@@ -157,7 +157,8 @@ def _run(args: argparse.Namespace, report: "_RunReport") -> int:
         progress.finish()
         say.ended(result.outcome == "done")
         late = f", {result.late_steps} late" if result.late_steps else ""
-        say(f"{result.outcome}: {result.steps_run} steps in {result.show_s:.3f} s{late}")
+        took = f"in {result.show_s:.3f} s" if result.show_s >= 0 else "before the show's start (its count-in)"
+        say(f"{result.outcome}: {result.steps_run} steps {took}{late}")
         if session.log_path:
             say(f"log: {session.log_path}")
         if result.outcome != "done":

@@ -205,6 +205,8 @@ class Session:
                 self._play_out(show, stop, sampler, everyone)
             elif result.outcome == "done":
                 self._end_of_section(show, stop)
+            elif isinstance(show, LinkShowClock) and self.clock.mono() < show.mono_at(show.origin_s):
+                self._stop_transport(everyone)
             if sampler is not None:
                 sampler.sample(force=True)
             return result
@@ -303,6 +305,15 @@ class Session:
             summary = gate.due(show.session.snapshot(), force=True)
             if summary is not None:
                 record(None, INFO, summary)
+
+    def _stop_transport(self, listeners: list[RunListener]) -> None:
+        """Stopped in the count-in: the transport this host started is stopped again (a Live
+        following start/stop would play on for a show that never began); one another app started
+        is left alone."""
+        assert self.link is not None
+        if self.link.stop_playing():
+            self._tell(listeners, WARNING, f"{LINK_PREFIX}stopped before the show's start: the session's transport "
+                                           "this host started is stopped again")
 
     def _note_zero(self, show: ShowClock) -> None:
         """The log's metadata gets show time 0 as monotonic and wall-clock ns (again when a

@@ -35,6 +35,7 @@ from choreo.show.model import (
     LINK_NO_GO,
     LINK_NO_MAP,
     LINK_NO_MUSIC,
+    LINK_MIN_BPM,
     LINK_NO_OFFSET,
     MACHINE,
     SIM_URL,
@@ -205,7 +206,9 @@ def _link_clock(show: Show, plans: Mapping[str, Plan], request: RunRequest) -> L
     refusal = (f"the show has `music:`; {LINK_NO_MUSIC}: add --no-music" if show.music and not request.no_music
                else f"the show has a tempo map; {LINK_NO_MAP}" if tempo is not None and tempo.bars
                else f"the show's bar 1 is at {tempo.offset:g} s; {LINK_NO_OFFSET}: make `tempo.offset` 0"
-               if tempo is not None and tempo.offset else _go_refusal(plans))
+               if tempo is not None and tempo.offset
+               else f"the show's tempo is {tempo.bpm:g} bpm; a Link session's is {LINK_MIN_BPM:g} at the least"
+               if tempo is not None and tempo.bpm < LINK_MIN_BPM else _go_refusal(plans))
     if refusal is not None:
         raise UsageError(f"--clock link: {refusal} (or leave out --clock link)")
     return LinkClock(tempo.bpm, tempo.meter) if tempo is not None else LinkClock(None, LINK_METER)

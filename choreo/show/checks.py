@@ -21,6 +21,7 @@ from choreo.show.model import (
     GO,
     LINK,
     LINK_NO_GO,
+    LINK_MIN_BPM,
     LINK_NO_MAP,
     LINK_NO_MUSIC,
     LINK_NO_OFFSET,
@@ -188,6 +189,11 @@ def _check_link(walk: _Walk) -> None:
     if "music" in data:
         walk.key_problem(("music",), f"{LINK_NO_MUSIC}: leave out `music:` (a peer such as Live plays it), or "
                                      "use `clock: machine`")
+    bpm = tempo.get("bpm")
+    if _number(bpm) and bpm < LINK_MIN_BPM and walk.ok(("tempo", "bpm")):
+        walk.problem(("tempo", "bpm"), f"{bpm:g} bpm: an Ableton Link session's tempo is {LINK_MIN_BPM:g} bpm at "
+                                       "the least (Link would take another without a word): write the tempo in "
+                                       "beats Link can have, or use `clock: machine`")
 
 
 def _check_hosts(walk: _Walk) -> None:

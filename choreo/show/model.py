@@ -65,6 +65,7 @@ def _is_letter(ch: str) -> bool:
 SOLO = "robot"  # the name a one-robot show's robot goes by (`robot:`)
 MACHINE, LINK = "machine", "link"  # `clock:`: the machine's clock (or the music's), or the Ableton Link session's
 CLOCKS = (MACHINE, LINK)
+LINK_MIN_BPM = 20.0  # the slowest tempo an Ableton Link session takes (Link's own range: 20-999 bpm)
 NOMINAL_BPM = 120.0  # `tempo: {bpm: link}`: the tempo a plan is drawn at (the session's is known only at run time)
 HOST_NAME_MAX = 32  # characters of a `hosts:` name; the schema's pattern says the same
 LINK_METER = 4  # beats a bar (Link's quantum) of a show on the Link clock without `tempo:`

@@ -64,10 +64,11 @@ class LinkShowClock:
     def realign(self, earliest: float, tempo_changed: bool = False) -> bool:
         """Before the show's start, the session's bars moved: the start goes back onto them, on
         every host alike. A tempo change (during the count-in) keeps the session's beat the show
-        was to start on, now sooner or later; a jump of the phase (a peer found late, and Link
-        moved this host onto the session's phase) takes the beat of the same phase nearest where
-        the start was. Either way at or after monotonic `earliest` (the runners' lead), else the
-        next bar's. True if it moved; never once the show has begun."""
+        was to start on, now sooner or later (sooner than the runners' lead: its first cue a
+        little late, never a bar later); a jump of the phase (a peer found late, and Link moved
+        this host onto the session's phase) takes the beat of the same phase nearest where the
+        start was, at or after monotonic `earliest` (the runners' lead), else the next bar's.
+        True if it moved; never once the show has begun."""
         zero, first_bar = self._place
         start = zero + self.origin_s
         if time.monotonic() >= start:
@@ -78,8 +79,10 @@ class LinkShowClock:
         if not tempo_changed:
             near = snapshot.beat_at_mono(start)
             start_beat = round((near - phase) / self.meter) * self.meter + phase
-        if snapshot.mono_of_beat(start_beat) < earliest:
-            start_beat = bar_at_or_after(snapshot.beat_at_mono(earliest) - phase, self.meter) + phase
+            if snapshot.mono_of_beat(start_beat) < earliest:
+                start_beat = bar_at_or_after(snapshot.beat_at_mono(earliest) - phase, self.meter) + phase
+        # a tempo change keeps the beat whatever: a ramp (a change every 20 ms) moving the start
+        # on by a bar whenever it came near would make each host's start recede, each its own way
         moved = (snapshot.mono_of_beat(start_beat) - self.origin_s, start_beat - self.origin_beats)
         if abs(moved[0] - zero) < 1e-6 and abs(moved[1] - first_bar) < 1e-9:
             return False

@@ -250,6 +250,19 @@ class LinkSession:
         self._call(start)
         self._resample()
 
+    def stop_playing(self) -> bool:
+        """Stop the transport if this host started it and it plays (a show stopped in its
+        count-in); True if it did. A transport another peer started is never stopped here."""
+        if self._started is None or not self.snapshot().playing:
+            return False
+
+        def stop(link: LinkPeer) -> None:
+            link.set_is_playing_and_request_beat_at_time(False, link.time, float(link.beat))
+        self._call(stop)
+        self._started = None
+        self._resample()
+        return True
+
     def count_from_start(self) -> float:
         """Renumber this host's beats so that beat 0 is the first bar line at or after the
         session's start (its transport's start time, shared state): every host that does so
