@@ -26,9 +26,20 @@ def closest(given: str, known: Iterable[str]) -> str | None:
     return close[0] if close else None
 
 
+MESSAGE_CHARS = 1000  # an error line printed at most this long: a value from outside may be megabytes
+
+
 def one_line(text: str) -> str:
     """`text` with its line breaks (and every other control or invisible character) escaped."""
     return visible(text)
+
+
+def bounded(line: str) -> str:
+    """An error line cut to MESSAGE_CHARS, saying how much was left out: `--host` given 100 KB
+    of name printed 200 KB (its text escaped), and any option or file's text could."""
+    if len(line) <= MESSAGE_CHARS:
+        return line
+    return f"{line[:MESSAGE_CHARS]}… ({len(line) - MESSAGE_CHARS} more characters)"
 
 
 class ChoreoError(Exception):
@@ -39,7 +50,7 @@ class ChoreoError(Exception):
     def lines(self) -> list[str]:
         """The message as the one-problem-a-line text the CLI prints: one line, whatever a name
         from outside put in it (a port or file named with a line break, a log's text)."""
-        return [one_line(str(self))]
+        return [bounded(one_line(str(self)))]
 
 
 class UsageError(ChoreoError):
@@ -92,7 +103,7 @@ class ShowError(ChoreoError):
         super().__init__("\n".join(str(p) for p in self.problems))
 
     def lines(self) -> list[str]:
-        return [one_line(str(p)) for p in self.problems]
+        return [bounded(one_line(str(p))) for p in self.problems]
 
 
 class LinkError(ChoreoError):

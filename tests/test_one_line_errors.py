@@ -67,3 +67,18 @@ def test_outputs_that_name_a_file_with_a_line_break_keep_to_one_line(tmp_path, c
         assert main(argv) == 0
         out = capsys.readouterr().out
         assert len(out.strip("\n").splitlines()) == 1 and expected in out, out
+
+
+@pytest.mark.parametrize(("argv", "code"), [(["run", "{show}", "--host", "{big}", "--no-log"], 2),
+                                            (["run", "{show}", "--port", "{big}", "--no-log"], 3),
+                                            (["validate", "{big}"], 2)])
+def test_a_huge_value_from_outside_is_one_bounded_line(tmp_path, capsys, argv, code):
+    """R1: `--host` given 100 KB of name printed 200 KB (escaped twice over). Every error line
+    is cut, saying how much was left out, whatever value an option or a file brought in."""
+    show = tmp_path / "show.yaml"
+    show.write_text("version: 1\nsteps: [{play: 1}]\n")
+    big = "\x1b" * 100_000
+    assert main([a.format(show=show, big=big) for a in argv]) == code
+    lines = capsys.readouterr().err.splitlines()  # a run says what it opens first: those lines too
+    assert max(len(line) for line in lines) < 1100, [len(line) for line in lines]
+    assert lines[-1].endswith("more characters)"), lines[-1][-80:]

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from choreo.cli.terminal import StatusWriter
 from choreo.cli.terminal import columns as terminal_columns
+from choreo.errors import bounded
 from choreo.log.format import ERROR, LINK_PREFIX, WARNING
 from choreo.music.player import output_name
 from choreo.textfit import fit
@@ -63,7 +64,8 @@ class Say:
             return
         try:
             width = terminal_columns(self.out) if self.out.isatty() else None
-            print(fit(line, width), file=self.out, flush=True)
+            # to a file or pipe whole, but never megabytes: a port or a name from outside may be
+            print(bounded(fit(line, width)), file=self.out, flush=True)
         except (OSError, ValueError):
             self.quiet = True
 
@@ -232,7 +234,7 @@ class Progress:
         if last_step_done:
             with self._lock:
                 self._current = ""
-        self.writer.line(text)
+        self.writer.line(bounded(text))
 
     def on_play_out(self, end_s: float) -> None:
         """The steps are done; the music plays on to its end."""
