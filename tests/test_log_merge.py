@@ -371,3 +371,17 @@ def test_a_shifted_hosts_log_lines_keep_their_own_time_with_their_log_time():
     topic, data = _place(LOG_TOPIC, line, _host("b", []), -2_000_000_000)
     assert json.loads(data)["timestamp"] == {"sec": 3, "nsec": 7}
     assert _place(LOG_TOPIC, line, _host("b", []), 0)[1] == line  # the axis's own lines: as written
+
+
+def test_hosts_that_did_not_play_in_step_are_said_to_have_not():
+    """R1: two hosts that started a bar apart through a tempo change merged without a word (a
+    spread of 145 ms). Past 20 ms of spread, the merge says the hosts were not in step."""
+    from choreo.log.merge import _warnings
+
+    a = _host("a", [(k * 0.5, k * 500_000_000) for k in range(40)])
+    b = _host("b", [(k * 0.5, k * 500_000_000 + (0 if k < 20 else 145_000_000)) for k in range(40)])
+    alignments = align([a, b])
+    said = _warnings([a, b], alignments)
+    assert alignments[1].spread_ns == 145_000_000 and any("did not play in step" in line for line in said), said
+    steady = align([a, _host("b", [(k * 0.5, k * 500_000_000 + 7_000) for k in range(40)])])
+    assert not any("in step" in line for line in _warnings([a, _host("b", [])], steady))

@@ -59,6 +59,7 @@ from choreo.show.read import MAX_BYTES as SHOW_MAX_BYTES
 from choreo.textfit import visible
 
 MAX_INPUTS = 64  # logs one merge takes: each is an open file while the messages stream
+UNISON_SPREAD_NS = 20_000_000  # hosts in step agree within this (R1: two hosts a bar apart showed 145-606 ms)
 FIT_MIN_SAMPLES = 20  # clock samples before a drift between two machines' clocks is fitted
 FIT_MIN_SPAN_NS = 60 * 10**9  # ...over at least this long (less: a shift is one number)
 FIT_MAX_RATE = 1e-3  # a drift past 1000 ppm is no crystal's: not fitted (the median shift stands)
@@ -326,6 +327,10 @@ def _warnings(logs: list[HostLog], alignments: list[Alignment]) -> list[str]:
         elif alignment.by == "clock" and not (log.sources | logs[0].sources) <= {LINK}:
             said.append(f"host {log.host}: not both on the Link clock "
                         f"({'/'.join(sorted(logs[0].sources | log.sources))}): show time 0 taken as the same instant")
+        elif alignment.by == "clock" and alignment.spread_ns > UNISON_SPREAD_NS:
+            said.append(f"host {log.host}: its clock samples disagree with host {logs[0].host}'s by up to "
+                        f"{alignment.spread_ns / 1e6:.1f} ms: the hosts did not play in step (started on different "
+                        "bars, or one lost the session); the merge lines them up on the middle of it")
         if log.cut is not None:
             said.append(f"host {log.host}: its log is unfinished ({log.cut}): merged as far as it goes")
     return said
