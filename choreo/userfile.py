@@ -20,10 +20,11 @@ import io
 import os
 import stat
 from collections.abc import Iterator
+from contextlib import suppress
 from contextlib import contextmanager
 from pathlib import Path
 
-from choreo.errors import InputError
+from choreo.errors import InputError, UsageError
 from choreo.textfit import visible
 
 _KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a named pipe"), (stat.S_ISCHR, "a device"),
@@ -162,3 +163,43 @@ def modified_if_regular(path: Path) -> float | None:
     except (OSError, ValueError):
         return None
     return info.st_mtime if stat.S_ISREG(info.st_mode) else None
+
+
+NEW_FILE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)  # EXCL: never through a link
+
+
+def write_why(exc: OSError | ValueError) -> str:
+    """Why a file cannot be written, in the OS's words except where they mislead: ValueError is
+    a name with a NUL byte."""
+    if isinstance(exc, ValueError):
+        return "no file can have this name"
+    return "a loop of symbolic links" if exc.errno == errno.ELOOP else (exc.strerror or str(exc))
+
+
+@contextmanager
+def written_whole(target: Path, said: str) -> Iterator[io.BufferedRandom]:
+    """A new file for `target` (checked by the caller), written beside it and renamed over it
+    when the block ends without an error: a command that fails half way (a full disk, a bad
+    input found late) leaves no half-written file, and whatever was there before stays. Every
+    OS failure is one line (UsageError, `said: cannot write: why`), the temporary file removed."""
+    import secrets  # here, not at the top: its hmac and OpenSSL would slow every `choreo --help`
+
+    temp = target.parent / f".{target.name[:64]}.{secrets.token_hex(4)}.part"
+    try:
+        file = os.fdopen(os.open(temp, NEW_FILE, 0o666), "w+b")
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"{said}: cannot write: {write_why(exc)}") from None
+    done = False
+    try:
+        yield file
+        file.close()
+        os.replace(temp, target)
+        done = True
+    except OSError as exc:
+        raise UsageError(f"{said}: cannot write: {write_why(exc)}") from None
+    finally:
+        if not done:
+            with suppress(OSError):
+                file.close()
+            with suppress(OSError):
+                temp.unlink()

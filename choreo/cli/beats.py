@@ -15,19 +15,19 @@ destroy it.
 from __future__ import annotations
 
 import argparse
-import errno
 import json
 import math
 import os
 import stat
 import sys
 from collections.abc import Iterator
-from contextlib import ExitStack, closing, contextmanager, suppress
+from contextlib import ExitStack, closing, contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO
 
 from choreo.errors import UsageError, one_line
 from choreo.textfit import visible
+from choreo.userfile import write_why, written_whole
 
 if TYPE_CHECKING:  # numpy and miniaudio load only when a song is read
     from choreo.music.beats import Beat, BeatEstimate
@@ -270,8 +270,6 @@ def _same_file(one: str, other: str) -> bool:
 def replacing(path: str, option: str, song: str) -> Iterator[BinaryIO]:
     """A new file for `path`, written beside it and renamed over it when the block ends without
     an error; every failure one line (exit 2) and the temporary file removed."""
-    import secrets  # here, not at the top: its hmac and OpenSSL would slow every `choreo --help`
-
     from choreo.run.settings import check_output_folder
 
     if path.endswith(tuple(filter(None, (os.sep, os.altsep)))):  # Path() drops the slash: `new/` wrote a file `new`
@@ -280,28 +278,8 @@ def replacing(path: str, option: str, song: str) -> Iterator[BinaryIO]:
     check_output_folder(Path(path), option)
     target = Path(os.path.realpath(path))  # a link is followed: the file it names is replaced
     _check_target(target, path, option, song)
-    temp = target.parent / f".{target.name[:64]}.{secrets.token_hex(4)}.part"
-    try:
-        file = os.fdopen(os.open(temp, _NEW_FILE, 0o666), "w+b")
-    except (OSError, ValueError) as exc:
-        raise UsageError(f"{option} {visible(path)}: cannot write: {_why(exc)}") from None
-    done = False
-    try:
+    with written_whole(target, f"{option} {visible(path)}") as file:
         yield file
-        file.close()
-        os.replace(temp, target)
-        done = True
-    except OSError as exc:
-        raise UsageError(f"{option} {visible(path)}: cannot write: {_why(exc)}") from None
-    finally:
-        if not done:
-            with suppress(OSError):
-                file.close()
-            with suppress(OSError):
-                temp.unlink()
-
-
-_NEW_FILE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)  # EXCL: never through a link
 
 
 def _check_target(target: Path, path: str, option: str, song: str) -> None:
@@ -311,7 +289,7 @@ def _check_target(target: Path, path: str, option: str, song: str) -> None:
     except FileNotFoundError:
         return
     except (OSError, ValueError) as exc:
-        raise UsageError(f"{option} {visible(path)}: cannot write: {_why(exc)}") from None
+        raise UsageError(f"{option} {visible(path)}: cannot write: {write_why(exc)}") from None
     if not stat.S_ISREG(mode):
         from choreo.userfile import kind_of
 
@@ -322,10 +300,3 @@ def _check_target(target: Path, path: str, option: str, song: str) -> None:
                          "song; give another file name")
     if not os.access(target, os.W_OK):  # a rename would replace it all the same: its owner said no
         raise UsageError(f"{option} {visible(path)}: cannot write: the file is read-only")
-
-
-def _why(exc: OSError | ValueError) -> str:
-    """The OS's words, except where they mislead: ValueError is a name with a NUL byte."""
-    if isinstance(exc, ValueError):
-        return "no file can have this name"
-    return "a loop of symbolic links" if exc.errno == errno.ELOOP else (exc.strerror or str(exc))

@@ -33,11 +33,10 @@ import heapq
 import json
 import math
 from bisect import bisect_right
-from contextlib import ExitStack, suppress
+from contextlib import ExitStack
 import os
 import re
 import stat
-import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -55,6 +54,7 @@ from choreo.log.format import (CHANNELS, CHOREO_TOPICS, CLOCK_TOPIC, METADATA_NA
 from choreo.log.reader import LogReader
 from choreo.log.recorder import CHUNK_SIZE, schema_text
 from choreo.show.model import LINK
+from choreo.userfile import written_whole
 from choreo.show.read import MAX_BYTES as SHOW_MAX_BYTES
 from choreo.textfit import visible
 
@@ -342,25 +342,8 @@ def _warnings(logs: list[HostLog], alignments: list[Alignment]) -> list[str]:
 def _write_atomically(report: MergeReport) -> None:
     """The merged log, written beside the output and renamed onto it once whole: a merge that
     fails (a log damaged since the first pass, a full disk) leaves no half-written file."""
-    target = report.output
-    shown = visible(str(target))
-    try:
-        fd, temp = tempfile.mkstemp(prefix=f".{target.name[:100]}.", suffix=".merging", dir=target.parent)
-    except (OSError, ValueError) as exc:
-        raise UsageError(f"-o {shown}: cannot write: {getattr(exc, 'strerror', None) or exc}") from None
-    done = False
-    try:
-        os.fchmod(fd, 0o644)  # a log as readable as the runs' (mkstemp makes it the owner's alone)
-        with os.fdopen(fd, "wb") as file:
-            _write(report, file)
-        os.replace(temp, target)
-        done = True
-    except OSError as exc:
-        raise UsageError(f"-o {shown}: cannot write: {exc.strerror or exc}") from None
-    finally:
-        if not done:
-            with suppress(OSError):
-                os.unlink(temp)
+    with written_whole(report.output, f"-o {visible(str(report.output))}") as file:
+        _write(report, file)
 
 
 def _write(report: MergeReport, file: IO[bytes]) -> None:
