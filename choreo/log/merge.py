@@ -107,7 +107,7 @@ class HostLog:
     sources: set[str]  # what kept its show clock (the samples' `source`)
     cut: str | None  # why it ends early (a killed run), if it does
     show: tuple[str, bytes] | None  # its attached show: name, bytes
-    beats: list[tuple[float, int]] = field(default_factory=list)  # Link clock samples: (show beat, log time)
+    beats: list[tuple[float, int, float]] = field(default_factory=list)  # Link samples: (show beat, log time, tempo)
 
 
 @dataclass
@@ -186,12 +186,12 @@ def survey(path: Path) -> HostLog:
                        samples, sources, str(reader.cut) if reader.cut else None, shown, beats)
 
 
-def _clock_samples(reader: LogReader) -> tuple[list[tuple[float, int]], set[str], list[tuple[float, int]]]:
+def _clock_samples(reader: LogReader) -> tuple[list[tuple[float, int]], set[str], list[tuple[float, int, float]]]:
     """The running show clock's samples, (show time, log time), and on the Link clock (show
     beat, log time); a sample that does not parse or holds no finite time passed over (the
     reviews report such a message)."""
     samples: list[tuple[float, int]] = []
-    beats: list[tuple[float, int]] = []
+    beats: list[tuple[float, int, float]] = []
     sources: set[str] = set()
     for _, log_time, data in reader.messages((CLOCK_TOPIC,)):
         try:
@@ -203,8 +203,9 @@ def _clock_samples(reader: LogReader) -> tuple[list[tuple[float, int]], set[str]
         if math.isfinite(sample.show_s) and len(samples) < MAX_SAMPLES:
             samples.append((float(sample.show_s), log_time))
             sources.add(sample.source)
-            if isinstance(sample.beat, (int, float)) and math.isfinite(sample.beat):
-                beats.append((float(sample.beat), log_time))
+            beat, tempo = sample.beat, sample.tempo
+            if isinstance(beat, (int, float)) and isinstance(tempo, (int, float)) and math.isfinite(beat + tempo):
+                beats.append((float(beat), log_time, float(tempo)))
     return samples, sources, beats
 
 
@@ -240,9 +241,10 @@ def align(logs: list[HostLog]) -> list[Alignment]:
     first = logs[0]
     out = [Alignment(first.host, 0, 0, 0, "axis")]
     for log in logs[1:]:
-        by_beat = bool(first.beats and log.beats)
-        axis = _increasing(first.beats if by_beat else first.samples)
-        pairs = list(_offset_pairs(axis, _increasing(log.beats if by_beat else log.samples)))
+        if first.beats and log.beats:
+            pairs = list(_beat_pairs(_increasing_beats(first.beats), _increasing_beats(log.beats)))
+        else:
+            pairs = list(_offset_pairs(_increasing(first.samples), _increasing(log.samples)))
         if pairs:
             out.append(_fitted(log.host, pairs))
         else:
@@ -290,6 +292,34 @@ def offsets_to(axis: list[tuple[float, int]], samples: list[tuple[float, int]]) 
     """(the axis's log time at each sample's show time) - (the sample's log time), in ns, for the
     samples within the axis's span of show time."""
     return (offset for _, offset in _offset_pairs(axis, samples))
+
+
+def _increasing_beats(samples: list[tuple[float, int, float]]) -> list[tuple[float, int, float]]:
+    """The Link samples while the show's beat goes on (a --loop pass's restart left out), less
+    the last one before each change of tempo: a host hears of a peer's change some tens of ms
+    late, and a sample taken meanwhile reads the beat on the old tempo."""
+    kept: list[tuple[float, int, float]] = []
+    for beat, log_time, tempo in samples:
+        if not kept or (beat > kept[-1][0] and log_time > kept[-1][1]):
+            kept.append((beat, log_time, tempo))
+    return [one for one, after in zip(kept, [*kept[1:], None], strict=True) if after is None or after[2] == one[2]]
+
+
+def _beat_pairs(axis: list[tuple[float, int, float]],
+                samples: list[tuple[float, int, float]]) -> Iterator[tuple[int, int]]:
+    """(the sample's log time, its offset) by the show's beat: the axis interpolated at each
+    sample's beat, only between two axis samples at one tempo, and the sample at that tempo too
+    (across a tempo change the beat is no straight line in time: each host's samples fall
+    a few milliseconds apart around it)."""
+    beats = [beat for beat, _, _ in axis]
+    for beat, log_time, tempo in samples:
+        at = bisect_right(beats, beat)
+        if not 0 < at < len(axis):
+            continue
+        (b0, t0, tempo0), (b1, t1, tempo1) = axis[at - 1], axis[at]
+        if not tempo0 == tempo1 == tempo:
+            continue
+        yield log_time, round(t0 + (t1 - t0) * (beat - b0) / (b1 - b0)) - log_time
 
 
 def _offset_pairs(axis: list[tuple[float, int]], samples: list[tuple[float, int]]) -> Iterator[tuple[int, int]]:
