@@ -180,3 +180,13 @@ def test_a_loop_is_refused_on_the_link_clock_with_a_host_and_rehearsed_on_the_ma
     with pytest.raises(UsageError, match=r"^--loop 0\.\.1: not on the Link clock with --host .*--clock machine"):
         RunSettings.settle(RunRequest(show, no_log=True, host="left", loop="0..1"))
     assert RunSettings.settle(RunRequest(show, no_log=True, host="left", loop="0..1", clock="machine")).link is None
+
+
+def test_a_plain_port_is_the_one_robot_a_host_drives(tmp_path):
+    """A host that drives one robot takes `--port URL` for it, as a one-robot show does; a host
+    of several still needs --port NAME=URL."""
+    show = write_show(tmp_path, SHOW)
+    settings = RunSettings.settle(RunRequest(str(show), no_log=True, host="right", clock="machine", port="sim://?seed=7"))
+    assert [(link.robot, link.port.split("&")[0]) for link in settings.links.values()] == [("c", "sim://?seed=7")]
+    with pytest.raises(UsageError, match=r"^--port sim://: this show has several robots"):
+        RunSettings.settle(RunRequest(str(show), no_log=True, host="left", clock="machine", port="sim://"))

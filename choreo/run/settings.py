@@ -140,7 +140,9 @@ class RunSettings:
         host = _host(show, request.host)
         _check_robot_ports(show, request, host)
         cast = {name: robot for name, robot in show.cast.items() if host is None or name in show.hosts[host]}
-        drafts = {name: _link_settings(name, robot, request, show.ensemble) for name, robot in cast.items()}
+        lone = _lone_robot(show, host) if request.port is not None else None
+        drafts = {name: _link_settings(name, robot, request, show.ensemble and name != lone)
+                  for name, robot in cast.items()}
         _check_shared_ports(drafts)
         every = compile_plans(show, {n: link.layout for n, link in drafts.items()},
                               {n: link.baud for n, link in drafts.items()})
@@ -378,6 +380,12 @@ def _for_robot(name: str, show: Show, make: Callable[[], T]) -> T:
 ROBOT_PORT = re.compile(r"^([A-Za-z][A-Za-z0-9_-]{0,31})=(.*)$", re.S)
 
 
+def _lone_robot(show: Show, host: str | None) -> str | None:
+    """The one robot `--host` drives, if it drives one alone (a plain `--port URL` is its)."""
+    robots = show.hosts.get(host, ()) if host is not None else ()
+    return robots[0] if len(robots) == 1 else None
+
+
 def split_robot_port(value: str) -> tuple[str, str] | None:
     """`--port left=/dev/ttyUSB0` -> ("left", "/dev/ttyUSB0"); a plain port (which may hold
     `=` itself, `sim://?drop=5`) -> None."""
@@ -386,8 +394,9 @@ def split_robot_port(value: str) -> tuple[str, str] | None:
 
 
 def _check_robot_ports(show: Show, request: RunRequest, host: str | None = None) -> None:
-    """`--port URL` is for a one-robot show, `--port NAME=URL` for one of several (of this host's)."""
-    if show.ensemble and request.port is not None:
+    """`--port URL` is for a one-robot show (or a host of one robot: `--host` drives it alone),
+    `--port NAME=URL` for one of several (of this host's)."""
+    if show.ensemble and request.port is not None and _lone_robot(show, host) is None:
         names = ", ".join(show.cast)
         raise UsageError(f"--port {request.port}: this show has several robots ({names}): "
                          f"give --port NAME=URL for each robot to move off its show port")
