@@ -401,3 +401,27 @@ def test_hosts_that_did_not_play_in_step_are_said_to_have_not():
     assert alignments[1].spread_ns == 145_000_000 and any("did not play in step" in line for line in said), said
     steady = align([a, _host("b", [(k * 0.5, k * 500_000_000 + 7_000) for k in range(40)])])
     assert not any("in step" in line for line in _warnings([a, _host("b", [])], steady))
+
+
+def test_the_merged_show_lasts_as_long_as_its_longest_host_in_either_order(duo, tmp_path):
+    """The docs trial: one show read 4.4 s or 9.5 s by the order the logs were given. The host
+    whose show ran longest times the merged show (its clock, its time the axis) either way."""
+    lengths = {}
+    for host, path in duo.logs.items():
+        with LogReader(path) as reader:
+            list(reader.messages(()))
+            lengths[host] = float(reader.result[Result.SHOW_S])
+    for order in (list(duo.logs.values()), list(duo.logs.values())[::-1]):
+        report = merge_logs(order, tmp_path / "m.mcap")
+        first = report.hosts[0].host
+        assert lengths[first] == max(lengths.values())  # the longest (of equals, the first given)
+        with LogReader(tmp_path / "m.mcap") as reader:
+            list(reader.messages(()))
+            assert float(reader.result[Result.SHOW_S]) == max(lengths.values()) and reader.info.hosts[0] == first
+    from choreo.log.merge import _longest_first
+
+    short, long = _host("short", []), _host("long", [])
+    short.metadata = {RESULT_METADATA_NAME: {Result.SHOW_S: "4.392"}}
+    long.metadata = {RESULT_METADATA_NAME: {Result.SHOW_S: "9.502"}}
+    assert [log.host for log in _longest_first([short, long])] == ["long", "short"]
+    assert [log.host for log in _longest_first([long, short])] == ["long", "short"]
