@@ -414,10 +414,10 @@ def test_the_merged_show_lasts_as_long_as_its_longest_host_in_either_order(duo, 
     for order in (list(duo.logs.values()), list(duo.logs.values())[::-1]):
         report = merge_logs(order, tmp_path / "m.mcap")
         first = report.hosts[0].host
-        assert lengths[first] == max(lengths.values())  # the longest (of equals, the first given)
+        assert lengths[first] >= max(lengths.values()) - 0.5  # the longest (of as long, the first given)
         with LogReader(tmp_path / "m.mcap") as reader:
             list(reader.messages(()))
-            assert float(reader.result[Result.SHOW_S]) == max(lengths.values()) and reader.info.hosts[0] == first
+            assert float(reader.result[Result.SHOW_S]) == lengths[first] and reader.info.hosts[0] == first
     from choreo.log.merge import _longest_first
 
     short, long = _host("short", []), _host("long", [])

@@ -59,6 +59,7 @@ from choreo.show.read import MAX_BYTES as SHOW_MAX_BYTES
 from choreo.textfit import visible
 
 MAX_INPUTS = 64  # logs one merge takes: each is an open file while the messages stream
+SAME_LENGTH_S = 0.5  # hosts' shows this close in length are as long (the first given times the merged one)
 UNISON_SPREAD_NS = 20_000_000  # hosts in step agree within this (R1: two hosts a bar apart showed 145-606 ms)
 FIT_MIN_SAMPLES = 20  # clock samples before a drift between two machines' clocks is fitted
 FIT_MIN_SPAN_NS = 60 * 10**9  # ...over at least this long (less: a shift is one number)
@@ -145,9 +146,10 @@ def merge_logs(paths: Sequence[str | Path], output: str | Path) -> MergeReport:
 
 
 def _longest_first(logs: list[HostLog]) -> list[HostLog]:
-    """The host whose show ran longest first (the rest as given): its clock times the merged show
-    and its time is the axis, so the merged show lasts as long as its longest host, whatever
-    order the logs were given in (the trial: one show read 4.4 s or 9.5 s by the order)."""
+    """The host whose show ran longest first (of those within SAME_LENGTH_S of it, the first
+    given; the rest as given): its clock times the merged show and its time is the axis, so the
+    merged show lasts as long as its longest host, whatever order the logs were given in (the
+    trial: one show read 4.4 s or 9.5 s by the order)."""
     def show_s(log: HostLog) -> float:
         text = log.metadata.get(RESULT_METADATA_NAME, {}).get(Result.SHOW_S, "")
         try:
@@ -155,7 +157,9 @@ def _longest_first(logs: list[HostLog]) -> list[HostLog]:
         except ValueError:
             return -math.inf
         return value if math.isfinite(value) else -math.inf
-    longest = max(range(len(logs)), key=lambda i: (show_s(logs[i]), -i))
+    lengths = [show_s(log) for log in logs]
+    # hosts of one show end within a motion of each other: the first given of those, as given
+    longest = next(i for i, length in enumerate(lengths) if length >= max(lengths) - SAME_LENGTH_S)
     return [logs[longest], *logs[:longest], *logs[longest + 1:]]
 
 
