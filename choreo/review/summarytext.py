@@ -53,7 +53,8 @@ def _render_run(summary: Summary) -> Iterable[str]:
     made = f"(choreo {run.get(Info.VERSION, '?')}, host {run.get(Info.HOST, '?')})"
     if run and run.get(Info.ROBOTS):
         names = run[Info.ROBOTS].split(",")
-        yield (f"run       started {run.get(Info.START_TIME, '?')}, {len(names)} robots ({', '.join(names)}; "
+        robots = f"{len(names)} robot" + ("s" if len(names) != 1 else "")
+        yield (f"run       started {run.get(Info.START_TIME, '?')}, {robots} ({', '.join(names)}; "
                f"ports below) {made}")
     elif run:
         yield (f"run       started {run.get(Info.START_TIME, '?')} on {run.get(Info.PORT, '?')} at "

@@ -288,8 +288,9 @@ class Session:
             if event.kind in ("jump", "tempo") and \
                     show.realign(self.clock.mono() + REALIGN_LEAD_S, tempo_changed=event.kind == "tempo"):
                 # before the show began: it starts on the session's bar line as it now stands
-                self._tell(listeners, INFO, f"{LINK_PREFIX}the session's bars moved before the start: the show "
-                                            f"starts on its bar line {show.zero - self.clock.mono():.3f} s from now")
+                what = "tempo changed" if event.kind == "tempo" else "bars moved"
+                self._tell(listeners, INFO, f"{LINK_PREFIX}the session's {what} before the start: the show starts "
+                                            f"on its bar line {show.zero - self.clock.mono():.3f} s from now")
                 self._note_zero(show)
             self.clock.source.notify()  # the runners follow every change, logged or not
             if gate.passes():
