@@ -510,11 +510,13 @@ def test_a_flood_over_osc_neither_fills_the_log_nor_the_terminal_and_the_review_
             sent += 1
         peer.replies(quiet_s=0.5)
         stopped = False
+        stops = 0
         deadline = time.monotonic() + 30
         while not stopped:  # a stop, once the sender's budget has come back
             assert time.monotonic() < deadline, "the stop was never taken"
             peer.send(message("/choreo/stop"))
             sent += 1
+            stops += 1
             stopped = any(b"stopping" in reply for reply in peer.replies(quiet_s=0.3))
         peer.close()
         _, err = process.communicate(timeout=30)
@@ -524,10 +526,13 @@ def test_a_flood_over_osc_neither_fills_the_log_nor_the_terminal_and_the_review_
     commands = read_log(log_path).topic("/choreo/command")
     unlogged = [c for c in commands if c["command"] == UNLOGGED]
     assert unlogged and len(commands) < 200
-    assert sum(c.get("count", 1) for c in commands) == sent
+    # every command the run heard is in its log; a stop sent again while the reply to the one taken
+    # was on its way (a loaded machine) may come after the log closed: those alone may be missing
+    total = sum(c.get("count", 1) for c in commands)
+    assert sent - stops < total <= sent, (total, sent, stops)
     review = choreo("log", "summary", str(log_path), cwd=tmp_path)
     assert review.returncode == 0, review.stderr
-    assert f"commands  {sent} from the operator ({sent - 2} refused; " in review.stdout  # a GO and the stop taken
+    assert f"commands  {total} from the operator ({total - 2} refused; " in review.stdout  # a GO and the stop taken
     assert "log export" not in review.stdout
 
 
