@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import threading
-import time
-from collections.abc import Sequence
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import TracebackType
@@ -22,7 +20,7 @@ from choreo.clock import (MachineShowClock, PausableShowClock, RunClock, ShowClo
 from choreo.errors import UsageError
 from choreo.events import Command, PlayOutListener, RunListener, RunResult, StopRequest
 from choreo.live.controls import HoldingShowClock, Live
-from choreo.live.limits import LIMITS, Budget, Rate
+from choreo.live.limits import LIMITS, Rate, ReportGate
 from choreo.log.format import CLOCK_EVERY_S, INFO, LINK_PREFIX, WARNING, ClockRecord, Result, result_metadata
 from choreo.log.recorder import Recorder
 from choreo.music.player import LEAD_IN_S, Player
@@ -293,7 +291,7 @@ class Session:
                                             f"on its bar line {show.zero - self.clock.mono():.3f} s from now")
                 self._note_zero(show)
             self.clock.source.notify()  # the runners follow every change, logged or not
-            if gate.passes():
+            if gate.passes(event.kind):
                 record(event.kind, WARNING if event.kind in ("jump", "stopped") else INFO, event.message)
             summary = gate.due(event.snapshot)
             if summary is not None:
@@ -471,26 +469,20 @@ class ClockSampler:
 class _LinkEventGate:
     """How many of a Link session's changes are logged one by one: a peer changing its tempo
     every 10 ms would otherwise write a clock sample and a line each (and print the line).
-    Past the budget they are counted, and summed up in one line a `every_s` at most."""
+    Past the budget they are counted, and summed up in one line a `every_s` at most: the OSC
+    commands' `ReportGate`, whose lock also serves the Link thread and the pass's end alike."""
 
     def __init__(self, rate: Rate, every_s: float) -> None:
-        self._budget = Budget.of(rate)
-        self._every_s = every_s
-        self._held = 0
-        self._since = time.monotonic()
+        self._gate = ReportGate(replace(LIMITS, reported=rate, summary_every_s=every_s))
 
-    def passes(self) -> bool:
-        if self._budget.take():
-            return True
-        self._held += 1
-        return False
+    def passes(self, kind: str = "change") -> bool:
+        return self._gate.passes(kind, "link session", ok=False)
 
     def due(self, snapshot: LinkSnapshot, force: bool = False) -> str | None:
         """The summary of the changes held back, once `every_s` has passed (or `force`)."""
-        now = time.monotonic()
-        if not self._held or (not force and now - self._since < self._every_s):
+        held = self._gate.due(force)
+        if held is None:
             return None
-        held, self._held, self._since = self._held, 0, now
-        return (f"{held} more session change{'s' if held != 1 else ''} not logged one by one "
+        return (f"{held.count} more session change{'s' if held.count != 1 else ''} not logged one by one "
                 f"(now {snapshot.tempo:.2f} bpm, {snapshot.peers} peers, "
                 f"{'playing' if snapshot.playing else 'stopped'})")
