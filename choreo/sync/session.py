@@ -235,7 +235,6 @@ class LinkSession:
         def propose(link: LinkPeer) -> None:
             link.tempo = bpm
         self._call(propose)
-        self._resample()
 
     def start_playing(self, beat: float) -> None:
         """Start the session's transport on continuous `beat` (a bar line ahead): peers that
@@ -248,7 +247,6 @@ class LinkSession:
             self._started = (time.monotonic(), timedelta(microseconds=at_us))
             link.set_is_playing_and_request_beat_at_time(True, self._started[1], beat + snapshot.shift)
         self._call(start)
-        self._resample()
 
     def stop_playing(self) -> bool:
         """Stop the transport if this host started it and it plays (a show stopped in its
@@ -260,7 +258,6 @@ class LinkSession:
             link.set_is_playing_and_request_beat_at_time(False, link.time, float(link.beat))
         self._call(stop)
         self._started = None
-        self._resample()
         return True
 
     def count_from_start(self) -> float:
@@ -280,19 +277,19 @@ class LinkSession:
             link.quantum = self.quantum
             link.request_beat_at_start_playing_time(0.0)
             found.append(-(self._beat_time(link, 0.0) - start_us) * float(link.tempo) / 60e6)
-        self._call(count)
-        self._resample(renumbered=True)
+        self._call(count, renumbered=True)
         return found[0]
 
-    @staticmethod
-    def _beat_time(link: LinkPeer, beat: float) -> float:
-        """Link time (us) of `beat` in this host's count, read now."""
-        t1 = _us(link.time)
-        now = link.beat
-        t2 = _us(link.time)
-        return (t1 + t2) / 2 + (beat - now) * 60e6 / float(link.tempo)
+    @classmethod
+    def _beat_time(cls, link: LinkPeer, beat: float) -> float:
+        """Link time (us) of `beat` in this host's count, read now (as a sample reads it)."""
+        _, beat_us, now, _ = cls._read(link)
+        return Timeline(beat_us, now, float(link.tempo)).time_at(beat)
 
-    def _call(self, action: Callable[[LinkPeer], None]) -> None:
+    def _call(self, action: Callable[[LinkPeer], None], renumbered: bool = False) -> None:
+        """`action` on the Link thread, then a fresh sample there (this host changed the
+        session: the next snapshot must show it); `renumbered`: this host renumbered its beats
+        on purpose, so the count starts over with no shift."""
         loop = self._loop
         if loop is None or self._closing.is_set():
             raise ChoreoError("Link: the session is closed")
@@ -300,19 +297,8 @@ class LinkSession:
         async def run() -> None:
             assert self._link is not None
             action(self._link)
-        asyncio.run_coroutine_threadsafe(run(), loop).result(CALL_TIMEOUT_S)
-
-    def _resample(self, renumbered: bool = False) -> None:
-        """A fresh sample now (after this host changed the session); `renumbered`: this host
-        renumbered its beats on purpose, so the count starts over with no shift."""
-        loop = self._loop
-        if loop is None:
-            return
-
-        async def sample() -> None:
-            assert self._link is not None
             self._sample(self._link, fresh=renumbered)
-        asyncio.run_coroutine_threadsafe(sample(), loop).result(CALL_TIMEOUT_S)
+        asyncio.run_coroutine_threadsafe(run(), loop).result(CALL_TIMEOUT_S)
 
     # -- the Link thread ---------------------------------------------------------------------
 
