@@ -73,15 +73,14 @@ def _start_here(session: LinkSession, how: LinkStart, tell: Callable[[str], None
     playing (the show's tempo proposed first)."""
     snapshot = session.snapshot()
     if snapshot.playing:
-        bar = bar_at_or_after(snapshot.beat_at_mono(time.monotonic() + how.lead_s), session.quantum)
+        bar = next_bar(session, how.lead_s)
         tell(f"the session plays ({peers_text(snapshot.peers)}, {snapshot.tempo:.2f} bpm): "
              f"the show starts on its next bar line")
         return bar
     if how.tempo is not None and abs(snapshot.tempo - how.tempo) > 1e-3:
         session.propose_tempo(how.tempo)
         snapshot = session.snapshot()
-    lead = how.lead_s + START_LEAD_S
-    bar = bar_at_or_after(snapshot.beat_at_mono(time.monotonic() + lead), session.quantum)
+    bar = next_bar(session, how.lead_s + START_LEAD_S)
     start_mono = snapshot.mono_of_beat(bar)
     alone = "alone, as the session's first peer" if snapshot.peers == 0 else f"with {peers_text(snapshot.peers)}"
     tell(f"starting the session's transport {alone}, at {snapshot.tempo:.2f} bpm, on a bar line "
