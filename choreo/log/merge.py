@@ -41,7 +41,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from statistics import median
-from typing import IO
+from typing import IO, TypeVar
 
 from mcap.writer import CompressionType, Writer
 
@@ -268,7 +268,7 @@ def align(logs: list[HostLog]) -> list[Alignment]:
     out = [Alignment(first.host, 0, 0, 0, "axis")]
     for log in logs[1:]:
         if first.beats and log.beats:
-            pairs = list(_beat_pairs(_increasing_beats(first.beats), _increasing_beats(log.beats)))
+            pairs = list(_offset_pairs(_increasing_beats(first.beats), _increasing_beats(log.beats)))
         else:
             pairs = list(_offset_pairs(_increasing(first.samples), _increasing(log.samples)))
         if pairs:
@@ -304,13 +304,16 @@ def _slope(points: list[tuple[int, int]]) -> float:
     return sum((x - mean_x) * (y - mean_y) for x, y in points) / sxx if sxx else 0.0
 
 
-def _increasing(samples: list[tuple[float, int]]) -> list[tuple[float, int]]:
-    """The samples whose show time goes on from the one before (a loop's rewind left out): the
-    axis a show time is interpolated on."""
-    kept: list[tuple[float, int]] = []
-    for show_s, log_time in samples:
-        if not kept or (show_s > kept[-1][0] and log_time > kept[-1][1]):
-            kept.append((show_s, log_time))
+Sample = TypeVar("Sample", tuple[float, int], tuple[float, int, float])  # (show time or beat, log time, ...)
+
+
+def _increasing(samples: list[Sample]) -> list[Sample]:
+    """The samples whose show time (or beat) goes on from the one before (a loop's rewind left
+    out): the axis a show time is interpolated on."""
+    kept: list[Sample] = []
+    for sample in samples:
+        if not kept or (sample[0] > kept[-1][0] and sample[1] > kept[-1][1]):
+            kept.append(sample)
     return kept
 
 
@@ -324,42 +327,29 @@ def _increasing_beats(samples: list[tuple[float, int, float]]) -> list[tuple[flo
     """The Link samples while the show's beat goes on (a --loop pass's restart left out), less
     the last one before each change of tempo: a host hears of a peer's change some tens of ms
     late, and a sample taken meanwhile reads the beat on the old tempo."""
-    kept: list[tuple[float, int, float]] = []
-    for beat, log_time, tempo in samples:
-        if not kept or (beat > kept[-1][0] and log_time > kept[-1][1]):
-            kept.append((beat, log_time, tempo))
+    kept = _increasing(samples)
     return [one for one, after in zip(kept, [*kept[1:], None], strict=True) if after is None or after[2] == one[2]]
 
 
-def _beat_pairs(axis: list[tuple[float, int, float]],
-                samples: list[tuple[float, int, float]]) -> Iterator[tuple[int, int]]:
-    """(the sample's log time, its offset) by the show's beat: the axis interpolated at each
-    sample's beat, only between two axis samples at one tempo, and the sample at that tempo too
-    (across a tempo change the beat is no straight line in time: each host's samples fall
-    a few milliseconds apart around it)."""
-    beats = [beat for beat, _, _ in axis]
-    for beat, log_time, tempo in samples:
-        at = bisect_right(beats, beat)
-        if not 0 < at < len(axis):
-            continue
-        (b0, t0, tempo0), (b1, t1, tempo1) = axis[at - 1], axis[at]
-        if not tempo0 == tempo1 == tempo:
-            continue
-        yield log_time, round(t0 + (t1 - t0) * (beat - b0) / (b1 - b0)) - log_time
-
-
-def _offset_pairs(axis: list[tuple[float, int]], samples: list[tuple[float, int]]) -> Iterator[tuple[int, int]]:
-    """(the sample's log time, its offset) for `offsets_to`: the axis interpolated at each sample's
-    key (a show time, or the show's beat on Link)."""
+def _offset_pairs(axis: list[Sample], samples: list[Sample]) -> Iterator[tuple[int, int]]:
+    """(the sample's log time, its offset): the axis interpolated at each sample's key (a show
+    time, or the show's beat on Link) within the axis's span. Samples with a tempo (by the beat)
+    pair only between two axis samples at one tempo, the sample at that tempo too: across a
+    tempo change the beat is no straight line in time, and each host samples it a few
+    milliseconds apart around it."""
     if len(axis) < 2:
         return
-    times = [key for key, _ in axis]
-    for key, log_time in samples:
-        if not times[0] <= key <= times[-1]:
+    keys = [one[0] for one in axis]
+    for sample in samples:
+        key, log_time = sample[0], sample[1]
+        if not keys[0] <= key <= keys[-1]:
             continue
-        at = min(max(bisect_right(times, key), 1), len(axis) - 1)
-        (s0, t0), (s1, t1) = axis[at - 1], axis[at]
-        yield log_time, round(t0 + (t1 - t0) * (key - s0) / (s1 - s0)) - log_time
+        at = min(max(bisect_right(keys, key), 1), len(axis) - 1)
+        before, after = axis[at - 1], axis[at]
+        if before[2:] != after[2:] or after[2:] != sample[2:]:
+            continue
+        (k0, t0), (k1, t1) = before[:2], after[:2]
+        yield log_time, round(t0 + (t1 - t0) * (key - k0) / (k1 - k0)) - log_time
 
 
 def _by_show_start(first: HostLog, log: HostLog) -> int:
