@@ -39,6 +39,7 @@ import socket
 import sys
 import tempfile
 import threading
+from functools import partial
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -371,23 +372,15 @@ def _each(links: list[LinkSettings], check: Callable[[LinkSettings], list[Findin
     daemon, holding only its port)."""
     if machine.virtual:
         return {link.robot: _guarded(check, link) for link in links}
-    done: dict[str, list[Finding]] = {}
-    lock = threading.Lock()
-
-    def work(link: LinkSettings) -> None:
-        found = _guarded(check, link)
-        with lock:
-            done[link.robot] = found
-
-    threads = [threading.Thread(target=work, args=(link,), daemon=True, name=f"doctor {link.robot}")
-               for link in links]
-    for thread in threads:
-        thread.start()
+    waits = {link.robot: _on_thread(partial(_guarded, check, link), f"doctor {link.robot}") for link in links}
     end = time.monotonic() + machine.deadline_s
-    for thread in threads:
-        thread.join(max(0.0, end - time.monotonic()))
-    with lock:
-        return {link.robot: done.get(link.robot) or [_hung(link, machine)] for link in links}
+    found: dict[str, list[Finding]] = {}
+    for link in links:
+        try:
+            found[link.robot] = waits[link.robot](max(0.0, end - time.monotonic()))
+        except Exception:  # noqa: BLE001 - no answer in time, or a check that died unforeseen: as before, no answer
+            found[link.robot] = [_hung(link, machine)]
+    return found
 
 
 def _guarded(check: Callable[[LinkSettings], list[Finding]], link: LinkSettings) -> list[Finding]:
@@ -456,25 +449,19 @@ def _link_started(settings: RunSettings, machine: Machine) -> Callable[[], list[
     (Link in a wedged network stack, a binding that hangs: doctor never does)."""
     assert settings.link is not None
     clock = settings.link
-    seen: list[LinkSeen] = []
-
-    def work() -> None:
-        try:
-            seen.append(_look(clock, machine))
-        except Exception as exc:  # noqa: BLE001 - a check failing in a way nobody foresaw is one finding
-            seen.append(LinkSeen("", failure=f"{type(exc).__name__}: {exc}"))
-
-    thread = threading.Thread(target=work, daemon=True, name="doctor link")
-    thread.start()
+    wait = _on_thread(lambda: _look(clock, machine), "doctor link")
 
     def findings() -> list[Finding]:
-        thread.join(machine.link_deadline_s)
-        if not seen:
+        try:
+            seen = wait(machine.link_deadline_s)
+        except _NoAnswer:
             return [Finding(PROBLEM, "link session", f"no answer from the Link session within "
                             f"{machine.link_deadline_s:g} s (the binding or the network stack hangs)",
                             "choreo doctor SHOW again; if it hangs again, reinstall aalink: "
                             f"{INSTALL_HINT}")]
-        return _link_findings(settings, seen[0])
+        except Exception as exc:  # noqa: BLE001 - a check failing in a way nobody foresaw is one finding
+            seen = LinkSeen("", failure=f"{type(exc).__name__}: {exc}")
+        return _link_findings(settings, seen)
     return findings
 
 
@@ -697,23 +684,40 @@ def _in_time(call: Callable[[], T], seconds: float, machine: Machine, hangs: str
     thread is left behind); `hangs` says what then."""
     if machine.virtual:
         return call()
+    try:
+        return _on_thread(call, "doctor music")(seconds)
+    except _NoAnswer:
+        raise ChoreoError(f"no answer within {seconds:g} s ({hangs})") from None
+
+
+class _NoAnswer(Exception):
+    """A check on a thread of its own did not answer in time."""
+
+
+def _on_thread(call: Callable[[], T], name: str) -> Callable[[float], T]:
+    """`call` started now on a thread of its own; the returned wait gives its result within the
+    seconds given it, its exception raised on the waiting thread, or _NoAnswer (the thread left
+    behind: a check that hangs never hangs doctor)."""
     done: list[T] = []
     failed: list[BaseException] = []
 
     def work() -> None:
         try:
             done.append(call())
-        except BaseException as exc:  # noqa: BLE001 - handed to the caller's thread, raised there
+        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread, raised there
             failed.append(exc)
 
-    thread = threading.Thread(target=work, daemon=True, name="doctor music")
+    thread = threading.Thread(target=work, daemon=True, name=name)
     thread.start()
-    thread.join(seconds)
-    if failed:
-        raise failed[0]
-    if not done:
-        raise ChoreoError(f"no answer within {seconds:g} s ({hangs})")
-    return done[0]
+
+    def wait(seconds: float) -> T:
+        thread.join(seconds)
+        if failed:
+            raise failed[0]
+        if not done:
+            raise _NoAnswer
+        return done[0]
+    return wait
 
 
 def _song_length(settings: RunSettings, end: float, decodes: str, cut: bool = False) -> Finding:
