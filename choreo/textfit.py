@@ -22,6 +22,10 @@ ELLIPSIS = "…"
 _HIDDEN_CATEGORIES = frozenset(("Cc", "Cf", "Zl", "Zp", "Cs"))
 # Characters that print as nothing although Unicode gives them a letter's or a mark's category.
 _BLANK = frozenset("\u034f\u115f\u1160\u17b4\u17b5\u3164\uffa0")
+# Unicode's default-ignorable code points a category does not catch: variation selectors (marks
+# that print as nothing: `bow` and `bow\ufe0f` look alike), Mongolian ones, and the blocks kept
+# for more of them (unassigned today, zero-width on a terminal that knows them tomorrow).
+_IGNORABLE = ((0x180B, 0x180F), (0x2065, 0x2065), (0xFE00, 0xFE0F), (0xFFF0, 0xFFF8), (0xE0000, 0xE0FFF))
 # Anything outside printable ASCII is looked at one by one; printable ASCII never needs to be.
 _SUSPECT = re.compile(r"[^\x20-\x7e]")
 
@@ -40,7 +44,10 @@ def _escape(char: str) -> str:
 
 def is_hidden(char: str) -> bool:
     """Whether a terminal would obey `char`, or show it as nothing, rather than print it."""
-    return unicodedata.category(char) in _HIDDEN_CATEGORIES or char in _BLANK
+    if unicodedata.category(char) in _HIDDEN_CATEGORIES or char in _BLANK:
+        return True
+    code = ord(char)
+    return any(first <= code <= last for first, last in _IGNORABLE)
 
 
 def visible(text: str, keep: str = "") -> str:

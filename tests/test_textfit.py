@@ -24,6 +24,10 @@ HOSTILE = [
     ("name\udcff", "name\\udcff"),  # an undecodable byte of a file name
     ("\U000e0041", "\\udb40\\udc41"),  # a tag character (invisible), beyond the BMP
     ("\u3164", "\\u3164"),  # Hangul filler: a letter that prints as nothing
+    ("bow\ufe0f", "bow\\ufe0f"),  # a variation selector: a mark that prints as nothing (issue 21, item 4)
+    ("a\u180bb\u180f", "a\\u180bb\\u180f"),  # Mongolian variation selectors
+    ("w\U000e0100ave", "w\\udb40\\udd00ave"),  # a variation selector beyond the BMP
+    ("\u2065\ufff0", "\\u2065\\ufff0"),  # default-ignorable, unassigned: zero-width once assigned
 ]
 
 
