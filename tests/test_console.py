@@ -312,6 +312,7 @@ NOT_ESC = [
     b"\x1b[?1;2c", b"\x1b[24;80R", b"\x1b[I", b"\x1b[O",  # device attributes, cursor report, focus
     b"\x1b[M !!", b"\x1b[M#q ", b"\x1b[<0;12;5M", b"\x1b[<0;12;5m",  # mouse: X10 (a space in it), SGR
     b"\x1b[200~go q y \r\n\x1b[201~",  # a bracketed paste with spaces and q in it
+    b"\x1b#8", b"\x1b(B", b"\x1b%G", b"\x1b\x1b(0", b"\x1bNa",  # intermediates and a final; SS2 (issue 21, item 5)
 ]
 
 

@@ -265,13 +265,15 @@ def _complete(sequence: bytes) -> bool:
         return body != b"" and _complete(body)
     if _is_string(sequence):
         return body.endswith((b"\x07", b"\x1b\\"))
-    if head not in (b"[", b"O"):
+    if 0x21 <= head[0] <= 0x2F:  # intermediates, then a final byte (`ESC ( B`, `ESC # 8`); `ESC SP` is Alt+Space
+        return body != b"" and not 0x20 <= body[-1] <= 0x2F
+    if head not in (b"[", b"O", b"N"):
         return True  # Alt and a key: one byte
     if not body or (head == b"[" and body == b"["):  # the Linux console's F1: ESC [ [ A
         return False
     if head == b"[" and body[:1] == b"M":  # an X10 mouse report: three raw bytes after the M
         return len(body) >= 4
-    return not 0x20 <= body[-1] <= 0x3F  # CSI, SS3: parameters, intermediates, a final byte
+    return not 0x20 <= body[-1] <= 0x3F  # CSI, SS3, SS2: parameters, intermediates, a final byte
 
 
 def unmarked_paste(keys: list[str]) -> list[str]:
