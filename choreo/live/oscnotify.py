@@ -4,7 +4,9 @@ waits for the network and a message that cannot be sent (or queued) is dropped.
 
 A target that is choreo's own `--osc` port on this machine would loop (each notification
 comes back as an unknown command, which is notified again), so it is refused at start-up:
-loopback, the unspecified address, and every address of this machine's interfaces.
+loopback, the unspecified address, every address of this machine's interfaces, and a multicast
+group or the broadcast address at that port (a datagram sent there is delivered to this
+machine's own sockets too: `ff02::1%eth0` reached `--osc-host ::` and looped).
 
 A sender may ask for the same notifications with `/choreo/updates 1` (QLab's `/updates`):
 `Subscriptions` keeps who (at most `Limits.update_subscribers`, each until it has been silent
@@ -95,6 +97,34 @@ def is_this_machine(ip: str, family: int) -> bool:
     return True
 
 
+def comes_back(ip: str, family: int) -> bool:
+    """Would a datagram sent to `ip` reach this machine's own sockets? This machine's own
+    addresses do (`is_this_machine`), and so do a multicast group (sent with the loop that is
+    every system's default on: any socket on the port may take it) and the broadcast address."""
+    try:
+        address = ipaddress.ip_address(ip.split("%")[0])
+    except ValueError:
+        return False
+    mapped = address.ipv4_mapped if isinstance(address, ipaddress.IPv6Address) else None
+    shared = (mapped or address).is_multicast or (mapped or address) == ipaddress.IPv4Address("255.255.255.255")
+    return shared or is_this_machine(ip, family)
+
+
+def receiver(family: int, address: tuple) -> tuple:
+    """Who a looked-up target reaches, however it was spelt: an IPv4-mapped IPv6 address
+    (`[::ffff:127.0.0.1]:9`) reaches the IPv4 receiver (`127.0.0.1:9`); IPv6's flow label
+    does not change the receiver, its scope does."""
+    host, port = str(address[0]), address[1]
+    try:
+        ip = ipaddress.ip_address(host.split("%")[0])
+    except ValueError:
+        return family, address
+    mapped = ip.ipv4_mapped if isinstance(ip, ipaddress.IPv6Address) else None
+    if mapped is not None:
+        return socket.AF_INET, (str(mapped), port)
+    return (family, (str(ip), port, address[3])) if len(address) == 4 else (family, (str(ip), port))
+
+
 class Notifier:
     """Sends each notification to every target (see the module's docstring)."""
 
@@ -104,6 +134,7 @@ class Notifier:
         self._queue: queue.Queue[tuple | None] = queue.Queue(QUEUED)
         self._sockets: dict[int, socket.socket] = {}
         self._addresses: list[tuple[int, Any]] = []  # (family, address) of each target
+        self._receivers: list[tuple] = []  # who each target reaches (`receiver`)
         self._thread: threading.Thread | None = None
 
     def resolve(self, own_port: int) -> None:
@@ -117,13 +148,13 @@ class Notifier:
                 self.close()
                 raise UsageError(f"--osc-notify {show_target(target)}: {getattr(exc, 'strerror', None) or exc}") \
                     from None
-            if port == own_port and any(is_this_machine(str(info[4][0]), info[0]) for info in found):
+            if port == own_port and any(comes_back(str(info[4][0]), info[0]) for info in found):
                 self.close()
                 raise UsageError(f"--osc-notify {show_target(target)}: that is choreo's own --osc port on this "
                                  "machine: each notification would come back as a command (give the port "
                                  "the receiver listens on)")
             family, kind, proto, _, address = found[0]
-            if (family, address) in self._addresses:  # localhost:9000 and 127.0.0.1:9000: one receiver
+            if receiver(family, address) in self._receivers:  # localhost:9000 and 127.0.0.1:9000: one receiver
                 self.close()
                 raise UsageError(f"--osc-notify {show_target(target)}: given twice (another spelling of a "
                                  "target given before): each notification would be sent to it twice")
@@ -131,6 +162,7 @@ class Notifier:
                 self._sockets[family] = socket.socket(family, kind, proto)
                 self._sockets[family].setblocking(False)
             self._addresses.append((family, address))
+            self._receivers.append(receiver(family, address))
 
     def start(self) -> None:
         self._thread = threading.Thread(target=self._loop, name="choreo-osc-notify", daemon=True)
