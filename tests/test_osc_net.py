@@ -31,6 +31,7 @@ from test_osc import GO_SHOW, TIMEOUT_S, Commands, ask, client, free_port, live,
 
 from choreo.live import osc as osc_module
 from choreo.live.osc import OscServer
+from choreo.live.oscnet import ConnectionTable
 from choreo.live.osclimits import OscLimits
 from choreo.live.oscwire import BUNDLE, decode_packet, encode_message, slip_encode
 
@@ -211,6 +212,50 @@ def test_idle_connections_cannot_keep_a_go_out(live):
         server.close()
 
 
+JUNK = {"a bad SLIP escape": b"\xc0\xdb\x01\xc0", "a malformed bundle": slip_encode(bad_bundle(0)),
+        "an address nobody takes": slip_encode(encode_message("/x")),
+        "a reply": slip_encode(encode_message("/reply/choreo/go", ["{}"]))}
+
+
+@pytest.mark.parametrize("junk", list(JUNK))
+def test_connections_that_sent_only_junk_cannot_keep_the_operators_machine_out(live, junk):
+    """Before: any whole frame proved a connection, so eight connections from the operator's own
+    machine that each sent one bad frame (then nothing) held its eight places for the idle
+    timeout (600 s), and QLab there was refused ('too many connections'). Junk proves nothing:
+    such connections are the silent ones a newcomer takes the place of."""
+    commands = Commands()
+    live.subscribe(commands)
+    limits = OscLimits(max_connections=6, max_per_sender=3)  # the timeouts as shipped: 5 s, 600 s
+    server = serve(live, wire_limits=limits)
+    squatters = [connect_from("127.0.0.1", server.port) for _ in range(limits.max_per_sender)]
+    try:
+        for sock in squatters:
+            sock.sendall(JUNK[junk])
+        assert wait_for(lambda: sum(server.counts.values()) + len(commands.events) >= limits.max_per_sender,
+                        TIMEOUT_S)  # each one's junk read
+        with client("tcp", server.port) as qlab:  # from 127.0.0.1 too, with the squatters still open
+            assert ask(qlab, "/choreo/start")[1]["status"] == "ok"
+            assert server._net.connections <= limits.max_per_sender
+    finally:
+        for sock in squatters:
+            sock.close()
+        server.close()
+
+
+def test_a_desk_that_spoke_stays_after_a_junk_message():
+    """A connection proven by a command and then sending junk keeps its idle timeout: a message
+    begun and ended as junk does not leave it on the 5 s deadline of a message begun."""
+    table: ConnectionTable[str] = ConnectionTable(OscLimits())
+    table.admit("desk", "10.0.0.1", 0.0)
+    table.heard("desk", 1.0, messages=1, pending=False)
+    table.heard("desk", 2.0, messages=0, frames=0, pending=True)  # a message begun
+    table.heard("desk", 3.0, messages=0, frames=1, pending=False)  # ...ended, as junk
+    assert table.next_due() == 1.0 + OscLimits().idle_timeout_s
+    table.admit("junk", "10.0.0.1", 0.0)
+    table.heard("junk", 1.0, messages=0, frames=5, pending=False)  # five bad frames: not proven
+    assert table.expired(OscLimits().message_timeout_s) == [("junk", "closed: no command within 5 s of connecting")]
+
+
 def test_silent_and_trickling_connections_are_closed_in_time(live):
     commands = Commands()
     live.subscribe(commands)
@@ -241,8 +286,8 @@ def test_silent_and_trickling_connections_are_closed_in_time(live):
     finally:
         server.close()
     whys = sorted(e.answer.message for e in commands.events if e.command.name == "dropped")
-    assert whys == ["closed: a message unfinished after 0.3 s", "closed: no message within 0.3 s of connecting"] or \
-        whys == ["closed: no message within 0.3 s of connecting"] * 2  # (the trickle's first byte came late)
+    assert whys == ["closed: a message unfinished after 0.3 s", "closed: no command within 0.3 s of connecting"] or \
+        whys == ["closed: no command within 0.3 s of connecting"] * 2  # (the trickle's first byte came late)
 
 
 # -- the attack, against the real command with a Mac's descriptor limit -----------------------

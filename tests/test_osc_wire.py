@@ -247,7 +247,7 @@ def test_a_connection_must_speak_in_time_and_a_trickle_does_not_keep_it():
     table.heard("lab", 1.0, messages=1, pending=True)  # a message, then the start of the next one
     assert table.next_due() == 5.0
     assert table.expired(4.99) == []
-    assert sorted(table.expired(5.0)) == [("silent", "closed: no message within 5 s of connecting"),
+    assert sorted(table.expired(5.0)) == [("silent", "closed: no command within 5 s of connecting"),
                                           ("trickle", "closed: a message unfinished after 5 s")]
     assert table.expired(6.0) == [("lab", "closed: a message unfinished after 5 s")]
     assert table.expired(600.99) == []

@@ -97,7 +97,7 @@ from choreo.events import Answer, Command, CommandEvent, GoCue, RunResult, StepE
 from choreo.live.limits import LIMITS, Limits, SenderLimits
 from choreo.log.format import UNLOGGED
 from choreo.live.controls import Live
-from choreo.live.oscnet import ListenFailed, OscNet
+from choreo.live.oscnet import Handled, ListenFailed, OscNet
 from choreo.live.osclimits import LIMITS as WIRE_LIMITS
 from choreo.live.osclimits import OscLimits
 from choreo.live.oscnotify import Notifier, Subscriber, Subscriptions, Target, is_this_machine, show_target
@@ -517,18 +517,20 @@ class OscServer:
         self._refuse(host, f"osc tcp {show_target((host, sender[1]))}", "")
         return False
 
-    def packet(self, transport: str, sender: Sender, data: bytes) -> list[bytes]:
+    def packet(self, transport: str, sender: Sender, data: bytes) -> Handled:
         """One packet (a datagram, a TCP frame): its encoded replies. The sender is checked
         before the packet is read, and its rate of packets: past it the packet is counted and
         not read, at the least cost (a flood that costs choreo more than its sender outruns the
-        socket, which then drops the operator's GO too). A malformed packet is refused whole."""
+        socket, which then drops the operator's GO too). A malformed packet is refused whole.
+        It `spoke` if it carried an address of ours (a command, a question), read."""
         host, allowed = self._verdict(sender[0])
         budget = budget_key(transport, host)
         cost = 1 + (len(data) - 1) // self.wire_limits.packet_bytes_per_token if data else 1  # reading is by the byte
         if not self._limits.may_read(budget, allowed, cost):
             self.counts[UNREAD] += 1
             self.live.count(UNREAD if allowed else "refused", f"osc {transport} {host}")
-            return []
+            return Handled()
+        spoke = False
         source = f"osc {transport} {show_target((host, sender[1]))}"  # `where`, from the remembered host
         if not allowed:
             replies = [self._refuse(host, source, "")]  # its address is not read: the reply is `/reply`
@@ -540,7 +542,8 @@ class OscServer:
                 replies = [self._malformed(budget, source, decoded.error, decoded.address)]
             else:
                 replies = self._messages(origin, decoded.messages)
-        return [reply.encoded() for reply in replies if reply is not None]
+                spoke = any(wanted_or_none(self._shown(m.address)) is not None for m in decoded.messages)
+        return Handled((reply.encoded() for reply in replies if reply is not None), spoke)
 
     def rest_s(self, sender: Sender) -> float:
         """A TCP sender over its rate of packets: how long its connections are not read."""

@@ -10,9 +10,13 @@ memory, descriptors and time, and the operator's GO still gets through:
   connections that speak, of the least lately heard one of the address holding the most (so
   a few addresses cannot lock a new one out either). A sender at its own cap of connections
   that all speak gets no more.
-- A connection must complete a message within `message_timeout_s` of opening or of beginning
-  it (a trickle of bytes does not keep it open); one that has sent messages is closed after
-  `idle_timeout_s` of silence. Buffered bytes are bounded by the frame limit.
+- A connection must send a message the handler takes (a command, a question: not junk, a
+  malformed packet or an address nobody takes) within `message_timeout_s` of opening, and
+  complete every message within `message_timeout_s` of beginning it (a trickle of bytes does
+  not keep it open); one that has sent messages is closed after `idle_timeout_s` without one.
+  Junk proves nothing: eight connections from the operator's own machine that each sent one bad
+  frame held its places for the idle timeout, and QLab there could not connect over TCP.
+  Buffered bytes are bounded by the frame limit.
 - Out of descriptors (EMFILE: the process's limit is lower than the caps need), the oldest
   connection that has not sent a message is closed to make room; with none, accepting pauses
   for `ACCEPT_PAUSE_S` instead of spinning on a listener that stays readable.
@@ -45,7 +49,7 @@ import sys
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from collections.abc import Hashable
 from typing import Generic, Protocol, TypeVar
@@ -88,8 +92,9 @@ class PacketHandler(Protocol):
     def admit(self, sender: Sender) -> bool:
         """A TCP connection, at accept: False closes it before it is read."""
 
-    def packet(self, transport: str, sender: Sender, data: bytes) -> list[bytes]:
-        """One packet (a datagram, a TCP frame): the encoded replies to send back."""
+    def packet(self, transport: str, sender: Sender, data: bytes) -> Handled:
+        """One packet (a datagram, a TCP frame): the encoded replies to send back, and whether
+        it spoke (a TCP connection that never does is closed in time)."""
 
     def dropped(self, transport: str, sender: Sender, why: str) -> None:
         """Something was dropped or closed (a bad frame, a cap, a timeout): to count and tell."""
@@ -102,6 +107,16 @@ class PacketHandler(Protocol):
 
     def closed(self, transport: str, sender: Sender) -> None:
         """A TCP connection ended (either side closed it): what was kept for it goes."""
+
+
+class Handled(list[bytes]):
+    """A packet's encoded replies, and whether it `spoke`: carried a message its handler takes
+    (a command, a question), as a desk's packets do, not junk, a malformed packet or an address
+    nobody takes (which would otherwise hold a TCP connection's place for the idle timeout)."""
+
+    def __init__(self, replies: Iterable[bytes] = (), spoke: bool = False) -> None:
+        super().__init__(replies)
+        self.spoke = spoke
 
 
 # -- the connections' bookkeeping (pure: times are given) -------------------------------------
@@ -170,21 +185,24 @@ class ConnectionTable(Generic[K]):
         held = Counter(self._slots[k].host for k in keys)
         return min(keys, key=lambda k: (-held[self._slots[k].host], self._slots[k].spoke))
 
-    def heard(self, key: K, now: float, *, messages: int, pending: bool) -> None:
-        """Bytes came: `messages` whole ones, and a message is `pending` (begun) after them. A
-        message begun must end within the timeout; only whole messages earn more time."""
+    def heard(self, key: K, now: float, *, messages: int, pending: bool, frames: int | None = None) -> None:
+        """Bytes came: `frames` whole ones (as many as `messages` unless given), `messages` of
+        them messages that speak (see `Handled`), and a message is `pending` (begun) after them.
+        A message begun must end within the timeout; only messages that speak earn more time
+        (junk, however much, neither proves a connection nor keeps it open)."""
         slot: _Slot | None = self._slots.get(key)  # the table's own record of the connection
         if slot is None:
             return
+        frames = messages if frames is None else frames
         if messages:
             slot.proven = True
             slot.spoke = now
         if not slot.proven:
             pass  # the first message is due within the timeout of connecting, however it trickles
-        elif pending and (messages or not slot.pending):
+        elif pending and (frames or not slot.pending):
             slot.due = now + self.limits.message_timeout_s
-        elif not pending and messages:
-            slot.due = now + self.limits.idle_timeout_s
+        elif not pending:
+            slot.due = slot.spoke + self.limits.idle_timeout_s
         slot.pending = pending
 
     def remove(self, key: K) -> None:
@@ -204,7 +222,7 @@ class ConnectionTable(Generic[K]):
         if slot.pending:
             return f"closed: a message unfinished after {self.limits.message_timeout_s:g} s"
         if not slot.proven:
-            return f"closed: no message within {self.limits.message_timeout_s:g} s of connecting"
+            return f"closed: no command within {self.limits.message_timeout_s:g} s of connecting"
         return f"closed: idle for {self.limits.idle_timeout_s:g} s"
 
 
@@ -484,11 +502,14 @@ class OscNet:
         fed = connection.reader.feed(data)
         for why in fed.bad:
             self.handler.dropped("tcp", connection.sender, why)
-        self._table.heard(connection, self._now(), messages=len(fed.packets) + len(fed.bad),
-                          pending=connection.reader.pending)
+        spoke = 0
         for packet in fed.packets:
-            for reply in self.handler.packet("tcp", connection.sender, packet):
+            handled = self.handler.packet("tcp", connection.sender, packet)
+            spoke += handled.spoke
+            for reply in handled:
                 connection.unsent += connection.reader.frame(reply)
+        self._table.heard(connection, self._now(), messages=spoke, frames=len(fed.packets) + len(fed.bad),
+                          pending=connection.reader.pending)
         if fed.fatal is not None:
             self._drop(connection, f"closed: {fed.fatal}")
             return
