@@ -422,6 +422,15 @@ def taken_port():  # type: ignore[no-untyped-def]
         yield taken.getsockname()[1]
 
 
+@pytest.fixture
+def tcp_taken_port():  # type: ignore[no-untyped-def]
+    """A port whose TCP side another program listens on (on every address), its UDP side free."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as taken:
+        taken.bind(("0.0.0.0", 0))
+        taken.listen()
+        yield taken.getsockname()[1]
+
+
 BAD_OPTIONS = {
     "port out of range": (["--osc", "70000"], "--osc 70000: give a port number"),
     "negative port": (["--osc", "-1"], "--osc -1: give a port number"),
@@ -440,6 +449,10 @@ BAD_OPTIONS = {
     "notify port in another script": (["--osc", "0", "--osc-notify", "127.0.0.1:\u0665"],
                                       "--osc-notify 127.0.0.1:\u0665: give HOST:PORT"),
     "port in use": (["--osc", "{taken}"], "--osc {taken}: cannot listen on 127.0.0.1:{taken}"),
+    "tcp port in use, udp free": (["--osc", "{tcp_taken}"], "--osc {tcp_taken}: cannot listen on 127.0.0.1:{tcp_taken} "
+                                  "(tcp): Address already in use"),
+    "tcp port in use, any host": (["--osc", "{tcp_taken}", "--osc-host", "::"],
+                                  "--osc {tcp_taken}: cannot listen on [::]:{tcp_taken} (tcp)"),
     "empty host": (["--osc", "0", "--osc-host", ""], "--osc-host '': give the address"),
     "host of another machine": (["--osc", "0", "--osc-host", "192.0.2.1"], "--osc 0: cannot listen on 192.0.2.1:0"),
     "bad allow": (["--osc", "0", "--osc-allow", "qlab.local"], "--osc-allow qlab.local: give an IP address"),
@@ -453,6 +466,10 @@ BAD_OPTIONS = {
                        "--osc-notify no-such-host.invalid:9: "),
     "notify itself": (["--osc", "{free}", "--osc-notify", "localhost:{free}"], "--osc-notify localhost:{free}: that is "
                       "choreo's own --osc port"),
+    "notify itself, the group of all hosts": (["--osc", "{free}", "--osc-host", "0.0.0.0", "--osc-notify",
+                                               "224.0.0.1:{free}"], "--osc-notify 224.0.0.1:{free}: that is choreo's own"),
+    "notify twice, mapped": (["--osc", "0", "--osc-notify", "127.0.0.1:9", "--osc-notify", "[::ffff:127.0.0.1]:9"],
+                             "--osc-notify [::ffff:127.0.0.1]:9: given twice"),
     "bad timeout": (["--timeout", "nan"], "--timeout nan: "),
     "bad retries": (["--retries", "99"], "--retries 99: "),
     "bad baud": (["--baud", "12"], "baud 12: "),
@@ -460,12 +477,13 @@ BAD_OPTIONS = {
 
 
 @pytest.mark.parametrize("case", list(BAD_OPTIONS))
-def test_a_bad_option_ends_the_run_before_a_log_or_a_board_is_touched(tmp_path, taken_port, case):
+def test_a_bad_option_ends_the_run_before_a_log_or_a_board_is_touched(tmp_path, taken_port, tcp_taken_port, case):
     """Once `--osc 70000` or a port in use were noticed only after the log was created and the
     board had had its ACK check and config read."""
     options, expected = BAD_OPTIONS[case]
     free = free_port()
-    options = [o.format(taken=taken_port, free=free) for o in options]
+    ports = {"taken": taken_port, "tcp_taken": tcp_taken_port, "free": free}
+    options = [o.format(**ports) for o in options]
     show = write_show(tmp_path, ONE_STEP)
     board = Board()
     try:
@@ -474,7 +492,7 @@ def test_a_bad_option_ends_the_run_before_a_log_or_a_board_is_touched(tmp_path, 
     finally:
         board.close()
     assert result.returncode == 2, result.stderr
-    assert result.stderr.startswith(expected.format(taken=taken_port, free=free)), result.stderr
+    assert result.stderr.startswith(expected.format(**ports)), result.stderr
     assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
     assert not touched  # no byte went to the board
     assert not (tmp_path / "runs").exists()  # no log was created
