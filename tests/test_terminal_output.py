@@ -125,6 +125,20 @@ def test_a_visible_stream_is_the_stream_for_everything_but_writing() -> None:
     assert stream.getvalue() == raw.getvalue()  # the rest is the stream's own
 
 
+def test_what_a_command_writes_as_bytes_is_shown_escaped_too(capsysbinary, monkeypatch) -> None:
+    """`choreo import` writes its UTF-8 under the text stream (sys.stdout.buffer): whatever the
+    show it writes holds, the terminal is shown it escaped, as every text output is."""
+    import choreo.show.hth4
+    import choreo.show.starter
+
+    monkeypatch.setattr(choreo.show.hth4, "read_project", lambda path: None)
+    monkeypatch.setattr(choreo.show.starter, "starter_show", lambda project, *rest: f"name: {HOSTILE}\xff\n")
+    assert vmain(["import", "project.h4p"]) == 0
+    out = capsysbinary.readouterr().out.decode("utf-8")
+    assert_safe(out)
+    assert out == "name: \\x1b]0;pwned\\x07\\x1b[2J\\u202eevil\\u200b\\u009b31m\u00ff\n"
+
+
 # -- the terminal never holds the show ----------------------------------------------------------
 
 

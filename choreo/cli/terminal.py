@@ -38,8 +38,9 @@ class VisibleStream:
     """A text stream (stdout or stderr) that shows outside text safely: everything written
     through it is made `visible` (newlines kept), so no show name, file name, OSC address or
     log content printed by any command can drive the terminal, whichever line printed it.
-    JSON stays JSON: the escapes it writes are JSON's own inside a string. Everything else
-    (fileno, isatty, flush, buffer) is the stream's own."""
+    JSON stays JSON: the escapes it writes are JSON's own inside a string. Its `buffer` (where
+    `choreo import` writes its UTF-8) shows the same text the same way. Everything else
+    (fileno, isatty, flush) is the stream's own."""
 
     def __init__(self, stream: TextIO) -> None:
         self.stream = stream
@@ -48,9 +49,29 @@ class VisibleStream:
         self.stream.write(visible(text, keep="\n"))
         return len(text)
 
+    @property
+    def buffer(self) -> VisibleBytes:
+        return VisibleBytes(self.stream.buffer)
+
     def writelines(self, lines: Iterable[str]) -> None:
         for line in lines:
             self.write(line)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.stream, name)
+
+
+class VisibleBytes:
+    """The bytes under a VisibleStream: UTF-8 text (as every command writes there), made
+    visible like the text above it; a byte that is not UTF-8 is shown as its escape."""
+
+    def __init__(self, stream: Any) -> None:
+        self.stream = stream
+
+    def write(self, data: bytes) -> int:
+        text = bytes(data).decode("utf-8", errors="surrogateescape")
+        self.stream.write(visible(text, keep="\n").encode("utf-8"))
+        return len(data)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.stream, name)
