@@ -467,7 +467,8 @@ BAD_OPTIONS = {
     "notify itself": (["--osc", "{free}", "--osc-notify", "localhost:{free}"], "--osc-notify localhost:{free}: that is "
                       "choreo's own --osc port"),
     "notify itself, the group of all hosts": (["--osc", "{free}", "--osc-host", "0.0.0.0", "--osc-notify",
-                                               "224.0.0.1:{free}"], "--osc-notify 224.0.0.1:{free}: that is choreo's own"),
+                                               "224.0.0.1:{free}"],
+                                              "--osc-notify 224.0.0.1:{free}: that is choreo's own"),
     "notify twice, mapped": (["--osc", "0", "--osc-notify", "127.0.0.1:9", "--osc-notify", "[::ffff:127.0.0.1]:9"],
                              "--osc-notify [::ffff:127.0.0.1]:9: given twice"),
     "bad timeout": (["--timeout", "nan"], "--timeout nan: "),

@@ -50,7 +50,7 @@ LIVE_MD = [
     f"| replies to senders not allowed, all together | {rate(LIMITS.refusals)} |",
     f"logged (and printed, and notified) one by one | {rate(LIMITS.reported)};",
     f"per {'second' if LIMITS.summary_every_s == 1 else f'{LIMITS.summary_every_s:g} s'} at most",
-    f"| packets read, one allowed sender (",
+    "| packets read, one allowed sender (",
     f"| {rate(LIMITS.packets_per_sender)} (a desk's fader moves fit)",
     f"| senders with budgets of their own | {LIMITS.senders_tracked} (",
     f"one sender | {rate(LIMITS.queries_per_sender)}, apart from",
