@@ -463,3 +463,20 @@ def test_a_traceback_shows_outside_text_escaped_too() -> None:
     assert_safe(done.stderr)
     assert done.stderr.count("OSError: cannot read \\x1b]0;pwned\\x07\\u202e") == 2
     assert "Exception in thread thread\\x1b[2J" in done.stderr
+
+
+@pytest.mark.parametrize("width", [2, 8, 20, 40, 43, 44, 60, 120])
+def test_every_line_of_the_doctor_table_fits_the_terminal(width: int) -> None:
+    """Beside a long check name (a robot's), the detail column had 24 columns at least and ran
+    past the edge of a narrower terminal; there the detail goes below its check (issue 21, item 5)."""
+    from choreo.board.doctor import Finding
+    from choreo.cli.doctor import table
+
+    findings = [Finding("problem", "port", f"sim://?durations=0:1.5,1:2,4:1.2,5:1.2,20:0.6,40:1 {HOSTILE} busy",
+                        "close the other program", robot="a_robot_with_a_long_name"),
+                Finding("ok", "log", "folder runs takes a new file"), Finding("note", "ロボット", "日本語の説明 " * 6)]
+    lines = table(findings, width)
+    assert all(display_width(line) <= width for line in lines), [line for line in lines if display_width(line) > width]
+    assert_safe("\n".join(lines))
+    joined = "".join(line.strip() for line in lines)
+    assert "closetheotherprogram" in joined.replace(" ", "")  # the fix is wrapped, never cut

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 from choreo.board.usb import KONDO_USB_ID
 from choreo.errors import UsageError
 from choreo.show.model import CLOCKS
-from choreo.textfit import char_width, display_width, pad, visible
+from choreo.textfit import char_width, display_width, fit, pad, visible
 from choreo.wire.layouts import LAYOUT_NAMES
 from choreo.wire.protocol import spell_bauds
 
@@ -159,10 +159,13 @@ def table(findings: Sequence[Finding], width: int | None = None) -> list[str]:
     """One row a check: its name, the verdict, what was found and, for a problem, the fix;
     whatever a name from outside (a port, a file, a show) put in it is shown escaped. Given a
     terminal's `width`, a long detail wraps under the detail column (never cut: the fix is the
-    point of the line)."""
+    point of the line); narrower than the columns and MIN_DETAIL, each row is its check and
+    verdict (cut to the width) and its detail wrapped below: no line runs past the edge."""
     names = max([len("check"), *(display_width(visible(f.name)) for f in findings)])
     indent = names + 2 + len("verdict") + 2
-    room = max(width - indent, MIN_DETAIL) if width is not None else None
+    if width is not None and width - indent < MIN_DETAIL:
+        return _stacked(findings, width)
+    room = width - indent if width is not None else None
     lines = [f"{pad('check', names)}  verdict  detail -> fix"]
     for f in findings:
         detail = visible(f.text + (f" -> fix: {f.fix}" if f.fix else ""))
@@ -172,7 +175,18 @@ def table(findings: Sequence[Finding], width: int | None = None) -> list[str]:
     return lines
 
 
-MIN_DETAIL = 24  # columns the detail keeps however narrow the terminal (it then runs past the edge)
+MIN_DETAIL = 24  # columns the detail needs beside the check and verdict (else it goes below them)
+
+
+def _stacked(findings: Sequence[Finding], width: int) -> list[str]:
+    """The table for a narrow terminal: a check's name and verdict, then its detail indented."""
+    indent = "  " if width > 2 * len("  ") else ""
+    lines = [fit("check  verdict", width), fit(f"{indent}detail -> fix", width)]
+    for f in findings:
+        lines.append(fit(f"{f.name}  {f.verdict}", width))
+        detail = visible(f.text + (f" -> fix: {f.fix}" if f.fix else ""))
+        lines += [indent + line for line in wrapped(detail, max(width - len(indent), 1))]
+    return lines
 
 
 def wrapped(text: str, width: int | None) -> list[str]:
