@@ -52,10 +52,24 @@ def test_a_lost_start_reply_with_the_motion_running_is_a_play_done(lost, answer)
 
 
 def test_a_lost_start_reply_with_the_motion_not_running_is_retried_from_the_stop_frame():
-    link, port, events = link_for(ACK_MOV, ACK_CALL, b"", NEVER, ACK_MOV, ACK_CALL, ACK_MOV)
+    # "Never started" is believed from a second read, one refresh after the first one's answer.
+    link, port, events = link_for(ACK_MOV, ACK_CALL, b"", NEVER, NEVER, ACK_MOV, ACK_CALL, ACK_MOV)
     played = link.play(3)
     assert played.recovered is None and played.tries == 2
-    assert kinds(events) == ["stop", "play", "restore", "read", "stop", "play", "restore"]
+    assert kinds(events) == ["stop", "play", "restore", "read", "read", "stop", "play", "restore"]
+    answered = next(e for e in events.rx if e.frame.kind is p.FrameKind.READ)
+    again = [e for e in events.tx if e.frame.kind is p.FrameKind.READ][1]
+    assert again.time_ns - answered.time_ns >= 50_000_000  # a refresh after the first answer came
+
+
+@pytest.mark.parametrize("then", [RUNNING, OVER], ids=["running", "over"])
+def test_a_start_frame_the_first_read_came_before_is_seen_by_the_second_and_not_sent_again(then):
+    # The write returned before the start frame was on the wire (the OS or the adapter held it):
+    # the first read was answered from the state before it arrived.
+    link, port, events = link_for(ACK_MOV, ACK_CALL, BAD_SUM, NEVER, then)
+    played = link.play(3, Tag(0))
+    assert played.tries == 1 and played.recovered and "it was not sent again" in played.recovered
+    assert kinds(events) == ["stop", "play", "restore", "read", "read"]
 
 
 @pytest.mark.parametrize("answer", [OVER, state(0x8721, MAIN_LOOP + 6, 0, 0)],
@@ -246,3 +260,41 @@ def test_a_fault_on_the_state_read_too_still_starts_each_motion_once(tmp_path, l
     assert result.outcome == "done"
     assert board.starts == 6 and board.stack_faults == 0
     assert len([m for m in log.logs if "not sent again" in m["message"]]) == 6
+
+
+# -- a start frame held on its way: the first state read comes before it (issue 21, item 2) ---
+
+HELD_SHOW = "version: 1\nsteps:\n  - wait: LEAD\n  - play: 1\n  - wait: 0.2\n  - play: 2\n  - wait: 0.1\n"
+
+
+def held_start_frames(monkeypatch, hold_s: float) -> None:
+    """The sim's start frames reach the board `hold_s` after the client's write returned, as
+    when the OS or a USB adapter holds the bytes (a write returns once they are buffered)."""
+    from choreo.sim import protocol_sim
+    from choreo.sim.faults import frame_kind
+
+    def write(self, data, /):  # type: ignore[no-untyped-def]
+        frame = bytes(data)
+        self._live().send(frame, self.time_source.now() + (hold_s if frame_kind(frame) == "restore" else 0.0))
+        self._live()
+        return len(frame)
+
+    monkeypatch.setattr(protocol_sim.Serial, "write", write)
+
+
+@pytest.mark.parametrize("layout", ["seed", "hth4-2.2"])
+def test_a_start_frame_held_on_its_way_with_a_garbled_answer_starts_once(tmp_path, monkeypatch, layout):
+    # Was: the first read, 50 ms after the write, showed the state from before the held restore
+    # arrived ("never started"): sent again, 3 to 6 starts for 2 plays, or the play failed.
+    from choreo.run.settings import RunRequest
+    from runlog import prepare
+
+    held_start_frames(monkeypatch, 0.045)
+    for lead in (0.001, 0.031):  # the writes at two phases of the 50 ms refresh
+        show = write_show(tmp_path, HELD_SHOW.replace("LEAD", str(lead)))
+        session = prepare(RunRequest(str(show), port="sim://?durations=1:0.5,2:0.05&badsum=1&faults_on=restore",
+                                     layout=layout, no_log=True))
+        with session:
+            result = session.run()
+            board = session.stage.links["robot"].port.board
+        assert result.outcome == "done" and board.starts == 2 and board.stack_faults == 0, lead

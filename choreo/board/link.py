@@ -324,14 +324,28 @@ class Link:
         sequence again would start the same motion twice. A NAK is a refusal (the frame was
         not carried out), so only silence or a garbled answer needs asking. The read of the
         program state (the layout's `start_state` judges it: running, over, never started)
-        waits one status refresh after the start frame, so it cannot show the state from before,
-        and goes out at once after that (no ACK check first: a late ACK cannot be taken for a
-        read's answer, it is set aside). A motion already over by then still counts as started.
+        waits one status refresh after the start frame, so it cannot show the state from before
+        the CALL (acknowledged before the start frame went out), and goes out at once after that
+        (no ACK check first: a late ACK cannot be taken for a read's answer, it is set aside). A
+        motion already over by then still counts as started.
+
+        "Never started" is believed only from a second read one refresh after the first one's
+        answer: a write returns before its bytes are on the wire (the OS and a USB adapter may
+        hold them), so the first read may be shown the board's state from just before a start
+        frame that arrived late; the board takes frames in order, so by the first read's answer
+        the start frame had arrived (or never will). Running and over need no second look: only
+        the start frame sets the run bit or lets the call return.
         """
-        self._check_stop(what)
-        self.clock.sleep_until(start_sent + self.status_spacing_s)
         read = replace(self.layout.start_read, motion=motion)  # the log tells which motion it asks about
-        return self.layout.start_state(motion, self.exchange(read, tag).data)
+        since = start_sent
+        for _ in range(2):
+            self._check_stop(what)
+            self.clock.sleep_until(since + self.status_spacing_s)
+            state = self.layout.start_state(motion, self.exchange(read, tag).data)
+            if state.started:
+                return state
+            since = self.clock.mono()  # the board had the start frame by this answer, if ever
+        return state
 
     def halt(self, tag: Tag | None = None) -> Reply:
         """The play sequence's stop frame alone: the board's program halts, and the motion with
