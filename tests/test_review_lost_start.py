@@ -135,6 +135,30 @@ def test_a_state_read_showing_it_never_started_waits_for_the_retry():
     assert (play.start_ns, play.ended_by) == (700, "end of log")  # the retry's restore: one play
 
 
+@pytest.mark.parametrize("then, ended_by", [(RUNNING, "end of log"), (OVER, "state read")], ids=["running", "over"])
+def test_a_second_state_read_that_shows_it_started_counts_it_as_the_link_did(then, ended_by):
+    # The link believes "never started" only from a second read; a start frame held on its way
+    # shows in the second (the link: started, not sent again).
+    tracker = MotionTracker(SEED)
+    _lost_start(tracker)
+    _read(tracker, 4, NEVER, 80)
+    _read(tracker, 5, then, 150)
+    (play,) = tracker.finish(500)
+    assert (play.motion, play.start_ns, play.ended_by) == (3, 20, ended_by)
+
+
+def test_two_reads_showing_it_never_started_wait_for_the_retry():
+    tracker = MotionTracker(SEED)
+    _lost_start(tracker)
+    _read(tracker, 4, NEVER, 80)
+    _read(tracker, 5, NEVER, 150)
+    for seq, kind in enumerate(("stop", "play", "restore"), 6):
+        tracker.tx(TxRecord(seq, kind, "", step=0, motion=3), seq * 100)
+        tracker.rx(RxRecord(seq, "ack"), seq * 100 + 1)
+    (play,) = tracker.finish(1000)
+    assert (play.start_ns, play.ended_by) == (800, "end of log")
+
+
 def test_the_layout_judges_the_same_state_differently():
     # RAM that is seed's "never started" for motion 3 is no state the hth4-2.2 sequence leaves
     tracker = MotionTracker(HTH4_22)

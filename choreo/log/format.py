@@ -591,7 +591,8 @@ class MotionTracker:
     unmeasured. A restore whose answer was lost is judged as the link judged it: by the answer
     to the read of the board's program state that followed, through the robot's layout
     (`Layout.start_state`): running, or already over (ended at the read, unmeasured), is a play
-    started at the restore; never started is not, and the link sends the sequence again. With a
+    started at the restore; never started is not, once the link sends the sequence again (it
+    reads twice before it believes that: the second read may show the motion started). With a
     layout this choreo does not know (`layout` None) the link's next frame tells instead: the
     same sequence again from its stop frame, or not. An older log (no state read) is judged by a
     status reply saying executing.
@@ -652,8 +653,7 @@ class MotionTracker:
             return
         state = self.layout.start_state(motion, _hex_bytes(reply.hex))
         if not state.started:
-            self._lost_start = None  # the link sends the sequence again from its stop frame
-            return
+            return  # a second read may yet show it started; else the retry's stop frame drops it
         self._start(lost)
         if state is StartState.DONE:
             self._end(read_ns, "state read")  # over before the read went out
