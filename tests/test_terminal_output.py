@@ -480,3 +480,34 @@ def test_every_line_of_the_doctor_table_fits_the_terminal(width: int) -> None:
     assert_safe("\n".join(lines))
     joined = "".join(line.strip() for line in lines)
     assert "closetheotherprogram" in joined.replace(" ", "")  # the fix is wrapped, never cut
+
+
+def test_validates_line_fits_the_terminal_and_stays_whole_in_a_pipe(tmp_path) -> None:
+    """`choreo validate`'s ok line (every motion named) ran 168 columns on a terminal of 30
+    (issue 21, item 5; `beats`' comments and `devices` alike, by the same print_fitted): cut
+    there; whole to a pipe."""
+    primary, secondary = _pty(30)
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+    command = [str(REPO / ".venv" / "bin" / "choreo")]
+    process = subprocess.Popen(command + ["validate", "shows/dance.yaml"], stdin=secondary, stdout=secondary,
+                               stderr=secondary, cwd=REPO, env=env)
+    os.close(secondary)
+    seen = b""
+    try:
+        while select.select([primary], [], [], 20)[0]:
+            try:
+                data = os.read(primary, 65536)
+            except OSError:
+                break  # the command ended and closed the terminal
+            if not data:
+                break
+            seen += data
+    finally:
+        assert process.wait(20) == 0
+        os.close(primary)
+    lines = seen.decode().splitlines()
+    assert lines and all(display_width(line) <= 30 for line in lines), lines
+    assert lines[0].startswith("shows/dance.yaml: ok") and lines[0].endswith("…")
+    piped = subprocess.run(command + ["validate", "shows/dance.yaml"], capture_output=True, text=True, cwd=REPO,
+                           env=env, check=True)
+    assert piped.stdout.rstrip("\n").endswith("estimated 22.0 s")  # a pipe takes it whole

@@ -25,6 +25,7 @@ from contextlib import ExitStack, closing, contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO
 
+from choreo.cli.terminal import print_fitted
 from choreo.errors import UsageError, one_line
 from choreo.textfit import visible
 from choreo.userfile import write_why, written_whole
@@ -93,7 +94,11 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(json_record(features.path, found), ensure_ascii=False))
     else:
         for line in text_lines(features.path, found, with_beats=args.beats):
-            print(one_line(line))  # a song named with a line break must not add a line to the YAML
+            line = one_line(line)  # a song named with a line break must not add a line to the YAML
+            if line.startswith("#"):
+                print_fitted(line)  # a comment cut to the terminal is still a comment
+            else:
+                print(line)
     for note in notes:
         print(one_line(note), file=sys.stderr)
     return 0

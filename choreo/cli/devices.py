@@ -19,6 +19,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from choreo.cli.terminal import print_fitted
     from choreo.music.player import NULL_DEVICE, outputs
 
     found = outputs()
@@ -30,6 +31,6 @@ def run(args: argparse.Namespace) -> int:
     if not real:
         print("no audio outputs found (no sound system answers): music shows play silent on null")
     for output in real:
-        print(f"{output.number:>3}  {output.name} ({output.backend})")
-    print(f"{NULL_DEVICE:>4} silent, keeps the music's time (miniaudio's null backend)")
+        print_fitted(f"{output.number:>3}  {output.name} ({output.backend})")
+    print_fitted(f"{NULL_DEVICE:>4} silent, keeps the music's time (miniaudio's null backend)")
     return 0

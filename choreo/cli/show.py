@@ -16,7 +16,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from choreo.cli.jsonout import problem_record
-from choreo.cli.terminal import columns
+from choreo.cli.terminal import columns, print_fitted
 from choreo.errors import ShowError, one_line
 from choreo.textfit import display_width, fit, pad, visible
 from choreo.wire.layouts import EXAMPLE_CONFIG, layout_named
@@ -68,7 +68,7 @@ def run_validate(args: argparse.Namespace) -> int:
             record = _show_record(show, *plans.values()) if not show.ensemble else _plans_record(show, plans)
             files.append({"path": path, "ok": True, **record, "cues": cues_record(plans)})
         else:
-            print(one_line(summary_line(show, plans)), flush=True)  # a file named with a line break
+            print_fitted(one_line(summary_line(show, plans)))  # a file named with a line break
     if args.json:  # its files' record says the problems; stderr as without --json
         print(json.dumps({"ok": not problems, "exit": 2 if problems else 0, "files": files}, ensure_ascii=False))
         for line in ShowError(problems).lines():

@@ -34,6 +34,12 @@ def columns(stream: TextIO | None = None) -> int | None:
     return given if given else None
 
 
+def print_fitted(line: str) -> None:
+    """A line of a command's output for a person, cut to the terminal's width (with `…`) if
+    stdout is one; to a file or a pipe, whole."""
+    print(fit(line, columns() if sys.stdout.isatty() else None), flush=True)
+
+
 class VisibleStream:
     """A text stream (stdout or stderr) that shows outside text safely: everything written
     through it is made `visible` (newlines kept), so no show name, file name, OSC address or
