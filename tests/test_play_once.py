@@ -265,36 +265,23 @@ def test_a_fault_on_the_state_read_too_still_starts_each_motion_once(tmp_path, l
 # -- a start frame held on its way: the first state read comes before it (issue 21, item 2) ---
 
 HELD_SHOW = "version: 1\nsteps:\n  - wait: LEAD\n  - play: 1\n  - wait: 0.2\n  - play: 2\n  - wait: 0.1\n"
-
-
-def held_start_frames(monkeypatch, hold_s: float) -> None:
-    """The sim's start frames reach the board `hold_s` after the client's write returned, as
-    when the OS or a USB adapter holds the bytes (a write returns once they are buffered)."""
-    from choreo.sim import protocol_sim
-    from choreo.sim.faults import frame_kind
-
-    def write(self, data, /):  # type: ignore[no-untyped-def]
-        frame = bytes(data)
-        self._live().send(frame, self.time_source.now() + (hold_s if frame_kind(frame) == "restore" else 0.0))
-        self._live()
-        return len(frame)
-
-    monkeypatch.setattr(protocol_sim.Serial, "write", write)
+# Every restore held 40 ms on the client's side (the OS or the USB adapter: a write returns once
+# the bytes are buffered), then answered with a bad checksum, fast.
+HELD = "sim://?durations=1:0.5,2:0.05&hold=1&badsum=1&faults_on=restore"
 
 
 @pytest.mark.parametrize("layout", ["seed", "hth4-2.2"])
-def test_a_start_frame_held_on_its_way_with_a_garbled_answer_starts_once(tmp_path, monkeypatch, layout):
+def test_a_start_frame_held_on_its_way_with_a_garbled_answer_starts_once(tmp_path, layout):
     # Was: the first read, 50 ms after the write, showed the state from before the held restore
     # arrived ("never started"): sent again, 3 to 6 starts for 2 plays, or the play failed.
     from choreo.run.settings import RunRequest
     from runlog import prepare
 
-    held_start_frames(monkeypatch, 0.045)
     for lead in (0.001, 0.031):  # the writes at two phases of the 50 ms refresh
         show = write_show(tmp_path, HELD_SHOW.replace("LEAD", str(lead)))
-        session = prepare(RunRequest(str(show), port="sim://?durations=1:0.5,2:0.05&badsum=1&faults_on=restore",
-                                     layout=layout, no_log=True))
+        session = prepare(RunRequest(str(show), port=HELD, layout=layout, no_log=True))
         with session:
             result = session.run()
             board = session.stage.links["robot"].port.board
         assert result.outcome == "done" and board.starts == 2 and board.stack_faults == 0, lead
+        assert len([e for e in board.journal if e.kind == "held"]) == 2

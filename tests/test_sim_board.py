@@ -380,7 +380,7 @@ def test_trigger_spelling_refuses(text):
 def test_unknown_fault_kind_is_refused():
     with pytest.raises(ValueError, match="unknown fault kind 'melt'"):
         FaultPlan({"melt": Trigger(every=1)})
-    assert set(FAULT_KINDS) == {"lose", "drop", "nak", "badsum", "short", "junk", "late", "lose_start"}
+    assert set(FAULT_KINDS) == {"lose", "drop", "nak", "badsum", "short", "junk", "late", "lose_start", "hold"}
 
 
 @pytest.mark.parametrize("layout", ["seed", "hth4-2.2"])
@@ -724,3 +724,33 @@ def test_the_journal_names_frames_by_the_boards_own_layout(layout, how):
     assert resumed in _journal_note(layout, restore, how)
     other = (HTH4_22 if layout is SEED else SEED).play_frame(5).data  # another layout's slot: said so
     assert f"not a motion slot of the {layout.name} layout" in _journal_note(layout, other, how)
+
+
+# -- hold: the client's OS or adapter holds a written frame (issue 21, item 2) -------------------
+
+
+def test_a_held_frame_reaches_the_board_hold_ms_after_the_write_and_what_follows_waits_behind_it():
+    b = board(faults=FaultPlan.parse({"hold": "2"}, hold_s=0.03), wire=True, reply_delay_s=0.0002)
+    line = Line(b)
+    bt = b.byte_time
+    line.send(STOP, 1.0)  # write 1: not held
+    assert b.journal[-1].kind == "frame" and b.journal[-1].at == pytest.approx(1.0 + len(STOP) * bt)
+    assert line.take(1.05, 10) == ACK_MOV
+    line.send(p.play_frame(3).data, 1.1)  # write 2: held 30 ms, taken then
+    assert [e.kind for e in list(b.journal)[-2:]] == ["held", "frame"]
+    assert "held 30 ms" in b.journal[-2].note and b.journal[-1].at == pytest.approx(1.13 + 7 * bt)
+    assert line.available(1.13) == 0 and line.available(1.14) == 4  # its answer: after the hold
+    line.send(RESTORE, 1.1)  # written at once after it: on the wire behind it (and not answered,
+    assert b.journal[-1].kind == "ignored"  # the board still replying: a client must wait)
+    assert b.journal[-1].at == pytest.approx(1.13 + 16 * bt)
+
+
+def test_hold_is_counted_over_the_writes_faults_on_names_and_its_time_is_checked():
+    plan = FaultPlan.parse({"hold": "1"}, on=frozenset({"restore"}), hold_s=0.02)
+    b = board(faults=plan)
+    assert [b.held_s(frame) for frame in (STOP, p.play_frame(3).data, RESTORE, STATUS)] == [0, 0, 0.02, 0]
+    assert parse_query("hold=1&hold_ms=25").faults.hold_s == pytest.approx(0.025)
+    assert parse_query("hold=1").faults.hold_s == pytest.approx(0.04)
+    with pytest.raises(ValueError, match="hold_ms"):
+        parse_query("hold=1&hold_ms=-1")
+    assert "hold every frame" in parse_query("hold=1").faults.describe()

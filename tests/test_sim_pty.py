@@ -297,11 +297,11 @@ def test_command_line_options_mirror_the_url_query():
     args = build_parser().parse_args(
         ["sim", "--motion-s", "0.5", "--durations", "3:2.5,7:1.2", "--baud", "625000", "--reply-ms", "0.3",
          "--refresh-ms", "20", "--drop", "5", "--late", "0.1", "--late-ms", "250", "--seed", "4", "--no-wire",
-         "--gap-ms", "30"]
+         "--gap-ms", "30", "--hold", "3", "--hold-ms", "15"]
     )
     from_cli = parse_options(options_from_args(args))
     from_url = parse_query(
         "motion_s=0.5&durations=3:2.5,7:1.2&baud=625000&reply_ms=0.3&refresh_ms=20&drop=5&late=0.1&late_ms=250"
-        "&seed=4&wire=0&gap_ms=30"
+        "&seed=4&wire=0&gap_ms=30&hold=3&hold_ms=15"
     )
     assert from_cli == from_url and from_cli.refresh_s == pytest.approx(0.02)

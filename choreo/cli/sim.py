@@ -10,6 +10,7 @@ import threading
 import time
 from typing import TYPE_CHECKING
 
+from choreo.cli.terminal import print_fitted
 from choreo.errors import LinkError, UsageError
 from choreo.wire.protocol import spell_bauds
 
@@ -108,9 +109,12 @@ def _fault_options(parser: argparse.ArgumentParser) -> None:
         ("late", "reply --late-ms late"),
         ("lose_start", "no reply to the frame that starts a motion, which still starts "
                        "(counted over motion starts)"),
+        ("hold", "the frame reaches the board --hold-ms after it was written, as when the client's OS "
+                 "or adapter holds it (counted over writes)"),
     ):
         faults.add_argument(f"--{kind.replace('_', '-')}", dest=kind, metavar="K|P", help=what)
     faults.add_argument("--late-ms", metavar="MS", help="how late a --late reply is, ms (default 500)")
+    faults.add_argument("--hold-ms", metavar="MS", help="how long --hold holds a frame, ms (default 40)")
     faults.add_argument("--faults-on", dest="faults_on", metavar="KINDS",
                         help="the frame faults hit (and count) only frames of these kinds, comma-separated: "
                              "stop, counter, play, restore, read, sync, other (default: every frame)")
@@ -155,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
             for server in servers:
                 print(server.path, flush=True)
             paths = ", ".join(str(server.path) for server in servers)  # set once the pty is open
-            print(f"choreo sim: simulated RCB-4 on {paths}, {options.describe()}; Ctrl-C to stop", file=sys.stderr)
+            print_fitted(f"choreo sim: simulated RCB-4 on {paths}, {options.describe()}; Ctrl-C to stop", sys.stderr)
             ends = _serve_all(servers)
         finally:
             for sig, handler in previous.items():

@@ -359,6 +359,10 @@ class SimBoard:
                 outcome = replace(outcome, reply=b"", note=f"{outcome.note}; its reply is lost (lose_start)")
         return kinds, outcome
 
+    def held_s(self, data: bytes) -> float:
+        """How long the client's OS or adapter holds this write before it leaves (`hold` fault)."""
+        return self._injector.held_s(bytes(data))
+
     def note(self, kind: str, at: float, data: bytes, text: str) -> None:
         """Journal something the transport saw that never became a frame (partial, ignored)."""
         self._record(JournalEntry(kind, at, bytes(data), note=text))

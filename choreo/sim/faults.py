@@ -16,6 +16,11 @@ Kinds (what the client sees for the frame the fault hits):
 - ``lose_start``: no reply to a frame that starts a motion (the restore or resume with a motion
   armed), although the motion does start: the case where a client must not play it twice.
   Counted over motion starts, not frames: ``lose_start=2`` hits the 2nd, 4th... start.
+- ``hold``: the frame reaches the board ``hold_ms`` (default 40 ms) after the client's write
+  returned, as when the client's OS or USB adapter holds written bytes (a write returns once
+  they are buffered, not once they are on the wire; no source bounds how long). The frame takes
+  effect and is answered on arrival. Counted over the frames the client writes (one write call
+  a frame, as a client must), not over frames received.
 
 Spelling (the same in a ``sim://`` query and on the ``choreo sim`` command line): the value is
 either a whole number K >= 1, meaning every K-th frame (frames K, 2K, 3K... counted from 1 over
@@ -56,9 +61,12 @@ FRAME_FAULTS: tuple[str, ...] = ("lose", "drop", "nak", "badsum", "short", "junk
 # Counted over the frames that start a motion (a restore or resume with a motion armed), not
 # over every frame: `lose_start=2` loses the reply to every second start.
 START_FAULTS: tuple[str, ...] = ("lose_start",)
-FAULT_KINDS: tuple[str, ...] = FRAME_FAULTS + START_FAULTS
+# Decided when the client writes a frame, before the board sees it: counted over writes.
+WRITE_FAULTS: tuple[str, ...] = ("hold",)
+FAULT_KINDS: tuple[str, ...] = FRAME_FAULTS + START_FAULTS + WRITE_FAULTS
 JUNK = bytes((0xFF, 0x00, 0xAA))  # 0xff is no valid size byte: a careful reader notices at once
 DEFAULT_LATE_S = 0.5
+DEFAULT_HOLD_S = 0.04  # most of a 50 ms status refresh: a read sent a refresh after the write can come first
 
 # Faults after which the board did not execute the frame (it never got it, or refused it).
 NOT_EXECUTED = frozenset({"lose", "drop", "nak"})
@@ -155,6 +163,7 @@ class FaultPlan:
     seed: int = 0
     late_s: float = DEFAULT_LATE_S
     on: frozenset[str] = frozenset()  # frame kinds the frame faults hit (see `frame_kind`); empty: all
+    hold_s: float = DEFAULT_HOLD_S
 
     def __post_init__(self) -> None:
         unknown = sorted(set(self.triggers) - set(FAULT_KINDS))
@@ -163,10 +172,12 @@ class FaultPlan:
         check_frame_kinds(self.on)
         if self.late_s < 0:
             raise ValueError(f"late_ms must be >= 0, not {self.late_s * 1000:g}")
+        if self.hold_s < 0:
+            raise ValueError(f"hold_ms must be >= 0, not {self.hold_s * 1000:g}")
 
     @classmethod
     def parse(cls, values: Mapping[str, str], seed: int = 0, late_s: float = DEFAULT_LATE_S,
-              on: frozenset[str] = frozenset()) -> FaultPlan:
+              on: frozenset[str] = frozenset(), hold_s: float = DEFAULT_HOLD_S) -> FaultPlan:
         """Triggers from their spelled values, each error naming its fault kind."""
         triggers = {}
         for kind, text in values.items():
@@ -174,7 +185,7 @@ class FaultPlan:
                 triggers[kind] = Trigger.parse(text)
             except ValueError as exc:
                 raise ValueError(f"{kind}={text}: {exc}") from None
-        return cls(triggers, seed, late_s, on)
+        return cls(triggers, seed, late_s, on, hold_s)
 
     def describe(self) -> str:
         if not self.triggers:
@@ -212,6 +223,7 @@ class FaultInjector:
         self._rngs = {kind: random.Random(f"{self.plan.seed}:{kind}") for kind in FAULT_KINDS}
         self._lost = False
         self._aimed = 0  # frames of the kinds `faults_on` names, so far
+        self._written = 0  # frames the client wrote (of the kinds `faults_on` names), for `hold`
 
     def decide(self, number: int, data: bytes = b"") -> tuple[str, ...]:
         """The fault kinds that hit frame `number` (1-based; `data`, its bytes), in
@@ -238,6 +250,15 @@ class FaultInjector:
             if trigger.hits(number, draw):
                 hit.append(kind)
         return tuple(hit)
+
+    def held_s(self, data: bytes) -> float:
+        """How long the client's side holds this write before its first byte leaves (`hold`)."""
+        trigger = self.plan.triggers.get("hold")
+        if trigger is None or (self.plan.on and frame_kind(data) not in self.plan.on):
+            return 0.0
+        self._written += 1
+        draw = self._rngs["hold"].random() if trigger.probability is not None else None
+        return self.plan.hold_s if trigger.hits(self._written, draw) else 0.0
 
     def start_lost(self, start: int) -> bool:
         """Whether the reply to the `start`-th motion start (1-based) is lost (`lose_start`)."""

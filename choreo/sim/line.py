@@ -8,7 +8,9 @@ stream:
 - Wire time in: bytes written at `now` arrive one after another, 11 bit times each at the
   board's baud (after whatever is still on the line), so a 19-byte stop frame written at t
   has fully arrived at t + 19 * 11 / 115200 s = t + 1.81 ms. A pseudo-terminal or an in-process
-  write delivers instantly, so this is where the frame's own wire time is put back.
+  write delivers instantly, so this is where the frame's own wire time is put back. A write the
+  `hold` fault hits leaves only `hold_ms` later (the client's OS or adapter held it); what is
+  written after it waits behind it.
 - Framing: the size byte comes first and says how many bytes make the frame. An idle gap longer
   than `gap_s` between two bytes drops an incomplete frame (the real board's gap is about
   150 us). A first byte that cannot be a size (below 3, above 128) starts a burst of noise that
@@ -174,8 +176,12 @@ class Line:
         if wrong:
             self.board.note("ignored", now, data, f"client line {self.settings} cannot be read by the board: {wrong}")
             return
+        held = self.board.held_s(data)
+        if held:
+            self.board.note("held", now, data, f"held {held * 1e3:g} ms by the client's OS or adapter "
+                            "before it left (fault hold)")
         bt = self.board.byte_time
-        start = max(now, self._in_free)
+        start = max(now + held, self._in_free)
         for i, byte in enumerate(bytes(data)):
             for unit in self.framer.push(byte, start + (i + 1) * bt, bt):
                 self._handle(unit)

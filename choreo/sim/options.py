@@ -21,6 +21,8 @@ with dashes on the command line (`--motion-s 0.5 --drop 5`), and both go through
 | latency_ms | an FTDI USB adapter's latency timer (below); 0: no adapter | 0 |
 | lose, drop, nak, badsum, short, junk, late | faults: K (every K-th frame) or P (probability) | none |
 | lose_start | no reply to the frame that starts a motion (it still starts): K-th start or P | none |
+| hold | the client's OS or adapter holds a written frame `hold_ms` before it leaves: K-th write or P | none |
+| hold_ms | how long a `hold` fault holds a frame | 40 |
 | faults_on | the frame faults hit (and count) only frames of these kinds (below) | every frame |
 
 latency_ms: reply bytes reach the client at the adapter's next tick (every MS ms), or at once
@@ -45,10 +47,10 @@ from choreo.sim.board import (
     POWER_ON_CONFIG,
     SimBoard,
 )
-from choreo.sim.faults import DEFAULT_LATE_S, FAULT_KINDS, FaultPlan, parse_frame_kinds
+from choreo.sim.faults import DEFAULT_HOLD_S, DEFAULT_LATE_S, FAULT_KINDS, FaultPlan, parse_frame_kinds
 
 SETTINGS = ("baud", "motion_s", "durations", "reply_ms", "refresh_ms", "wire", "gap_ms", "seed", "late_ms",
-            "layout", "config", "baud_switch", "latency_ms", "faults_on")
+            "layout", "config", "baud_switch", "latency_ms", "faults_on", "hold_ms")
 OPTION_NAMES: tuple[str, ...] = SETTINGS + FAULT_KINDS
 
 
@@ -175,9 +177,10 @@ def parse_options(values: Mapping[str, str]) -> SimOptions:
     faults = {kind: values[kind] for kind in FAULT_KINDS if kind in values}
     seed = _parsed(values, "seed", _whole, 0)
     late_s = _parsed(values, "late_ms", _milliseconds, DEFAULT_LATE_S)
+    hold_s = _parsed(values, "hold_ms", _milliseconds, DEFAULT_HOLD_S)
     aimed = _parsed(values, "faults_on", parse_frame_kinds, frozenset[str]())
     try:
-        plan = FaultPlan.parse(faults, seed=seed, late_s=late_s, on=aimed)
+        plan = FaultPlan.parse(faults, seed=seed, late_s=late_s, on=aimed, hold_s=hold_s)
     except ValueError as exc:
         raise ValueError(f"fault {exc}") from None
     return SimOptions(
