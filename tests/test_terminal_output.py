@@ -30,7 +30,7 @@ from choreo.cli.progress import Progress
 from choreo.cli.terminal import StatusWriter, VisibleStream, visible_output
 from choreo.events import Answer, Command, CommandEvent, StepEvent
 from choreo.run.settings import RunRequest
-from choreo.textfit import display_width, is_hidden
+from choreo.textfit import display_width, is_hidden, visible
 from runlog import REPO, prepare, read_log, vmain, wait_for, write_show
 
 HOSTILE = "\x1b]0;pwned\x07\x1b[2J\u202eevil\u200b\x9b31m"
@@ -511,3 +511,27 @@ def test_validates_line_fits_the_terminal_and_stays_whole_in_a_pipe(tmp_path) ->
     piped = subprocess.run(command + ["validate", "shows/dance.yaml"], capture_output=True, text=True, cwd=REPO,
                            env=env, check=True)
     assert piped.stdout.rstrip("\n").endswith("estimated 22.0 s")  # a pipe takes it whole
+
+
+class _NarrowTerminal(io.StringIO):
+    """A terminal whose width only COLUMNS tells (no descriptor to ask)."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+def test_report_lines_are_cut_to_a_terminal_and_whole_elsewhere(monkeypatch) -> None:
+    """log merge, log export, replay, probe, ports and sim say their lines through print_fitted
+    (issue 21, item 5: log merge's ran 117 columns on a terminal of 40)."""
+    from choreo.cli.terminal import print_fitted
+
+    monkeypatch.setenv("COLUMNS", "30")
+    line = f"merged 2 logs, 83 messages, hosts stage-left (lead), stage-right (follow): /tmp/{HOSTILE}.mcap"
+    terminal, pipe = _NarrowTerminal(), io.StringIO()
+    print_fitted(line, terminal)
+    print_fitted(line, pipe)
+    assert display_width(terminal.getvalue().rstrip("\n")) == 30 and terminal.getvalue().endswith("…\n")
+    assert pipe.getvalue() == visible(line) + "\n"
+    assert_safe(terminal.getvalue() + pipe.getvalue())
+    sources = {name: (REPO / "choreo" / "cli" / f"{name}.py").read_text() for name in ("log", "probe", "ports", "sim")}
+    assert sources["log"].count("print_fitted(") >= 10 and all("print_fitted(" in text for text in sources.values())

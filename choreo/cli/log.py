@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING, BinaryIO, TextIO, cast
 
 from choreo.cli.jsonout import error_record, print_json
-from choreo.cli.terminal import UNKNOWN_COLUMNS, columns
+from choreo.cli.terminal import UNKNOWN_COLUMNS, columns, print_fitted
 from choreo.errors import ChoreoError, UsageError, did_you_mean
 from choreo.log import LOG_DIR, LOG_SUFFIX
 from choreo.textfit import fit, visible
@@ -151,11 +151,11 @@ def run_merge(args: argparse.Namespace) -> int:
     check_output_folder(Path(args.output), "-o")
     report = merge_logs(args.logs, args.output)
     for alignment in report.alignments:
-        print(visible(alignment.describe()))
+        print_fitted(alignment.describe())
     for warning in report.warnings:
-        print(f"warning: {visible(warning)}", file=sys.stderr)
+        print_fitted(f"warning: {warning}", sys.stderr)
     hosts = ", ".join(f"{log.host} ({', '.join(log.robots)})" for log in report.hosts)
-    print(visible(f"merged {len(report.hosts)} logs, {report.messages} messages, hosts {hosts}: {report.output}"))
+    print_fitted(f"merged {len(report.hosts)} logs, {report.messages} messages, hosts {hosts}: {report.output}")
     return 0
 
 
@@ -388,7 +388,7 @@ def run_export(args: argparse.Namespace) -> int:
     if written:
         note = f" (log {cut.state}: {cut.reason})" if cut else ""
         what = "cue rows" if args.cues else "frames"
-        print(f"exported {count} {what} to {written}{note}", file=sys.stderr)
+        print_fitted(f"exported {count} {what} to {written}{note}", sys.stderr)
     return 0
 
 
@@ -427,7 +427,7 @@ def _export_parquet(args: argparse.Namespace, into: str, other_targets: bool) ->
                 print(line, file=sys.stderr)
             continue
         counts = ", ".join(f"{count} {kind if count != 1 else kind[:-1]}" for kind, count in done.counts.items())
-        print(visible(f"exported {path}: {counts} to {folder / stem(path)}.*.parquet{cut}"), file=sys.stderr)
+        print_fitted(f"exported {path}: {counts} to {folder / stem(path)}.*.parquet{cut}", sys.stderr)
     return 2 if failed else 0
 
 
@@ -486,10 +486,10 @@ def run_replay(args: argparse.Namespace) -> int:
     def started(report) -> None:
         if not args.quiet:
             note = f" (simulator without the show's durations: {report.show_note})" if report.show_note else ""
-            print(f"replay: {report.source} on {report.port} at speed {report.speed:g}{note}", file=sys.stderr)
+            print_fitted(f"replay: {report.source} on {report.port} at speed {report.speed:g}{note}", sys.stderr)
             if report.speed_note:
-                print(f"note: {report.speed_note}", file=sys.stderr)
-            print(f"log: {report.log_path}", file=sys.stderr)
+                print_fitted(f"note: {report.speed_note}", sys.stderr)
+            print_fitted(f"log: {report.log_path}", sys.stderr)
 
     def differs(difference) -> None:
         if say:
@@ -508,13 +508,13 @@ def run_replay(args: argparse.Namespace) -> int:
     late = f", {report.replay_late} sent late by the replay" if report.replay_late else ""
     timing = (f" ({report.excused} of them status polls at a motion's end{late})"
               if report.excused else "")
-    print(f"replayed {report.frames} frames: {report.same} same, {report.different} differ{timing}"
-          f"{unmatched}; frames left up to {report.max_lag_ms:.1f} ms after their recorded time{cut}")
+    print_fitted(f"replayed {report.frames} frames: {report.same} same, {report.different} differ{timing}"
+                 f"{unmatched}; frames left up to {report.max_lag_ms:.1f} ms after their recorded time{cut}")
     lengths = report.recorded
     if lengths is not None and lengths.show_s is not None:
         stood = stood_text(lengths)
-        print(f"recorded show: {lengths.show_s:.3f} s on the show clock" + (f" ({stood})" if stood else ""))
-    print(f"log: {report.log_path}")
+        print_fitted(f"recorded show: {lengths.show_s:.3f} s on the show clock" + (f" ({stood})" if stood else ""))
+    print_fitted(f"log: {report.log_path}")
     return code
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from choreo.cli.terminal import print_fitted
 from choreo.board.usb import FTDI_DRIVER, KONDO_USB, KONDO_USB_ID, NEW_ID
 
 
@@ -32,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
               f"need: modprobe ftdi_sio && echo {NEW_ID} > /sys/{FTDI_DRIVER}/new_id)")
         return 0
     for port in ports:
-        print(describe_port(port))
+        print_fitted(describe_port(port))
     return 0
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
+from choreo.cli.terminal import print_fitted
 from choreo.errors import UsageError
 from choreo.wire.protocol import spell_bauds
 
@@ -46,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
         print_json(board_record(info))
         return 0
     for line in info.lines():
-        print(line)
+        print_fitted(line)
     return 0
 
 

@@ -34,10 +34,11 @@ def columns(stream: TextIO | None = None) -> int | None:
     return given if given else None
 
 
-def print_fitted(line: str) -> None:
-    """A line of a command's output for a person, cut to the terminal's width (with `…`) if
-    stdout is one; to a file or a pipe, whole."""
-    print(fit(line, columns() if sys.stdout.isatty() else None), flush=True)
+def print_fitted(line: str, file: TextIO | None = None) -> None:
+    """A line for a person on stdout (or `file`: stderr), cut to the terminal's width (with
+    `…`) where it is one; to a file or a pipe, whole."""
+    stream = file if file is not None else sys.stdout
+    print(fit(line, columns(stream) if stream.isatty() else None), file=stream, flush=True)
 
 
 class VisibleStream:
