@@ -223,6 +223,24 @@ def test_an_unknown_layout_is_said_and_slots_named_by_the_layout_they_fit():
     assert "unknown to this choreo" in note and "\x1b" not in note
 
 
+def test_a_huge_recorded_layout_name_is_cut_in_every_review(logs, tmp_path, capsys):
+    # A hostile log's 50 KB layout name was printed whole: in the summary, the frames' notes and
+    # every row of an export. A known name is kept whole.
+    from test_review_damage import _rewritten
+
+    huge = "hth9" + "\u202e" + "x" * 50_000
+    log = tmp_path / "huge.mcap"
+    _rewritten(logs["mixed"], log, "/rcb4/tx", "-", None, {"robot.left.layout": huge})
+    assert LogLayouts.of({"robot.left.layout": huge, "robots": "left"}).name("left") == huge[:39] + "\u2026"
+    assert LogLayouts.of({"layout": "hth4-2.2"}).name(None) == "hth4-2.2"
+    for review in (["summary"], ["frames"], ["export", "--csv", "-"]):  # --json: the metadata as stored
+        capsys.readouterr()
+        assert vmain(["log", review[0], str(log), *review[1:]]) == 0
+        out = capsys.readouterr().out
+        assert "x" * 40 not in out and len(out) < 20_000, review
+        assert "hth9" in out, review
+
+
 def test_replies_are_read_by_the_frame_they_answer():
     layouts = LogLayouts.of({"layout": "hth4-2.2"})
     status = TxRecord(1, "status", HTH4_22.status.hex)

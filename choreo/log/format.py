@@ -713,7 +713,7 @@ class LogLayouts:
     @classmethod
     def of(cls, run_info: Mapping[str, str]) -> LogLayouts:
         robots = logged_robots(run_info)
-        return cls({robot: str(run_info.get(layout_key(robot), "")) for robot in [None, *robots]})
+        return cls({robot: _kept_layout_name(str(run_info.get(layout_key(robot), ""))) for robot in [None, *robots]})
 
     def name(self, robot: str | None) -> str:
         """The layout name the log gives the robot's frames (seed where it gives none)."""
@@ -747,6 +747,17 @@ class LogLayouts:
                 notes.append(f"{whose}board layout {self.name(robot)!r} is unknown to this choreo: "
                              "motion slots named by whichever known layout they fit")
         return notes
+
+
+LAYOUT_NAME_KEPT = 40  # characters of a recorded layout name no choreo knows that a review keeps
+
+
+def _kept_layout_name(name: str) -> str:
+    """A recorded layout name as reviews keep it: a known one whole; another (a newer choreo's,
+    or a hostile log's) is only ever shown, in every row of an export: cut to LAYOUT_NAME_KEPT."""
+    if name in LAYOUTS or len(name) <= LAYOUT_NAME_KEPT:
+        return name
+    return name[:LAYOUT_NAME_KEPT - 1] + "\u2026"
 
 
 def frame_meaning(tx: TxRecord, layouts: LogLayouts) -> str:
