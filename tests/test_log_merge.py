@@ -273,6 +273,19 @@ def test_the_same_host_twice_or_one_robot_on_two_hosts_is_refused(hosts, tmp_pat
     assert os.listdir(tmp_path) == ["other.mcap"]
 
 
+def test_the_logs_of_two_shows_are_refused(hosts, tmp_path, capsys):
+    """Issue 21, item 6: a host's log of another show (here a one-robot show) merged without a
+    word, its steps labelled by the first's show."""
+    from choreo.clock import VirtualTime
+
+    other = tmp_path / "solo.mcap"
+    argv = ["run", str(write_show(tmp_path, SOLO)), "--log", str(other), "-q"]
+    assert main(argv, time_source=VirtualTime(1000.0)) == 0
+    err = _refused(capsys, [str(hosts[LEFT]), str(other), "-o", str(tmp_path / "m.mcap")])
+    assert "of show 'duo'" in err and "of show 'solo'" in err and "merge the logs of one show" in err
+    assert not (tmp_path / "m.mcap").exists()
+
+
 def test_the_output_may_be_no_input_nor_in_a_missing_folder(hosts, tmp_path, capsys):
     logs = [str(path) for path in hosts.values()]
     before = hosts[RIGHT].read_bytes()
@@ -312,7 +325,7 @@ def test_a_message_that_is_no_choreo_message_fails_the_merge_and_leaves_nothing(
     with open(bad, "wb") as f:
         writer = Writer(f)
         writer.start(library="choreo 0.1.0")
-        writer.add_metadata(METADATA_NAME, {Info.SHOW: "x"})
+        writer.add_metadata(METADATA_NAME, {Info.SHOW: "duo"})  # a host of the show whose message is no choreo message
         schema = writer.register_schema("choreo.Tx", "jsonschema", b"{}")
         writer.add_message(writer.register_channel("/rcb4/tx", "json", schema), 5, b'{"seq": "one"}', 5)
         writer.add_metadata(RESULT_METADATA_NAME, {Result.SHOW_ZERO_WALL_NS: str(_zero(hosts[LEFT]))})

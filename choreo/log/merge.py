@@ -246,6 +246,7 @@ def _check_hosts(logs: list[HostLog]) -> None:
     hosts: dict[str, Path] = {}
     robots: dict[str, str] = {}
     for log in logs:
+        _check_show(logs[0], log)
         if log.host in hosts:
             raise UsageError(f"log merge: {visible(str(hosts[log.host]))} and {visible(str(log.path))} are both "
                              f"host {visible(log.host)}: give each host's log once")
@@ -255,6 +256,19 @@ def _check_hosts(logs: list[HostLog]) -> None:
                 raise UsageError(f"log merge: robot {visible(robot)} is in the logs of hosts {visible(robots[robot])} "
                                  f"and {visible(log.host)}: a show's hosts drive different robots")
             robots[robot] = log.host
+
+
+def _show_name(log: HostLog) -> str:
+    return log.metadata.get(METADATA_NAME, {}).get(Info.SHOW, "")
+
+
+def _check_show(first: HostLog, log: HostLog) -> None:
+    """Hosts of one show ran one show: the runs of two shows have no plan in common, and the
+    merged log's one show would label the other's steps with its own (issue 21, item 6)."""
+    mine, theirs = _show_name(first), _show_name(log)
+    if theirs != mine:
+        raise UsageError(f"log merge: {visible(str(first.path))} is a run of show {visible(repr(mine))}, "
+                         f"{visible(str(log.path))} of show {visible(repr(theirs))}: merge the logs of one show")
 
 
 # -- lining the logs up --------------------------------------------------------------------------
