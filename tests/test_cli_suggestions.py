@@ -100,3 +100,31 @@ def test_the_live_line_keeps_its_step_whole_when_it_fits():
     from choreo.cli.progress import live_line
 
     assert live_line("step 0: play 1", 0.5, 1.0, 80) == "step 0: play 1  0.5/1.0 s [##########----------]"
+
+
+HUGE = "x" * 100_000
+
+
+@pytest.mark.parametrize("argv", [
+    ["log", "frames", "x.mcap", "--kind", HUGE],  # a choice: argparse quotes it whole, then the choices
+    ["frames", "play", "--baud", "9" * 5000],  # a number argparse could not read
+    ["run", "shows/minimal.yaml", "--layout", "\x1b]0;owned\x07" + HUGE],
+    ["log", "summary", "--bogus" + HUGE],
+    [HUGE],
+])
+def test_a_huge_or_hostile_value_is_cut_in_the_error_line(capsys, argv):
+    """Issue 21, item 6: a 100 KB value argparse could not take was printed whole (100 KB a line,
+    the choices lost after it); the error line is cut, the choices kept, controls escaped."""
+    lines = error_of(capsys, *argv)
+    assert len(lines[-1]) < 1200 and "\x1b" not in lines[-1] and "\x07" not in lines[-1]
+    if "--kind" in argv:
+        assert "more characters)" in lines[-1] and lines[-1].endswith("'invalid')")
+
+
+def test_a_huge_value_is_cut_in_the_json_error_too(capsys):
+    with pytest.raises(SystemExit):
+        main(["log", "frames", "--json", "x.mcap", "--kind", HUGE])
+    import json
+
+    error = json.loads(capsys.readouterr().out)["error"]
+    assert len(error) < 1200 and "(choose from 'stop'" in error

@@ -8,9 +8,11 @@ import re
 from collections.abc import Sequence
 from typing import NoReturn
 
-from choreo.errors import UsageError, did_you_mean
+from choreo.errors import UsageError, bounded, did_you_mean, one_line
 
 _INVALID_CHOICE = re.compile(r"invalid choice: '(?P<given>[^']*)' \(choose from (?P<choices>.*)\)")
+_QUOTED = re.compile(r"'([^']{%d,})'" % 200)  # a value given, quoted in argparse's message
+_QUOTED_KEPT = 80  # characters of an over-long value the message keeps
 
 
 class ChoreoParser(argparse.ArgumentParser):
@@ -28,7 +30,8 @@ class ChoreoParser(argparse.ArgumentParser):
         match = _INVALID_CHOICE.search(message)
         if match:
             choices = re.findall(r"'([^']*)'", match.group("choices"))
-            message += did_you_mean(match.group("given"), choices)
+            message += did_you_mean(match.group("given")[:_QUOTED_KEPT], choices)
+        message = bounded(one_line(_QUOTED.sub(_cut_value, message)))
         if self._wants_json():
             from choreo.cli.jsonout import error_record, print_json
 
@@ -46,3 +49,10 @@ class ChoreoParser(argparse.ArgumentParser):
         first = next((a.split("=", 1)[0] for a in extra if a.startswith("-")), None)
         hint = did_you_mean(first, options) if first else ""
         self.error(f"unrecognized arguments: {' '.join(extra)}{hint}")
+
+
+def _cut_value(match: re.Match[str]) -> str:
+    """A value given to an option, as an error quotes it, cut (argparse quotes it whole: a
+    100 KB `--kind` printed 100 KB, and the choices after it were lost in a cut of the line)."""
+    value = match.group(1)
+    return f"'{value[:_QUOTED_KEPT]}…' ({len(value) - _QUOTED_KEPT} more characters)"
