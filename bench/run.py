@@ -44,6 +44,7 @@ BENCHMARKS = (
     ("beats", "13. beat finding on songs with known beats (issue 23)"),
     ("heldout", "14. beat finding on a held-out set, never tuned on"),
     ("link", "15. two hosts on one Ableton Link session (issue 25)"),
+    ("go_tracks", "16. a GO in one track against another track's timed cues (issue 21)"),
 )
 RESULTS = BENCH / "RESULTS.md"
 
