@@ -10,6 +10,8 @@ could push a second return address on the board.
 
 from __future__ import annotations
 
+import os
+import stat
 import statistics
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
@@ -105,6 +107,10 @@ def open_port(url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TI
     import serial
 
     register_url_handlers()
+    if own_terminal(url):
+        raise LinkError(f"port {url}: is the terminal choreo runs in, not a board's adapter (opening it would "
+                        "set it raw at the board's baud and write frames into it): `choreo ports` lists the "
+                        "serial ports")
     try:
         port = serial.serial_for_url(
             url, baudrate=baud, bytesize=serial.EIGHTBITS, parity=serial.PARITY_EVEN,
@@ -119,6 +125,42 @@ def open_port(url: str, baud: int = DEFAULT_BAUD, *, timeout: float = DEFAULT_TI
         return port
     except PORT_ERRORS as exc:
         raise LinkError(f"port {url}: cannot open: {_reason(exc)} (at {baud} baud, 8E1){_open_hint(exc)}") from None
+
+
+CONTROLLING_TERMINAL = "/dev/tty"
+
+
+def own_terminal(path: str) -> bool:
+    """Whether `path` is the terminal choreo runs in: its controlling terminal or a standard
+    stream's. A board is never there (a mistyped --port, `choreo sim`'s path taken from the
+    wrong window), and the operator's terminal would be left raw at 115200 8E1 with frames in it."""
+    if os.name != "posix" or "://" in path:
+        return False
+    try:
+        device = os.stat(path)
+    except (OSError, ValueError):
+        return False  # opening it says why
+    if not stat.S_ISCHR(device.st_mode):
+        return False
+    return device.st_rdev in _terminals()
+
+
+def _terminals() -> set[int]:
+    """The device numbers of this process's terminals: /dev/tty itself, the standard streams'
+    and the controlling terminal's (Linux tells it in /proc/self/stat)."""
+    found: set[int] = set()
+    with suppress(OSError):
+        found.add(os.stat(CONTROLLING_TERMINAL).st_rdev)
+    for fd in (0, 1, 2):
+        with suppress(OSError):
+            if os.isatty(fd):
+                found.add(os.fstat(fd).st_rdev)
+    with suppress(OSError, ValueError, IndexError):
+        with open("/proc/self/stat", encoding="ascii", errors="replace") as status:
+            tty_nr = int(status.read().rpartition(")")[2].split()[4])
+        if tty_nr:
+            found.add(os.makedev((tty_nr >> 8) & 0xFFF, (tty_nr & 0xFF) | ((tty_nr >> 12) & 0xFFF00)))
+    return found
 
 
 def usb_latency_note(port: serial.SerialBase) -> str | None:
