@@ -535,3 +535,31 @@ def test_report_lines_are_cut_to_a_terminal_and_whole_elsewhere(monkeypatch) -> 
     assert_safe(terminal.getvalue() + pipe.getvalue())
     sources = {name: (REPO / "choreo" / "cli" / f"{name}.py").read_text() for name in ("log", "probe", "ports", "sim")}
     assert sources["log"].count("print_fitted(") >= 10 and all("print_fitted(" in text for text in sources.values())
+
+
+def test_choreo_sim_answers_while_its_journal_goes_to_a_pipe_nobody_reads() -> None:
+    """`choreo sim -v` wrote each journal line from the board's thread: a pipe nobody read (or
+    a terminal stopped with Ctrl-S) stopped its replies, and the show's link timed out (issue 21,
+    item 5). The journal has a thread of its own; the board answers."""
+    read, write = os.pipe()
+    sim = subprocess.Popen([sys.executable, "-m", "choreo", "sim", "-v"], stdout=subprocess.PIPE, stderr=write,
+                           cwd=REPO, text=True, start_new_session=True)
+    try:
+        assert sim.stdout is not None
+        device = sim.stdout.readline().strip()
+        assert wait_for(lambda: b"Ctrl-C to stop" in os.read(read, 65536), timeout=20)  # the opening line
+        # filled through a description of its own (the sim's stays blocking), to the last byte
+        filler = os.open(f"/proc/self/fd/{write}", os.O_WRONLY | os.O_NONBLOCK)
+        for size in (4096, 1):
+            with pytest.raises(BlockingIOError):
+                while True:
+                    os.write(filler, b"x" * size)
+        os.close(filler)
+        probe = subprocess.run([str(REPO / ".venv" / "bin" / "choreo"), "probe", "--port", device],
+                               capture_output=True, text=True, cwd=REPO, timeout=60)
+        assert probe.returncode == 0 and "answers on" in probe.stdout, probe.stdout + probe.stderr
+    finally:
+        os.killpg(sim.pid, signal.SIGKILL)
+        sim.wait(10)
+        os.close(read)
+        os.close(write)

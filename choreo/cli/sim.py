@@ -10,7 +10,7 @@ import threading
 import time
 from typing import TYPE_CHECKING
 
-from choreo.cli.terminal import print_fitted
+from choreo.cli.terminal import StatusWriter, print_fitted
 from choreo.errors import LinkError, UsageError
 from choreo.wire.protocol import spell_bauds
 
@@ -145,8 +145,14 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UsageError(f"choreo sim: {_as_flags(str(exc))}") from None
     start = time.monotonic()
-    servers = [_server(options, args, start, number if args.boards > 1 else None) for number in range(args.boards)]
+    # the journal is written by a thread of its own: a terminal stopped with Ctrl-S or a pipe
+    # nobody reads must not hold up the board's replies (lines past its queue are counted)
+    journal = StatusWriter(sys.stderr, fit_lines=sys.stderr.isatty(), what="journal line") if args.verbose else None
+    servers = [_server(options, journal, start, number if args.boards > 1 else None, args)
+               for number in range(args.boards)]
     with contextlib.ExitStack() as stack:
+        if journal is not None:
+            stack.callback(journal.close)
         for server in servers:
             stack.enter_context(server)
         # Handlers first: whoever reads the paths may signal us at once, and must get exit 0.
@@ -171,16 +177,18 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _server(options: SimOptions, args: argparse.Namespace, start: float, number: int | None) -> PtyServer:
+def _server(options: SimOptions, journal: StatusWriter | None, start: float, number: int | None,
+            args: argparse.Namespace) -> PtyServer:
     from choreo.sim.pty import PtyServer
     from choreo.sim.line import PTY_GAP_S
 
     prefix = f"[board {number + 1}] " if number is not None else ""
 
     def said(entry: JournalEntry) -> None:
-        print(prefix + entry.line(start), file=sys.stderr, flush=True)
+        if journal is not None:
+            journal.line(prefix + entry.line(start))
 
-    board = options.board(on_entry=said if args.verbose else None, power_on=start)
+    board = options.board(on_entry=said if journal is not None else None, power_on=start)
     return PtyServer(board, gap_s=options.gap_s or PTY_GAP_S, check_settings=not args.no_settings_check,
                      latency_s=options.latency_s)
 

@@ -119,10 +119,12 @@ class StatusWriter:
     CAPACITY = 100
     REDRAW_S = 0.25
 
-    def __init__(self, out: TextIO, *, fit_lines: bool, status: Callable[[int], str] | None = None) -> None:
+    def __init__(self, out: TextIO, *, fit_lines: bool, status: Callable[[int], str] | None = None,
+                 what: str = "progress line") -> None:
         self.out: TextIO | None = raw_stream(out)
         self.fit_lines = fit_lines
         self.status = status
+        self.what = what  # what a line is, in the count of those dropped
         self.dropped_total = 0
         self._lock = threading.Lock()
         self._lines: deque[str] = deque()
@@ -177,7 +179,7 @@ class StatusWriter:
             self._lines.clear()
             self._dropped = 0
         if dropped:
-            lines.append(f"({dropped} progress line{'s' if dropped != 1 else ''} not shown: "
+            lines.append(f"({dropped} {self.what}{'s' if dropped != 1 else ''} not shown: "
                          "the output did not keep up)")
         width = (columns(self.out) or UNKNOWN_COLUMNS) if self.fit_lines else None
         text = "\r\x1b[K" if self._shown and (lines or self.status is not None) else ""
