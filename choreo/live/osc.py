@@ -97,7 +97,7 @@ from choreo.events import Answer, Command, CommandEvent, GoCue, RunResult, StepE
 from choreo.live.limits import LIMITS, Limits, SenderLimits
 from choreo.log.format import UNLOGGED
 from choreo.live.controls import Live
-from choreo.live.oscnet import Handled, ListenFailed, OscNet
+from choreo.live.oscnet import NOTHING, Handled, ListenFailed, OscNet
 from choreo.live.osclimits import LIMITS as WIRE_LIMITS
 from choreo.live.osclimits import OscLimits
 from choreo.live.oscnotify import Notifier, Subscriber, Subscriptions, Target, is_this_machine, show_target
@@ -529,7 +529,7 @@ class OscServer:
         if not self._limits.may_read(budget, allowed, cost):
             self.counts[UNREAD] += 1
             self.live.count(UNREAD if allowed else "refused", f"osc {transport} {host}")
-            return Handled()
+            return NOTHING
         spoke = False
         source = f"osc {transport} {show_target((host, sender[1]))}"  # `where`, from the remembered host
         if not allowed:

@@ -109,14 +109,21 @@ class PacketHandler(Protocol):
         """A TCP connection ended (either side closed it): what was kept for it goes."""
 
 
-class Handled(list[bytes]):
+class Handled(tuple[bytes, ...]):
     """A packet's encoded replies, and whether it `spoke`: carried a message its handler takes
     (a command, a question), as a desk's packets do, not junk, a malformed packet or an address
-    nobody takes (which would otherwise hold a TCP connection's place for the idle timeout)."""
+    nobody takes (which would otherwise hold a TCP connection's place for the idle timeout).
+    A tuple: `NOTHING`, shared, answers every packet refused unread at no cost."""
 
-    def __init__(self, replies: Iterable[bytes] = (), spoke: bool = False) -> None:
-        super().__init__(replies)
-        self.spoke = spoke
+    spoke: bool
+
+    def __new__(cls, replies: Iterable[bytes] = (), spoke: bool = False) -> Handled:
+        handled = super().__new__(cls, replies)
+        handled.spoke = spoke
+        return handled
+
+
+NOTHING = Handled()  # no reply, nothing said: a packet refused before it was read
 
 
 # -- the connections' bookkeeping (pure: times are given) -------------------------------------
