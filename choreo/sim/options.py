@@ -188,7 +188,7 @@ def parse_options(values: Mapping[str, str]) -> SimOptions:
         motion_s=_parsed(values, "motion_s", _seconds, DEFAULT_MOTION_S),
         durations=_parsed(values, "durations", parse_durations, {}),
         reply_s=_parsed(values, "reply_ms", _milliseconds, DEFAULT_REPLY_DELAY_S),
-        refresh_s=_parsed(values, "refresh_ms", _milliseconds, DEFAULT_REFRESH_S),
+        refresh_s=_parsed(values, "refresh_ms", _refresh, DEFAULT_REFRESH_S),
         wire=_parsed(values, "wire", _flag, True),
         gap_s=_parsed(values, "gap_ms", _positive_milliseconds, None),
         faults=plan,
@@ -271,6 +271,14 @@ def _positive_milliseconds(text: str) -> float:
     value = _milliseconds(text)
     if value <= 0:
         raise ValueError("milliseconds must be > 0")
+    return value
+
+
+def _refresh(text: str) -> float:
+    """0 (live) or a period a tick count can be taken of: 1e-320 ms made time / period infinite."""
+    value = _milliseconds(text)
+    if 0 < value < 1e-9:
+        raise ValueError("a refresh period is 0 (live) or at least 0.000001 ms")
     return value
 
 
