@@ -126,3 +126,11 @@ def test_probe_and_doctor_of_a_line_that_echoes_fail(capsys):
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
     assert main(["doctor", "--port", "loop://"]) == 1
     assert "PROBLEM board: port loop://: something answers the ACK check" in capsys.readouterr().out
+
+
+def test_a_device_that_naks_every_frame_is_said_to_hear_them_garbled_not_to_echo(capsys):
+    # Was: "so it is not a board: a line that echoes what is sent" for a NAK to every frame.
+    assert main(["probe", "--port", "sim://?nak=1", "--timeout", "0.02"]) == 3
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "NAKs the ACK check and answers no question after it" in line and "echoes" not in line
+    assert "parity (8E1)" in line and line.startswith("port sim://?nak=1: something at 115200 baud")

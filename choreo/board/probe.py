@@ -165,8 +165,10 @@ def probe(url: str, *, bauds: Iterable[int] = protocol.BAUDS, timeout: float = D
             refused.append(exc)
             continue
         try:
-            if _answers(link):
-                return _read(link, url, baud, [f"note: {exc}: not tried at that baud" for exc in refused])
+            answer = _answers(link)
+            if answer is not None:
+                notes = [f"note: {exc}: not tried at that baud" for exc in refused]
+                return _read(link, url, baud, notes, refused_all=answer is ReplyKind.NAK)
         finally:
             link.close()
         tried.append(str(baud))
@@ -178,16 +180,17 @@ def probe(url: str, *, bauds: Iterable[int] = protocol.BAUDS, timeout: float = D
                     f"adapter, or 5 V inverted logic without it), the cable, and the parity (8E1){also}")
 
 
-def _answers(link: Link) -> bool:
-    """Two ACK checks; any well-formed answer means a board listens at this baud."""
+def _answers(link: Link) -> ReplyKind | None:
+    """Two ACK checks; any well-formed answer (ACK or NAK, which it was) means a board listens
+    at this baud; None if neither was answered."""
     for attempt in (1, 2):
         reply = link.send(protocol.sync_frame(), attempt)
         if reply.kind in (ReplyKind.ACK, ReplyKind.NAK):
-            return True
-    return False
+            return reply.kind
+    return None
 
 
-def _read(link: Link, url: str, baud: int, notes: list[str]) -> BoardInfo:
+def _read(link: Link, url: str, baud: int, notes: list[str], refused_all: bool = False) -> BoardInfo:
     info = BoardInfo(url, baud, notes=notes)
     asked = len(notes)
     version = _ask(link, protocol.version_frame(), info, "version")
@@ -201,15 +204,21 @@ def _read(link: Link, url: str, baud: int, notes: list[str]) -> BoardInfo:
     if counter is not None:
         info.counter = Counter(counter[2:-1])
     if info.version is None and info.config is None and info.counter is None:
-        raise _no_board(url, baud, info.notes[asked:])
+        raise _no_board(url, baud, info.notes[asked:], refused_all)
     return info
 
 
-def _no_board(url: str, baud: int, notes: list[str]) -> LinkError:
+def _no_board(url: str, baud: int, notes: list[str], refused_all: bool = False) -> LinkError:
     """An ACK check answered and nothing after it: the ACK's reply is its own bytes, so a line
     that echoes what is sent (TX joined to RX, a half-duplex adapter) or a device that repeats
-    one answer passes it. That is no board to report as found (nor for `doctor` to call ok)."""
+    one answer passes it. That is no board to report as found (nor for `doctor` to call ok).
+    A NAK to the ACK check is no echo: something refuses every frame it hears (garbled)."""
     first = notes[0].removeprefix("note: ") if notes else "no answer"
+    if refused_all:
+        return LinkError(f"port {url}: something at {baud} baud NAKs the ACK check and answers no question "
+                         "after it (version, config word, program counter): it hears every frame garbled: "
+                         "check the parity (8E1), the cable and that no other program talks on the port; "
+                         f"first: {first}")
     return LinkError(f"port {url}: something answers the ACK check at {baud} baud but no question after it "
                      "(version, config word, program counter), so it is not a board: a line that echoes what "
                      f"is sent (TX joined to RX) answers the ACK check with its own bytes; first: {first}")
