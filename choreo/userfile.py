@@ -165,6 +165,18 @@ def modified_if_regular(path: Path) -> float | None:
     return info.st_mtime if stat.S_ISREG(info.st_mode) else None
 
 
+def same_file(one: str | os.PathLike[str], other: str | os.PathLike[str]) -> bool:
+    """The same file, by name or (when it exists) by identity: a link, `./x`, a hard link. An
+    output a command is about to write must not be the file it reads: opened for writing first,
+    the input is gone before it is read (`log export LOG --csv LOG` emptied the log)."""
+    try:
+        if os.path.realpath(one) == os.path.realpath(other):
+            return True
+        return os.path.samefile(one, other)
+    except (OSError, ValueError):
+        return False
+
+
 NEW_FILE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)  # EXCL: never through a link
 
 

@@ -269,3 +269,27 @@ def test_an_output_file_that_is_a_pipe_nobody_reads_is_one_line_not_a_hang(run_l
     os.mkfifo(fifo)
     done = choreo("log", "export", str(run_log), "--csv", str(fifo))  # it blocked until the timeout
     assert (done.returncode, done.stderr) == (2, f"log export --csv {fifo}: cannot write: a named pipe nobody reads\n")
+
+
+@pytest.mark.parametrize("argv", [
+    ["log", "export", "LOG", "--csv", "OUT"], ["log", "export", "LOG", "--json", "OUT"],
+    ["log", "export", "LOG", "--jsonl", "-", "--csv", "OUT"],
+    ["log", "export", "LOG", "--format", "jsonl", "-o", "OUT"],
+    ["log", "export", "LOG", "--cues", "--csv", "OUT"], ["log", "timeline", "LOG", "--png", "OUT"],
+], ids=lambda argv: " ".join(argv[1:2] + argv[3:4]))
+@pytest.mark.parametrize("named", ["itself", "dot", "link", "hard link"])
+def test_an_output_that_is_the_log_read_is_refused_and_the_log_kept(run_log, tmp_path, capsys, argv, named):
+    """Issue 21, item 6: `log export LOG --csv LOG` (or through a link) opened its output first,
+    emptied the log, then read it: 'not an MCAP file', the run's log gone."""
+    log = tmp_path / "run.mcap"
+    log.write_bytes(run_log.read_bytes())
+    out = {"itself": log, "dot": tmp_path / "." / "run.mcap", "link": tmp_path / "link.mcap",
+           "hard link": tmp_path / "hard.mcap"}[named]
+    if named == "link":
+        out.symlink_to(log)
+    if named == "hard link":
+        os.link(log, out)
+    assert main([str(log) if a == "LOG" else str(out) if a == "OUT" else a for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "that is the log being read" in err, err
+    assert log.read_bytes() == run_log.read_bytes()

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, BinaryIO
 from choreo.cli.terminal import print_fitted
 from choreo.errors import UsageError, one_line
 from choreo.textfit import visible
-from choreo.userfile import write_why, written_whole
+from choreo.userfile import same_file, write_why, written_whole
 
 if TYPE_CHECKING:  # numpy and miniaudio load only when a song is read
     from choreo.music.beats import Beat, BeatEstimate
@@ -225,7 +225,7 @@ def _open_outputs(args: argparse.Namespace, files: ExitStack) -> dict[str, Binar
         if path == "-":  # stdout carries the tempo block, and a WAV's header is written last
             raise UsageError(f"{option} -: give a file name (./- for a file named -); stdout is for the "
                              "tempo block")
-    if len(wanted) == 2 and _same_file(args.click, args.png):
+    if len(wanted) == 2 and same_file(args.click, args.png):
         raise UsageError(f"--png {visible(args.png)}: the same file as --click: give each its own")
     opened = {option: files.enter_context(replacing(path, option, args.song)) for option, path in wanted.items()}
     if "--png" in wanted:  # after the paths: a wrong one is said without the second it takes to import matplotlib
@@ -261,16 +261,6 @@ def _write_outputs(args: argparse.Namespace, features: Features, found: BeatEsti
     return notes
 
 
-def _same_file(one: str, other: str) -> bool:
-    """The same file, by name or (when it exists) by identity: a link, `./x`, a hard link."""
-    if os.path.realpath(one) == os.path.realpath(other):
-        return True
-    try:
-        return os.path.samefile(one, other)
-    except (OSError, ValueError):
-        return False
-
-
 @contextmanager
 def replacing(path: str, option: str, song: str) -> Iterator[BinaryIO]:
     """A new file for `path`, written beside it and renamed over it when the block ends without
@@ -300,7 +290,7 @@ def _check_target(target: Path, path: str, option: str, song: str) -> None:
 
         raise UsageError(f"{option} {visible(path)}: cannot write: it is {kind_of(mode)}, not a file: "
                          "give a file name")
-    if _same_file(str(target), song):
+    if same_file(target, song):
         raise UsageError(f"{option} {visible(path)}: that is the song itself: writing it would destroy the "
                          "song; give another file name")
     if not os.access(target, os.W_OK):  # a rename would replace it all the same: its owner said no

@@ -23,6 +23,7 @@ from choreo.cli.terminal import UNKNOWN_COLUMNS, columns, print_fitted
 from choreo.errors import ChoreoError, UsageError, did_you_mean
 from choreo.log import LOG_DIR, LOG_SUFFIX
 from choreo.textfit import fit, visible
+from choreo.userfile import same_file
 from choreo.wire.layouts import LAYOUT_NAMES
 from choreo.wire.protocol import DEFAULT_BAUD, FrameKind, ReplyKind, spell_bauds
 
@@ -331,7 +332,7 @@ def _timeline_png(log: str, png: str) -> int:
 
     with LogReader(log) as reader:
         require_matplotlib()
-        with _output(png, "timeline --png", binary=True) as out:
+        with _output(png, "timeline --png", log, binary=True) as out:
             timeline = build(reader)
             render_png(timeline, cast(BinaryIO, out))  # _output(binary=True) opens it in binary mode
     cut = f" (log {timeline.cut.state}: {timeline.cut.reason})" if timeline.cut else ""
@@ -380,7 +381,7 @@ def run_export(args: argparse.Namespace) -> int:
         sinks: list[CsvSink | JsonSink | JsonLinesSink] = []
         for name, value in targets:
             out = sys.stdout if value == "-" else cast(TextIO, files.enter_context(  # opened in text mode
-                _output(value, f"log export --{name}")))
+                _output(value, f"log export --{name}", args.log[0])))
             sinks.append(CsvSink(out, CUE_COLUMNS if args.cues else COLUMNS) if name == "csv" else sink_of[name](out))
         count = export_cues(reader, sinks) if args.cues else export(reader, sinks)
         cut = reader.cut
@@ -432,7 +433,7 @@ def _export_parquet(args: argparse.Namespace, into: str, other_targets: bool) ->
 
 
 @contextmanager
-def _output(path: str, command: str, binary: bool = False) -> Iterator[IO]:
+def _output(path: str, command: str, log: str, binary: bool = False) -> Iterator[IO]:
     """An output file, created before the log is read, every failure one line (exit 2).
 
     A folder that does not exist is refused, not made: a mistyped folder would otherwise become a
@@ -444,6 +445,9 @@ def _output(path: str, command: str, binary: bool = False) -> Iterator[IO]:
 
     target = Path(path)
     check_output_folder(target, command)
+    if same_file(target, log):  # opened for writing first, the log would be emptied before it was read
+        raise UsageError(f"{command} {path}: that is the log being read ({log}): writing it would destroy the log; "
+                         "give another file name")
     created = not os.path.lexists(target)
     try:
         fd = os.open(target, _WRITE_FLAGS, 0o666)  # a named pipe nobody reads: ENXIO, not a hang
