@@ -508,3 +508,14 @@ def test_names_that_clean_to_the_same_text_keep_distinct_keys(tmp_path, capsys):
         "motion_3": {"number": 3, "hth4_name": "wave"},
         "motion_4": {"number": 4},  # a Hangul filler alone: nothing visible is left to keep
     }
+
+
+def test_an_output_in_a_loop_of_links_or_named_nothing_is_one_line(tmp_path, capsys):
+    """Issue 21, item 6: `-o loop/x.yaml` (a folder that is a loop of links) was a RuntimeError
+    traceback from the schema line's relative path; `-o ''` spoke of '.'."""
+    project = write_project(tmp_path, project_xml([Slot(0, "home")]))
+    (tmp_path / "a").symlink_to(tmp_path / "b")
+    (tmp_path / "b").symlink_to(tmp_path / "a")
+    looped = str(tmp_path / "a" / "x.yaml")
+    assert "folder" in assert_one_line_exit_2(capsys, ["import", str(project), "-o", looped], "")
+    assert "give the show's file name" in assert_one_line_exit_2(capsys, ["import", str(project), "-o", ""], "")

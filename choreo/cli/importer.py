@@ -7,6 +7,7 @@ project is `ProjectError` (exit 2, one line), mapped by the CLI's `main` like ev
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -47,8 +48,12 @@ def run_import(args: argparse.Namespace) -> int:
     if args.output in (None, "-"):  # a file named "-" is ./-
         _write_stdout(starter_show(project))
         return 0
-    output = Path(args.output)
-    _write_new(output, starter_show(project, schema_reference(output)))
+    output = _new_output(args.output)
+    try:
+        schema = schema_reference(output)
+    except (OSError, RuntimeError):  # a link loop met on the way (Path.resolve's RuntimeError)
+        schema = None
+    _write_new(output, starter_show(project, schema))
     count = len(project.motions)
     print(one_line(f"{output}: {count} motion{'s' if count != 1 else ''}, layout {project.layout}: "
                    f"check it with `choreo plan {output}`"))
@@ -64,6 +69,20 @@ def _write_stdout(text: str) -> None:
     sys.stdout.flush()
     buffer.write(text.encode("utf-8"))
     buffer.flush()
+
+
+def _new_output(name: str) -> Path:
+    """`-o`'s file, checked before anything is made of its name: a link loop in its folder was a
+    RuntimeError traceback (the schema's relative path resolves the folder), `-o ''` wrote of '.'."""
+    from choreo.run.settings import check_output_folder
+
+    if not name:
+        raise UsageError("-o '': give the show's file name (or - for standard output)")
+    path = Path(name)
+    check_output_folder(path, "-o")
+    if os.path.lexists(path):
+        raise UsageError(f"{path}: already exists; `choreo import` never overwrites a file: give another with -o")
+    return path
 
 
 def _write_new(path: Path, text: str) -> None:
