@@ -162,14 +162,21 @@ def test_without_pyarrow_it_says_how_to_install_it(tmp_path, monkeypatch, capsys
     assert not list(tmp_path.glob("*.parquet*"))
 
 
-def test_a_missing_folder_or_two_logs_of_one_name_are_refused_before_anything_is_written(tmp_path, capsys):
+def test_a_missing_folder_or_two_logs_of_one_name_are_refused_before_anything_is_written(tmp_path, capsys,
+                                                                                          monkeypatch):
+    monkeypatch.chdir(tmp_path)  # where '' would write
     commanded(tmp_path / "live.mcap")
     (tmp_path / "b").mkdir()
     commanded(tmp_path / "b" / "live.mcap")
     for argv, says in (([str(tmp_path / "live.mcap"), "--parquet", str(tmp_path / "nosuch" / "x")], "does not exist"),
                        ([str(tmp_path / "live.mcap"), str(tmp_path / "b"), "--parquet", str(tmp_path)], "same tables"),
                        ([str(tmp_path / "live.mcap"), "--parquet", str(tmp_path), "--cues"], "leave out"),
-                       ([str(tmp_path / "live.mcap"), str(tmp_path / "live.mcap"), "--csv", "-"], "one log at a time")):
+                       ([str(tmp_path / "live.mcap"), str(tmp_path / "live.mcap"), "--csv", "-"], "one log at a time"),
+                       # issue 21, item 6: '' (an unset shell variable) wrote the tables into the current folder,
+                       # and a file was 'folder is not a folder'
+                       ([str(tmp_path / "live.mcap"), "--parquet", ""], "give the folder the tables go in"),
+                       ([str(tmp_path / "live.mcap"), "--format", "parquet", "-o", ""], "give the folder"),
+                       ([str(tmp_path / "live.mcap"), "--parquet", "live.mcap"], "not a folder: give")):
         assert vmain(["log", "export", *argv]) == 2
         err = capsys.readouterr().err.splitlines()
         assert len(err) == 1 and says in err[0], err

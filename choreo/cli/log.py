@@ -406,9 +406,11 @@ def _export_parquet(args: argparse.Namespace, into: str, other_targets: bool) ->
                          "leave out --csv, --json, --jsonl and --cues")
     require_pyarrow()
     folder = Path(into)
+    if not into:  # Path('') is the current folder: an unset shell variable wrote the tables there
+        raise UsageError("log export --parquet '': give the folder the tables go in")
     if not _is_folder(folder):
-        what = "is not a folder" if os.path.lexists(folder) else "does not exist"
-        raise UsageError(f"log export --parquet {into}: folder {what} (create it first)")
+        what = "is not a folder: give a folder" if os.path.lexists(folder) else "does not exist (create it first)"
+        raise UsageError(f"log export --parquet {into}: {what}")
     logs = _logs_in(args.log)
     named: dict[str, Path] = {}
     for path in logs:
