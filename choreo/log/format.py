@@ -694,6 +694,104 @@ def _hex_bytes(text: object) -> bytes:
         return b""
 
 
+# -- the metadata as a review keeps it ------------------------------------------------------------
+
+# What a review keeps of a log's `choreo` metadata: a hostile log's 50 KB names, 100,000 robots
+# or keys were printed whole by every review and copied into a merged log. Choreo writes within
+# these (schemas/show.schema.json: at most 16 robots and 16 hosts, names of 32 characters, a
+# show's name of 200 or a file's stem), so what it writes is kept whole.
+ROBOTS_KEPT = 16  # robots (and hosts) of a show: its schema's maxProperties
+NAME_KEPT = 32  # characters of a robot's or a host's name: the schema's pattern
+SHOW_NAME_KEPT = 255  # characters of a show's name: the schema's 200, or a file's stem
+VALUE_KEPT = 4096  # characters of any other value (a show's path, a port)
+SHORT_KEPT = 64  # characters of a value choreo writes short (a version, a time, a number, the machine's name)
+OTHER_KEYS_KEPT = 32  # keys choreo does not write (a newer choreo's): the first these
+METADATA_RECORDS_KEPT = 64  # metadata records (a merged log's hosts' own among them) besides choreo's two
+_ROBOT_WHATS = (Info.PORT, Info.BAUD, Info.LAYOUT)
+_HOST_WHATS = (Info.SHIFT_NS, Info.SPREAD_NS, Info.ALIGNED_BY)
+_SHORT_KEYS = frozenset((Info.VERSION, Info.SHOW_SHA256, Info.BAUD, Info.START_TIME, Info.START_NS, Info.HOST,
+                         Info.PYTHON, Info.PLATFORM, Info.UNISON, Info.SHIFT_NS, Info.SPREAD_NS, Info.ALIGNED_BY))
+_INFO_KEYS = _SHORT_KEYS | {Info.SHOW, Info.SHOW_PATH, Info.PORT, Info.LAYOUT, Info.ROBOTS, Info.HOSTS, Info.SHOW_HOST}
+
+
+def _kept_text(text: str, kept: int) -> str:
+    return text if len(text) <= kept else text[:kept - 1] + "\u2026"
+
+
+def _kept_chars(key: str) -> int:
+    """How much of a `choreo` key's value a review keeps: what choreo writes there, whole."""
+    if key in _SHORT_KEYS:
+        return SHORT_KEPT
+    return NAME_KEPT if key == Info.SHOW_HOST else SHOW_NAME_KEPT if key == Info.SHOW else VALUE_KEPT
+
+
+@dataclass
+class _Keeping:
+    """One metadata record being bounded: what is kept so far, and what a review says it left out."""
+
+    raw: Mapping[str, str]
+    kept: dict[str, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    values_cut: int = 0
+
+    def value(self, text: str, kept: int = VALUE_KEPT) -> str:
+        if len(text) > kept:
+            self.values_cut += 1
+        return _kept_text(text, kept)
+
+    def names(self, key: str, whose: str, whats: tuple[str, ...], kept_as: Callable[[str], str]) -> None:
+        """A list of names (`robots`, `hosts`): at most ROBOTS_KEPT, each cut to NAME_KEPT, with
+        each one's own keys (`robot.NAME.port`) kept under the name as cut."""
+        listed = [name for name in str(self.raw.get(key, "")).split(",") if name]
+        names: dict[str, str] = {}
+        for name in listed:
+            names.setdefault(_kept_text(name, NAME_KEPT), name)
+            if len(names) == ROBOTS_KEPT:
+                break
+        if len(listed) > ROBOTS_KEPT:
+            self.notes.append(f"the log names {len(listed):,} {whose}s: the first {ROBOTS_KEPT} kept "
+                              f"(a show has at most {ROBOTS_KEPT})")
+        if any(len(name) > NAME_KEPT for name in names.values()):
+            self.notes.append(f"{whose} names longer than {NAME_KEPT} characters (no show's) cut with \u2026")
+        if key in self.raw:
+            self.kept[key] = ",".join(names)
+        for cut, name in names.items():
+            for what in whats:
+                if (value := self.raw.get(kept_as(name) + what)) is not None:
+                    self.kept[kept_as(cut) + what] = self.value(value, _kept_chars(what))
+
+    def rest(self) -> None:
+        """Choreo's other keys, values cut; keys it does not write, up to OTHER_KEYS_KEPT."""
+        others = 0
+        for key, value in self.raw.items():
+            if key in _INFO_KEYS and key not in (Info.ROBOTS, Info.HOSTS):
+                self.kept[key] = self.value(value, _kept_chars(key))
+            elif key not in self.kept and not key.startswith(("robot.", "host.")):
+                others += 1
+                if others <= OTHER_KEYS_KEPT:
+                    self.kept[self.value(key, NAME_KEPT)] = self.value(value)
+        if others > OTHER_KEYS_KEPT:
+            self.notes.append(f"the log's metadata has {others:,} keys choreo does not write: "
+                              f"the first {OTHER_KEYS_KEPT} kept")
+        if self.values_cut:
+            self.notes.append(f"{self.values_cut:,} metadata text{'s' if self.values_cut > 1 else ''} longer than "
+                              "choreo writes cut with \u2026")
+
+
+def kept_metadata(name: str, raw: Mapping[str, str]) -> tuple[dict[str, str], list[str]]:
+    """A metadata record as every review (and a merge) keeps it, and what it says it left out:
+    the `choreo` record's robots, hosts, names, keys and values bounded (ROBOTS_KEPT, NAME_KEPT,
+    VALUE_KEPT...); any other record's keys and values likewise. Shown text is still escaped
+    where it is shown: this bounds what one log can cost, not what its characters are."""
+    keeping = _Keeping(raw if name in (METADATA_NAME, RESULT_METADATA_NAME) else
+                       dict(list(raw.items())[:OTHER_KEYS_KEPT]))
+    if name == METADATA_NAME:
+        keeping.names(Info.ROBOTS, "robot", _ROBOT_WHATS, lambda robot: robot_key(robot, ""))
+        keeping.names(Info.HOSTS, "host", _HOST_WHATS, lambda host: host_key(host, ""))
+    keeping.rest()
+    return keeping.kept, keeping.notes
+
+
 # -- frames in words, by the layout they were made for ------------------------------------------
 
 

@@ -34,7 +34,7 @@ from typing import IO
 
 from choreo.errors import InputError, LogError
 from choreo.log.format import (CHOREO_TOPICS, CLOCK_TOPIC, METADATA_NAME, RESULT_METADATA_NAME, SHOW_MEDIA_TYPE,
-                               base_topic, clock_topic, LoggedRun)
+                               METADATA_RECORDS_KEPT, base_topic, clock_topic, kept_metadata, LoggedRun)
 from choreo.userfile import open_input, reading
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -116,7 +116,8 @@ class LogReader:
         self.path = Path(path)
         self.library = ""
         self.profile = ""
-        self.metadata: dict[str, dict[str, str]] = {}
+        self.metadata: dict[str, dict[str, str]] = {}  # bounded as reviews keep it (format.kept_metadata)
+        self.metadata_notes: dict[str, list[str]] = {}  # what the bounds left out, by record
         self.attachments: list[Attachment] = []
         self.channels: dict[int, Channel] = {}
         self.cut: Cut | None = None
@@ -144,6 +145,11 @@ class LogReader:
     def run_info(self) -> dict[str, str]:
         """The `choreo` metadata: show, port, baud, start time... (empty if the log has none)."""
         return self.metadata.get(METADATA_NAME, {})
+
+    @property
+    def run_notes(self) -> list[str]:
+        """What a review keeps not of a hostile log's `choreo` metadata (its bounds), to say so."""
+        return self.metadata_notes.get(METADATA_NAME, [])
 
     @property
     def info(self) -> LoggedRun:
@@ -285,7 +291,8 @@ class LogReader:
             self.library, _ = _string(body, pos)
         elif opcode == OP_METADATA:
             name, pos = _string(body, 0)
-            self.metadata[name] = _string_map(body, pos)[0]
+            if name in (METADATA_NAME, RESULT_METADATA_NAME) or len(self.metadata) < METADATA_RECORDS_KEPT:
+                self.metadata[name], self.metadata_notes[name] = kept_metadata(name, _string_map(body, pos)[0])
         elif opcode == OP_ATTACHMENT:
             pos = 16
             name, pos = _string(body, pos)

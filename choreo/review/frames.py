@@ -167,3 +167,4 @@ def frame_lines(reader: LogReader, step: int | None = None, kind: str | None = N
                                          f"kind {kind}" if kind else "",
                                          f"robot {robot}" if robot else "") if x)
         yield f"no frames{' with ' + wanted if wanted else ''} in this log"
+    yield from reader.run_notes

@@ -168,6 +168,7 @@ class Summary:
     result: dict[str, str] | None
     complete: bool
     cut: Cut | None
+    run_notes: list[str] = field(default_factory=list)  # what the review keeps not of a hostile log's metadata
     messages: int = 0
     duration_s: float | None = None  # show clock at the last message (or the result's, if closed)
     lengths: Durations | None = None  # the duration, holds, pauses, wall time: `showtime.durations`
@@ -217,7 +218,8 @@ class Summary:
         return self.run.get(Info.SHOW) or self.path.stem
 
 
-_SHARED_FIELDS = ("log", "state", "cut", "show", "result")  # a robot's record in a summary leaves out the whole log's
+# A robot's record in a summary leaves out the whole log's fields.
+_SHARED_FIELDS = ("log", "state", "cut", "show", "run_notes", "result")
 
 
 def summary_record(summary: Summary) -> dict:
@@ -234,6 +236,7 @@ def summary_record(summary: Summary) -> dict:
         "cut": str(summary.cut) if summary.cut else None,
         "show": summary.show_name,
         "run": summary.run,
+        "run_notes": summary.run_notes,
         "result": summary.result,
         "duration_s": summary.duration_s,
         "lengths": summary.lengths.to_json() if summary.lengths else None,
@@ -303,7 +306,7 @@ def summarize(path: str | Path) -> Summary:
 
 
 def summarize_reader(reader: LogReader) -> Summary:
-    summary = Summary(reader.path, dict(reader.run_info), None, False, None)
+    summary = Summary(reader.path, dict(reader.run_info), None, False, None, list(reader.run_notes))
     tally = _Tally(ShowTimes.of(reader))
     notes = StandNotes(tally.times, LISTED_STANDS)
     parts: dict[str, _Part] = {}  # a show for several robots: each robot's own tally and tracker

@@ -61,6 +61,8 @@ def _render_run(summary: Summary) -> Iterable[str]:
                f"{run.get(Info.BAUD, '?')} baud, layout {LogLayouts.of(run).describe(None)} {made}")
     else:
         yield "run       no `choreo` metadata: not a log written by choreo run"
+    for note in summary.run_notes:
+        yield f"          {note}"
     yield from _render_hosts(run)
 
 

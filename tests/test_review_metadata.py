@@ -1,0 +1,97 @@
+"""A hostile log's `choreo` metadata against the reviews and `log merge` (issue 21, hostile logs):
+50 KB names, 100,000 robots or keys, controls in any value. The reader keeps the metadata
+bounded in one place (format.kept_metadata): every review and a merge print or copy only that,
+with a note of what was left out, and what choreo itself writes is kept whole."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from choreo.log.format import (NAME_KEPT, ROBOTS_KEPT, SHOW_NAME_KEPT, VALUE_KEPT, ClockRecord, Info, StepRecord,
+                               kept_metadata, robot_key)
+from choreo.log.reader import LogReader
+from choreo.log.recorder import Recorder, RobotInfo, RunInfo
+from runlog import vmain
+from test_review_damage import _rewritten
+from test_review_hostile import T0, S, logged
+
+BIG = "\x1b[2J\u202e" + "N" * 50_000
+REVIEWS = (["summary"], ["summary", "--json"], ["frames"], ["timeline"], ["export", "--csv", "-"],
+           ["export", "--cues", "--json", "-"])
+HOSTILE = {
+    "a 50 KB robot name": {"robots": f"left,{BIG},right", robot_key(BIG, "port"): BIG,
+                           robot_key(BIG, "layout"): "seed"},
+    "100,000 robots": {"robots": ",".join(f"r{i}" for i in range(100_000))},
+    "20,000 keys": {f"k{i}": "v" for i in range(20_000)},
+    "every value 50 KB": {key: BIG for key in ("show", "show_path", "host", "port", "version", "start_time",
+                                               "python", "platform", "show_host", "layout", "baud")},
+}
+NOTES = {"a 50 KB robot name": "robot names longer than", "100,000 robots": "the log names 100,000 robots",
+         "20,000 keys": "keys choreo does not write", "every value 50 KB": "metadata texts longer than"}
+
+
+def _clocked(recorder: Recorder) -> None:
+    for n in range(3):  # clock samples a merge lines the hosts up by
+        recorder.on_clock(ClockRecord(n * 0.5, n * S // 2, state="running"), T0 + n * S // 2)
+    recorder.on_step_record(StepRecord(0, "play", "start", 0.0), T0)
+
+
+@pytest.fixture(scope="module")
+def plain(tmp_path_factory) -> Path:
+    return logged(tmp_path_factory.mktemp("metadata") / "plain.mcap", _clocked)
+
+
+@pytest.mark.parametrize("kind", list(HOSTILE))
+def test_hostile_metadata_is_bounded_escaped_and_noted_in_every_review(plain, tmp_path, capsys, kind):
+    # Before: log summary printed a 50 KB name or a 790 KB robot list in one line, --json 1.3 MB
+    # of keys, and log frames a layout note for each of 100,000 robots (13 MB).
+    log = tmp_path / "hostile.mcap"
+    _rewritten(plain, log, "/rcb4/tx", "-", None, HOSTILE[kind])
+    for review in REVIEWS:
+        capsys.readouterr()
+        assert vmain(["log", review[0], str(log), *review[1:]]) == 0, review
+        out = capsys.readouterr().out
+        assert len(out) < 40_000 and "N" * (VALUE_KEPT + 1) not in out, review
+        assert "\x1b" not in out and "\u202e" not in out, review
+    assert vmain(["log", "summary", str(log)]) == 0
+    assert NOTES[kind] in capsys.readouterr().out
+
+
+def test_what_choreo_writes_is_kept_whole():
+    robots = tuple(RobotInfo(f"r{i:02d}" + "x" * (NAME_KEPT - 3), "/dev/" + "p" * 4000, 115200)
+                   for i in range(ROBOTS_KEPT))
+    info = RunInfo("/" + "d" * (VALUE_KEPT - 1), "s" * SHOW_NAME_KEPT, b"", "/dev/ttyUSB0", 115200, 10**18,
+                   robots=robots, unison=True, show_host="h" * NAME_KEPT)
+    written = info.metadata()
+    assert kept_metadata("choreo", written) == (written, [])
+    merged = {**written, Info.HOSTS: ",".join(f"h{i:02d}" + "y" * 29 for i in range(16)),
+              **{f"host.h{i:02d}{'y' * 29}.shift_ns": str(-10**18) for i in range(16)}}
+    assert kept_metadata("choreo", merged) == (merged, [])
+
+
+def test_a_cut_robot_keeps_its_own_keys_and_names_collapse_to_one():
+    kept, notes = kept_metadata("choreo", {"robots": f"{'a' * 40},{'a' * 50},b", robot_key("a" * 40, "port"): "p"})
+    assert kept["robots"] == f"{'a' * (NAME_KEPT - 1)}\u2026,b"
+    assert kept[robot_key("a" * (NAME_KEPT - 1) + "\u2026", "port")] == "p" and len(notes) == 1
+
+
+def _host(plain: Path, path: Path, host: str, extra: dict) -> Path:
+    _rewritten(plain, path, "/rcb4/tx", "-", None, {"show_host": host, **extra})
+    return path
+
+
+def test_a_merge_of_hostile_logs_does_not_amplify(plain, tmp_path, capsys):
+    # Before: a 1.2 MB log of 200 keys of 5 KB merged into 2.4 MB (its metadata copied twice).
+    junk = {"host": BIG, "port": BIG, **{f"k{i}": "v" * 5000 for i in range(200)}}
+    a, b = _host(plain, tmp_path / "a.mcap", "a", junk), _host(plain, tmp_path / "b.mcap", "b", {})
+    merged = tmp_path / "m.mcap"
+    assert vmain(["log", "merge", str(a), str(b), "-o", str(merged)]) == 0
+    assert merged.stat().st_size < (a.stat().st_size + b.stat().st_size) // 2
+    with LogReader(merged) as reader:
+        assert all(len(record) < 100 for record in reader.metadata.values())
+        assert len(reader.run_info[Info.HOST]) <= 64
+    capsys.readouterr()
+    assert vmain(["log", "summary", str(merged)]) == 0
+    assert len(capsys.readouterr().out) < 20_000
