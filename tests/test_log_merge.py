@@ -293,6 +293,7 @@ def test_the_output_may_be_no_input_nor_in_a_missing_folder(hosts, tmp_path, cap
     assert hosts[RIGHT].read_bytes() == before
     assert "does not exist" in _refused(capsys, [*logs, "-o", str(tmp_path / "nowhere" / "m.mcap")])
     assert "not a regular file" in _refused(capsys, [*logs, "-o", str(tmp_path)])
+    assert "-o '': give the path" in _refused(capsys, [*logs, "-o", ""])  # issue 21, item 6: said "-o ."
     assert "at least two" in _refused(capsys, [logs[0], "-o", str(tmp_path / "m.mcap")])
     many = [logs[0]] * (MAX_INPUTS + 1)
     assert f"at most {MAX_INPUTS}" in _refused(capsys, [*many, "-o", str(tmp_path / "m.mcap")])

@@ -135,6 +135,8 @@ class MergeReport:
 
 def merge_logs(paths: Sequence[str | Path], output: str | Path) -> MergeReport:
     """Merge the hosts' logs `paths` into `output` (UsageError or LogError, one line, if not)."""
+    if not os.fspath(output):  # Path('') is '.': said as "-o .", a name the user never wrote
+        raise UsageError("-o '': give the path of a new .mcap")
     target = Path(output)
     _check_inputs(paths, target)
     logs = _longest_first([survey(Path(path)) for path in paths])
