@@ -563,3 +563,25 @@ def test_choreo_sim_answers_while_its_journal_goes_to_a_pipe_nobody_reads() -> N
         sim.wait(10)
         os.close(read)
         os.close(write)
+
+
+@pytest.mark.parametrize("width", [30, 80])
+def test_every_commands_help_fits_the_terminal(monkeypatch, width: int) -> None:
+    """argparse wraps help text, but not a usage line indented under a long command nor an
+    option's choices, and `choreo sim --help`'s paragraphs were written out by hand (93 columns
+    on a terminal of 80) (issue 21, item 5)."""
+    import argparse
+
+    from choreo.cli import build_parser
+
+    monkeypatch.setenv("COLUMNS", str(width))
+
+    def parsers(parser: argparse.ArgumentParser):  # type: ignore[no-untyped-def]
+        yield parser
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    yield from parsers(sub)
+
+    lines = [line for parser in parsers(build_parser()) for line in parser.format_help().splitlines()]
+    assert len(lines) > 500 and [line for line in lines if display_width(line) > width] == []

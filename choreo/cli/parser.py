@@ -9,10 +9,31 @@ from collections.abc import Sequence
 from typing import NoReturn
 
 from choreo.errors import UsageError, bounded, did_you_mean, one_line
+from choreo.textfit import fit
 
 _INVALID_CHOICE = re.compile(r"invalid choice: '(?P<given>[^']*)' \(choose from (?P<choices>.*)\)")
 _QUOTED = re.compile(r"'([^']{%d,})'" % 200)  # a value given, quoted in argparse's message
 _QUOTED_KEPT = 80  # characters of an over-long value the message keeps
+
+
+class FittedHelpFormatter(argparse.HelpFormatter):
+    """argparse's help, every line of it within the terminal's width: argparse wraps the text,
+    but not a usage line indented under a long command, nor an option's choices (`--format
+    {csv,json,jsonl,parquet}`): those are cut with `…` on a narrow terminal."""
+
+    def format_help(self) -> str:
+        columns = self._width + 2  # argparse leaves 2 of the terminal's columns
+        return "\n".join(fit(line, columns) for line in super().format_help().split("\n"))
+
+
+class ParagraphHelpFormatter(FittedHelpFormatter):
+    """Help whose description and epilog keep their paragraphs (a blank line apart), each
+    wrapped to the terminal's width as argparse wraps the rest: written out by hand, their
+    lines ran past a narrower terminal's edge (`choreo sim --help` at 80 columns)."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        return "\n\n".join(super(ParagraphHelpFormatter, self)._fill_text(paragraph, width, indent)
+                             for paragraph in text.split("\n\n"))
 
 
 class ChoreoParser(argparse.ArgumentParser):
@@ -20,6 +41,10 @@ class ChoreoParser(argparse.ArgumentParser):
     the subcommand whose arguments were wrong (not the top-level one)."""
 
     _given: Sequence[str] = ()
+
+    def __init__(self, *args, **kwargs) -> None:  # argparse's own arguments, passed on
+        kwargs.setdefault("formatter_class", FittedHelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def parse_known_args(self, args=None, namespace=None):  # argparse's own arguments, passed on
         """Remembered, so that a bad argument of a command asked for JSON is answered in JSON."""

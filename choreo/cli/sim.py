@@ -10,6 +10,7 @@ import threading
 import time
 from typing import TYPE_CHECKING
 
+from choreo.cli.parser import ParagraphHelpFormatter
 from choreo.cli.terminal import StatusWriter, print_fitted
 from choreo.errors import LinkError, UsageError
 from choreo.wire.protocol import spell_bauds
@@ -50,7 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="run the simulated controller on a pseudo-terminal",
         description="Serve a simulated RCB-4 board on a pseudo-terminal and print its device path.",
         epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=ParagraphHelpFormatter,
     )
     _board_options(parser)
     _fault_options(parser)
