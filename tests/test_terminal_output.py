@@ -533,7 +533,8 @@ def test_report_lines_are_cut_to_a_terminal_and_whole_elsewhere(monkeypatch) -> 
     assert display_width(terminal.getvalue().rstrip("\n")) == 30 and terminal.getvalue().endswith("…\n")
     assert pipe.getvalue() == visible(line) + "\n"
     assert_safe(terminal.getvalue() + pipe.getvalue())
-    sources = {name: (REPO / "choreo" / "cli" / f"{name}.py").read_text() for name in ("log", "probe", "ports", "sim")}
+    commands = ("log", "probe", "ports", "sim", "importer", "beats", "devices", "show")
+    sources = {name: (REPO / "choreo" / "cli" / f"{name}.py").read_text() for name in commands}
     assert sources["log"].count("print_fitted(") >= 10 and all("print_fitted(" in text for text in sources.values())
 
 

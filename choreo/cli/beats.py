@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
             else:
                 print(line)
     for note in notes:
-        print(one_line(note), file=sys.stderr)
+        print_fitted(one_line(note), sys.stderr)
     return 0
 
 

@@ -11,6 +11,7 @@ import os
 import sys
 from pathlib import Path
 
+from choreo.cli.terminal import print_fitted
 from choreo.errors import UsageError, one_line
 
 
@@ -55,8 +56,8 @@ def run_import(args: argparse.Namespace) -> int:
         schema = None
     _write_new(output, starter_show(project, schema))
     count = len(project.motions)
-    print(one_line(f"{output}: {count} motion{'s' if count != 1 else ''}, layout {project.layout}: "
-                   f"check it with `choreo plan {output}`"))
+    print_fitted(one_line(f"{output}: {count} motion{'s' if count != 1 else ''}, layout {project.layout}: "
+                          f"check it with `choreo plan {output}`"))
     return 0
 
 
