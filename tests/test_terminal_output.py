@@ -586,3 +586,18 @@ def test_every_commands_help_fits_the_terminal(monkeypatch, width: int) -> None:
 
     lines = [line for parser in parsers(build_parser()) for line in parser.format_help().splitlines()]
     assert len(lines) > 500 and [line for line in lines if display_width(line) > width] == []
+
+
+@pytest.mark.parametrize("width", [4, 16, 40, 80])
+def test_doctors_check_lines_wrap_within_the_terminal(width: int) -> None:
+    """`choreo doctor` without a show: a check's line and its fix (150-257 columns) wrapped on
+    a terminal, nothing of it cut (issue 21, item 5); to a pipe it stays one line."""
+    from choreo.board.doctor import Finding
+    from choreo.cli.doctor import _hanging
+
+    line = Finding("problem", "board", f"no port to check: {HOSTILE} ロボット",
+                   "choreo doctor --port /dev/ttyUSB0 (or sim:// to try the simulator)").line()
+    lines = _hanging(line, width)
+    assert all(display_width(shown) <= width for shown in lines), lines
+    assert "".join(shown.strip() for shown in lines).replace(" ", "") == line.replace(" ", "")
+    assert _hanging(line, None) == [line]

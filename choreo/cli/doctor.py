@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -100,9 +101,23 @@ def run(args: argparse.Namespace) -> int:
 
         print_json({"ok": code == 0, "exit": code, "findings": [_record(f) for f in findings]})
         return code
+    from choreo.cli.terminal import columns
+
+    width = columns() if sys.stdout.isatty() else None  # a file or a pipe: one line a check
     for finding in findings:
-        print(finding.line())
+        for line in _hanging(finding.line(), width):
+            print(line)
     return code
+
+
+def _hanging(line: str, width: int | None) -> list[str]:
+    """A check's line within the terminal's `width`: wrapped (never cut: the fix is the point),
+    what follows its first line indented under the check's name."""
+    indent = len("PROBLEM ")
+    if width is None or display_width(line) <= width or width < 2 * indent:
+        return wrapped(line, width)
+    first, *rest = wrapped(line, width - indent)
+    return [first] + [" " * indent + more for more in rest]
 
 
 SHOW_ONLY = ("baud", "layout", "log", "no_log", "no_music", "from_step", "loop", "timeout", "retries", "osc",
