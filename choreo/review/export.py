@@ -26,7 +26,7 @@ from choreo.log.format import (COMMAND_TOPIC, LOG_TOPIC, STEP_TOPIC, CommandReco
                                Result, StepRecord, frame_meaning, parse, reply_meaning)
 from choreo.review.attached import AttachedShow, attached_show
 from choreo.review.frames import Exchange, exchanges
-from choreo.review.showtime import ShowTimes
+from choreo.review.showtime import ShowTimes, rounded
 from choreo.review.timeline import link_cue_fields
 from choreo.log.reader import LogReader
 from choreo.show.cues import Cue, CueList, cue_list
@@ -70,7 +70,7 @@ def row(exchange: Exchange, layouts: LogLayouts) -> dict:
 
 
 def _round(seconds: float | None) -> float | None:
-    return None if seconds is None else round(seconds, 9)
+    return None if seconds is None else rounded(seconds, 9)
 
 
 def rows(reader: LogReader) -> Iterator[dict]:
@@ -242,7 +242,7 @@ def _cue_row(record: StepRecord, cue: Cue | None, released: str, tempo: Tempo | 
     return {"number": record.cue_number or (cue.number if cue else None), "label": record.label,
             "robot": record.robot, "pass": passes, "planned_s": _ms(_planned(record, released)),
             "actual_s": None if skipped else _ms(record.actual_s),
-            "late_ms": None if skipped or record.go else round(record.late_ms, 3), "released": released,
+            "late_ms": None if skipped or record.go else rounded(record.late_ms, 3), "released": released,
             "bar_beat": _bar_beat(cue, tempo, record.estimated_s)}
 
 
@@ -267,14 +267,14 @@ def _bar_beat(cue: Cue | None, tempo: Tempo | None, planned_s: float) -> str | N
         bar, beat = cue.at_beat
     elif tempo is not None and isinstance(planned_s, (int, float)) and math.isfinite(planned_s):
         bar, beat = tempo.position(planned_s)
-        beat = round(beat, 3)
+        beat = rounded(beat, 3)
     else:
         return None
     return f"{bar}.{beat_text(beat)}"
 
 
 def _ms(seconds: float | None) -> float | None:
-    return None if seconds is None else round(seconds, 3)
+    return None if seconds is None else rounded(seconds, 3)
 
 
 def cue_rows(reader: LogReader, show: AttachedShow | None = None) -> list[dict]:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, RX_TOPIC, STEP_TOPIC, TX_TOPIC, ClockRecord, LogLayouts,
                                Record, RxRecord, StepRecord, TxRecord, frame_meaning, parse, reply_meaning)
 from choreo.log.reader import LogReader
-from choreo.review.showtime import ShowTimes
+from choreo.review.showtime import ShowTimes, fixed
 from choreo.review.summary import stale_replies
 
 
@@ -121,7 +121,7 @@ def matches(exchange: Exchange, step: int | None, kind: str | None, robot: str |
 
 
 def _time(seconds: float | None) -> str:
-    return f"{seconds:10.6f}" if seconds is not None else " " * 10
+    return fixed(seconds, 6, 10) if seconds is not None else " " * 10
 
 
 def lines(exchange: Exchange, layouts: LogLayouts) -> Iterator[str]:
@@ -135,7 +135,7 @@ def lines(exchange: Exchange, layouts: LogLayouts) -> Iterator[str]:
         yield (f"{_time(exchange.tx_s)}  tx  #{exchange.seq:<6} {where:<9} {tx.kind:<8} "
                f"{tx.hex:<56} {robot}{frame_meaning(tx, layouts)}{retry}")
     if rx is not None:
-        latency = f"{rx.latency_ms:.3f} ms"
+        latency = f"{fixed(rx.latency_ms)} ms"
         yield (f"{_time(exchange.rx_s)}  rx  #{exchange.seq:<6} {latency:<9} {rx.kind:<8} "
                f"{rx.hex:<56} {robot}{reply_meaning(rx, tx, layouts)}{stale_note(rx)}")
     elif tx is not None:

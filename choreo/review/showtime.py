@@ -71,6 +71,21 @@ LINK_THIN_S = 5.0  # Link samples on one line closer than this to the one kept b
 LINK_CHANGES = 1000  # the session's changes kept one by one (each counted)
 
 
+def fixed(value: float, places: int = 3, width: int = 0, sign: bool = False) -> str:
+    """A time (or any figure) as every review prints it, `places` decimals, right-aligned in
+    `width`: never `-0.000`. A merged host's shift, or a frame a few ns before show zero, rounds
+    to zero with a minus that reads as a time before the show."""
+    text = f"{value:{'+' if sign else ''}.{places}f}"
+    if text.startswith("-") and not text.strip("-0."):
+        text = ("+" if sign else "") + text[1:]
+    return text.rjust(width)
+
+
+def rounded(value: float, places: int) -> float:
+    """`round`, never -0.0 (what an export writes: `-0.0` in CSV and JSON reads as before the show)."""
+    return round(value, places) + 0.0
+
+
 def _planned(step: StepRecord) -> float:
     """A step's planned time, as where a run began: the first step's is 0 (a lead-in is no part)."""
     return max(0.0, float(step.estimated_s)) if step.index else 0.0
@@ -403,7 +418,7 @@ class LinkTimes:
         if self._tempo is None or abs(tempo - self._tempo) > 1e-6:
             at = show_s if self._heard is None else self._heard  # heard there, if a tempo event said so
             if self._tempo is not None:
-                self._change(at, "tempo", f"tempo {self._tempo:.2f} -> {tempo:.2f} bpm")
+                self._change(at, "tempo", f"tempo {fixed(self._tempo, 2)} -> {fixed(tempo, 2)} bpm")
             if len(self.tempos) < LINK_CHANGES:
                 self.tempos.append((at, tempo))
             self._heard = None
@@ -547,7 +562,7 @@ class StandNote:
         """`held 2.300 s at cue 1 'applause', go from key`."""
         at = f" at {self.cue}" if self.cue else ""
         by = f", {self.by}" if self.by else "" if self.stand.end_ns is not None else ", to the end of the log"
-        return f"{self.stand.kind} {self.stand.seconds(end_ns):.3f} s{at}{by}"
+        return f"{self.stand.kind} {fixed(self.stand.seconds(end_ns))} s{at}{by}"
 
 
 class StandNotes:

@@ -11,11 +11,12 @@ from collections.abc import Iterable
 
 from choreo.log.format import COMMAND_TOPIC, ERROR, LATE_MS, Info, LoggedRun, LogLayouts, Result, host_key
 from choreo.numtext import whole_number
+from choreo.review.showtime import fixed
 from choreo.review.summary import FRAME_KINDS, LISTED_PLAYS, Summary
 from choreo.review.timeline import link_text, stood_text
 
 def _ms(value: float | None) -> str:
-    return "-" if value is None else f"{value:.3f} ms"
+    return "-" if value is None else f"{fixed(value)} ms"
 
 
 def render(summary: Summary) -> Iterable[str]:
@@ -79,15 +80,15 @@ def _render_hosts(run: dict[str, str]) -> Iterable[str]:
         shift = run.get(host_key(host, Info.SHIFT_NS), "")
         size, spread = whole_number(shift.removeprefix("-")), whole_number(run.get(host_key(host, Info.SPREAD_NS), ""))
         by = run.get(host_key(host, Info.ALIGNED_BY), "?")
-        how = f"spread {spread / 1e6:.3f} ms" if spread is not None and by == "clock" else f"by {by}"
-        moved = f"{(-size if shift.startswith('-') else size) / 1e9:+.6f} s" if size is not None else "?"
+        how = f"spread {fixed(spread / 1e6)} ms" if spread is not None and by == "clock" else f"by {by}"
+        moved = "?" if size is None else f"{fixed((-size if shift.startswith('-') else size) / 1e9, 6, sign=True)} s"
         placed.append(f"{host} shifted {moved} ({how})")
     yield f"hosts     {len(hosts)} merged: {hosts[0]} (the time axis, its clock times the show), {', '.join(placed)}"
 
 
 def _render_outcome(summary: Summary) -> Iterable[str]:
     """How the run ended, and what its steps came to."""
-    duration = f"{summary.duration_s:.3f} s" if summary.duration_s is not None else "-"
+    duration = f"{fixed(summary.duration_s)} s" if summary.duration_s is not None else "-"
     if summary.result:
         outcome = summary.result.get(Result.OUTCOME, "?")
         error = summary.result.get(Result.ERROR)
@@ -136,7 +137,7 @@ def _render_stands(summary: Summary) -> Iterable[str]:
         return
     yield ("holds     " if lengths.holds or lengths.pauses else "ran       ") + text
     for stand in summary.stands:
-        yield f"  {stand.stand.show_s:9.3f} s  {stand.text(summary.end_ns)}"
+        yield f"  {fixed(stand.stand.show_s, 3, 9)} s  {stand.text(summary.end_ns)}"
     listed = len(summary.stands)
     if lengths.holds + lengths.pauses > listed:
         yield f"  ... and {lengths.holds + lengths.pauses - listed} more"
@@ -147,7 +148,7 @@ def _render_log_lines(summary: Summary) -> Iterable[str]:
     yield f"log lines {summary.warnings} warnings, {summary.errors} errors"
     for line in summary.log_lines:
         word = "error  " if line.level >= ERROR else "warning"
-        yield f"  {line.show_s:9.3f} s  {word} {line.message}"
+        yield f"  {fixed(line.show_s, 3, 9)} s  {word} {line.message}"
     if summary.warnings + summary.errors > len(summary.log_lines):
         yield f"  ... and {summary.warnings + summary.errors - len(summary.log_lines)} more (choreo log frames)"
 
@@ -165,8 +166,9 @@ def _render_clock(summary: Summary) -> Iterable[str]:
         kept = link_text(summary.link)
     else:
         kept = "the machine's"
-    ran = f" it ran (of {clock.span_s:.1f} s; the rest held or paused)" if clock.stood_s > 0 else ""
-    drift = (f"; show clock minus machine clock {clock.drift_ms:+.3f} ms over the {clock.ran_s:.1f} s{ran}"
+    ran = f" it ran (of {fixed(clock.span_s, 1)} s; the rest held or paused)" if clock.stood_s > 0 else ""
+    drift = (f"; show clock minus machine clock {fixed(clock.drift_ms, sign=True)} ms "
+             f"over the {fixed(clock.ran_s, 1)} s{ran}"
              if clock.samples > 1 else "")
     disordered = (f"; {summary.clock_disordered} out of order, passed over"
                   if summary.clock_disordered else "")
@@ -184,7 +186,7 @@ def _render_commands(summary: Summary) -> Iterable[str]:
         unlogged = f"; {summary.commands_unlogged} of them not logged one by one, over the log's limit): {by}"
     yield f"commands  {summary.commands_total} from the operator ({summary.commands_refused} refused{unlogged or ')'}"
     for command in summary.commands:
-        when = f"{command.show_s:9.3f} s" if command.show_s is not None else "   before  "
+        when = f"{fixed(command.show_s, 3, 9)} s" if command.show_s is not None else "   before  "
         what = command.what
         verdict = "" if command.status == "ok" else f" {command.status.upper()}"
         yield f"  {when}  {what:<12} {command.source}{verdict}: {command.message}"
@@ -222,9 +224,9 @@ def _render_motions(summary: Summary) -> Iterable[str]:
         return
     yield f"motions   {summary.plays_total} played (measured: restore to the first status not executing)"
     for stats in sorted(summary.motions.values(), key=lambda s: s.motion):
-        if stats.durations:
-            spread = (f"median {stats.median_s:.3f} s (min {min(stats.durations):.3f}, "
-                      f"max {max(stats.durations):.3f})")
+        if stats.durations and stats.median_s is not None:
+            spread = (f"median {fixed(stats.median_s)} s (min {fixed(min(stats.durations))}, "
+                      f"max {fixed(max(stats.durations))})")
         else:
             spread = "not measured (no status query saw it end)"
         yield f"  motion {stats.motion:3d}  x{stats.plays:<5d} {spread}"
@@ -232,6 +234,6 @@ def _render_motions(summary: Summary) -> Iterable[str]:
         for play in summary.plays:
             label = f" '{play.label}'" if play.label else ""
             where = f"step {play.step}{label}" if play.step is not None else "abort"
-            took = (f"{play.duration_s:.3f} s" if play.duration_s is not None
+            took = (f"{fixed(play.duration_s)} s" if play.duration_s is not None
                     else f"not measured (ended by {play.ended_by})")
-            yield f"  {play.start_s:9.3f} s  motion {play.motion:3d}  {where}: {took}"
+            yield f"  {fixed(play.start_s, 3, 9)} s  motion {play.motion:3d}  {where}: {took}"

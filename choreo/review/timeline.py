@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 
 from choreo.errors import ChoreoError
 from choreo.review.attached import AttachedShow, attached_show
-from choreo.review.showtime import (Durations, LinkTimes, ShowTimes, StandNote, StandNotes, durations,
+from choreo.review.showtime import (Durations, fixed, LinkTimes, ShowTimes, StandNote, StandNotes, durations,
                                     see_for_stands)
 from choreo.log.format import (ABORT_LABEL, CLOCK_TOPIC, COMMAND_TOPIC, ERROR, LATE_MS, LOG_TOPIC, RX_TOPIC,
                                STEP_TOPIC, TX_TOPIC, ClockRecord, CommandRecord, LogLayouts, LogRecord, MotionPlay,
@@ -459,8 +459,8 @@ def _see_step(timeline: Timeline, steps: dict[tuple[str | None, int], _Step], st
         if step.kind == "play":
             steps[(step.robot, step.index)] = _Step(step, step.late_ms if is_late(step) else 0.0)
             if is_late(step):
-                timeline.marks.append(Mark(now, "late", f"{whose}{step.ref} started {step.late_ms:.1f} ms late "
-                                                        f"(due {step.planned_s:.3f} s)", at))
+                timeline.marks.append(Mark(now, "late", f"{whose}{step.ref} started {fixed(step.late_ms, 1)} ms late "
+                                                        f"(due {fixed(step.planned_s)} s)", at))
         return
     known: _Step | None = steps.get((step.robot, step.index))
     if known is not None and step.cue is not None and step.lead_ms is not None:
@@ -468,7 +468,7 @@ def _see_step(timeline: Timeline, steps: dict[tuple[str | None, int], _Step], st
     if known is not None and slipped(step, late_at_start=known.late_ms > 0):
         known.late_ms = step.late_ms
         timeline.marks.append(Mark(now, "late", f"{whose}{step.ref}: motion {step.motion} started "
-                                                f"{step.late_ms:.1f} ms late (retries)", at))
+                                                f"{fixed(step.late_ms, 1)} ms late (retries)", at))
     if step.outcome in ("failed", "timeout"):
         timeline.marks.append(Mark(now, "failure", f"{whose}{step.ref} {step.outcome}", at))
     elif step.outcome == "aborted":
@@ -566,7 +566,7 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
     span = timeline.span_s
     scale = width / span
     yield from _head(timeline, span, width)
-    end = f"{span:.1f} s"
+    end = f"{fixed(span, 1)} s"
     ruler = f"0 s{'':{max(width - 3 - len(end), 1)}}{end}"[:width]
     yield _row("step", "motion", "planned", "actual", ruler, figures)
     yield from _mark_rows(timeline, scale, width, figures)
@@ -597,7 +597,7 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
 def _head(timeline: Timeline, span: float, width: int) -> Iterator[str]:
     """The show's lengths, the scale, the legend."""
     outcome = f", {timeline.outcome}" if timeline.outcome else ""
-    yield f"timeline of {timeline.show}: {timeline.end_s:.3f} s on the show clock{outcome}"
+    yield f"timeline of {timeline.show}: {fixed(timeline.end_s)} s on the show clock{outcome}"
     stood = stood_text(timeline.lengths)
     if stood:
         yield stood
@@ -623,8 +623,8 @@ def link_text(link: LinkTimes) -> str:
     """`the Link session's: 120.00 bpm, 150.00 from 1.48 s; 2 other peers; 13 samples`, with
     the peers' joins and leaves, the transport's stops and the timeline's jumps."""
     tempos = link.tempos
-    text = "the Link session's: " + (f"{tempos[0][1]:.2f} bpm" if tempos else "no tempo sampled")
-    text += "".join(f", {bpm:.2f} from {show_s:.2f} s" for show_s, bpm in tempos[1:LISTED_TEMPOS + 1])
+    text = "the Link session's: " + (f"{fixed(tempos[0][1], 2)} bpm" if tempos else "no tempo sampled")
+    text += "".join(f", {fixed(bpm, 2)} from {fixed(show_s, 2)} s" for show_s, bpm in tempos[1:LISTED_TEMPOS + 1])
     more = link.counts.get("tempo", 0) - min(max(len(tempos) - 1, 0), LISTED_TEMPOS)
     text += f", ... ({more} more tempo changes)" if more > 0 else ""
     if link.peers is not None:
@@ -637,7 +637,7 @@ def link_text(link: LinkTimes) -> str:
         count = link.counts.get(kind, 0)
         if count:
             times = [change.show_s for change in link.changes if change.kind == kind][:LISTED_TEMPOS]
-            text += f"; {word} at " + ", ".join(f"{at:.2f} s" for at in times) + \
+            text += f"; {word} at " + ", ".join(f"{fixed(at, 2)} s" for at in times) + \
                 (f" ({count} times)" if count > len(times) else "")
     return text
 
@@ -659,20 +659,21 @@ def stood_text(lengths: Durations | None) -> str:
         return ""
     ran = []
     if lengths.start_s >= 0.0005:
-        ran.append(f"from {lengths.start_s:.3f} s")
+        ran.append(f"from {fixed(lengths.start_s)} s")
     if lengths.passes > 1:
         ran.append(f"{lengths.passes} passes")
     stood = []
     if lengths.holds:
-        stood.append(f"held {lengths.held_s:.3f} s at {counted(lengths.holds, 'GO cue')}")
+        stood.append(f"held {fixed(lengths.held_s)} s at {counted(lengths.holds, 'GO cue')}")
     if lengths.pauses:
-        stood.append(f"paused {lengths.paused_s:.3f} s" + (f" ({lengths.pauses} pauses)" if lengths.pauses > 1 else ""))
+        pauses = f" ({lengths.pauses} pauses)" if lengths.pauses > 1 else ""
+        stood.append(f"paused {fixed(lengths.paused_s)} s{pauses}")
     if not (ran or stood):
         return ""
-    parts = [", ".join(ran) + (f": ran {lengths.ran_s:.3f} s" if lengths.ran_s is not None else "")] if ran else []
+    parts = [", ".join(ran) + (f": ran {fixed(lengths.ran_s)} s" if lengths.ran_s is not None else "")] if ran else []
     parts += [", ".join(stood)] if stood else []
     if lengths.wall_s is not None:
-        parts.append(f"{lengths.wall_s:.3f} s in all")
+        parts.append(f"{fixed(lengths.wall_s)} s in all")
     return "; ".join(parts)
 
 
@@ -739,7 +740,7 @@ def _listed(timeline: Timeline) -> Iterator[str]:
         if marks or title in ("late plays", "faults"):
             yield f"{title}: {len(marks) or 'none'}"
         for mark in marks[:LISTED_MARKS]:
-            yield f"  {mark.show_s:9.3f} s  {mark.text}"
+            yield f"  {fixed(mark.show_s, 3, 9)} s  {mark.text}"
         if len(marks) > LISTED_MARKS:
             yield f"  ... and {len(marks) - LISTED_MARKS} more"
     if timeline.unplayed:
@@ -858,7 +859,7 @@ def _draw_marks(ax: Any, timeline: Timeline, first_y: int) -> list[str]:  # ax: 
         ax.broken_barh([(stand.drawn_at, stand.length_s) for stand in timeline.stands], (0, 1),
                        transform=ax.get_xaxis_transform(), facecolors=STOOD, linewidth=0, zorder=0)
     for stand in timeline.stands[:LISTED_MARKS]:
-        ax.annotate(f"{stand.kind} {stand.length_s:.1f} s at {stand.show_s:.3f} s", (stand.drawn_at, 0.0),
+        ax.annotate(f"{stand.kind} {fixed(stand.length_s, 1)} s at {fixed(stand.show_s)} s", (stand.drawn_at, 0.0),
                     xycoords=("data", "axes fraction"), va="bottom", ha="left", fontsize="x-small",
                     color="#555555")
     return rows
@@ -891,7 +892,7 @@ def _draw_run(ax: Any, run: MotionRun, y: int) -> None:  # ax: a matplotlib Axes
 
 def _png_title(timeline: Timeline) -> str:
     stood = stood_text(timeline.lengths)
-    title = f"{timeline.show}: {timeline.end_s:.2f} s" + (f" ({stood})" if stood else "")
+    title = f"{timeline.show}: {fixed(timeline.end_s, 2)} s" + (f" ({stood})" if stood else "")
     if timeline.outcome:
         title += f", {timeline.outcome}"
     if timeline.cut is not None:
