@@ -293,3 +293,16 @@ def test_an_output_that_is_the_log_read_is_refused_and_the_log_kept(run_log, tmp
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "that is the log being read" in err, err
     assert log.read_bytes() == run_log.read_bytes()
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full here")
+@pytest.mark.parametrize("argv, code", [(["plan", "NOPE.yaml"], 2), (["validate", "--json", "NOPE.yaml"], 2),
+                                        (["frames", "play", "3", "--baud", "9"], 2)])
+def test_an_error_into_a_full_stderr_keeps_its_exit_status(argv, code, tmp_path):
+    """Issue 21, item 6: with stderr on a full disk the error line's failed write escaped as a
+    traceback nobody could read, and the exit status became 1."""
+    argv = [str(tmp_path / a) if a == "NOPE.yaml" else a for a in argv]
+    with open("/dev/full", "w") as full:
+        done = subprocess.run([sys.executable, "-m", "choreo", *argv], stdout=subprocess.DEVNULL, stderr=full,
+                              cwd=ROOT, timeout=60)
+    assert done.returncode == code

@@ -70,7 +70,7 @@ def main(argv: Sequence[str] | None = None, *, signals: SignalGuard | None = Non
         finally:
             sys.stdout = output.wrapped
         if output.failure is not None:  # reported here, even if a command swallowed the exception
-            print(output.message(), file=sys.stderr)
+            _tell(output.message())
             return code or OUTPUT_ERROR_EXIT  # a command that failed anyway keeps its own status
         return code
 
@@ -92,10 +92,10 @@ def _outcome(argv: Sequence[str] | None, signals: SignalGuard | None, time_sourc
         raise
     except ChoreoError as exc:
         for line in exc.lines():
-            print(line, file=sys.stderr)
+            _tell(line)
         return exc.exit_code
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+        _tell("interrupted")
         return Interrupted.exit_code
     except BrokenPipeError:
         # The reader of our output went away (`choreo log frames LOG | head`): not an error.
@@ -105,8 +105,16 @@ def _outcome(argv: Sequence[str] | None, signals: SignalGuard | None, time_sourc
     except OSError as exc:
         # Every read of a user's file and every write of the output says which it was (an
         # InputError, an OutputError); anything else the system refused is still one line.
-        print(f"choreo: {exc.strerror or exc}" + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
+        _tell(f"choreo: {exc.strerror or exc}" + (f": {exc.filename}" if exc.filename else ""))
         return 2
+
+
+def _tell(line: str) -> None:
+    """An error line on stderr, if stderr takes it: a stderr that cannot be written (`2>/dev/full`)
+    has no one to tell, and its failure must not become the exit status (a traceback's 1, where
+    the error's own status was due)."""
+    with suppress(OSError, ValueError):
+        print(line, file=sys.stderr)
 
 
 def _remember_leaf_parsers(parser: argparse.ArgumentParser) -> None:
