@@ -28,7 +28,8 @@ README = [
     f"command or question within {NET.message_timeout_s:g} s of connecting",
     f"after {NET.idle_timeout_s:g} s without one",
     f"one packet at most {NET.max_datagram // 1024} KB",
-    f"commands carried out: {rate(LIMITS.commands_per_sender)} from one sender, {rate(LIMITS.commands_total)} from all",
+    f"commands carried out: {rate(LIMITS.commands_per_sender)} from one sender, {rate(LIMITS.commands_total)} from all "
+    "over UDP and as many over TCP",
     f"replies: {rate(LIMITS.replies_per_sender)} to one sender",
     f"printed one by one: {rate(LIMITS.reported)}, the rest counted and summed up every {LIMITS.summary_every_s:g} s",
     f"Link session changes logged one by one: {rate(LIMITS.link_events)}",
@@ -45,7 +46,8 @@ LIVE_MD = [
     f"nested {NET.max_bundle_depth} deep at most, and {NET.max_bundle_elements} elements",
     f"and {NET.max_arguments} arguments",
     f"| commands carried out, one sender | {rate(LIMITS.commands_per_sender)};",
-    f"| commands carried out, all senders together | {rate(LIMITS.commands_total)} |",
+    f"| commands carried out, all senders together | {rate(LIMITS.commands_total)} over UDP, and as many "
+    "over TCP apart",
     f"| replies to one sender | {rate(LIMITS.replies_per_sender)} (",
     f"| replies to senders not allowed, all together | {rate(LIMITS.refusals)} |",
     f"logged (and printed, and notified) one by one | {rate(LIMITS.reported)};",

@@ -9,9 +9,11 @@ terminal; one UDP packet (a bundle of 408 GOs) would have choreo send 408 replie
 whose address may be forged. So:
 
 - each allowed sender (an address: every port of a machine is one sender) may have
-  `commands_per_sender` carried out, and all of them together `commands_total` (a bundle's
-  messages count one by one; an address choreo does not know is no command and spends none);
-  the rest are not carried out;
+  `commands_per_sender` carried out, and all of them together `commands_total`, over UDP apart
+  from TCP (a bundle's messages count one by one; an address choreo does not know is no command
+  and spends none); the rest are not carried out. Apart, because a UDP sender's address can be
+  forged: ten addresses of an allowed network flooding datagrams took the whole total, and the
+  operator's GO over TCP, from an address its handshake proves, was 'ignored' for as long;
 - each allowed sender's packets are read within `packets_per_sender` (a datagram, a TCP frame;
   one more token per 4 KB past its first, and for each message of a bundle after its first),
   over TCP apart from UDP, and all refused senders' within one such budget: past it a packet is
@@ -176,22 +178,50 @@ class Budgets:
             del self._budgets[idle]
 
 
+@dataclass(frozen=True)
+class SenderKey:
+    """Whose budgets a packet spends: its sender's host, over TCP apart from UDP (a key that is
+    not a SenderKey, a plain host, is a UDP sender's)."""
+
+    host: str
+    transport: str = "udp"
+
+
+def _transport(key: Hashable) -> str:
+    return key.transport if isinstance(key, SenderKey) and key.transport == "tcp" else "udp"
+
+
+class _ByTransport:
+    """A `Budgets` for UDP senders and one for TCP senders: a UDP sender's address can be
+    forged, and a flood from more addresses than a table holds must neither take the places of
+    TCP senders (whose handshake proves their address) nor drain the bucket the newcomers share."""
+
+    def __init__(self, rate: Rate, keys: int, now: Callable[[], float]) -> None:
+        self._tables = {transport: Budgets(rate, keys, now) for transport in ("udp", "tcp")}
+
+    def take(self, key: Hashable, tokens: int = 1) -> bool:
+        return self._tables[_transport(key)].take(key, tokens)
+
+    def empty_for_s(self, key: Hashable) -> float:
+        return self._tables[_transport(key)].empty_for_s(key)
+
+
 class SenderLimits:
     """The network's side of the limits: whether a sender's command is carried out, and whether
     a reply goes back to it (`Limits` says how many)."""
 
     def __init__(self, limits: Limits = LIMITS, now: Callable[[], float] = time.monotonic) -> None:
         self.limits = limits
-        self._packets = Budgets(limits.packets_per_sender, limits.senders_tracked, now)
+        self._packets = _ByTransport(limits.packets_per_sender, limits.senders_tracked, now)
         self._refused_packets = Budget.of(limits.packets_per_sender, now)
-        self._commands = Budgets(limits.commands_per_sender, limits.senders_tracked, now)
-        self._total = Budget.of(limits.commands_total, now)
-        self._replies = Budgets(limits.replies_per_sender, limits.senders_tracked, now)
+        self._commands = _ByTransport(limits.commands_per_sender, limits.senders_tracked, now)
+        self._total = {transport: Budget.of(limits.commands_total, now) for transport in ("udp", "tcp")}
+        self._replies = _ByTransport(limits.replies_per_sender, limits.senders_tracked, now)
         self._refusals = Budget.of(limits.refusals, now)
-        self._queries = Budgets(limits.queries_per_sender, limits.senders_tracked, now)
+        self._queries = _ByTransport(limits.queries_per_sender, limits.senders_tracked, now)
         self._queries_total = Budget.of(limits.queries_total, now)
 
-    def may_read(self, host: str, allowed: bool, tokens: int = 1) -> bool:
+    def may_read(self, host: Hashable, allowed: bool, tokens: int = 1) -> bool:
         """May a packet from `host` be read now (`tokens`: what reading it costs, a big one
         more)? Senders not allowed share one budget (their packets are refused, never read;
         their addresses are the easiest to forge, and many of them must not take the table's
@@ -200,20 +230,21 @@ class SenderLimits:
             return self._refused_packets.take(tokens)
         return self._packets.take(host, tokens)
 
-    def rest_s(self, host: str) -> float:
+    def rest_s(self, host: Hashable) -> float:
         """How long an allowed TCP sender that has spent its packets' budget is not read (TCP
         holds its bytes meanwhile, at no cost to choreo); 0 while it has some left."""
         return self._packets.empty_for_s(host)
 
-    def admit(self, host: str) -> bool:
-        """May a command from `host` be carried out now? Its own budget first, so a flooding
-        sender spends its own tokens, not the others' share of the total."""
-        return self._commands.take(host) and self._total.take()
+    def admit(self, host: Hashable) -> bool:
+        """May a command from `host` (a SenderKey) be carried out now? Its own budget first, so
+        a flooding sender spends its own tokens, not the others' share of the total; then the
+        total of its transport's senders (UDP's, whose addresses can be forged, cannot take TCP's)."""
+        return self._commands.take(host) and self._total[_transport(host)].take()
 
-    def may_reply(self, host: str) -> bool:
+    def may_reply(self, host: Hashable) -> bool:
         return self._replies.take(host)
 
-    def may_query(self, host: str, costly: bool = True) -> bool:
+    def may_query(self, host: Hashable, costly: bool = True) -> bool:
         """May a question from `host` (status, thump) be answered now? A budget apart from the
         commands' and replies': polling spends neither. Its own budget first, then, for a
         `costly` one (status: kilobytes), all senders' (a heartbeat's reply is as small as a

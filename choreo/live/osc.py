@@ -94,7 +94,7 @@ from typing import Any
 
 from choreo.errors import UsageError, closest
 from choreo.events import Answer, Command, CommandEvent, GoCue, RunResult, StepEvent
-from choreo.live.limits import LIMITS, Limits, SenderLimits
+from choreo.live.limits import LIMITS, Limits, SenderKey, SenderLimits
 from choreo.log.format import UNLOGGED
 from choreo.live.controls import Live
 from choreo.live.oscnet import NOTHING, Handled, ListenFailed, OscNet
@@ -543,7 +543,7 @@ class OscServer:
             else:
                 replies = self._messages(origin, decoded.messages)
                 spoke = any(wanted_or_none(self._shown(m.address)) is not None for m in decoded.messages)
-        return Handled((reply.encoded() for reply in replies if reply is not None), spoke)
+        return Handled.of((reply.encoded() for reply in replies if reply is not None), spoke)
 
     def rest_s(self, sender: Sender) -> float:
         """A TCP sender over its rate of packets: how long its connections are not read."""
@@ -594,7 +594,7 @@ class OscServer:
             replies.append(self._receive(origin, message.address, message.args))
         return replies
 
-    def _malformed(self, budget: str, source: str, error: str, address: str | None) -> Reply | None:
+    def _malformed(self, budget: SenderKey, source: str, error: str, address: str | None) -> Reply | None:
         """A packet choreo cannot read whole: nothing of it is carried out. Its sender (allowed)
         is answered when the refused message's address could be read."""
         self.counts["malformed"] += 1
@@ -697,7 +697,7 @@ class OscServer:
         for subscriber in expired:
             self._report(Command(UPDATES_COMMAND, subscriber.source), Answer("ok", f"updates off: {subscriber.ended}"))
 
-    def _answer(self, budget: str, reply: Reply) -> Reply | None:
+    def _answer(self, budget: SenderKey, reply: Reply) -> Reply | None:
         """The reply, if the sender's reply budget allows (one packet can ask for many)."""
         return reply if self._limits.may_reply(budget) else None
 
@@ -767,7 +767,7 @@ class Origin:
     transport: str
     sender: Sender
     host: str
-    budget: str
+    budget: SenderKey
     source: str
 
     @property
@@ -796,11 +796,12 @@ def loops(sender: Sender, own_port: int) -> bool:
     return sender[1] == 0 or sender[1] == own_port and is_this_machine(str(sender[0]), family)
 
 
-def budget_key(transport: str, host: str) -> str:
+def budget_key(transport: str, host: str) -> SenderKey:
     """Whose budgets a packet spends: its sender's, over TCP apart from UDP. A TCP peer's address
     is proven by its handshake, a UDP sender's can be forged: a flood of datagrams forged in
-    QLab's name must not spend the budgets of QLab's own TCP connection."""
-    return host if transport == "udp" else f"{host} (tcp)"
+    QLab's name must not spend the budgets of QLab's own TCP connection, nor, from many
+    addresses, the places and totals TCP senders have."""
+    return SenderKey(host, "tcp" if transport == "tcp" else "udp")
 
 
 def echo_message(address: str) -> str:

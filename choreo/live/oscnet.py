@@ -113,14 +113,18 @@ class Handled(tuple[bytes, ...]):
     """A packet's encoded replies, and whether it `spoke`: carried a message its handler takes
     (a command, a question), as a desk's packets do, not junk, a malformed packet or an address
     nobody takes (which would otherwise hold a TCP connection's place for the idle timeout).
-    A tuple: `NOTHING`, shared, answers every packet refused unread at no cost."""
+    A tuple: `NOTHING`, shared, answers every packet refused unread at no cost. `Spoke` is one
+    that spoke (a class of its own: the verdict is fixed when the replies are)."""
 
-    spoke: bool
+    spoke = False
 
-    def __new__(cls, replies: Iterable[bytes] = (), spoke: bool = False) -> Handled:
-        handled = super().__new__(cls, replies)
-        handled.spoke = spoke
-        return handled
+    @staticmethod
+    def of(replies: Iterable[bytes], spoke: bool) -> Handled:
+        return Spoke(replies) if spoke else Handled(replies)
+
+
+class Spoke(Handled):
+    spoke = True
 
 
 NOTHING = Handled()  # no reply, nothing said: a packet refused before it was read
