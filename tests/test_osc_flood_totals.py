@@ -63,3 +63,16 @@ def test_forged_udp_senders_past_the_table_leave_a_tcp_desk_its_budget():
         clock.advance(0.1)
     desk = SenderKey("192.168.1.20", "tcp")
     assert all(limits.admit(desk) for _ in range(3)) and limits.may_reply(desk)
+
+
+def test_a_udp_status_flood_leaves_a_tcp_desk_its_answers():
+    """Before: all senders' status questions shared one total (40, then 20 a second); datagrams
+    from many addresses asking for status took it, and a TCP desk's status went unanswered."""
+    clock = VirtualTime()
+    limits = SenderLimits(now=clock.now)
+    for _ in range(20):
+        for n in range(100):
+            limits.may_query(SenderKey(f"10.0.0.{n}"))
+        clock.advance(0.1)
+    desk = SenderKey("10.9.9.9", "tcp")
+    assert all(limits.may_query(desk) for _ in range(5))

@@ -219,7 +219,7 @@ class SenderLimits:
         self._replies = _ByTransport(limits.replies_per_sender, limits.senders_tracked, now)
         self._refusals = Budget.of(limits.refusals, now)
         self._queries = _ByTransport(limits.queries_per_sender, limits.senders_tracked, now)
-        self._queries_total = Budget.of(limits.queries_total, now)
+        self._queries_total = {transport: Budget.of(limits.queries_total, now) for transport in ("udp", "tcp")}
 
     def may_read(self, host: Hashable, allowed: bool, tokens: int = 1) -> bool:
         """May a packet from `host` be read now (`tokens`: what reading it costs, a big one
@@ -248,8 +248,9 @@ class SenderLimits:
         """May a question from `host` (status, thump) be answered now? A budget apart from the
         commands' and replies': polling spends neither. Its own budget first, then, for a
         `costly` one (status: kilobytes), all senders' (a heartbeat's reply is as small as a
-        command's: a status flood must not silence a desk's heartbeat)."""
-        return self._queries.take(host) and (not costly or self._queries_total.take())
+        command's: a status flood must not silence a desk's heartbeat), its transport's (a flood
+        of datagrams from forged addresses must not silence a TCP desk's status either)."""
+        return self._queries.take(host) and (not costly or self._queries_total[_transport(host)].take())
 
     def may_answer_refusal(self) -> bool:
         """A reply to a sender not allowed (shared by all of them: their addresses are forged
