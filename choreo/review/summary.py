@@ -99,10 +99,13 @@ class MotionStats:
     motion: int
     plays: int = 0
     durations: list[float] = field(default_factory=list)  # kept per slot up to a bound
+    unmeasured: dict[str, int] = field(default_factory=dict)  # what ended the plays no status query timed: count
 
     def add(self, play: Play) -> None:
         self.plays += 1
-        if play.duration_s is not None and len(self.durations) < 10_000:
+        if play.duration_s is None:
+            self.unmeasured[play.ended_by] = self.unmeasured.get(play.ended_by, 0) + 1
+        elif len(self.durations) < 10_000:
             self.durations.append(play.duration_s)
 
     @property
@@ -259,7 +262,8 @@ def summary_record(summary: Summary) -> dict:
             Result.SHOW_ZERO_MONOTONIC_NS: _int(summary.result, Result.SHOW_ZERO_MONOTONIC_NS),
             Result.SHOW_ZERO_WALL_NS: _int(summary.result, Result.SHOW_ZERO_WALL_NS),
             **({"link": summary.link.to_json()} if summary.link is not None else {})},
-        "motions": [{"motion": m.motion, "plays": m.plays, "measured": m.measured, "median_s": m.median_s}
+        "motions": [{"motion": m.motion, "plays": m.plays, "measured": m.measured, "median_s": m.median_s,
+                     "unmeasured": m.unmeasured}
                     for m in sorted(summary.motions.values(), key=lambda m: m.motion)],
         "commands": [{**command.to_json(), "what": command.what} for command in summary.commands],
         "commands_total": summary.commands_total,
@@ -433,6 +437,8 @@ def _gather(summary: Summary, parts: dict[str, _Part], unison: bool) -> None:
             merged = summary.motions.setdefault(stats.motion, MotionStats(stats.motion))
             merged.plays += stats.plays
             merged.durations.extend(stats.durations[:10_000 - len(merged.durations)])
+            for by, count in stats.unmeasured.items():
+                merged.unmeasured[by] = merged.unmeasured.get(by, 0) + count
     if not unison:
         return
     steps = set().union(*(part.starts for part in parts.values()))

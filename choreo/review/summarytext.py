@@ -12,7 +12,7 @@ from collections.abc import Iterable
 from choreo.log.format import COMMAND_TOPIC, ERROR, LATE_MS, Info, LoggedRun, LogLayouts, Result, host_key
 from choreo.numtext import whole_number
 from choreo.review.showtime import fixed
-from choreo.review.summary import FRAME_KINDS, LISTED_PLAYS, Summary
+from choreo.review.summary import FRAME_KINDS, LISTED_PLAYS, MotionStats, Summary
 from choreo.review.timeline import link_text, stood_text
 
 def _ms(value: float | None) -> str:
@@ -42,6 +42,25 @@ def _state(summary: Summary) -> str:
     if summary.result is None:
         return "UNFINISHED: the run recorded no result (it did not close its log)"
     return "UNFINISHED: no MCAP footer"
+
+
+# What ended a play no status query timed (MotionPlay.ended_by), as the summary says it.
+ENDED_BY = {
+    "state read": "ended by the program state read after a lost reply (over before it)",
+    "stop": "ended by the next play's stop",
+    "end of log": "running at the log's end",
+    "status": "ended by a status query at no known time",
+}
+
+
+def _spread(stats: MotionStats) -> str:
+    """A motion slot's measured lengths, and what ended the plays no status query timed."""
+    whys = "; ".join(f"{count} {ENDED_BY.get(by, by)}" for by, count in stats.unmeasured.items())
+    if not stats.durations or stats.median_s is None:
+        return f"not measured ({whys or 'no status query saw it end'})"
+    spread = (f"median {fixed(stats.median_s)} s (min {fixed(min(stats.durations))}, "
+              f"max {fixed(max(stats.durations))})")
+    return spread + (f"; {sum(stats.unmeasured.values())} not measured ({whys})" if whys else "")
 
 
 def _render_run(summary: Summary) -> Iterable[str]:
@@ -224,12 +243,7 @@ def _render_motions(summary: Summary) -> Iterable[str]:
         return
     yield f"motions   {summary.plays_total} played (measured: restore to the first status not executing)"
     for stats in sorted(summary.motions.values(), key=lambda s: s.motion):
-        if stats.durations and stats.median_s is not None:
-            spread = (f"median {fixed(stats.median_s)} s (min {fixed(min(stats.durations))}, "
-                      f"max {fixed(max(stats.durations))})")
-        else:
-            spread = "not measured (no status query saw it end)"
-        yield f"  motion {stats.motion:3d}  x{stats.plays:<5d} {spread}"
+        yield f"  motion {stats.motion:3d}  x{stats.plays:<5d} {_spread(stats)}"
     if summary.plays_total <= LISTED_PLAYS:
         for play in summary.plays:
             label = f" '{play.label}'" if play.label else ""
