@@ -95,3 +95,42 @@ def test_a_merge_of_hostile_logs_does_not_amplify(plain, tmp_path, capsys):
     capsys.readouterr()
     assert vmain(["log", "summary", str(merged)]) == 0
     assert len(capsys.readouterr().out) < 20_000
+
+
+def _forged(path: Path, info: dict[str, str], robots: list[str]) -> Path:
+    """A log written with the mcap library: `info` as its metadata, then one play sequence's
+    frames and replies for each of `robots` (in its messages only)."""
+    import json
+
+    from mcap.writer import Writer
+
+    with open(path, "wb") as stream:
+        writer = Writer(stream)
+        writer.start()
+        writer.add_metadata("choreo", info)
+        tx, rx = (writer.register_channel(topic, "json", 0) for topic in ("/rcb4/tx", "/rcb4/rx"))
+        for n, robot in enumerate(robots):
+            for seq, kind in enumerate(("stop", "play", "restore"), 1):
+                t = T0 + n * S + seq * 1000
+                writer.add_message(tx, t, json.dumps({"seq": seq, "kind": kind, "hex": "04fe0608", "step": 0,
+                                                      "motion": 1, "robot": robot}).encode(), t)
+                writer.add_message(rx, t + 500, json.dumps({"seq": seq, "kind": "ack", "hex": "04fe0608",
+                                                            "robot": robot}).encode(), t + 500)
+        writer.finish()
+    return path
+
+
+def test_robot_names_in_messages_are_cut_and_their_count_bounded(tmp_path, capsys):
+    # Before: a 50 KB robot name in the frames printed it on every line of log frames (1.2 MB from
+    # a 20 KB log), and 20,000 robots named in messages made 20,000 sections of log summary.
+    big = _forged(tmp_path / "big.mcap", {"show": "x", "robots": BIG}, [BIG, BIG])
+    many = _forged(tmp_path / "many.mcap", {"show": "x"}, [f"r{i}" for i in range(2000)])
+    for review in REVIEWS:
+        capsys.readouterr()
+        assert vmain(["log", review[0], str(big), *review[1:]]) == 0, review
+        out = capsys.readouterr().out
+        assert "N" * NAME_KEPT not in out and "\x1b" not in out, review
+    capsys.readouterr()
+    assert vmain(["log", "summary", str(many)]) == 0
+    out = capsys.readouterr().out
+    assert len(out.splitlines()) < 100 and f"robots past the first {ROBOTS_KEPT}" in out

@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Mapping
 from functools import lru_cache
-from dataclasses import MISSING, Field, dataclass, field, fields
+from dataclasses import MISSING, Field, dataclass, field, fields, replace
 from typing import Any, ClassVar
 
 from choreo.clock import HELD, PAUSED, RUNNING
@@ -295,6 +295,7 @@ class _Record:
         NaN or a list, or a 30-digit `latency_ms`, must fail here, in the one way every review
         turns into one line, not as an OverflowError or a format error deep in a review."""
         record_type: type = self.__class__  # as `type`, for mypy: see to_json
+        cut = None
         for name, kinds in _field_kinds(record_type):
             value = getattr(self, name)
             kind = _KIND_OF.get(type(value))
@@ -302,7 +303,9 @@ class _Record:
                 raise TypeError(f"field {name!r} holds {type(value).__name__}, not {' or '.join(kinds)}")
             if kind in ("int", "float") and not -_NUMBER_MAX <= value <= _NUMBER_MAX:  # NaN fails too
                 raise ValueError(f"field {name!r} holds {value!r:.40}, out of range")
-        return self
+            if name == "robot" and kind == "str" and len(value) > NAME_KEPT:
+                cut = _kept_text(value, NAME_KEPT)  # as the metadata's robot names are (kept_metadata)
+        return self if cut is None else replace(self, robot=cut)  # type: ignore[type-var]  # its subclasses are dataclasses
 
 
 _BLANK = {"int": 0, "float": 0.0, "str": ""}  # a required field's blank, by its annotation
