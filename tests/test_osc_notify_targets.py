@@ -9,6 +9,9 @@ import socket
 import pytest
 
 from choreo.errors import UsageError
+from choreo.events import StopRequest
+from choreo.live.controls import Live
+from choreo.live.osc import OscServer
 from choreo.live.oscnotify import Notifier, comes_back, receiver
 
 
@@ -70,3 +73,22 @@ def test_receivers_apart_are_apart():
     notifier = Notifier([("127.0.0.1", 9), ("127.0.0.1", 10), ("::1", 9)])
     notifier.resolve(OWN_PORT)  # three receivers: each gets the notifications
     notifier.close()
+
+
+@pytest.mark.parametrize("host, shown", [("0", "0.0.0.0"), ("localhost", "127.0.0.1"), ("[::1]", "[::1]"),
+                                         ("::1", "[::1]")])
+def test_the_start_up_line_names_the_address_listened_on(host, shown):
+    """Before: `--osc-host 0` listened on every network and said 'listening on 0:PORT', and
+    `--osc-host [::1]` (as a URL writes it) was 'cannot listen on [[::1]]:0'."""
+    plain = shown.strip("[]")
+    try:
+        with socket.socket(socket.AF_INET6 if ":" in plain else socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.bind((plain, 0))
+    except OSError:
+        pytest.skip(f"no {plain} on this machine")
+    server = OscServer(Live(StopRequest()), 0, host=host)
+    server.bind()
+    try:
+        assert server.listening.startswith(f"osc: listening on {shown}:{server.port} (udp and tcp)"), server.listening
+    finally:
+        server.close()

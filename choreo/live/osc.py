@@ -439,7 +439,7 @@ class OscServer:
                  notify: Sequence[Target] = (), limits: Limits = LIMITS,
                  now: Callable[[], float] = time.monotonic, wire_limits: OscLimits = WIRE_LIMITS) -> None:
         self.live = live
-        self.host = host
+        self.host = host[1:-1] if host.startswith("[") and host.endswith("]") else host  # [::1], as URLs write it
         self.requested_port = port
         self.allow_given = tuple(allow)
         self.allow = parse_allow(allow)
@@ -496,13 +496,19 @@ class OscServer:
         self._notifier.close()
 
     @property
+    def bound_host(self) -> str:
+        """The address listened on as the system took it (`0` and `localhost` are names for
+        0.0.0.0 and 127.0.0.1: the line says which), or as given before binding."""
+        return self._net.bound_host if self._net is not None else self.host
+
+    @property
     def listening(self) -> str:
         """The start-up line: where, both transports, and who may command the show."""
         others = ", ".join(self.allow_given)
         who = f"commands from this machine and {others}" if others else "commands from this machine only"
         if others and _is_loopback_host(self.host):
             who += f" (but {self.host} is reachable from this machine only: give --osc-host 0.0.0.0)"
-        line = f"osc: listening on {where((self.host, self.port))} (udp and tcp), {who}"
+        line = f"osc: listening on {where((self.bound_host, self.port))} (udp and tcp), {who}"
         if self.notify:
             line += f"; progress to {', '.join(show_target(target) for target in self.notify)}"
         return line

@@ -270,6 +270,7 @@ class OscNet:
         self._closing = threading.Event()
         self._thread: threading.Thread | None = None
         self._port: int | None = None
+        self._bound_host: str | None = None  # the address bound, as the system names it
         self._drops_seen = 0  # the socket's count of dropped datagrams, as last told
         self._by_sender: dict[Sender, _Connection] = {}  # the TCP connections, by their peer's address
         self._outbox: deque[tuple[Sender, bytes]] = deque()  # notifications for TCP peers (`push`)
@@ -283,6 +284,11 @@ class OscNet:
         return self._port if self._port is not None else self.requested_port
 
     @property
+    def bound_host(self) -> str:
+        """The address bound, as the system names it (the host given, until bound)."""
+        return self._bound_host or self.host
+
+    @property
     def connections(self) -> int:
         """TCP connections open now."""
         return len(self._connections)
@@ -293,6 +299,7 @@ class OscNet:
         if self._udp is None:
             self._udp, self._tcp = bind(self.host, self.requested_port, self.limits)
             self._port = self._udp.getsockname()[1]
+            self._bound_host = _named(self._udp.getsockname())
 
     def serve(self) -> None:
         """Serve from a thread of its own, until `close`."""
@@ -634,6 +641,17 @@ def _listen(host: str, port: int, kind: int, limits: OscLimits) -> socket.socket
         raise ListenFailed(transport, (host, port), getattr(exc, "strerror", None) or str(exc),
                            getattr(exc, "errno", None) == errno.EADDRINUSE) from None
     return sock
+
+
+def _named(address: Sender) -> str:
+    """A bound address's host as a person writes it: an IPv6 one with its interface's name
+    (`fe80::1%eth0`) when it has a scope."""
+    if len(address) < 4 or not address[3]:
+        return str(address[0])
+    try:
+        return f"{address[0]}%{socket.if_indextoname(address[3])}"
+    except OSError:  # an interface gone since: its number says where
+        return f"{address[0]}%{address[3]}"
 
 
 def _set(sock: socket.socket, level: int, option: int, value: int) -> None:
