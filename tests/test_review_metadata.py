@@ -134,3 +134,34 @@ def test_robot_names_in_messages_are_cut_and_their_count_bounded(tmp_path, capsy
     assert vmain(["log", "summary", str(many)]) == 0
     out = capsys.readouterr().out
     assert len(out.splitlines()) < 100 and f"robots past the first {ROBOTS_KEPT}" in out
+
+
+def test_text_in_a_logs_messages_is_cut_where_it_is_read(plain, tmp_path, capsys):
+    # Before: a 50 KB reply error, label or log line (a few bytes compressed) was printed on every
+    # line of log frames and every row of an export: 1.2 MB of CSV from a 19 KB log.
+    import json
+
+    from mcap.writer import Writer
+
+    from choreo.errors import MESSAGE_CHARS
+    from choreo.log.format import RxRecord, TxRecord
+
+    cut = TxRecord.from_json({"seq": 1, "kind": "play", "hex": "07", "label": BIG})
+    assert cut.label == BIG[:MESSAGE_CHARS - 1] + "…"
+    log = tmp_path / "text.mcap"
+    with open(log, "wb") as stream:
+        writer = Writer(stream)
+        writer.start()
+        writer.add_metadata("choreo", {"show": "x"})
+        tx, rx, lines = (writer.register_channel(t, "json", 0) for t in ("/rcb4/tx", "/rcb4/rx", "/choreo/log"))
+        for seq in range(1, 21):
+            writer.add_message(tx, T0 + seq, json.dumps(TxRecord(seq, "play", "070c", label=BIG).to_json()).encode(), 0)
+            writer.add_message(rx, T0 + seq, json.dumps(RxRecord(seq, "timeout", error=BIG).to_json()).encode(), 0)
+            writer.add_message(lines, T0 + seq, json.dumps({"timestamp": {"sec": 0, "nsec": 0}, "level": 4,
+                                                             "message": BIG}).encode(), 0)
+        writer.finish()
+    for review in REVIEWS:
+        capsys.readouterr()
+        assert vmain(["log", review[0], str(log), *review[1:]]) == 0, review
+        out = capsys.readouterr().out
+        assert len(out) < 20 * 3 * 2 * MESSAGE_CHARS and "\x1b" not in out, (review, len(out))

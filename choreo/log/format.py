@@ -19,6 +19,7 @@ from dataclasses import MISSING, Field, dataclass, field, fields, replace
 from typing import Any, ClassVar
 
 from choreo.clock import HELD, PAUSED, RUNNING
+from choreo.errors import MESSAGE_CHARS
 from choreo.events import RunResult
 from choreo.numtext import whole_number
 from choreo.wire.framewords import describe_frame, describe_reply, is_slot
@@ -295,7 +296,7 @@ class _Record:
         NaN or a list, or a 30-digit `latency_ms`, must fail here, in the one way every review
         turns into one line, not as an OverflowError or a format error deep in a review."""
         record_type: type = self.__class__  # as `type`, for mypy: see to_json
-        cut = None
+        cuts: dict[str, str] = {}  # text longer than choreo writes there, cut (the text shown, not its meaning)
         for name, kinds in _field_kinds(record_type):
             value = getattr(self, name)
             kind = _KIND_OF.get(type(value))
@@ -303,12 +304,17 @@ class _Record:
                 raise TypeError(f"field {name!r} holds {type(value).__name__}, not {' or '.join(kinds)}")
             if kind in ("int", "float") and not -_NUMBER_MAX <= value <= _NUMBER_MAX:  # NaN fails too
                 raise ValueError(f"field {name!r} holds {value!r:.40}, out of range")
-            if name == "robot" and kind == "str" and len(value) > NAME_KEPT:
-                cut = _kept_text(value, NAME_KEPT)  # as the metadata's robot names are (kept_metadata)
-        return self if cut is None else replace(self, robot=cut)  # type: ignore[type-var]  # its subclasses are dataclasses
+            if kind == "str" and len(value) > _FIELD_KEPT.get(name, FIELD_TEXT_KEPT):
+                cuts[name] = _kept_text(value, _FIELD_KEPT.get(name, FIELD_TEXT_KEPT))
+        return replace(self, **cuts) if cuts else self  # type: ignore[type-var]  # its subclasses are dataclasses
 
 
 _BLANK = {"int": 0, "float": 0.0, "str": ""}  # a required field's blank, by its annotation
+# A record's text as every review keeps it: a hostile log's 50 KB error or label (a few bytes
+# compressed) was printed on every line of log frames and every row of an export. A robot's name
+# is cut as the metadata's are (kept_metadata), bytes in hex at what no frame or set-aside reply
+# reaches, any other text at MESSAGE_CHARS (choreo's own longest line, an error's).
+FIELD_TEXT_KEPT = MESSAGE_CHARS  # and _FIELD_KEPT, by the metadata's bounds below
 # A JSON value's Python type -> the annotations it may fill (bool is not a number here).
 _KIND_OF = {int: "int", float: "float", str: "str", bool: "bool", dict: "dict", type(None): "None"}
 _NUMBER_MAX = 2 ** 63  # nanoseconds since 1970 fit, with room; no field of a log holds more
@@ -710,6 +716,7 @@ VALUE_KEPT = 4096  # characters of any other value (a show's path, a port)
 SHORT_KEPT = 64  # characters of a value choreo writes short (a version, a time, a number, the machine's name)
 OTHER_KEYS_KEPT = 32  # keys choreo does not write (a newer choreo's): the first these
 METADATA_RECORDS_KEPT = 64  # metadata records (a merged log's hosts' own among them) besides choreo's two
+_FIELD_KEPT = {"robot": NAME_KEPT, "hex": VALUE_KEPT, "stale": VALUE_KEPT}  # a record's text (_Record._checked)
 _ROBOT_WHATS = (Info.PORT, Info.BAUD, Info.LAYOUT)
 _HOST_WHATS = (Info.SHIFT_NS, Info.SPREAD_NS, Info.ALIGNED_BY)
 _SHORT_KEYS = frozenset((Info.VERSION, Info.SHOW_SHA256, Info.BAUD, Info.START_TIME, Info.START_NS, Info.HOST,
