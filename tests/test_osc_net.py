@@ -256,6 +256,24 @@ def test_a_desk_that_spoke_stays_after_a_junk_message():
     assert table.expired(OscLimits().message_timeout_s) == [("junk", "closed: no command within 5 s of connecting")]
 
 
+def test_a_proven_desk_sending_fader_moves_keeps_its_place():
+    """Junk must not keep a connection open, but a desk proven by a command that then sends
+    only fader moves (well-formed, at addresses choreo does not take) between its GOs is heard:
+    its idle timeout runs from its last well-formed message, not its last command."""
+    limits = OscLimits()
+    table: ConnectionTable[str] = ConnectionTable(limits)
+    table.admit("desk", "10.0.0.1", 0.0)
+    table.heard("desk", 1.0, messages=1, pending=False, read=1)  # a GO
+    table.heard("desk", 500.0, messages=0, frames=1, pending=False, read=1)  # a fader move
+    assert table.expired(1.0 + limits.idle_timeout_s + 1.0) == []
+    assert table.next_due() == 500.0 + limits.idle_timeout_s
+    table.heard("desk", 900.0, messages=0, frames=1, pending=False, read=0)  # junk renews nothing
+    assert table.next_due() == 500.0 + limits.idle_timeout_s
+    table.admit("faders", "10.0.0.2", 0.0)
+    table.heard("faders", 1.0, messages=0, frames=1, pending=False, read=1)  # never a command: not proven
+    assert ("faders", "closed: no command within 5 s of connecting") in table.expired(limits.message_timeout_s)
+
+
 def test_silent_and_trickling_connections_are_closed_in_time(live):
     commands = Commands()
     live.subscribe(commands)

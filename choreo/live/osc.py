@@ -528,7 +528,8 @@ class OscServer:
         before the packet is read, and its rate of packets: past it the packet is counted and
         not read, at the least cost (a flood that costs choreo more than its sender outruns the
         socket, which then drops the operator's GO too). A malformed packet is refused whole.
-        It `spoke` if it carried an address of ours (a command, a question), read."""
+        It was `read` if well-formed, and `spoke` if it carried an address of ours (a command, a
+        question)."""
         host, allowed = self._verdict(sender[0])
         budget = budget_key(transport, host)
         cost = 1 + (len(data) - 1) // self.wire_limits.packet_bytes_per_token if data else 1  # reading is by the byte
@@ -536,7 +537,7 @@ class OscServer:
             self.counts[UNREAD] += 1
             self.live.count(UNREAD if allowed else "refused", f"osc {transport} {host}")
             return NOTHING
-        spoke = False
+        spoke = read = False
         source = f"osc {transport} {show_target((host, sender[1]))}"  # `where`, from the remembered host
         if not allowed:
             replies = [self._refuse(host, source, "")]  # its address is not read: the reply is `/reply`
@@ -548,8 +549,9 @@ class OscServer:
                 replies = [self._malformed(budget, source, decoded.error, decoded.address)]
             else:
                 replies = self._messages(origin, decoded.messages)
+                read = True
                 spoke = any(wanted_or_none(self._shown(m.address)) is not None for m in decoded.messages)
-        return Handled.of((reply.encoded() for reply in replies if reply is not None), spoke)
+        return Handled.of((reply.encoded() for reply in replies if reply is not None), spoke, read)
 
     def rest_s(self, sender: Sender) -> float:
         """A TCP sender over its rate of packets: how long its connections are not read."""

@@ -113,17 +113,24 @@ class Handled(tuple[bytes, ...]):
     """A packet's encoded replies, and whether it `spoke`: carried a message its handler takes
     (a command, a question), as a desk's packets do, not junk, a malformed packet or an address
     nobody takes (which would otherwise hold a TCP connection's place for the idle timeout).
-    A tuple: `NOTHING`, shared, answers every packet refused unread at no cost. `Spoke` is one
-    that spoke (a class of its own: the verdict is fixed when the replies are)."""
+    And whether it was `read`: well-formed OSC, taken or not (a desk proven by a command keeps
+    its place while it sends fader moves between its GOs, which junk does not). A tuple:
+    `NOTHING`, shared, answers every packet refused unread at no cost. `Read` and `Spoke` are
+    the verdicts as classes of their own (fixed when the replies are)."""
 
     spoke = False
+    read = False
 
     @staticmethod
-    def of(replies: Iterable[bytes], spoke: bool) -> Handled:
-        return Spoke(replies) if spoke else Handled(replies)
+    def of(replies: Iterable[bytes], spoke: bool, read: bool = False) -> Handled:
+        return Spoke(replies) if spoke else Read(replies) if read else Handled(replies)
 
 
-class Spoke(Handled):
+class Read(Handled):
+    read = True
+
+
+class Spoke(Read):
     spoke = True
 
 
@@ -196,17 +203,20 @@ class ConnectionTable(Generic[K]):
         held = Counter(self._slots[k].host for k in keys)
         return min(keys, key=lambda k: (-held[self._slots[k].host], self._slots[k].spoke))
 
-    def heard(self, key: K, now: float, *, messages: int, pending: bool, frames: int | None = None) -> None:
+    def heard(self, key: K, now: float, *, messages: int, pending: bool, frames: int | None = None,
+              read: int = 0) -> None:
         """Bytes came: `frames` whole ones (as many as `messages` unless given), `messages` of
-        them messages that speak (see `Handled`), and a message is `pending` (begun) after them.
-        A message begun must end within the timeout; only messages that speak earn more time
-        (junk, however much, neither proves a connection nor keeps it open)."""
+        them messages that speak (see `Handled`), `read` of them well-formed, and a message is
+        `pending` (begun) after them. A message begun must end within the timeout; only messages
+        that speak prove a connection, and well-formed ones keep a proven one open (junk,
+        however much, does neither)."""
         slot: _Slot | None = self._slots.get(key)  # the table's own record of the connection
         if slot is None:
             return
         frames = messages if frames is None else frames
         if messages:
             slot.proven = True
+        if messages or slot.proven and read:
             slot.spoke = now
         if not slot.proven:
             pass  # the first message is due within the timeout of connecting, however it trickles
@@ -520,14 +530,15 @@ class OscNet:
         fed = connection.reader.feed(data)
         for why in fed.bad:
             self.handler.dropped("tcp", connection.sender, why)
-        spoke = 0
+        spoke = read = 0
         for packet in fed.packets:
             handled = self.handler.packet("tcp", connection.sender, packet)
             spoke += handled.spoke
+            read += handled.read
             for reply in handled:
                 connection.unsent += connection.reader.frame(reply)
         self._table.heard(connection, self._now(), messages=spoke, frames=len(fed.packets) + len(fed.bad),
-                          pending=connection.reader.pending)
+                          pending=connection.reader.pending, read=read)
         if fed.fatal is not None:
             self._drop(connection, f"closed: {fed.fatal}")
             return
