@@ -26,7 +26,7 @@ def _flat(path: str) -> str:
 README = [
     f"{NET.max_connections} TCP connections at once, {NET.max_per_sender} from one address",
     f"command or question within {NET.message_timeout_s:g} s of connecting",
-    f"after {NET.idle_timeout_s:g} s without one",
+    f"after {NET.idle_timeout_s:g} s without a message",
     f"one packet at most {NET.max_datagram // 1024} KB",
     f"commands carried out: {rate(LIMITS.commands_per_sender)} from one sender, {rate(LIMITS.commands_total)} from all "
     "over UDP and as many over TCP",
@@ -39,7 +39,7 @@ LIVE_MD = [
     f"| TCP connections | {NET.max_connections} open at once, {NET.max_per_sender} from one address",
     f"| TCP: the first message | a command or question within {NET.message_timeout_s:g} s of connecting",
     f"every message begun whole within {NET.message_timeout_s:g} s of its first byte",
-    f"closed after {NET.idle_timeout_s:g} s without one |",
+    f"is closed after {NET.idle_timeout_s:g} s without a message (",
     f"| TCP: replies not read | {NET.max_unsent // 1024} KB queued",
     f"| one OSC packet (a datagram, a TCP message) | {NET.max_message:,} bytes",
     f"| one UDP datagram | any, up to {NET.max_datagram // 1024} KB",
