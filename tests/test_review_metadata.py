@@ -165,3 +165,33 @@ def test_text_in_a_logs_messages_is_cut_where_it_is_read(plain, tmp_path, capsys
         assert vmain(["log", review[0], str(log), *review[1:]]) == 0, review
         out = capsys.readouterr().out
         assert len(out) < 20 * 3 * 2 * MESSAGE_CHARS and "\x1b" not in out, (review, len(out))
+
+
+def test_an_attached_show_over_a_shows_size_is_not_read_and_its_name_is_cut(plain, tmp_path, capsys, monkeypatch):
+    # Before: the attachment was read whole whatever its size (a gigabyte: memory), and a 50 KB
+    # attachment name was printed whole in the timeline's "does not load" line.
+    from mcap.writer import Writer
+
+    from choreo.show.read import MAX_BYTES
+
+    def forged(name: str, data: bytes) -> Path:
+        path = tmp_path / f"attached{len(data)}.mcap"
+        with open(path, "wb") as stream:
+            writer = Writer(stream)
+            writer.start()
+            writer.add_metadata("choreo", {"show": "x"})
+            writer.add_attachment(0, 0, name, "application/yaml", data)
+            writer.finish()
+        return path
+
+    huge, named = forged("show.yaml", b"#" * (MAX_BYTES + 1)), forged("N" * 50_000 + ".yaml", b"version: [")
+    monkeypatch.setattr(LogReader, "attachment_data", lambda *a: pytest.fail("an oversized show was read"))
+    capsys.readouterr()
+    assert vmain(["log", "timeline", str(huge)]) == 0
+    assert "over the 256 KiB a show file may be" in capsys.readouterr().out
+    monkeypatch.undo()
+    from choreo.review.attached import attached_show
+
+    with LogReader(named) as reader:
+        problem = attached_show(reader).problem  # the timeline's line, whole as a pipe gets it
+    assert problem is not None and "does not load" in problem and len(problem) < 1000, problem

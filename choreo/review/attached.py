@@ -15,6 +15,9 @@ from typing import TYPE_CHECKING
 
 from choreo.log.format import SHOW_FALLBACK_NAME
 from choreo.log.reader import LogReader
+from choreo.textfit import fit
+
+NAME_SHOWN = 255  # characters of an attached show's file name a review keeps (a file name's most)
 
 if TYPE_CHECKING:  # for the types only: the show loader is imported when a log has a show attached
     from choreo.show.model import Plan, Show
@@ -51,6 +54,11 @@ def attached_show(reader: LogReader) -> AttachedShow:
     attachment = reader.show_attachment()
     if attachment is None:
         return AttachedShow(problem="the log has no show attached")
+    from choreo.show.read import MAX_BYTES
+
+    if attachment.size > MAX_BYTES:  # read whole, a hostile log's gigabyte would be memory
+        return AttachedShow(problem=f"the attached show is {attachment.size:,} bytes, over the "
+                                    f"{MAX_BYTES // 1024} KiB a show file may be: not read")
     source = reader.attachment_data(attachment)
     try:
         from choreo.errors import ChoreoError
@@ -58,13 +66,13 @@ def attached_show(reader: LogReader) -> AttachedShow:
         from choreo.show.plan import compile_plans
     except ImportError as exc:  # pragma: no cover - the loader ships with choreo
         return AttachedShow(problem=f"cannot load shows here: {exc}")
-    name = Path(attachment.name).name or SHOW_FALLBACK_NAME
+    name = fit(Path(attachment.name).name, NAME_SHOWN) or SHOW_FALLBACK_NAME  # a hostile log's is any length
     try:
         show = load_show_bytes(source, name)
         plans = compile_plans(show)
     except ChoreoError as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        return AttachedShow(problem=f"the attached show {attachment.name} does not load: {first}")
+        return AttachedShow(problem=f"the attached show {name} does not load: {first}")
     names: dict[int, str] = {}
     durations: dict[int, float] = {}
     for motion in show.motions.values():
