@@ -484,6 +484,7 @@ def _discard(file: IO, created: Path | None) -> None:
 
 
 def run_replay(args: argparse.Namespace) -> int:
+    from choreo.review.showtime import fixed
     from choreo.review.timeline import stood_text
     from choreo.run.replay import replay
 
@@ -519,7 +520,7 @@ def run_replay(args: argparse.Namespace) -> int:
     lengths = report.recorded
     if lengths is not None and lengths.show_s is not None:
         stood = stood_text(lengths)
-        print_fitted(f"recorded show: {lengths.show_s:.3f} s on the show clock" + (f" ({stood})" if stood else ""))
+        print_fitted(f"recorded show: {fixed(lengths.show_s)} s on the show clock" + (f" ({stood})" if stood else ""))
     print_fitted(f"log: {report.log_path}")
     return code
 

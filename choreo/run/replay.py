@@ -36,7 +36,7 @@ from choreo.log import LOG_DIR
 from choreo.log.reader import Cut, LogReader
 from choreo.log.recorder import Recorder, RobotInfo, RunInfo, default_log_path
 from choreo.review.attached import AttachedShow, attached_show
-from choreo.review.showtime import Durations, ShowTimes, durations
+from choreo.review.showtime import Durations, ShowTimes, durations, fixed
 from choreo.run.settings import LinkSettings, check_output_folder, check_timeout, given_layout, show_durations
 from choreo.run.stage import Stage
 from choreo.show.model import SIM_URL, SOLO, is_simulator
@@ -92,7 +92,7 @@ class Difference:
             note = " (timing: a poll at the motion's end, where the board's 50 ms status refresh decides)"
         else:
             note = " (a poll away from the motion's end: the board answered differently)" if self.timing else ""
-        return (f"{self.show_s:9.3f} s  #{self.seq} {where}{self.frame}: recorded "
+        return (f"{fixed(self.show_s, 3, 9)} s  #{self.seq} {where}{self.frame}: recorded "
                 f"{self._said(self.recorded)}, replay {self._said(self.replayed)}{note}")
 
     def _said(self, reply: RxRecord) -> str:
