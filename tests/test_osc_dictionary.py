@@ -90,12 +90,17 @@ def reply(packet: bytes) -> tuple[str, dict]:
 
 
 def ask(peer: Peer, address: str, *args) -> tuple[str, dict]:  # type: ignore[no-untyped-def]
-    """One message and its reply (the first packet back that is not a notification)."""
+    """One message and its reply (the first packet back that is not a notification, nor a late
+    reply to an earlier question: a loaded machine's status reply can come after its asker gave
+    up on it, and was read as the next question's)."""
     peer.send(encode_message(address, args))
     while True:
         packet = next_packet(peer)
-        if not packet.startswith(b"/choreo/notify"):
-            return reply(packet)
+        if packet.startswith(b"/choreo/notify"):
+            continue
+        answer = reply(packet)
+        if answer[0] == "/reply" + address or not answer[0].startswith("/reply/choreo/status"):
+            return answer
 
 
 def next_packet(peer: Peer) -> bytes:
