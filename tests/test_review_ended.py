@@ -35,3 +35,15 @@ def test_each_way_a_play_ended_is_counted_beside_the_measured_ones():
     line = _motion_line(summary, 7)
     assert line.endswith(f"median 0.500 s (min 0.500, max 0.500); 4 not measured (2 {ENDED_BY['stop']}; "
                          f"1 {ENDED_BY['end of log']}; 1 {ENDED_BY['state read']})"), line
+
+
+def test_the_timelines_legend_says_what_ended_the_plays_it_could_not_time(tmp_path, capsys):
+    # Before: "'.' up to what stopped it (the next play, or the log's end)" of a play the state read ended.
+    from runlog import vmain
+
+    run_short(tmp_path, "hth4-2.2", "lose_start=2")
+    capsys.readouterr()
+    assert vmain(["log", "timeline", str(tmp_path / "run.mcap")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    legend = lines[next(n for n, line in enumerate(lines) if "up to what ended it" in line) + 1]
+    assert "the state read after a lost start reply (over by then)" in legend and "the next play" in legend

@@ -588,10 +588,17 @@ def _text_lines(timeline: Timeline, columns: int) -> Iterator[str]:
         yield _row(step, run.title(), planned, actual, _bar(run, scale, width), figures)
     if not timeline.runs:
         yield "  (no motion played)"
-    if any(r.ended_by not in ("status", "not started", "not played") for r in timeline.runs):
-        yield "?: no status query saw it end (no `wait: done`, or the show stopped first): drawn"
-        yield "   for its expected length, '.' up to what stopped it (the next play, or the log's end)"
+    ended = [_ENDED_BY[r.ended_by] for r in timeline.runs if r.ended_by in _ENDED_BY]
+    if ended:
+        yield "?: no status query timed its end (no `wait: done`, or the show stopped first): drawn"
+        yield "   for its expected length, '.' up to what ended it:"
+        yield f"   {', '.join(dict.fromkeys(sorted(ended)))}"
     yield from _listed(timeline)
+
+
+# What ended a play no status query timed, in the legend of its '?' (MotionPlay.ended_by).
+_ENDED_BY = {"stop": "the next play", "end of log": "the log's end",
+             "state read": "the state read after a lost start reply (over by then)"}
 
 
 def _head(timeline: Timeline, span: float, width: int) -> Iterator[str]:
