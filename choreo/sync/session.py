@@ -415,13 +415,17 @@ class LinkSession:
         return renumbered, f"Link renumbered this host's beats by {bars} bars (the phase kept)"
 
     def _tell(self, event: LinkEvent) -> None:
-        """Each listener hears the event; one that fails is set aside (counted in
-        `listener_failures`), never the sampling: a show keeps following the session."""
+        """Each listener hears the event; one that fails is set aside: unsubscribed, its error
+        kept in `listener_failures` (one a listener, however many events peers send), never the
+        sampling: a show keeps following the session."""
         with self._listeners_lock:
             listeners = list(self._listeners)
         for listener in listeners:
             try:
                 listener(event)
             except Exception as exc:  # noqa: BLE001 a listener's bug must not take this host off Link mid-show
+                with self._listeners_lock:
+                    if listener in self._listeners:
+                        self._listeners.remove(listener)
                 self.listener_failures.append(exc)
 
