@@ -53,7 +53,14 @@ class VisibleStream:
         self.stream = stream
 
     def write(self, text: str) -> int:
-        self.stream.write(visible(text, keep="\n"))
+        shown = visible(text, keep="\n")
+        try:
+            self.stream.write(shown)
+        except UnicodeEncodeError as exc:
+            # a console whose encoding lacks the characters (LC_ALL=C, PYTHONIOENCODING=ascii, a
+            # cp1252 console): a show's Japanese name was a traceback; shown as \u escapes instead,
+            # as Python shows them on stderr
+            self.stream.write(shown.encode(exc.encoding, "backslashreplace").decode(exc.encoding))
         return len(text)
 
     @property
