@@ -49,6 +49,7 @@ OP_CHUNK = 0x06
 OP_ATTACHMENT = 0x09
 OP_METADATA = 0x0C
 OP_DATA_END = 0x0F
+ATTACHMENTS_KEPT = 64  # attachments a review keeps the description of (choreo attaches one: the show)
 
 RECORD_HEAD = struct.Struct("<BQ")  # opcode, length of what follows
 # A message record inside a chunk, up to its data: opcode, length, channel id, sequence, log time.
@@ -119,6 +120,7 @@ class LogReader:
         self.metadata: dict[str, dict[str, str]] = {}  # bounded as reviews keep it (format.kept_metadata)
         self.metadata_notes: dict[str, list[str]] = {}  # what the bounds left out, by record
         self.attachments: list[Attachment] = []
+        self._attached: set[int] = set()  # where each attachment seen starts
         self.channels: dict[int, Channel] = {}
         self.cut: Cut | None = None
         self.footer = False  # Data End, the footer and the closing magic are all there
@@ -300,13 +302,22 @@ class LogReader:
             (size,) = struct.unpack_from("<Q", body, pos)
             if pos + 8 + size > len(body):
                 raise ValueError(f"its data size {size:,} is more than the record holds")
-            attachment = Attachment(name, media_type, struct.unpack_from("<Q", body, 0)[0], start + 9 + pos + 8, size)
-            if attachment not in self.attachments:  # a second pass over the log meets it again
-                self.attachments.append(attachment)
+            self._attach(Attachment(name, media_type, struct.unpack_from("<Q", body, 0)[0], start + 9 + pos + 8, size))
         elif opcode == OP_SCHEMA:
             self._schema(body, 0)
         elif opcode == OP_CHANNEL:
             self._channel(body, 0)
+
+    def _attach(self, attachment: Attachment) -> None:
+        """An attachment's description, kept once (a second pass over the log meets it again; a
+        list searched for each made a hostile log's 20,000 attachments cost minutes) and at most
+        ATTACHMENTS_KEPT of them, the show a review needs besides."""
+        if attachment.offset in self._attached:
+            return
+        self._attached.add(attachment.offset)
+        show = attachment.media_type == SHOW_MEDIA_TYPE and self.show_attachment() is None
+        if show or len(self.attachments) < ATTACHMENTS_KEPT:
+            self.attachments.append(attachment)
 
     def _schema(self, buf: bytes, pos: int) -> None:
         (schema_id,) = struct.unpack_from("<H", buf, pos)
