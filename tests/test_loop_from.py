@@ -78,6 +78,25 @@ def test_a_loop_over_no_time_is_refused_before_anything_opens(tmp_path, capsys, 
     assert not log.exists()
 
 
+@pytest.mark.parametrize("show, loop", [
+    ("shows/dance.yaml", "1..1"),  # the `wait: done` after `start`'s play, alone
+    ("version: 1\nsteps:\n  - play: 1\n  - wait: 2\n    label: rest\n  - wait: 1\n  - play: 2\n", "rest..2"),
+    (TWO_ROBOTS.replace("  - wait: 3\n", "  - wait: 3\n    label: c\n  - wait: 1\n"), "c..3"),
+])
+def test_a_loop_of_waits_alone_is_refused_before_anything_opens(tmp_path, capsys, show, loop):
+    """`--loop 1..1` on dance.yaml polled a motion it never played, every 0.6 s, under a header
+    that promised a 22 s show."""
+    path = show if show.endswith(".yaml") else str(write_show(tmp_path, show))
+    log = tmp_path / "run.mcap"
+    ports = [f"{name}={tmp_path}/no-such-tty-{name}" for name in ("left", "right")] if "robots:" in show else \
+        [str(tmp_path / "no-such-tty")]
+    code = main(["run", path, "--loop", loop, *(a for p in ports for a in ("--port", p)), "--log", str(log), "-q"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert err[0].startswith(f"--loop {loop}: the section plays no motion, only waits")
+    assert not log.exists()
+
+
 def test_a_short_loop_is_refused_as_the_library_is_called_too(tmp_path):
     with pytest.raises(UsageError, match="one pass lasts 0.040 s"):
         Session.prepare(RunRequest(str(write_show(tmp_path, SHORT_MOTIONS)), loop="a..b", no_log=True))

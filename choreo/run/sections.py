@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from choreo.errors import UsageError, did_you_mean
-from choreo.show.model import Plan, Show
+from choreo.show.model import Plan, Show, StepKind
 
 MIN_LOOP_S = 0.1  # a --loop pass's least show time: its motions restart at most 10 times a second
 
@@ -38,6 +38,7 @@ def select(show: Show, plans: Mapping[str, Plan], from_step: str | None, loop_te
     loop = loop_range(loop_text)
     starts, origin = _starts(show, plans, loop[0], "--loop")
     ends = _ends(show, plans, loop[1], starts, "--loop")
+    _check_loop_plays(plans, starts, ends, loop_text)
     _check_loop_length(plans, starts, ends, origin, loop_text)
     return Sections(starts, origin, ends, loop)
 
@@ -103,6 +104,16 @@ def section_end(plans: Mapping[str, Plan], ends: Mapping[str, int]) -> float:
     show's expected end after the last step), the latest of every robot's."""
     return max(plan.steps[ends[name]].planned_s if ends[name] < len(plan.steps) else plan.estimated_s
                for name, plan in plans.items())
+
+
+def _check_loop_plays(plans: Mapping[str, Plan], starts: Mapping[str, int], ends: Mapping[str, int],
+                      given: str) -> None:
+    """A pass of waits alone repeats nothing a robot does (`--loop 1..1` on a lone `wait: done`
+    polled a motion it never played, every 0.6 s): a loop is for rehearsing motions."""
+    if not any(step.kind is StepKind.PLAY for name, plan in plans.items()
+               for step in plan.steps[starts[name]:ends[name]]):
+        raise UsageError(f"--loop {given}: the section plays no motion, only waits; a loop repeats plays: "
+                         "start it at a `play` step (see `choreo plan` for the steps)")
 
 
 def _check_loop_length(plans: Mapping[str, Plan], starts: Mapping[str, int], ends: Mapping[str, int],
