@@ -75,6 +75,7 @@ def test_a_cut_robot_keeps_its_own_keys_and_names_collapse_to_one():
     kept, notes = kept_metadata("choreo", {"robots": f"{'a' * 40},{'a' * 50},b", robot_key("a" * 40, "port"): "p"})
     assert kept["robots"] == f"{'a' * (NAME_KEPT - 1)}\u2026,b"
     assert kept[robot_key("a" * (NAME_KEPT - 1) + "\u2026", "port")] == "p" and len(notes) == 1
+    assert kept_metadata("another", {"robot.x.y": "1", "k": "v"}) == ({"robot.x.y": "1", "k": "v"}, [])
 
 
 def _host(plain: Path, path: Path, host: str, extra: dict) -> Path:

@@ -770,13 +770,14 @@ class _Keeping:
                 if (value := self.raw.get(kept_as(name) + what)) is not None:
                     self.kept[kept_as(cut) + what] = self.value(value, _kept_chars(what))
 
-    def rest(self) -> None:
-        """Choreo's other keys, values cut; keys it does not write, up to OTHER_KEYS_KEPT."""
+    def rest(self, named: tuple[str, ...] = ()) -> None:
+        """Choreo's other keys, values cut; keys it does not write, up to OTHER_KEYS_KEPT (those
+        beginning with `named`, a robot's or a host's, were kept with their names or not at all)."""
         others = 0
         for key, value in self.raw.items():
             if key in _INFO_KEYS and key not in (Info.ROBOTS, Info.HOSTS):
                 self.kept[key] = self.value(value, _kept_chars(key))
-            elif key not in self.kept and not key.startswith(("robot.", "host.")):
+            elif key not in self.kept and not (named and key.startswith(named)):
                 others += 1
                 if others <= OTHER_KEYS_KEPT:
                     self.kept[self.value(key, NAME_KEPT)] = self.value(value)
@@ -798,7 +799,9 @@ def kept_metadata(name: str, raw: Mapping[str, str]) -> tuple[dict[str, str], li
     if name == METADATA_NAME:
         keeping.names(Info.ROBOTS, "robot", _ROBOT_WHATS, lambda robot: robot_key(robot, ""))
         keeping.names(Info.HOSTS, "host", _HOST_WHATS, lambda host: host_key(host, ""))
-    keeping.rest()
+        keeping.rest(("robot.", "host."))
+    else:
+        keeping.rest()
     return keeping.kept, keeping.notes
 
 
