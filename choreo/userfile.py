@@ -155,6 +155,23 @@ def _kind_at(name: str) -> str:
     return "a file" if stat.S_ISREG(mode) else kind_of(mode)
 
 
+def folder_problem(folder: str | os.PathLike[str]) -> str | None:
+    """Why an output cannot go into `folder`, said after its name (`folder runs/ does not exist
+    (create it first)`), or None for a folder. The one wording for every output's folder: "does
+    not exist" alone hid a loop of links and a link to nothing behind a name the user could see."""
+    name = os.fspath(folder)
+    try:
+        mode = os.stat(name).st_mode
+    except OSError as exc:
+        if exc.errno == errno.ENOENT and not os.path.islink(name):
+            return "does not exist (create it first)"
+        why = _os_reason(name, exc, "folder").removeprefix("cannot read the folder: ")
+        return f"cannot be used: {why}"
+    except ValueError:
+        return f"cannot be used: {_UNNAMEABLE}"
+    return None if stat.S_ISDIR(mode) else f"is not a folder ({_kind_at(name)})"
+
+
 def modified_if_regular(path: Path) -> float | None:
     """When the regular file reached from `path` (links followed) was last modified; None for
     anything else: a link to nothing, a loop, a folder, a pipe, a device, a name too long."""

@@ -176,7 +176,7 @@ def test_a_missing_folder_or_two_logs_of_one_name_are_refused_before_anything_is
                        # and a file was 'folder is not a folder'
                        ([str(tmp_path / "live.mcap"), "--parquet", ""], "give the folder the tables go in"),
                        ([str(tmp_path / "live.mcap"), "--format", "parquet", "-o", ""], "give the folder"),
-                       ([str(tmp_path / "live.mcap"), "--parquet", "live.mcap"], "not a folder: give")):
+                       ([str(tmp_path / "live.mcap"), "--parquet", "live.mcap"], "is not a folder (a file)")):
         assert vmain(["log", "export", *argv]) == 2
         err = capsys.readouterr().err.splitlines()
         assert len(err) == 1 and says in err[0], err

@@ -325,7 +325,7 @@ def test_an_output_that_cannot_be_written_is_one_line_exit_2(logs, capsys, tmp_p
     for target, says in (
             (missing, f"cannot write: folder {missing.parent} does not exist (create it first)"),
             (Path("/proc/x.png"), "cannot write: No such file or directory"),
-            (logs.complete / "x.png", f"cannot write: folder {logs.complete} is not a folder (create it first)")):
+            (logs.complete / "x.png", f"cannot write: folder {logs.complete} is not a folder (a file)")):
         code, out, err = cli(capsys, "log", command, str(logs.complete), option, str(target))
         assert code == 2 and out == "", err
         assert err == f"{flag} {target}: {says}\n"

@@ -145,3 +145,26 @@ def test_a_name_no_file_can_have_is_one_line(tmp_path):
     assert f"music.file: a\\x00b.wav: {says} (" in info.value.lines()[0]  # printed escaped
     with pytest.raises(InputError, match=r"cannot read the log folder: no file can have this name"):
         listing(tmp_path / "a\0b", "log folder")
+
+
+def test_an_output_folder_that_is_a_loop_or_a_link_to_nothing_says_so_in_every_command(tmp_path, capsys):
+    """A folder that is a loop of links, or a link to nothing, was 'does not exist' (issue 21):
+    every output's folder (--log, -o, --png, --parquet) is judged by userfile.folder_problem."""
+    from choreo.cli import main
+    from choreo.userfile import folder_problem
+
+    os.symlink(tmp_path / "loop", tmp_path / "loop")
+    os.symlink(tmp_path / "gone", tmp_path / "dangling")
+    (tmp_path / "file").write_text("x")
+    assert folder_problem(tmp_path) is None
+    assert folder_problem(tmp_path / "nope") == "does not exist (create it first)"
+    assert folder_problem(tmp_path / "loop") == "cannot be used: a loop of symbolic links"
+    assert folder_problem(tmp_path / "dangling").startswith("cannot be used: it is a link to ")
+    assert folder_problem(tmp_path / "file") == "is not a folder (a file)"
+    assert folder_problem(tmp_path / ("n" * 300)) == "cannot be used: the name is too long for this system"
+    show = Path("shows/minimal.yaml").resolve()
+    for argv in (["run", str(show), "--log", str(tmp_path / "loop" / "x.mcap"), "--port", "sim://", "-q"],
+                 ["run", str(show), "--log", str(tmp_path / "dangling" / "x.mcap"), "--port", "sim://", "-q"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "cannot write: folder" in err[0] and "does not exist (create" not in err[0], err

@@ -23,7 +23,7 @@ from choreo.cli.terminal import UNKNOWN_COLUMNS, columns, print_fitted
 from choreo.errors import ChoreoError, UsageError, did_you_mean
 from choreo.log import LOG_DIR, LOG_SUFFIX
 from choreo.textfit import fit, visible
-from choreo.userfile import same_file
+from choreo.userfile import folder_problem, same_file
 from choreo.wire.layouts import LAYOUT_NAMES
 from choreo.wire.protocol import DEFAULT_BAUD, FrameKind, ReplyKind, spell_bauds
 
@@ -408,9 +408,9 @@ def _export_parquet(args: argparse.Namespace, into: str, other_targets: bool) ->
     folder = Path(into)
     if not into:  # Path('') is the current folder: an unset shell variable wrote the tables there
         raise UsageError("log export --parquet '': give the folder the tables go in")
-    if not _is_folder(folder):
-        what = "is not a folder: give a folder" if os.path.lexists(folder) else "does not exist (create it first)"
-        raise UsageError(f"log export --parquet {into}: {what}")
+    why = folder_problem(folder)
+    if why is not None:
+        raise UsageError(f"log export --parquet {into}: {why}")
     logs = _logs_in(args.log)
     named: dict[str, Path] = {}
     for path in logs:

@@ -60,6 +60,7 @@ from choreo.show.model import LINK, LinkClock, Plan, Show, StepKind, is_simulato
 from choreo.show.read import MAX_BYTES
 from choreo.show.report import format_path
 from choreo.sync.session import DISCOVERY_MAX_S, INSTALL_HINT, LinkSession, LinkSnapshot
+from choreo.userfile import folder_problem
 from choreo.wire.protocol import BAUDS
 
 if TYPE_CHECKING:  # the music loads when the show has some
@@ -916,9 +917,9 @@ def _writable(folder: Path, named: bool) -> Finding:
             os.close(handle)
             os.unlink(name)
             return Finding(OK, "log", f"folder {folder} takes a new file")
-        if named or folder.exists():
-            what = "is not a folder" if folder.exists() else "does not exist (create it first)"
-            return Finding(PROBLEM, "log", f"folder {folder} {what}", fix)
+        why = folder_problem(folder)
+        if why is not None and (named or os.path.lexists(folder)):
+            return Finding(PROBLEM, "log", f"folder {folder} {why}", fix)
         parent = _existing_parent(folder)
         if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
             return Finding(PROBLEM, "log", f"folder {folder} cannot be made: {parent} is "

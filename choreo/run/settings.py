@@ -49,6 +49,7 @@ from choreo.show.model import (
 from choreo.show.plan import compile_plans
 from choreo.sim.options import SimUrl, durations_text, ms_text
 from choreo.textfit import visible
+from choreo.userfile import folder_problem
 from choreo.wire.layouts import SEED, Layout, layout_named
 from choreo.wire.protocol import BAUDS, DEFAULT_BAUD, baud_refusal
 
@@ -416,9 +417,9 @@ def check_output_folder(path: Path, option: str) -> None:
     """An output given by name goes into a folder that exists: it is refused, never created (a
     typo would otherwise scatter files). Only the default log folder, runs/, is made."""
     folder = path.parent
-    if not folder.is_dir():
-        what = "is not a folder" if folder.exists() else "does not exist"
-        raise UsageError(f"{option} {path}: cannot write: folder {folder} {what} (create it first)")
+    why = folder_problem(folder)
+    if why is not None:
+        raise UsageError(f"{option} {path}: cannot write: folder {folder} {why}")
 
 
 def check_timeout(timeout: float) -> float:
