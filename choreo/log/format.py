@@ -719,8 +719,9 @@ METADATA_RECORDS_KEPT = 64  # metadata records (a merged log's hosts' own among 
 _FIELD_KEPT = {"robot": NAME_KEPT, "hex": VALUE_KEPT, "stale": VALUE_KEPT}  # a record's text (_Record._checked)
 _ROBOT_WHATS = (Info.PORT, Info.BAUD, Info.LAYOUT)
 _HOST_WHATS = (Info.SHIFT_NS, Info.SPREAD_NS, Info.ALIGNED_BY)
-_SHORT_KEYS = frozenset((Info.VERSION, Info.SHOW_SHA256, Info.BAUD, Info.START_TIME, Info.START_NS, Info.HOST,
-                         Info.PYTHON, Info.PLATFORM, Info.UNISON, Info.SHIFT_NS, Info.SPREAD_NS, Info.ALIGNED_BY))
+_SHORT_KEYS = frozenset((Info.VERSION, Info.SHOW_SHA256, Info.BAUD, Info.LAYOUT, Info.START_TIME, Info.START_NS,
+                         Info.HOST, Info.PYTHON, Info.PLATFORM, Info.UNISON, Info.SHIFT_NS, Info.SPREAD_NS,
+                         Info.ALIGNED_BY))
 _INFO_KEYS = _SHORT_KEYS | {Info.SHOW, Info.SHOW_PATH, Info.PORT, Info.LAYOUT, Info.ROBOTS, Info.HOSTS, Info.SHOW_HOST}
 
 
