@@ -219,3 +219,21 @@ def test_a_log_of_thousands_of_attachments_keeps_a_few_and_finds_its_show(tmp_pa
         assert len(reader.attachments) == ATTACHMENTS_KEPT + 1
         show = reader.show_attachment()
         assert show is not None and reader.attachment_data(show).startswith(b"version: 1")
+
+
+def test_a_replay_reads_no_oversized_attached_show_and_attaches_none(tmp_path, capsys, monkeypatch):
+    # Before: replay read the attachment whole again (whatever size the log said) to attach it to
+    # its own log; the review's read, bounded by a show file's size, is the one it attaches now.
+    from choreo.show.read import MAX_BYTES
+
+    log = tmp_path / "big.mcap"
+    recorder = Recorder(log, RunInfo("show.yaml", "x", b"#" * (MAX_BYTES + 1), "sim://", 115200, T0))
+    _clocked(recorder)
+    recorder.close({"outcome": "done"})
+    monkeypatch.setattr(LogReader, "attachment_data", lambda *a: pytest.fail("an oversized show was read"))
+    replayed = tmp_path / "replayed.mcap"
+    assert vmain(["replay", str(log), "--log", str(replayed), "--speed", "100"]) == 0, capsys.readouterr().err
+    monkeypatch.undo()
+    with LogReader(replayed) as reader:
+        attachment = reader.show_attachment()
+        assert attachment is None or attachment.size == 0

@@ -33,6 +33,8 @@ class AttachedShow:
     durations: dict[int, float] = field(default_factory=dict)  # slot -> expected seconds
     problem: str | None = None  # why the show could not be used, if it could not
     plans: dict[str, Plan] = field(default_factory=dict)  # robot -> Plan, in a show for several robots
+    source: bytes = b""  # the attached file as read (within a show file's size; nothing past it)
+    file_name: str = ""  # its name, cut to NAME_SHOWN
 
     def plan_of(self, robot: str | None) -> Plan | None:
         """The robot's plan (None: the one robot's)."""
@@ -72,7 +74,7 @@ def attached_show(reader: LogReader) -> AttachedShow:
         plans = compile_plans(show)
     except ChoreoError as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        return AttachedShow(problem=f"the attached show {name} does not load: {first}")
+        return AttachedShow(problem=f"the attached show {name} does not load: {first}", source=source, file_name=name)
     names: dict[int, str] = {}
     durations: dict[int, float] = {}
     for motion in show.motions.values():
@@ -80,4 +82,4 @@ def attached_show(reader: LogReader) -> AttachedShow:
         if motion.duration is not None:
             durations.setdefault(motion.number, motion.duration)
     return AttachedShow(show, next(iter(plans.values())), names, durations,
-                        plans=plans if show.ensemble else {})
+                        plans=plans if show.ensemble else {}, source=source, file_name=name)

@@ -229,10 +229,10 @@ def _settle(reader: LogReader, show: AttachedShow, request: ReplayRequest, clock
     robot_info = tuple(RobotInfo(link.robot, link.port, link.baud, boards[link.robot]) for link in links) \
         if robots else ()
     name = reader.info.show or reader.path.stem
-    attachment = reader.show_attachment()
-    show_source = reader.attachment_data(attachment) if attachment else b""
-    show_path = reader.info.show_path or (attachment.name if attachment else SHOW_FALLBACK_NAME)
-    info = RunInfo(show_path, name, show_source, solo.port, solo.baud, clock.wall_anchor_ns, layout, robot_info,
+    # the show as the review read it (a hostile log's attachment past a show file's size is not
+    # read again here, whole, into the new log)
+    show_path = reader.info.show_path or show.file_name or SHOW_FALLBACK_NAME
+    info = RunInfo(show_path, name, show.source, solo.port, solo.baud, clock.wall_anchor_ns, layout, robot_info,
                    reader.info.unison)
     new_log = Path(request.log_path) if request.log_path else default_log_path(f"{name}-replay", request.log_dir)
     return ReplaySettings(links, boards, info, new_log, unique_log=request.log_path is None)
