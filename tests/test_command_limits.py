@@ -203,7 +203,7 @@ def test_the_log_carries_the_counts_and_the_review_adds_them_up(tmp_path):
     assert summary.commands_refused == sent - 1  # every one but the start
     assert summary.commands_by["go"] == 10_000 and summary.commands_by["start"] == 1
     text = "\n".join(render(summary))
-    assert f"commands  {sent} from the operator ({sent - 1} refused; " in text
+    assert f"commands  {sent} received ({sent - 1} refused; " in text
     assert "choreo log export" not in text  # it has no commands: the line pointed nowhere
 
     from mcap.reader import make_reader

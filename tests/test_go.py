@@ -261,7 +261,7 @@ def test_the_summary_lists_who_pressed_what_and_when(tmp_path, capsys):
     run.finish()
     assert main(["log", "summary", str(run.log_path)]) == 0
     out = capsys.readouterr().out
-    assert "commands  2 from the operator (1 refused)" in out
+    assert "commands  2 received (1 refused)" in out
     # a command names the cue it acted on as the cue list does, or what was typed (quoted)
     assert "cue_go 'nope' test ERROR: cue 'nope' is not waiting for GO (waiting: 'applause')" in out
     assert "go cue 1 'applause' test: GO: cue 1 'applause'" in out

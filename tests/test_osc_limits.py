@@ -551,7 +551,7 @@ def test_a_flood_over_osc_neither_fills_the_log_nor_the_terminal_and_the_review_
     assert sent - stops < total <= sent, (total, sent, stops)
     review = choreo("log", "summary", str(log_path), cwd=tmp_path)
     assert review.returncode == 0, review.stderr
-    assert f"commands  {total} from the operator ({total - 2} refused; " in review.stdout  # a GO and the stop taken
+    assert f"commands  {total} received ({total - 2} refused; " in review.stdout  # a GO and the stop taken
     assert "log export" not in review.stdout
 
 

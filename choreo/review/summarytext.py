@@ -196,14 +196,15 @@ def _render_clock(summary: Summary) -> Iterable[str]:
 
 def _render_commands(summary: Summary) -> Iterable[str]:
     """Who pressed what and when: every GO, panic, start and stop, refused ones included, and
-    the counts of those the limits kept out of the log one by one."""
+    the counts of those the limits kept out of the log one by one. "Received", not "from the
+    operator": a flood refused from a stranger's address is counted here too."""
     if not summary.commands_total:
         return
     unlogged = ""
     if summary.commands_unlogged:
         by = ", ".join(f"{n} {name}" for name, n in sorted(summary.commands_by.items(), key=lambda kv: (-kv[1], kv[0])))
         unlogged = f"; {summary.commands_unlogged} of them not logged one by one, over the log's limit): {by}"
-    yield f"commands  {summary.commands_total} from the operator ({summary.commands_refused} refused{unlogged or ')'}"
+    yield f"commands  {summary.commands_total} received ({summary.commands_refused} refused{unlogged or ')'}"
     for command in summary.commands:
         when = f"{fixed(command.show_s, 3, 9)} s" if command.show_s is not None else "   before  "
         what = command.what
