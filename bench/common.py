@@ -172,3 +172,12 @@ def run_show(show_path: Path, port: str, *, log_path: Path | None = None) -> Sho
     clock = session.clock
     return ShowRun(capture, session.result, round(runner.show.mono_at(0.0) * 1e9),
                    clock.mono_anchor_ns - clock.wall_anchor_ns, run_s)
+
+
+def run_session_into(session: Session, listeners: list, live: object, errors: list[BaseException]) -> None:
+    """`session.run` on a benchmark's own thread: what it raises is kept for the caller to raise,
+    after it has stopped what it started (a thread's exception would only be printed)."""
+    try:
+        session.run(listeners, live=live)
+    except BaseException as exc:  # noqa: BLE001 - reported by the caller
+        errors.append(exc)

@@ -27,7 +27,7 @@ from pythonosc.osc_message_builder import build_msg
 from pythonosc.tcp_client import SimpleTCPClient
 from pythonosc.udp_client import SimpleUDPClient
 
-from common import Capture, median, percentile, pty_sim, row, temp_dir, write_show
+from common import Capture, median, percentile, pty_sim, row, run_session_into, temp_dir, write_show
 
 from choreo.live.controls import Live
 from choreo.live.limits import Limits, Rate
@@ -99,7 +99,7 @@ def measure(transport: str, gos: int) -> Timings:
             server.start()
             live.subscribe(server)
             errors: list[BaseException] = []
-            runner = threading.Thread(target=_run, args=(session, server, live, errors), daemon=True)
+            runner = threading.Thread(target=run_session_into, args=(session, [server], live, errors), daemon=True)
             runner.start()
             try:
                 with _client(transport, server.port) as client:
@@ -113,12 +113,6 @@ def measure(transport: str, gos: int) -> Timings:
                 raise errors[0]
     return timings
 
-
-def _run(session: Session, server: OscServer, live: Live, errors: list[BaseException]) -> None:
-    try:
-        session.run([server], live=live)
-    except BaseException as exc:  # noqa: BLE001 - reported by the caller
-        errors.append(exc)
 
 
 def _client(transport: str, port: int):  # type: ignore[no-untyped-def]

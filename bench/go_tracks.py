@@ -22,7 +22,7 @@ import sys
 import threading
 import time
 
-from common import Capture, median, percentile, pty_sim, row, temp_dir, write_show
+from common import Capture, median, percentile, pty_sim, row, run_session_into, temp_dir, write_show
 
 from choreo.events import Command, StopRequest
 from choreo.live.controls import Live
@@ -61,7 +61,7 @@ def measure(gos: int, seed: int = 21) -> tuple[list[float], list[float], list[fl
         holds: list[float] = []
         errors: list[BaseException] = []
         with session:
-            runner = threading.Thread(target=_run, args=(session, capture, live, errors), daemon=True)
+            runner = threading.Thread(target=run_session_into, args=(session, [capture], live, errors), daemon=True)
             runner.start()
             try:
                 for _ in range(gos):
@@ -88,12 +88,6 @@ def _one_go(live: Live, rng: random.Random) -> float:
         raise RuntimeError(f"GO not taken: {answer.message}")
     return hold
 
-
-def _run(session: Session, capture: Capture, live: Live, errors: list[BaseException]) -> None:
-    try:
-        session.run([capture], live=live)
-    except BaseException as exc:  # noqa: BLE001 - reported by the caller
-        errors.append(exc)
 
 
 def _lateness(capture: Capture) -> tuple[list[float], list[float]]:
