@@ -10,10 +10,14 @@ gets is exact; replies are waited for with a deadline, never a sleep that decide
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
+import os
 import socket
 import threading
 import time
+from pathlib import Path
 
 import pytest
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
@@ -477,6 +481,22 @@ BAD_OPTIONS = {
 }
 
 
+def _in_process(folder: Path, *argv: str) -> tuple[int, str]:
+    """`choreo ARGV` run in folder, in this process (what is checked is refused before anything
+    opens: the same code as a process of its own, without a Python start-up a case), and its stderr."""
+    from choreo.cli import main
+
+    before = os.getcwd()
+    os.chdir(folder)
+    stderr = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(stderr), contextlib.redirect_stdout(io.StringIO()):
+            code = main(list(argv))
+    finally:
+        os.chdir(before)
+    return code, stderr.getvalue()
+
+
 @pytest.mark.parametrize("case", list(BAD_OPTIONS))
 def test_a_bad_option_ends_the_run_before_a_log_or_a_board_is_touched(tmp_path, taken_port, tcp_taken_port, case):
     """Once `--osc 70000` or a port in use were noticed only after the log was created and the
@@ -488,13 +508,13 @@ def test_a_bad_option_ends_the_run_before_a_log_or_a_board_is_touched(tmp_path, 
     show = write_show(tmp_path, ONE_STEP)
     board = Board()
     try:
-        result = choreo("run", str(show), "--port", board.url, *options, cwd=tmp_path)
+        code, stderr = _in_process(tmp_path, "run", str(show), "--port", board.url, *options)
         touched = board.touched()
     finally:
         board.close()
-    assert result.returncode == 2, result.stderr
-    assert result.stderr.startswith(expected.format(**ports)), result.stderr
-    assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
+    assert code == 2, stderr
+    assert stderr.startswith(expected.format(**ports)), stderr
+    assert stderr.count("\n") == 1 and "Traceback" not in stderr
     assert not touched  # no byte went to the board
     assert not (tmp_path / "runs").exists()  # no log was created
 
@@ -561,9 +581,9 @@ def test_a_network_port_without_host_and_port_is_a_bad_argument_not_a_failed_lin
     """Once `--port socket://` created a log and failed as a link (exit 3) with pyserial's
     "'<=' not supported between instances of 'int' and 'NoneType'"."""
     show = write_show(tmp_path, ONE_STEP)
-    result = choreo("run", str(show), "--port", url, cwd=tmp_path)
-    assert result.returncode == 2, result.stderr
-    assert result.stderr.startswith(f"--port {url}: give ") and result.stderr.count("\n") == 1
+    code, stderr = _in_process(tmp_path, "run", str(show), "--port", url)
+    assert code == 2, stderr
+    assert stderr.startswith(f"--port {url}: give ") and stderr.count("\n") == 1
     assert not (tmp_path / "runs").exists()
 
 
