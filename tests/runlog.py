@@ -6,6 +6,7 @@ that Foxglove and the mcap tools will see.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import signal
@@ -14,7 +15,7 @@ import sys
 import textwrap
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, redirect_stderr, redirect_stdout
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -125,6 +126,23 @@ def read_log_linear(path: Path) -> tuple[RunLog, str | None]:
 def choreo(*args: str, cwd: Path | None = None, timeout: float = 60) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "choreo", *args], capture_output=True, text=True,
                           cwd=cwd or REPO, timeout=timeout, env=_env())
+
+
+def choreo_here(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """`choreo ARGS` in this process, in `cwd`, answered as `choreo()` answers: for what is
+    refused or reported before anything opens (bad options, unreadable files), where a process
+    of its own would only add a Python start-up (a third of a second of CPU) a case."""
+    from choreo.cli import main
+
+    before = os.getcwd()
+    out, err = io.StringIO(), io.StringIO()
+    os.chdir(cwd or REPO)
+    try:
+        with redirect_stdout(out), redirect_stderr(err):
+            code = main(list(args))
+    finally:
+        os.chdir(before)
+    return subprocess.CompletedProcess(["choreo", *args], code, out.getvalue(), err.getvalue())
 
 
 def start_choreo(*args: str, cwd: Path | None = None) -> subprocess.Popen:

@@ -10,14 +10,10 @@ gets is exact; replies are waited for with a deadline, never a sleep that decide
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
-import os
 import socket
 import threading
 import time
-from pathlib import Path
 
 import pytest
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
@@ -30,7 +26,7 @@ from choreo.log.format import UNLOGGED
 from choreo.live.controls import Live
 from choreo.events import Command, StopRequest
 from choreo.live.osc import OscServer
-from runlog import choreo, ended_if_left, read_log, start_choreo, wait_for, write_show
+from runlog import choreo, choreo_here, ended_if_left, read_log, start_choreo, wait_for, write_show
 from test_osc import ONE_GO_SHOW, Receiver, free_port, outside_address
 
 TIMEOUT_S = 5.0
@@ -481,22 +477,6 @@ BAD_OPTIONS = {
 }
 
 
-def _in_process(folder: Path, *argv: str) -> tuple[int, str]:
-    """`choreo ARGV` run in folder, in this process (what is checked is refused before anything
-    opens: the same code as a process of its own, without a Python start-up a case), and its stderr."""
-    from choreo.cli import main
-
-    before = os.getcwd()
-    os.chdir(folder)
-    stderr = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(stderr), contextlib.redirect_stdout(io.StringIO()):
-            code = main(list(argv))
-    finally:
-        os.chdir(before)
-    return code, stderr.getvalue()
-
-
 @pytest.mark.parametrize("case", list(BAD_OPTIONS))
 def test_a_bad_option_ends_the_run_before_a_log_or_a_board_is_touched(tmp_path, taken_port, tcp_taken_port, case):
     """Once `--osc 70000` or a port in use were noticed only after the log was created and the
@@ -508,7 +488,8 @@ def test_a_bad_option_ends_the_run_before_a_log_or_a_board_is_touched(tmp_path, 
     show = write_show(tmp_path, ONE_STEP)
     board = Board()
     try:
-        code, stderr = _in_process(tmp_path, "run", str(show), "--port", board.url, *options)
+        done = choreo_here("run", str(show), "--port", board.url, *options, cwd=tmp_path)
+        code, stderr = done.returncode, done.stderr
         touched = board.touched()
     finally:
         board.close()
@@ -581,7 +562,8 @@ def test_a_network_port_without_host_and_port_is_a_bad_argument_not_a_failed_lin
     """Once `--port socket://` created a log and failed as a link (exit 3) with pyserial's
     "'<=' not supported between instances of 'int' and 'NoneType'"."""
     show = write_show(tmp_path, ONE_STEP)
-    code, stderr = _in_process(tmp_path, "run", str(show), "--port", url)
+    done = choreo_here("run", str(show), "--port", url, cwd=tmp_path)
+    code, stderr = done.returncode, done.stderr
     assert code == 2, stderr
     assert stderr.startswith(f"--port {url}: give ") and stderr.count("\n") == 1
     assert not (tmp_path / "runs").exists()

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from choreo.cli import main
-from runlog import vmain
+from runlog import choreo_here, vmain
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -148,13 +148,13 @@ def hostile_folder(tmp_path, run_log) -> tuple[Path, Path]:
 
 def test_log_latest_is_the_newest_regular_log_whatever_else_is_named_mcap(hostile_folder):
     folder, real = hostile_folder
-    done = choreo("log", "latest", str(folder))
+    done = choreo_here("log", "latest", str(folder))
     assert (done.returncode, done.stdout, done.stderr) == (0, f"{real}\n", "")
 
 
 def test_log_summary_of_a_folder_reads_only_its_logs(hostile_folder):
     folder, real = hostile_folder
-    done = choreo("log", "summary", str(folder))
+    done = choreo_here("log", "summary", str(folder))
     assert done.returncode == 0, done.stderr
     assert done.stderr == "" and str(real) in done.stdout and done.stdout.count("\nmessages ") == 1
 
@@ -173,7 +173,7 @@ def test_a_log_that_is_not_a_file_is_one_line(tmp_path, name, says):
     (tmp_path / "x.mcap").mkdir()
     os.mkfifo(tmp_path / "fifo.mcap")
     for argv in (["log", "summary"], ["log", "frames"], ["log", "timeline"], ["replay"]):
-        done = choreo(*argv, str(tmp_path / name))
+        done = choreo_here(*argv, str(tmp_path / name))
         assert (done.returncode, done.stdout) == (2, ""), done.stderr
         expected = "no .mcap logs in this folder" if argv[-1] == "summary" and name == "x.mcap" else says
         assert expected in done.stderr and done.stderr.count("\n") == 1, done.stderr
