@@ -202,6 +202,9 @@ def test_log_latest_of_a_folder_that_is_not_there_or_not_a_folder(tmp_path, caps
     (tmp_path / "file").write_text("x")
     assert main(["log", "latest", str(tmp_path / "file")]) == 2
     assert capsys.readouterr().err == f"{tmp_path / 'file'}: not a folder (a file): give a log folder\n"
+    long_name = tmp_path / ("d" * 300)  # was 'no such folder'
+    assert main(["log", "latest", str(long_name)]) == 2
+    assert capsys.readouterr().err.endswith(": cannot read the log folder: the name is too long for this system\n")
 
 
 # ------------------------------------------------------------------ --json on failure

@@ -226,10 +226,22 @@ def run_summary(args: argparse.Namespace) -> int:
 
 
 def run_latest(args: argparse.Namespace) -> int:
-    if not os.path.lexists(args.dir):  # the usual case on a new machine: say where logs go
+    if _missing(args.dir):  # the usual case on a new machine: say where logs go
         raise UsageError(f"{args.dir}: no such folder (`choreo run` writes its logs to runs/)")
     print(visible(str(_folder_logs(Path(args.dir))[-1])))  # one line, even for a name with a line break
     return 0
+
+
+def _missing(name: str) -> bool:
+    """Nothing is there by that name; a name too long or holding a NUL is not "missing": the
+    listing says what it is (os.path.lexists answered False for both)."""
+    try:
+        os.lstat(name)
+    except FileNotFoundError:
+        return True
+    except (OSError, ValueError):
+        return False
+    return False
 
 
 def _logs_in(given: list[str]) -> list[Path]:
