@@ -521,8 +521,9 @@ class _NarrowTerminal(io.StringIO):
 
 
 def test_report_lines_are_cut_to_a_terminal_and_whole_elsewhere(monkeypatch) -> None:
-    """log merge, log export, replay, probe, ports and sim say their lines through print_fitted
-    (issue 21, item 5: log merge's ran 117 columns on a terminal of 40)."""
+    """log merge, log export, replay, probe and ports say their lines through print_fitted, sim
+    through a StatusWriter fitting them on a terminal (issue 21, item 5: log merge's ran 117
+    columns on a terminal of 40)."""
     from choreo.cli.terminal import print_fitted
 
     monkeypatch.setenv("COLUMNS", "30")
@@ -533,29 +534,31 @@ def test_report_lines_are_cut_to_a_terminal_and_whole_elsewhere(monkeypatch) -> 
     assert display_width(terminal.getvalue().rstrip("\n")) == 30 and terminal.getvalue().endswith("…\n")
     assert pipe.getvalue() == visible(line) + "\n"
     assert_safe(terminal.getvalue() + pipe.getvalue())
-    commands = ("log", "probe", "ports", "sim", "importer", "beats", "devices", "show")
+    commands = ("log", "probe", "ports", "importer", "beats", "devices", "show")
     sources = {name: (REPO / "choreo" / "cli" / f"{name}.py").read_text() for name in commands}
     assert sources["log"].count("print_fitted(") >= 10 and all("print_fitted(" in text for text in sources.values())
+    sim = (REPO / "choreo" / "cli" / "sim.py").read_text()
+    assert "StatusWriter(sys.stderr, fit_lines=sys.stderr.isatty()" in sim and "print(" not in sim.replace(
+        "print(server.path", "")  # the device paths alone go to stdout, whole
 
 
 def test_choreo_sim_answers_while_its_journal_goes_to_a_pipe_nobody_reads() -> None:
     """`choreo sim -v` wrote each journal line from the board's thread: a pipe nobody read (or
     a terminal stopped with Ctrl-S) stopped its replies, and the show's link timed out (issue 21,
-    item 5). The journal has a thread of its own; the board answers."""
+    item 5); its opening line, written before the boards served, held up their start. Its stderr
+    has a thread of its own; the board answers. The pipe is full before the sim starts."""
     read, write = os.pipe()
+    filler = os.open(f"/proc/self/fd/{write}", os.O_WRONLY | os.O_NONBLOCK)  # a description of its own:
+    for size in (4096, 1):  # the sim's stays blocking; filled to the last byte
+        with pytest.raises(BlockingIOError):
+            while True:
+                os.write(filler, b"x" * size)
+    os.close(filler)
     sim = subprocess.Popen([sys.executable, "-m", "choreo", "sim", "-v"], stdout=subprocess.PIPE, stderr=write,
                            cwd=REPO, text=True, start_new_session=True)
     try:
         assert sim.stdout is not None
         device = sim.stdout.readline().strip()
-        assert wait_for(lambda: b"Ctrl-C to stop" in os.read(read, 65536), timeout=20)  # the opening line
-        # filled through a description of its own (the sim's stays blocking), to the last byte
-        filler = os.open(f"/proc/self/fd/{write}", os.O_WRONLY | os.O_NONBLOCK)
-        for size in (4096, 1):
-            with pytest.raises(BlockingIOError):
-                while True:
-                    os.write(filler, b"x" * size)
-        os.close(filler)
         probe = subprocess.run([str(REPO / ".venv" / "bin" / "choreo"), "probe", "--port", device],
                                capture_output=True, text=True, cwd=REPO, timeout=60)
         assert probe.returncode == 0 and "answers on" in probe.stdout, probe.stdout + probe.stderr

@@ -11,7 +11,7 @@ import time
 from typing import TYPE_CHECKING
 
 from choreo.cli.parser import ParagraphHelpFormatter
-from choreo.cli.terminal import StatusWriter, print_fitted
+from choreo.cli.terminal import StatusWriter
 from choreo.errors import LinkError, UsageError
 from choreo.wire.protocol import spell_bauds
 
@@ -146,14 +146,15 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UsageError(f"choreo sim: {_as_flags(str(exc))}") from None
     start = time.monotonic()
-    # the journal is written by a thread of its own: a terminal stopped with Ctrl-S or a pipe
-    # nobody reads must not hold up the board's replies (lines past its queue are counted)
-    journal = StatusWriter(sys.stderr, fit_lines=sys.stderr.isatty(), what="journal line") if args.verbose else None
+    # stderr is written by a thread of its own: a terminal stopped with Ctrl-S or a pipe nobody
+    # reads must hold up neither the board's replies nor its start (the opening line, written
+    # before the boards served, held them all; lines past the queue are counted)
+    notes = StatusWriter(sys.stderr, fit_lines=sys.stderr.isatty(), what="journal line")
+    journal = notes if args.verbose else None
     servers = [_server(options, journal, start, number if args.boards > 1 else None, args)
                for number in range(args.boards)]
     with contextlib.ExitStack() as stack:
-        if journal is not None:
-            stack.callback(journal.close)
+        stack.callback(notes.close)
         for server in servers:
             stack.enter_context(server)
         # Handlers first: whoever reads the paths may signal us at once, and must get exit 0.
@@ -166,8 +167,8 @@ def run(args: argparse.Namespace) -> int:
             for server in servers:
                 print(server.path, flush=True)
             paths = ", ".join(str(server.path) for server in servers)  # set once the pty is open
-            print_fitted(f"choreo sim: simulated RCB-4 on {paths}, {options.describe()}; Ctrl-C to stop", sys.stderr)
-            ends = _serve_all(servers)
+            notes.line(f"choreo sim: simulated RCB-4 on {paths}, {options.describe()}; Ctrl-C to stop")
+            ends = _serve_all(servers, notes)
         finally:
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
@@ -194,7 +195,7 @@ def _server(options: SimOptions, journal: StatusWriter | None, start: float, num
                      latency_s=options.latency_s)
 
 
-def _serve_all(servers: list[PtyServer]) -> list[ServeEnd | None]:
+def _serve_all(servers: list[PtyServer], notes: StatusWriter) -> list[ServeEnd | None]:
     """Each board on its own thread (one stuck client never holds up another board's replies);
     the main thread keeps the signals. A lost board ends alone: the others go on serving."""
     from choreo.sim.pty import ServeEnd
@@ -206,8 +207,8 @@ def _serve_all(servers: list[PtyServer]) -> list[ServeEnd | None]:
     def serve(index: int) -> None:
         ends[index] = servers[index].serve()
         if ends[index] is ServeEnd.LOST:
-            print(f"choreo sim: fault 'lose' at frame {servers[index].board.lost_at_frame}: closed "
-                  f"{servers[index].path}; the other boards go on", file=sys.stderr, flush=True)
+            notes.line(f"choreo sim: fault 'lose' at frame {servers[index].board.lost_at_frame}: closed "
+                       f"{servers[index].path}; the other boards go on")
 
     threads = [threading.Thread(target=serve, args=(i,), daemon=True) for i in range(len(servers))]
     for thread in threads:
