@@ -44,21 +44,6 @@ def lower_bounds(pyproject: Path) -> list[str]:
     return sorted(pins.values(), key=str.lower)
 
 
-def requirements(pyproject: Path, extras: list[str]) -> list[str]:
-    """The requirements as declared, the runtime's and the named extras': what a venv needs
-    before the project itself is installed into it (`pip install --no-deps -e .`)."""
-    project = tomllib.loads(pyproject.read_text(encoding="utf-8"))["project"]
-    declared = list(project.get("dependencies", []))
-    for extra in extras:
-        if extra not in project.get("optional-dependencies", {}):
-            raise SystemExit(f"pyproject.toml has no extra {extra!r}")
-        declared.extend(project["optional-dependencies"][extra])
-    return declared
-
-
 if __name__ == "__main__":
     root = Path(__file__).resolve().parent.parent
-    if sys.argv[1:2] == ["--requirements"]:  # `--requirements EXTRA...`: the requirements, not the pins
-        sys.stdout.write("".join(line + "\n" for line in requirements(root / "pyproject.toml", sys.argv[2:])))
-    else:
-        sys.stdout.write("".join(pin + "\n" for pin in lower_bounds(root / "pyproject.toml")))
+    sys.stdout.write("".join(pin + "\n" for pin in lower_bounds(root / "pyproject.toml")))

@@ -45,11 +45,3 @@ def test_a_dependency_with_no_lower_bound_is_refused(tmp_path, requirement):
 def test_the_projects_own_pins_all_have_a_lowest_version():
     pins = _lowest().lower_bounds(ROOT / "pyproject.toml")
     assert "ruff==0.17.6" in pins and any(pin.startswith("mypy==") for pin in pins)
-
-
-def test_the_requirements_are_the_runtimes_and_the_extras_named(tmp_path):
-    """CI installs the lowest versions' dependencies beside the newest's, then the project alone."""
-    path = _pyproject(tmp_path, ["PyYAML>=6.0"], {"test": ["pytest>=7"], "lint": ["ruff==0.17.6"]})
-    assert _lowest().requirements(path, ["test"]) == ["PyYAML>=6.0", "pytest>=7"]
-    with pytest.raises(SystemExit, match="no extra 'docs'"):
-        _lowest().requirements(path, ["docs"])
