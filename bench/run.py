@@ -45,6 +45,7 @@ BENCHMARKS = (
     ("heldout", "14. beat finding on a held-out set, never tuned on"),
     ("link", "15. two hosts on one Ableton Link session (issue 25)"),
     ("go_tracks", "16. a GO in one track against another track's timed cues (issue 21)"),
+    ("go_siege", "17. GO over OSC while 300 idle TCP connections are held (issue 21)"),
 )
 RESULTS = BENCH / "RESULTS.md"
 
