@@ -149,8 +149,12 @@ async def _peer(show: Plan, hosts: dict[str, subprocess.Popen]) -> tuple[list[li
             await asyncio.sleep(0.05)
         beat = link.beat
         start = (math.floor(beat / METER) + 2) * METER
-        link.set_is_playing_and_request_beat_at_time(
-            True, link.time + timedelta(seconds=(start - beat) * 60 / link.tempo), start)
+        at = link.time + timedelta(seconds=(start - beat) * 60 / link.tempo)
+        link.set_is_playing_and_request_beat_at_time(True, at, start)
+        # With peers in the session, Link maps the requested beat to the next bar line strictly
+        # after `at` (this peer's count moves a bar), while the transport starts at `at`: show
+        # beat 0 is this peer's beat at `at` now, the bar line the transport started on.
+        start = round((link.beat + (at - link.time) / timedelta(seconds=1) * link.tempo / 60) / METER) * METER
         samples: list[list[float]] = []
         changed = False
         ends = time.monotonic() + show.seconds * 1.5 + 30
