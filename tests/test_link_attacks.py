@@ -14,7 +14,7 @@ from choreo.sync.clock import LinkShowClock
 from choreo.sync.session import LinkSnapshot
 from choreo.sync.start import LinkStart
 from choreo.sync.timeline import ClockPair, Timeline
-from test_sync_timeline import BEATS, FakeLink, FakeSession, _find, fake  # noqa: F401 fake is a fixture used by name
+from test_sync_timeline import BEATS, FakeLink, FakeSession, OneSnapshot, _find, fake  # noqa: F401 fake is a fixture used by name
 
 
 def test_a_renumbering_in_the_sample_a_tempo_change_arrives_in_is_taken_out(fake):  # noqa: F811 the fixture
@@ -78,16 +78,6 @@ def test_a_transport_started_a_hair_after_its_bar_line_starts_the_show_on_that_b
     assert session.snapshot().mono_of_beat(bar) == pytest.approx(start_mono, abs=0.01)  # not 2 s later
 
 
-class SetSnapshot:
-    """A session whose snapshot the test sets (what LinkShowClock reads of a LinkSession)."""
-
-    def __init__(self, snapshot: LinkSnapshot) -> None:
-        self.now = snapshot
-
-    def snapshot(self) -> LinkSnapshot:
-        return self.now
-
-
 def test_a_tempo_change_just_before_the_start_keeps_the_shows_first_bar():
     """DEFECT: LinkShowClock.realign on a tempo change in the count-in moves the start to the
     NEXT bar when the start bar now falls before `earliest` (the runners' 50 ms lead). A host
@@ -99,7 +89,7 @@ def test_a_tempo_change_just_before_the_start_keeps_the_shows_first_bar():
     mono = time.monotonic()
     pair = ClockPair(mono_ns=round(mono * 1e9), link_us=mono * 1e6 - 250_000.0, window_ns=0)
     beat_now = 15.94  # the start bar (beat 16) is 30 ms ahead at 120 bpm
-    session = SetSnapshot(LinkSnapshot(Timeline(pair.link_us, beat_now, 120.0), pair, 1, True))
+    session = OneSnapshot(LinkSnapshot(Timeline(pair.link_us, beat_now, 120.0), pair, 1, True))
     as_session: Any = session  # a LinkSession as far as the show clock looks
     show = LinkShowClock(as_session, session.now.mono_of_beat(16.0), 16.0, 4)
     # a peer's ramp: 120 -> 119 bpm now; beat 16 is still ~30 ms ahead, inside the 50 ms lead
