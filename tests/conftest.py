@@ -16,3 +16,13 @@ def output_to_a_pipe(monkeypatch):
     for name in ("COLUMNS", "LINES"):
         monkeypatch.delenv(name, raising=False)
         os.unsetenv(name)  # the C environment's copy too, which os.environ may not know of
+
+
+@pytest.fixture(autouse=True)
+def no_run_outlives_its_test():
+    """A live run a failing test left playing would hold the process's switch interval (and a
+    simulator, a log) under the next test in this worker: one failure would become several."""
+    yield
+    from runlog import stop_leftover_runs
+
+    stop_leftover_runs()

@@ -222,7 +222,13 @@ def prepare(request):  # type: ignore[no-untyped-def]
 class LiveRun:
     """A show playing in a thread with a `Live`, as `choreo run` plays it with live control:
     the test gives the commands (as the console or OSC would), and `attach(live)` may add
-    controls that also listen to the run (an OscServer). Real time, the in-process simulator."""
+    controls that also listen to the run (an OscServer). Real time, the in-process simulator.
+
+    A test that fails before its run ends leaves the run's thread playing (paused, or at a GO
+    cue) in the worker, holding what a run holds for the process (the quick thread switches)
+    under the next tests' feet: `stop_leftover_runs` (conftest, after every test) stops it."""
+
+    started: list[LiveRun] = []  # this process's runs not yet seen to end (see stop_leftover_runs)
 
     def __init__(self, tmp_path: Path, body: str, *, wait_start: bool = False, lockout_s: float | None = None,
                  attach=None, cues: bool = False, opening: bool = False,
@@ -248,6 +254,7 @@ class LiveRun:
         self.result = None
         self.error: BaseException | None = None
         self.thread = threading.Thread(target=self._run, daemon=True)
+        LiveRun.started.append(self)
         self.thread.start()
 
     def _run(self) -> None:
@@ -272,5 +279,17 @@ class LiveRun:
         self.thread.join(timeout)
         assert not self.thread.is_alive()
 
+    def stop_if_playing(self) -> None:
+        """Stop the run if it still plays (a test ended early), and wait for its end."""
+        if self.thread.is_alive():
+            self.go("panic")  # heard paused, at a GO cue, before the start; a stop would play the abort motion
+            self.thread.join(10)
+
     def log(self) -> RunLog:
         return read_log(self.log_path)
+
+
+def stop_leftover_runs() -> None:
+    """After a test: every LiveRun it started has ended (stopped here if its test did not wait)."""
+    while LiveRun.started:
+        LiveRun.started.pop().stop_if_playing()

@@ -313,8 +313,9 @@ def test_pause_in_a_music_show_pauses_the_song_and_the_next_cue_keeps_its_place(
             "  - play: 2\n    at: 0.5\n    label: after\n")
     run = LiveRun(tmp_path, body, cues=True, audio_device="null",
                   attach=lambda live: [OnStep(live, {(0, "start"): ["pause"]})])
-    assert wait_for(lambda: run.live.paused, 10, 0.001)
-    assert run.live.show is not None and run.live.show.state == PAUSED and run.live.state == "paused"
+    # the pause is said (live.paused) an instant before the music's clock stands: wait for both
+    assert wait_for(lambda: run.live.paused and run.live.show is not None and run.live.show.state == PAUSED, 10, 0.001)
+    assert run.live.state == "paused"
     stood = run.live.status()["show_s"]
     time.sleep(0.3)
     assert run.live.status()["show_s"] == stood  # the song's clock stands still
