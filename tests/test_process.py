@@ -37,8 +37,9 @@ pytestmark = pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="
 def spawn(entry: str, *args: str, **kwargs) -> subprocess.Popen:
     if entry == "script" and not SCRIPT.exists():
         pytest.skip("the choreo console script is not installed next to this Python")
+    kwargs.setdefault("env", _env())
     return subprocess.Popen([*ENTRIES[entry], *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=REPO, env=_env(), **kwargs)
+                            text=True, cwd=REPO, **kwargs)
 
 
 def catches(pid: int, signum: int) -> bool:
@@ -57,16 +58,56 @@ def wait_for_handler(process: subprocess.Popen, signum: int = signal.SIGTERM) ->
         assert process.poll() is None, "the process ended without ever catching the signal"
 
 
+# Holds the import of choreo's CLI (which `choreo.__main__` makes once its signal handlers are in)
+# until the test writes a byte to the pipe it names: the process is then surely still loading.
+GATE = """\
+import os
+import sys
+
+
+class Gate:
+    def find_spec(self, name, path=None, target=None):
+        if name == "choreo.cli":
+            sys.meta_path.remove(self)
+            os.read(int(os.environ["CHOREO_TEST_GATE_FD"]), 1)
+        return None
+
+
+sys.meta_path.insert(0, Gate())
+"""
+
+
+def spawn_held(tmp_path: Path, entry: str, *args: str) -> tuple[subprocess.Popen, int]:
+    """`spawn`, its CLI's import held (`GATE`) until a byte is written to the descriptor returned."""
+    (tmp_path / "gate").mkdir()
+    (tmp_path / "gate" / "sitecustomize.py").write_text(GATE)
+    held, release = os.pipe()
+    env = _env()
+    env["PYTHONPATH"] = str(tmp_path / "gate") + os.pathsep + env["PYTHONPATH"]
+    env["CHOREO_TEST_GATE_FD"] = str(held)
+    try:
+        return spawn(entry, *args, env=env, pass_fds=(held,)), release
+    finally:
+        os.close(held)
+
+
 @pytest.mark.parametrize("entry", ["script", "module"])
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 @pytest.mark.parametrize("command", ["validate", "run"])
 def test_a_signal_from_the_first_instant_is_exit_130_in_one_line(tmp_path, entry, signum, command):
+    """The signal comes while choreo loads, whatever the machine's speed: the CLI's import is held
+    until it has been sent (sent as soon as the handler was seen, a loaded machine could put the
+    test off until a quick command was over: `validate` then ended with 0, as it should)."""
     show = write_show(tmp_path, LONG_SHOW)
     log_path = tmp_path / "early.mcap"
     args = [command, str(show)] + (["--log", str(log_path)] if command == "run" else [])
-    process = spawn(entry, *args)
-    wait_for_handler(process)
-    process.send_signal(signum)  # choreo is still loading: noted, acted on once it has loaded
+    process, release = spawn_held(tmp_path, entry, *args)
+    try:
+        wait_for_handler(process)
+        process.send_signal(signum)  # choreo is still loading: noted, acted on once it has loaded
+        os.write(release, b"x")
+    finally:
+        os.close(release)
     out, err = process.communicate(timeout=30)
     assert process.returncode == 130, err
     assert err == "interrupted\n"
