@@ -7,6 +7,7 @@ import time
 import pytest
 import serial
 
+from choreo.clock import VirtualTime
 from choreo.wire import protocol as p
 from choreo.board.link import register_url_handlers
 from choreo.sim.faults import JUNK, FaultPlan
@@ -24,6 +25,17 @@ def open_sim(query: str = "", **kwargs) -> serial.SerialBase:
     return serial.serial_for_url("sim://" + (f"?{query}" if query else ""), **settings)
 
 
+def open_virtual(query: str = "", **kwargs) -> serial.SerialBase:
+    """`open_sim` on virtual time (`port.time_source`): the board's schedule (a reply's delay, a
+    late reply, a motion's end) against the reads is the same on any machine. On the machine's
+    clock a test thread put off between a write and a read (a loaded machine) saw a reply that
+    should still have been on its way."""
+    port = open_sim(query, do_not_open=True, **kwargs)
+    port.time_source = VirtualTime()
+    port.open()
+    return port
+
+
 def exchange(port: serial.SerialBase, frame: p.Frame) -> bytes:
     """Write a frame, read the size byte, then the rest: what a careful client does."""
     port.write(frame.data)
@@ -35,7 +47,7 @@ def exchange(port: serial.SerialBase, frame: p.Frame) -> bytes:
 
 @pytest.fixture
 def port():
-    with open_sim("motion_s=0.15") as port:
+    with open_virtual("motion_s=0.15") as port:
         yield port
 
 
@@ -49,14 +61,15 @@ def test_the_four_frames_play_a_motion_that_ends(port):
     assert exchange(port, stop) == p.ack(p.CMD_MOV)
     assert exchange(port, play) == p.ack(p.CMD_CALL)
     assert exchange(port, restore) == p.ack(p.CMD_MOV)
-    time.sleep(0.06)  # the status is refreshed every 50 ms: sooner may still show the old one
+    clock = port.time_source
+    clock.sleep(0.06)  # the status is refreshed every 50 ms: sooner may still show the old one
     verdict = p.parse_reply(STATUS, exchange(port, STATUS))
     assert verdict.kind is p.ReplyKind.STATUS and verdict.executing
-    deadline = time.monotonic() + 2.0
+    deadline = clock.now() + 2.0
     while p.parse_reply(STATUS, exchange(port, STATUS)).executing:
-        assert time.monotonic() < deadline, "the 0.15 s motion never ended"
-        time.sleep(0.05)
-    assert port.board.config(time.monotonic()) == 0x8721
+        assert clock.now() < deadline, "the 0.15 s motion never ended"
+        clock.sleep(0.05)
+    assert port.board.config(clock.now()) == 0x8721
     frames = [e for e in port.board.journal if e.kind == "frame"]
     assert [e.data for e in frames[:4]] == [stop.data, play.data, restore.data, STATUS.data]
     assert all(e.reply is not None for e in frames)
@@ -71,12 +84,12 @@ def test_durations_per_slot_in_the_url():
 
 
 def test_read_waits_for_the_reply_on_the_boards_schedule():
-    with open_sim("reply_ms=40") as port:
+    with open_virtual("reply_ms=40") as port:
         port.write(STATUS.data)
         assert port.in_waiting == 0
         assert port.read(5) == IDLE  # blocks until the bytes are on the wire
         entry = port.board.journal[-1]
-        assert time.monotonic() >= entry.reply_at
+        assert port.time_source.now() >= entry.reply_at
 
 
 def test_read_honours_the_timeout_without_spinning():
@@ -90,10 +103,10 @@ def test_read_honours_the_timeout_without_spinning():
 
 
 def test_timeout_zero_returns_what_has_arrived():
-    with open_sim("reply_ms=30", timeout=0) as port:
+    with open_virtual("reply_ms=30", timeout=0) as port:
         port.write(STATUS.data)
         assert port.read(5) == b""
-        time.sleep(0.05)
+        port.time_source.sleep(0.05)
         assert port.in_waiting == 5
         assert port.read(5) == IDLE
 
@@ -108,7 +121,7 @@ def test_in_waiting_and_reset_input_buffer():
 
 
 def test_reset_input_buffer_keeps_bytes_still_on_the_wire():
-    with open_sim("reply_ms=50") as port:
+    with open_virtual("reply_ms=50") as port:
         port.write(STATUS.data)
         port.reset_input_buffer()  # nothing has arrived yet
         assert port.read(5) == IDLE
@@ -225,7 +238,7 @@ def test_probability_fault_through_the_port_matches_the_board_model(kind):
 
 
 def test_late_reply_arrives_after_late_ms():
-    with open_sim("late=1&late_ms=120", timeout=0.05) as port:
+    with open_virtual("late=1&late_ms=120", timeout=0.05) as port:
         port.write(STATUS.data)
         assert port.read(5) == b""
         port.timeout = 1.0
@@ -233,7 +246,7 @@ def test_late_reply_arrives_after_late_ms():
 
 
 def test_late_with_probability():
-    with open_sim("late=0.5&late_ms=60&seed=3", timeout=0.03) as port:
+    with open_virtual("late=0.5&late_ms=60&seed=3", timeout=0.03) as port:
         got = [read_all(port, STATUS) for _ in range(8)]
         lates = [e.number for e in port.board.journal if e.faults == ("late",)]
     assert lates
