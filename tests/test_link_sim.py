@@ -243,6 +243,15 @@ def journal_of(proc: subprocess.Popen, stop: bool = True) -> tuple[int, list[int
     return len(numbers), hits, err
 
 
+def pty_options(kind: str, late: int) -> list[str]:
+    """`choreo sim`'s options beside the fault: a late reply `late` ms late; junk and the reply
+    after it written at once (no wire time). With wire time the server writes each byte when it
+    is due, and a server put off between two (a loaded machine) for longer than the link's
+    quiet spell (`QUIET_S`, 10 ms, a UART's line is never so slow) split the junk in two: the
+    link took the rest for the next try's reply (the error then quoted another try's bytes)."""
+    return ["--late-ms", str(late)] if kind == "late" else ["--no-wire"] if kind == "junk" else []
+
+
 def open_pty(path: str, recorder: Recorder) -> Link:
     return Link.open(path, timeout=PTY_TIMEOUT, listeners=[recorder])
 
@@ -250,8 +259,7 @@ def open_pty(path: str, recorder: Recorder) -> Link:
 @pytest.mark.parametrize("kind", sorted(REPLY_KIND))
 def test_pty_fault_on_every_frame_is_the_right_link_error(kind):
     rec = Recorder()
-    extra = ["--late-ms", str(late_ms(PTY_TIMEOUT) * 4)] if kind == "late" else []
-    with choreo_sim(f"--{kind}", "1", *extra) as (proc, path):
+    with choreo_sim(f"--{kind}", "1", *pty_options(kind, late_ms(PTY_TIMEOUT) * 4)) as (proc, path):
         with open_pty(path, rec) as link, pytest.raises(LinkError) as caught:
             link.play(3)
         received, hits, err = journal_of(proc)
@@ -273,8 +281,7 @@ def test_pty_fault_on_every_frame_is_the_right_link_error(kind):
 @pytest.mark.parametrize("kind", sorted(REPLY_KIND))
 def test_pty_fault_every_4th_frame_is_retried_and_succeeds(kind):
     rec = Recorder()
-    extra = ["--late-ms", str(late_ms(PTY_TIMEOUT))] if kind == "late" else []
-    with choreo_sim(f"--{kind}", "4", *extra) as (proc, path):
+    with choreo_sim(f"--{kind}", "4", *pty_options(kind, late_ms(PTY_TIMEOUT))) as (proc, path):
         with open_pty(path, rec) as link:
             workload(link)
         received, hits, _ = journal_of(proc)
