@@ -421,3 +421,29 @@ def test_a_panic_as_the_show_opens_is_logged_once_at_its_own_time_by_the_log_rec
         assert [name for name, _status, _ns in heard] == ["panic", "go"]
     live.command(Command("go", "key"))  # the subscription closed: the log hears no more
     assert len(heard) == 2
+
+
+class SlowToHear:
+    """Hears the commands before the log does, and is slow to hear a GO: as a console busy
+    drawing, or an operator's thread the machine put off between carrying a GO out and telling
+    the log of it."""
+
+    def on_command(self, event) -> None:  # type: ignore[no-untyped-def]
+        if event.command.name == "go":
+            time.sleep(0.3)
+
+
+def test_a_go_that_ends_the_show_is_logged_however_late_it_is_told(tmp_path):
+    """The show ends a few milliseconds after its last GO cue's GO: the run's end waits for the
+    GO's telling, so the log has it (it closed under it, and lost it, when the GO's thread was
+    put off that long)."""
+
+    def slow_first(live):  # type: ignore[no-untyped-def]
+        live.subscribe(SlowToHear())  # before the run's log subscribes: told first
+        return []
+
+    run = Running(tmp_path, "version: 1\nsteps:\n  - play: 1\n    at: go\n    label: bow\n", attach=slow_first)
+    run.until_waiting()
+    assert run.go().ok
+    run.finish()
+    assert [(m["command"], m["status"]) for m in run.log().topic("/choreo/command")] == [("go", "ok")]

@@ -46,6 +46,7 @@ RESUME_FIRST = "paused: resume first (p or /choreo/resume)"
 
 # a cue's state (`Live.cue_state`)
 AHEAD, WAITING, ACTIVE, DONE, SKIPPED = "ahead", "waiting", "running", "done", "skipped"
+TOLD_WITHIN_S = 2.0  # the run's end waits this long at most for the commands under way to be told
 NOT_STARTED = "nothing waits for GO now (the show waits for its start: /choreo/start)"
 OPENING = "refused: the show is still opening (its log is not recording yet): send it again in a moment"
 
@@ -202,6 +203,9 @@ class Live:
         self._opened = threading.Lock()
         self._unheard: list[tuple[Command, Answer, int]] = []  # each with when it was carried out
         self._handlers = self._handlers_by_name()
+        # commands carried out but maybe not yet told: the log's subscription ends after them
+        self._under_way = 0
+        self._told = threading.Condition()
 
     def subscribe(self, listener: CommandListener) -> Subscription:
         """Tell `listener` every command and its answer (and, if it is a `WaitingListener`,
@@ -508,6 +512,16 @@ class Live:
         """Carry out one command from any source, and tell the listeners. Once the show is
         stopping (or over) every command is refused: a GO then releases nothing, whatever still
         waits, and a stop or panic cannot change the stop under way."""
+        with self._told:
+            self._under_way += 1
+        try:
+            return self._carry_out(command)
+        finally:
+            with self._told:
+                self._under_way -= 1
+                self._told.notify_all()
+
+    def _carry_out(self, command: Command) -> Answer:
         handler = self._handlers.get(command.name)
         if self._opening:
             with self._opened:
@@ -537,15 +551,26 @@ class Live:
         closes: commands are taken from here on, and `log` is told first the panic or stop
         carried out before, at the time each was. Subscribed here, under the lock a command
         given while opening takes: subscribed apart, a panic between the two was told it twice
-        (as it happened, then as one held)."""
+        (as it happened, then as one held). Closed (the run's end), it first waits for the
+        commands under way to be told: a GO lets the runners go on the moment it is carried out,
+        and a show that ends a few milliseconds after its last GO cue closed its log before a
+        GO's thread (put off by a loaded machine, or a slow listener told before the log) told
+        it: the log lost the GO."""
         with self._opened:
-            subscription = self.subscribe(log) if log is not None else Subscription(lambda: None)
+            heard = self.subscribe(log) if log is not None else Subscription(lambda: None)
+            subscription = Subscription(lambda: self._after_commands_told(heard.close))
             unheard, self._unheard = self._unheard, []
             for command, answer, wall_ns in unheard:
                 if log is not None:
                     log.on_command(CommandEvent(command, answer, wall_ns, None))
             self._opening = False
         return subscription
+
+    def _after_commands_told(self, then: Callable[[], None]) -> None:
+        """`then`, once no command is under way (or after `TOLD_WITHIN_S`: a listener stuck)."""
+        with self._told:
+            self._told.wait_for(lambda: self._under_way == 0, TOLD_WITHIN_S)
+        then()
 
     def _handlers_by_name(self) -> dict[str, Callable[[Command], Answer]]:
         return {"go": self._go, "cue_go": self._cue_go, "skip": self._skip, "playhead": self._put_playhead,
