@@ -11,20 +11,21 @@ from __future__ import annotations
 
 import json
 import socket
+import subprocess
 import threading
 import time
 from pathlib import Path
 
 import pytest
 from pythonosc.dispatcher import Dispatcher
-from pythonosc.osc_server import ThreadingOSCUDPServer
+from pythonosc.osc_server import BlockingOSCUDPServer
 from pythonosc.tcp_client import SimpleTCPClient
 from pythonosc.udp_client import SimpleUDPClient
 
 from choreo.errors import UsageError
 from choreo.live.controls import Live
 from choreo.log.format import ERROR, WARNING
-from choreo.live.limits import Budget
+from choreo.live.limits import LIMITS, Budget
 from choreo.live.oscwire import encode_message, slip_encode
 from choreo.live.osc import OscServer, command_for, parse_allow, sender_allowed
 from choreo.events import PANIC, StopRequest
@@ -45,9 +46,12 @@ GO_SHOW = """\
     """
 ONE_GO_SHOW = GO_SHOW.replace("        label: encore\n", "").replace("      - play: 3\n        at: go\n", "")
 TIMEOUT_S = 5.0
+# a state polled for (a run at its cue, a notification in): long enough for a run's start on a
+# loaded machine; a poll returns as soon as the state holds, so only a failure waits this long
+POLL_S = 30.0
 
 
-def wait_until(predicate, timeout: float = TIMEOUT_S) -> None:  # type: ignore[no-untyped-def]
+def wait_until(predicate, timeout: float = POLL_S) -> None:  # type: ignore[no-untyped-def]
     assert wait_for(predicate, timeout, every=0.002), "timed out"
 
 
@@ -277,13 +281,16 @@ def test_stop_and_panic_end_a_waiting_show(shows, command):
 
 
 class Receiver:
-    """What QLab (or a logger) would receive on --osc-notify's port: python-osc's own UDP server."""
+    """What QLab (or a logger) would receive on --osc-notify's port: python-osc's own UDP server,
+    one that handles the datagrams one by one as they came (its threading server handed each one
+    to a thread of its own: a test that saw the last notification could miss one sent before it,
+    its thread not yet run on a loaded machine)."""
 
     def __init__(self) -> None:
         self.messages: list[tuple] = []
         dispatcher = Dispatcher()
         dispatcher.map("/choreo/notify/*", lambda address, *args: self.messages.append((address, *args)))
-        self.server = ThreadingOSCUDPServer(("127.0.0.1", 0), dispatcher)
+        self.server = BlockingOSCUDPServer(("127.0.0.1", 0), dispatcher)
         self.address = ("127.0.0.1", self.server.server_address[1])
         threading.Thread(target=self.server.serve_forever, args=(0.05,), daemon=True).start()
 
@@ -507,6 +514,23 @@ def free_port() -> int:
             return port
 
 
+def go_when_waiting(osc, process: subprocess.Popen) -> None:  # type: ignore[no-untyped-def]
+    """A GO sent until one is taken (choreo listens, and its show has reached the GO cue), no
+    faster than the sender's budget of commands refills: sent as fast as refusals came back, the
+    GOs of a run a loaded machine took 0.6 s to bring from listening to its cue spent that
+    budget, and the GOs past it were ignored as a flood (logged so) or their replies not sent."""
+    every_s = 1 / LIMITS.commands_per_sender.per_s
+    deadline = time.monotonic() + 30
+    while True:
+        assert time.monotonic() < deadline and process.poll() is None, "no GO taken"
+        sent = time.monotonic()
+        osc.send_message("/choreo/go", [])
+        reply = next(osc.get_messages(every_s), None)
+        if reply is not None and json.loads(reply.params[0])["status"] == "ok":
+            return
+        time.sleep(max(0.0, sent + every_s - time.monotonic()))
+
+
 def test_choreo_run_takes_go_over_osc(tmp_path):
     show = write_show(tmp_path, ONE_GO_SHOW)
     log_path = tmp_path / "run.mcap"
@@ -514,13 +538,7 @@ def test_choreo_run_takes_go_over_osc(tmp_path):
     process = start_choreo("run", str(show), "--osc", str(port), "--log", str(log_path))
     with ended_if_left(process):
         with client("udp", port) as osc:
-            deadline = time.monotonic() + 30
-            while True:  # until choreo listens and the show has reached its GO cue
-                assert time.monotonic() < deadline and process.poll() is None, "no GO taken"
-                osc.send_message("/choreo/go", [])
-                reply = next(osc.get_messages(0.1), None)
-                if reply is not None and json.loads(reply.params[0])["status"] == "ok":
-                    break
+            go_when_waiting(osc, process)
             source = source_of(osc, "udp")
         _, err = process.communicate(timeout=30)
     assert process.returncode == 0, err

@@ -22,7 +22,7 @@ from choreo.log.format import WARNING
 from runlog import wait_for
 from test_osc_dictionary import STATUS, Recording, ask, reply, told
 from test_osc_dictionary import peers, server  # noqa: F401 - fixtures
-from test_osc import Commands
+from test_osc import POLL_S, Commands
 from test_osc_dictionary import real_shows  # noqa: F401 - a fixture
 from test_osc_limits import Peer
 
@@ -354,7 +354,7 @@ def test_cues_sent_every_odd_way_reach_their_cue_or_change_nothing(transport, re
                                              queries_per_sender=many, queries_total=many))
     peer = Peer(transport, run.server.port)
     try:
-        assert wait_for(lambda: run.waiting() == ["café"], TIMEOUT_S, every=0.005), run.waiting()
+        assert wait_for(lambda: run.waiting() == ["café"], POLL_S, every=0.005), run.waiting()
         heard = Commands()
         run.live.subscribe(heard)
         reached = {"12.50": "12.5", "%6Eext": "12.5", "cafe%CC%81": "1", "caf%C3%A9": "1", "café": "1",
@@ -386,7 +386,7 @@ def test_a_bundle_of_pause_and_go_on_a_show(transport, real_shows):  # noqa: F81
     run = real_shows()  # GO_SHOW: cue 1 'applause' waits
     peer = Peer(transport, run.server.port)
     try:
-        assert wait_for(lambda: run.waiting() == ["applause"], TIMEOUT_S, every=0.005), run.waiting()
+        assert wait_for(lambda: run.waiting() == ["applause"], POLL_S, every=0.005), run.waiting()
         peer.send(encode_bundle([encode_message("/choreo/pause"), encode_message("/choreo/go")]))
         (pause, pause_body), (go, go_body) = [reply(p) for p in _replies(peer, 2)]
         assert (pause, pause_body["status"]) == ("/reply/choreo/pause", "ok")
