@@ -31,7 +31,7 @@ from choreo.cli.terminal import StatusWriter, VisibleStream, visible_output
 from choreo.events import Answer, Command, CommandEvent, StepEvent
 from choreo.run.settings import RunRequest
 from choreo.textfit import display_width, is_hidden, visible
-from runlog import REPO, prepare, read_log, vmain, wait_for, write_show
+from runlog import REPO, off_cue_s, prepare, read_log, started_on_cue, vmain, wait_for, write_show
 
 HOSTILE = "\x1b]0;pwned\x07\x1b[2J\u202eevil\u200b\x9b31m"
 
@@ -263,13 +263,23 @@ def _closed(log: Path) -> bool:
         return False
 
 
+def _every_play_on_its_cue(log: Path, when: str) -> None:
+    """TIMED_SHOW's twelve plays all ran, each motion on its cue (`started_on_cue`: past how late
+    the run measured its own wake-up, which a loaded machine's scheduler delays: a wake-up 453 ms
+    late failed a bound on the wake-ups beside CI). A runner that waited for the output at all
+    would have waited until it took lines again: after the log was closed, which the tests wait
+    for before they let the output go on."""
+    steps = read_log(log).steps
+    ends = [m for m in steps if m["event"] == "end"]
+    assert [m["outcome"] for m in ends] == ["ok"] * 12
+    late = [round(off_cue_s(steps, end) * 1e3) for end in ends if not started_on_cue(steps, end)]
+    assert not late, f"motions {late} ms off their cues {when}"
+
+
 def test_a_terminal_stopped_with_ctrl_s_holds_up_no_play(tmp_path) -> None:
     output, log, code = _run_on_pty(tmp_path, 300, "sim://", hold=True)
     assert code == 0, output
-    starts = [m for m in read_log(log).topic("/choreo/step") if m.get("event") == "start"]
-    assert len(starts) == 12
-    worst_ms = max(m["actual_s"] - m["planned_s"] for m in starts) * 1e3
-    assert worst_ms < 200, f"a play {worst_ms:.0f} ms late while the terminal was stopped"
+    _every_play_on_its_cue(log, "while the terminal was stopped")
 
 
 @pytest.mark.parametrize("columns", [50, 33])
@@ -356,10 +366,7 @@ def test_a_pipe_nobody_reads_holds_up_no_play(tmp_path) -> None:
             process.kill()
         os.close(write)
         os.close(read)
-    starts = [m for m in read_log(log).topic("/choreo/step") if m.get("event") == "start"]
-    assert len(starts) == 12
-    worst_ms = max(m["actual_s"] - m["planned_s"] for m in starts) * 1e3
-    assert worst_ms < 200, f"a play {worst_ms:.0f} ms late while the pipe was full"
+    _every_play_on_its_cue(log, "while the pipe was full")
     assert b"done: 12 steps" in b"".join(drained)
 
 
