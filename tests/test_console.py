@@ -559,8 +559,8 @@ def test_sixty_columns_draw_without_wrapping(tmp_path, pane):
     screen = run.wait_for("GO fires")
     lines = screen.splitlines()
     assert all(len(line) <= 60 for line in lines)
-    # the show time the clock was held at: 0.0 s, or 0.1 s when a loaded machine reached the GO late
-    title = [line for line in lines if re.search(r"show 0\.\d s · machine clock, held for GO", line)]
+    # the show time the clock was held at: 0.0 s, or later when a loaded machine reached the GO late
+    title = [line for line in lines if re.search(r"show \d+\.\d s · machine clock, held for GO", line)]
     assert len(title) == 1 and title[0].startswith("a show for two"), screen  # one line, drawn once
     assert any(line.startswith("alpha, beta_with_a… wait for GO: cue 1 'the-first") for line in lines), screen
     assert SHORT_LEGEND in lines

@@ -21,6 +21,7 @@ from choreo.sync.clock import LinkShowClock
 from choreo.sync.session import INSTALL_HINT, LinkEvent, LinkSession, LinkSnapshot, LinkUnavailable, make_aalink
 from choreo.sync.start import MISSED_S, START_LEAD_S, LinkStart, find_start
 from choreo.sync.timeline import ClockPair, Timeline, bar_at_or_after, tighter, whole_bars
+from runlog import wait_for
 
 WAIT_S = 5.0  # a state the session's thread reaches within this (it samples every few ms)
 BEATS = 0.05  # two reads of one beat timeline agree this closely (a loaded machine's thread reads late)
@@ -275,6 +276,23 @@ def test_start_playing_asks_link_for_the_beat_at_its_time_in_links_count(fake):
     assert ("tempo", 90.0) in link.calls and session.snapshot().tempo == 90.0
 
 
+class FoundOneByOne:
+    """`discover`'s stop callback, which it calls before each look at the session: Link finding
+    the peers already there one by one, each one sampled by the session before `discover` looks,
+    the next at its next look. Timers 0.15 s apart did this once, and a loaded machine fired the
+    second past SETTLE_S after the first was seen: `discover` rightly settled on one peer."""
+
+    def __init__(self, session: LinkSession, link: FakeLink, *counts: int) -> None:
+        self.session, self.link, self.counts = session, link, list(counts)
+
+    def __call__(self) -> bool:
+        if self.counts:
+            count = self.counts.pop(0)
+            self.link.peers(count)
+            assert wait_for(lambda: self.session.snapshot().peers == count, WAIT_S, every=0.001)
+        return False
+
+
 def test_discovery_waits_for_the_peers_already_in_the_session(fake, monkeypatch):
     """Link finds the peers already there some tenths of a second after joining: discover()
     waits for one (so a start is never decided alone by mistake), up to DISCOVERY_S."""
@@ -282,9 +300,8 @@ def test_discovery_waits_for_the_peers_already_in_the_session(fake, monkeypatch)
     monkeypatch.setattr(session_module, "DISCOVERY_S", 0.2)
     monkeypatch.setattr(session_module, "SETTLE_S", 0.4)
     monkeypatch.setattr(session_module, "DISCOVERY_MAX_S", 60.0)  # a wait that would fail the suite's time
-    threading.Timer(0.05, link.peers, (1,)).start()
-    threading.Timer(0.2, link.peers, (2,)).start()  # found one by one: the count settles on the second
-    assert session.discover().peers == 2
+    # found one by one: the count settles on the second, not the first discover saw
+    assert session.discover(stop=FoundOneByOne(session, link, 1, 2)).peers == 2
     link.peers(1)
     heard.wait_for("peers", "2 -> 1")
     link.peers(0)
