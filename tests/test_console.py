@@ -424,6 +424,9 @@ def test_the_terminal_is_put_back_exactly_even_when_the_screen_fails(tmp_path):
 # -- the console in a terminal (tmux) ----------------------------------------------------------
 
 needs_tmux = pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
+# how long a pane's screen or exit is polled for: the first includes choreo's start (a Python, its
+# imports, the show's preparation), seconds on a loaded machine; a poll ends as soon as it is there
+SCREEN_S = 30.0
 
 
 class Pane:
@@ -456,7 +459,7 @@ class Pane:
     def screen(self) -> str:
         return self._tmux("capture-pane", "-p", "-t", "run")
 
-    def wait_for(self, text: str, timeout: float = 10.0) -> str:
+    def wait_for(self, text: str, timeout: float = SCREEN_S) -> str:
         """The first screen showing `text` that is drawn whole: the same on a second look a
         moment later (tmux may capture a redraw half done: its top lines new, the ones below
         still the screen before, which a test reading those lines would take for the console's)."""
@@ -470,7 +473,7 @@ class Pane:
             assert time.monotonic() < deadline, f"{text!r} never appeared (drawn whole); the screen:\n{screen}"
             time.sleep(0.02)
 
-    def exit_code(self, timeout: float = 10.0) -> int:
+    def exit_code(self, timeout: float = SCREEN_S) -> int:
         deadline = time.monotonic() + timeout
         while not self.exit_file.exists():
             assert time.monotonic() < deadline, f"choreo run did not exit; the screen:\n{self.screen()}"
@@ -719,7 +722,7 @@ def test_after_each_resize_every_line_on_the_terminal_fits_it(tmp_path, pane):
     run.wait_for("GO fires")
     for width in (25, 60, 20, 33, 100, 40):
         run._tmux("resize-window", "-t", "run", "-x", str(width))
-        deadline = time.monotonic() + 5
+        deadline = time.monotonic() + SCREEN_S
         while True:
             joined = run._tmux("capture-pane", "-p", "-J", "-t", "run").splitlines()  # wrapped rows joined
             wide = [line for line in joined if display_width(line.rstrip()) > width]

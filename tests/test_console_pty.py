@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from runlog import read_log
-from test_console import Pane, commands_in, needs_tmux, pane  # noqa: F401 - pane: the fixture
+from test_console import SCREEN_S, Pane, commands_in, needs_tmux, pane  # noqa: F401 - pane: the fixture
 
 TWO_TRACKS = """\
 version: 1
@@ -183,7 +183,7 @@ def fits(screen: str, width: int) -> list[str]:
     return lines[title[0]:legend[0] + 1]
 
 
-def settled(run: Pane, text: str, width: int, timeout: float = 10.0) -> str:
+def settled(run: Pane, text: str, width: int, timeout: float = SCREEN_S) -> str:
     """The first screen showing `text` that is drawn whole (tmux may capture a redraw half
     done: its top lines new, its lower ones the screen before), and the same on a second look."""
     deadline = time.monotonic() + timeout
