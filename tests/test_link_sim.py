@@ -27,6 +27,16 @@ from choreo.sim.pty import PtyServer
 
 SIM_TIMEOUT = 0.05  # in-process replies take ~2 ms of simulated wire time
 PTY_TIMEOUT = 0.15  # a pty puts a scheduler between the link and the board: replies take ~1-5 ms
+# The link's timeout over a pty where every reply comes (nak, badsum, junk, lose): never waited
+# out, so it costs nothing, and no loaded machine's delay (a reply over 0.15 s in CI) passes for
+# a silent board: a timeout there added an ACK check or a retry the counts did not expect.
+REPLY_S = 5.0
+
+
+def pty_timeout(kind: str) -> float:
+    """The link's timeout for a fault: the short one where the link waits it out (no reply, a
+    late one, a short one)."""
+    return PTY_TIMEOUT if kind in ("drop", "late", "short") else REPLY_S
 
 
 class Recorder:
@@ -252,15 +262,15 @@ def pty_options(kind: str, late: int) -> list[str]:
     return ["--late-ms", str(late)] if kind == "late" else ["--no-wire"] if kind == "junk" else []
 
 
-def open_pty(path: str, recorder: Recorder) -> Link:
-    return Link.open(path, timeout=PTY_TIMEOUT, listeners=[recorder])
+def open_pty(path: str, recorder: Recorder, timeout: float = PTY_TIMEOUT) -> Link:
+    return Link.open(path, timeout=timeout, listeners=[recorder])
 
 
 @pytest.mark.parametrize("kind", sorted(REPLY_KIND))
 def test_pty_fault_on_every_frame_is_the_right_link_error(kind):
     rec = Recorder()
     with choreo_sim(f"--{kind}", "1", *pty_options(kind, late_ms(PTY_TIMEOUT) * 4)) as (proc, path):
-        with open_pty(path, rec) as link, pytest.raises(LinkError) as caught:
+        with open_pty(path, rec, pty_timeout(kind)) as link, pytest.raises(LinkError) as caught:
             link.play(3)
         received, hits, err = journal_of(proc)
     assert proc.returncode == 0
@@ -282,7 +292,7 @@ def test_pty_fault_on_every_frame_is_the_right_link_error(kind):
 def test_pty_fault_every_4th_frame_is_retried_and_succeeds(kind):
     rec = Recorder()
     with choreo_sim(f"--{kind}", "4", *pty_options(kind, late_ms(PTY_TIMEOUT))) as (proc, path):
-        with open_pty(path, rec) as link:
+        with open_pty(path, rec, pty_timeout(kind)) as link:
             workload(link)
         received, hits, _ = journal_of(proc)
     rec.check_paired()
@@ -295,7 +305,7 @@ def test_pty_fault_every_4th_frame_is_retried_and_succeeds(kind):
 def test_pty_port_lost_is_a_link_error_and_the_server_exits_3():
     rec = Recorder()
     with choreo_sim("--lose", "5") as (proc, path):
-        with open_pty(path, rec) as link, pytest.raises(LinkError) as caught:
+        with open_pty(path, rec, REPLY_S) as link, pytest.raises(LinkError) as caught:
             workload(link)
         received, hits, err = journal_of(proc, stop=False)
     assert proc.returncode == 3 and "fault 'lose' at frame 5" in err
@@ -327,7 +337,7 @@ def pty_in_process(kind: str, spelled: str, seed: int):
 def test_pty_fault_at_random_is_retried_or_the_right_error(kind):
     rec = Recorder()
     with pty_in_process(kind, "0.25", seed=3) as (board, path):
-        with open_pty(path, rec) as link:
+        with open_pty(path, rec, pty_timeout(kind)) as link:
             try:
                 workload(link)
                 workload(link)
@@ -343,7 +353,7 @@ def test_pty_fault_at_random_is_retried_or_the_right_error(kind):
 
 def test_pty_port_lost_at_random():
     rec = Recorder()
-    with (pty_in_process("lose", "0.2", seed=6) as (board, path), open_pty(path, rec) as link,
+    with (pty_in_process("lose", "0.2", seed=6) as (board, path), open_pty(path, rec, REPLY_S) as link,
           pytest.raises(LinkError, match="lost")):
         for _ in range(10):
             workload(link)
