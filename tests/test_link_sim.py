@@ -262,6 +262,17 @@ def pty_options(kind: str, late: int) -> list[str]:
     return ["--late-ms", str(late)] if kind == "late" else ["--no-wire"] if kind == "junk" else []
 
 
+def hit_seqs_of(journal: str) -> list[int]:
+    """`hit_seqs` read from `choreo sim -v`'s journal: frames taken and ignored, in order."""
+    hits, seq = [], 0
+    for line in journal.splitlines():
+        if re.match(r"\s*[\d.]+ (#\d+ |ignored: )", line):
+            seq += 1
+            if "[fault: " in line:
+                hits.append(seq)
+    return hits
+
+
 def open_pty(path: str, recorder: Recorder, timeout: float = PTY_TIMEOUT) -> Link:
     return Link.open(path, timeout=timeout, listeners=[recorder])
 
@@ -269,7 +280,9 @@ def open_pty(path: str, recorder: Recorder, timeout: float = PTY_TIMEOUT) -> Lin
 @pytest.mark.parametrize("kind", sorted(REPLY_KIND))
 def test_pty_fault_on_every_frame_is_the_right_link_error(kind):
     rec = Recorder()
-    with choreo_sim(f"--{kind}", "1", *pty_options(kind, late_ms(PTY_TIMEOUT) * 4)) as (proc, path):
+    # late past the link's giving up (0.6 s on an idle machine, later on a loaded one), however
+    # late: the reply never has to come (the server is stopped first), so a long wait costs nothing
+    with choreo_sim(f"--{kind}", "1", *pty_options(kind, late_ms(PTY_TIMEOUT) * 20)) as (proc, path):
         with open_pty(path, rec, pty_timeout(kind)) as link, pytest.raises(LinkError) as caught:
             link.play(3)
         received, hits, err = journal_of(proc)
@@ -294,12 +307,15 @@ def test_pty_fault_every_4th_frame_is_retried_and_succeeds(kind):
     with choreo_sim(f"--{kind}", "4", *pty_options(kind, late_ms(PTY_TIMEOUT))) as (proc, path):
         with open_pty(path, rec, pty_timeout(kind)) as link:
             workload(link)
-        received, hits, _ = journal_of(proc)
+        received, hits, err = journal_of(proc)
     rec.check_paired()
-    assert received == len(rec.tx)
+    # a late reply a loaded machine put off past the link's settle wait overlaps the ACK check
+    # after it, which the board ignores (not one of its frames): counted back in, as `hit_seqs` does
+    assert received + err.count(" ignored: ") == len(rec.tx)
     assert hits == [n for n in range(1, received + 1) if n % 4 == 0]
-    assert all(rec.rx[n - 1].reply.kind is REPLY_KIND[kind] for n in hits)
-    assert set(rec.failed()) >= set(hits)  # a loaded machine may add a timeout, never hide a fault
+    seqs = hit_seqs_of(err)
+    assert len(seqs) == len(hits) and all(rec.rx[n - 1].reply.kind is REPLY_KIND[kind] for n in seqs)
+    assert set(rec.failed()) >= set(seqs)  # a loaded machine may add a timeout, never hide a fault
 
 
 def test_pty_port_lost_is_a_link_error_and_the_server_exits_3():
