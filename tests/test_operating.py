@@ -45,27 +45,40 @@ steps:
 """
 
 
-def answer(peer: Peer, address: str, *args: object) -> dict | None:
-    """The one reply to one message (None: none came, e.g. before choreo listens)."""
+POLL_S = 0.5  # a status poll's wait for its reply: a poll missed is only asked again
+# A command's (and an asserted status's): a poll before choreo listens is refused at once (ICMP),
+# so only a loaded machine's slow reply waits this long (with 0.5 s, one was lost).
+ANSWER_S = 5.0
+
+
+def answer(peer: Peer, address: str, *args: object, wait_s: float = ANSWER_S) -> dict | None:
+    """The reply to one message (None: none came within `wait_s`, e.g. before choreo listens);
+    a reply to another address, which came after its own wait, is passed over."""
     try:
         peer.send(encode_message(address, list(args)))
-        peer.sock.settimeout(0.5)
-        if peer.transport == "udp":
-            packet = peer.sock.recv(65536)
-        else:  # SLIP: a frame ends at its END byte (0xC0); ESC (0xDB) sequences undone
-            buffer = b""
-            while b"\xc0" not in buffer.lstrip(b"\xc0"):
-                buffer += peer.sock.recv(65536)
-            frame = buffer.lstrip(b"\xc0").split(b"\xc0")[0]
-            packet = frame.replace(b"\xdb\xdc", b"\xc0").replace(b"\xdb\xdd", b"\xdb")
+        deadline = time.monotonic() + wait_s
+        while True:
+            peer.sock.settimeout(max(deadline - time.monotonic(), 0.001))
+            message = decode_packet(_packet(peer), LIMITS).messages[0]
+            if message.address == "/reply" + address:
+                return json.loads(message.args[0])
     except (ConnectionRefusedError, TimeoutError, OSError):
         return None
-    decoded = decode_packet(packet, LIMITS)
-    return json.loads(decoded.messages[0].args[0])
 
 
-def status(peer: Peer) -> dict | None:
-    reply = answer(peer, "/choreo/status")
+def _packet(peer: Peer) -> bytes:
+    """The next packet from choreo: a datagram, or one SLIP frame over TCP."""
+    if peer.transport == "udp":
+        return peer.sock.recv(65536)
+    buffer = b""  # SLIP: a frame ends at its END byte (0xC0); ESC (0xDB) sequences undone
+    while b"\xc0" not in buffer.lstrip(b"\xc0"):
+        buffer += peer.sock.recv(65536)
+    frame = buffer.lstrip(b"\xc0").split(b"\xc0")[0]
+    return frame.replace(b"\xdb\xdc", b"\xc0").replace(b"\xdb\xdd", b"\xdb")
+
+
+def status(peer: Peer, wait_s: float = ANSWER_S) -> dict | None:
+    reply = answer(peer, "/choreo/status", wait_s=wait_s)
     return reply["data"] if reply is not None else None
 
 
@@ -84,12 +97,14 @@ def test_an_evening_driven_over_osc_is_paused_released_and_reviewed_as_it_went(t
     process = start_choreo("run", str(tmp_path / "show.yaml"), "--port", "sim://", "--osc", str(port),
                            "--log", str(log_path), "--audio-device", "null")
     with ended_if_left(process):
-        udp, tcp = Peer("udp", port), None
+        # the polls from a peer of their own: a reply that came after its poll's wait is never
+        # taken for the answer to a command or to an asserted status
+        udp, poller, tcp = Peer("udp", port), Peer("udp", port), None
         try:
             seen: list[dict] = []
 
             def in_first_motion() -> bool:  # step 0 plays, step 1 waits for its end: the motion runs
-                now = status(udp)
+                now = status(poller, POLL_S)
                 seen.append(now or {})
                 return now is not None and now["robots"]["robot"]["step"] in (0, 1)
 
@@ -105,12 +120,13 @@ def test_an_evening_driven_over_osc_is_paused_released_and_reviewed_as_it_went(t
             tcp = Peer("tcp", port)
             resumed = answer(tcp, "/choreo/resume")
             assert resumed is not None and resumed["status"] == "ok", resumed
-            assert wait_for(lambda: (status(udp) or {}).get("waiting"), 30, every=0.02)
+            assert wait_for(lambda: (status(poller, POLL_S) or {}).get("waiting"), 30, every=0.02)
             go = answer(tcp, "/choreo/cue/act%202%2Fintro/go")
             assert go is not None and go["status"] == "ok" and go["message"] == "GO: cue 5 'act 2/intro'", go
             assert go["data"]["cue"] == "5"
         finally:
             udp.close()
+            poller.close()
             if tcp is not None:
                 tcp.close()
         _, err = process.communicate(timeout=60)
