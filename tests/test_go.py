@@ -14,8 +14,8 @@ from itertools import pairwise
 import pytest
 
 from choreo.cli import main
-from choreo.events import PANIC, StepEvent, StopRequest
-from choreo.live.controls import LOCKOUT_S
+from choreo.events import PANIC, CommandEvent, StepEvent, StopRequest
+from choreo.live.controls import LOCKOUT_S, Live
 from choreo.run.session import Session
 from choreo.run.settings import RunRequest
 from runlog import LiveRun as Running, prepare, read_log, started_on_cue, wait_for, write_show
@@ -437,7 +437,7 @@ class SlowToHear:
     drawing, or an operator's thread the machine put off between carrying a GO out and telling
     the log of it."""
 
-    def on_command(self, event) -> None:  # type: ignore[no-untyped-def]
+    def on_command(self, event: CommandEvent) -> None:
         if event.command.name == "go":
             time.sleep(0.3)
 
@@ -447,7 +447,7 @@ def test_a_go_that_ends_the_show_is_logged_however_late_it_is_told(tmp_path):
     GO's telling, so the log has it (it closed under it, and lost it, when the GO's thread was
     put off that long)."""
 
-    def slow_first(live):  # type: ignore[no-untyped-def]
+    def slow_first(live: Live) -> list:
         live.subscribe(SlowToHear())  # before the run's log subscribes: told first
         return []
 
