@@ -5,6 +5,15 @@ from __future__ import annotations
 import os
 
 import pytest
+from hypothesis import settings
+
+# Property tests check what choreo does with every input, not how fast: a deadline (hypothesis's
+# default is 200 ms an example) is a timed assertion, and a loaded CI machine that stalls one
+# example reports the test "flaky". Speed is measured in bench/. The fuzz tests that bound what
+# one hostile input may cost keep a deadline of their own, far above any stall (a hang fails).
+# derandomize: the same examples on every run and machine, as the rest of the suite is.
+settings.register_profile("choreo", deadline=None, derandomize=True, print_blob=True)
+settings.load_profile("choreo")
 
 
 @pytest.fixture(autouse=True)

@@ -262,7 +262,9 @@ ARG = st.one_of(st.text(max_size=12), st.integers(-2**63, 2**63 - 1), st.floats(
 ADDRESS = st.text(max_size=16).map(lambda text: "/" + text.replace("\x00", ""))
 MESSAGE = st.builds(encode_message, ADDRESS, st.lists(ARG, max_size=4))
 PACKET = st.recursive(MESSAGE, lambda inner: st.lists(inner, max_size=4).map(encode_bundle), max_leaves=12)
-FUZZ = settings(max_examples=150, deadline=1000, suppress_health_check=[HealthCheck.too_slow])
+# a deadline that fails a hang (unbounded work on one packet), not a loaded machine's stall
+HANG_MS = 10_000
+FUZZ = settings(max_examples=150, deadline=HANG_MS, suppress_health_check=[HealthCheck.too_slow])
 
 
 def check(packet: bytes, limits: OscLimits = LIMITS) -> Decoded:
