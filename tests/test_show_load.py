@@ -24,6 +24,10 @@ from choreo.show.read import MAX_BYTES
 from choreo.show.yamlwalk import MAX_DEPTH
 from choreo.show.model import DEFAULT_DONE_TIMEOUT_S, Repeat, Step, StepKind
 
+# Unbounded work on a hostile show takes minutes or forever; choreo's bounds make it milliseconds.
+# A bound between the two fails the first and never a loaded machine's stall (speed is bench/'s).
+HANG_S = 10.0
+
 ROOT = Path(__file__).resolve().parent.parent
 SHOWS = sorted((ROOT / "shows").glob("*.yaml"))
 
@@ -295,7 +299,7 @@ def test_a_billion_laughs_is_refused_at_once(tmp_path):
     started = time.perf_counter()
     with pytest.raises(ShowError) as info:
         load_show(path)
-    assert time.perf_counter() - started < 0.5
+    assert time.perf_counter() - started < HANG_S
     aliases = [p for p in info.value.problems if "aliases" in p.message]
     assert len(aliases) == 1  # reported once, counted after that
     assert (aliases[0].line, aliases[0].column) == (3, 10)
@@ -337,7 +341,7 @@ def test_keys_must_be_text(tmp_path):
 def test_nesting_is_bounded(tmp_path):
     started = time.perf_counter()
     problem = only(tmp_path, "[" * (MAX_BYTES - 1))
-    assert time.perf_counter() - started < 1
+    assert time.perf_counter() - started < HANG_S
     assert (problem.line, problem.column) == (1, MAX_DEPTH)
     assert problem.message == f"nested more than {MAX_DEPTH} levels deep"
 
@@ -895,7 +899,7 @@ def test_expansion_is_bounded(tmp_path):
               - repeat: 1000
                 steps: [{play: 1}]
     """)
-    assert time.perf_counter() - started < 1
+    assert time.perf_counter() - started < HANG_S
     assert (problem.line, problem.column, problem.path) == (2, 1, "steps")
     assert problem.message == (f"the show expands to {MAX_PLAN_STEPS + 1:,} steps or more; "
                                f"the limit is {MAX_PLAN_STEPS:,}")
