@@ -21,7 +21,7 @@ from choreo.show.plan import compile_plan
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = [p.read_text() for p in sorted((ROOT / "shows").glob("*.yaml"))]
-FUZZ = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=False)
+FUZZ = settings(max_examples=200, suppress_health_check=[HealthCheck.too_slow])  # conftest: derandomized
 PER_EXAMPLE_S = 10.0  # a hang, not a loaded machine's stall (see test_show_load.HANG_S)
 
 _dir = tempfile.TemporaryDirectory(prefix="choreo-fuzz-")
