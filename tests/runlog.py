@@ -22,6 +22,12 @@ from pathlib import Path
 from mcap.reader import NonSeekingReader, make_reader
 
 REPO = Path(__file__).resolve().parent.parent
+# A wait for a reply or a state that comes: it returns once it is in, so a long one costs nothing,
+# and a loaded machine's scheduler (a server process or thread put off) is no failure.
+REPLY_S = 5.0
+# Unbounded work on a hostile input takes minutes or forever; choreo's bounds make it milliseconds.
+# A bound between the two fails the first and never a loaded machine's stall (speed is bench/'s).
+HANG_S = 10.0
 
 
 def write_show(directory: Path, body: str, name: str = "show.yaml") -> Path:

@@ -24,13 +24,13 @@ from choreo.wire.protocol import FrameKind, ReplyKind
 from choreo.sim.faults import FaultPlan
 from choreo.sim.board import SimBoard
 from choreo.sim.pty import PtyServer
+from runlog import REPLY_S
 
 SIM_TIMEOUT = 0.05  # in-process replies take ~2 ms of simulated wire time
 PTY_TIMEOUT = 0.15  # a pty puts a scheduler between the link and the board: replies take ~1-5 ms
-# The link's timeout over a pty where every reply comes (nak, badsum, junk, lose): never waited
-# out, so it costs nothing, and no loaded machine's delay (a reply over 0.15 s in CI) passes for
-# a silent board: a timeout there added an ACK check or a retry the counts did not expect.
-REPLY_S = 5.0
+# The link's timeout over a pty where every reply comes (nak, badsum, junk, lose) is REPLY_S: no
+# loaded machine's delay (a reply over 0.15 s in CI) passes for a silent board there, which added
+# an ACK check or a retry the counts did not expect.
 
 
 def pty_timeout(kind: str) -> float:

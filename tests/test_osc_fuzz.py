@@ -15,7 +15,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from choreo.live.oscwire import BUNDLE, FrameReader, decode_packet, encode_message
-from test_osc_wire import HANG_MS, PACKET, check
+from runlog import HANG_S
+from test_osc_wire import PACKET, check
 
 EXAMPLES = 101
 PACKETS_EACH = 100  # decoded per example: 10,100 in all
@@ -53,7 +54,7 @@ def _variants(packet: bytes, rnd: random.Random) -> list[bytes]:
     return out
 
 
-FUZZ = settings(max_examples=EXAMPLES, deadline=HANG_MS, suppress_health_check=[HealthCheck.too_slow,
+FUZZ = settings(max_examples=EXAMPLES, deadline=HANG_S * 1000, suppress_health_check=[HealthCheck.too_slow,
                                                                              HealthCheck.data_too_large])
 
 

@@ -25,8 +25,8 @@ import time
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from runlog import REPO, ended_if_left, read_log, wait_for, write_show
-from test_osc_wire import HANG_MS, PACKET
+from runlog import HANG_S, REPO, ended_if_left, read_log, wait_for, write_show
+from test_osc_wire import PACKET
 from test_osc import GO_SHOW, TIMEOUT_S, Commands, ask, client, free_port, live, read_to_end, serve, server  # noqa: F401
 
 from choreo.live import osc as osc_module
@@ -425,7 +425,7 @@ def test_choreo_run_answers_after_malformed_packets_and_stops_on_sigterm(tmp_pat
     assert "WARNING" not in err and len(err) < 10_000
 
 
-@settings(max_examples=150, deadline=HANG_MS, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=150, deadline=HANG_S * 1000, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(packet=st.one_of(st.binary(max_size=128), PACKET, PACKET.map(lambda p: p[:-4] + b"\xff\xff\xff\xfc")))
 def test_fuzz_packets_through_the_server(live, packet):
     """The whole path a packet takes (sender check, decoding, the limits, the command, the

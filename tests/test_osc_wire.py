@@ -19,6 +19,7 @@ from choreo.live.oscnet import ConnectionTable
 from choreo.live.osclimits import LIMITS, OscLimits
 from choreo.live.oscwire import (BUNDLE, END, Decoded, FrameReader, Message, decode_packet, encode_bundle,
                                  encode_message, slip_decode, slip_encode)
+from runlog import HANG_S
 
 GO = build_msg("/choreo/go", []).dgram
 TAG = BUNDLE + struct.pack(">Q", 1)
@@ -262,9 +263,7 @@ ARG = st.one_of(st.text(max_size=12), st.integers(-2**63, 2**63 - 1), st.floats(
 ADDRESS = st.text(max_size=16).map(lambda text: "/" + text.replace("\x00", ""))
 MESSAGE = st.builds(encode_message, ADDRESS, st.lists(ARG, max_size=4))
 PACKET = st.recursive(MESSAGE, lambda inner: st.lists(inner, max_size=4).map(encode_bundle), max_leaves=12)
-# a deadline that fails a hang (unbounded work on one packet), not a loaded machine's stall
-HANG_MS = 10_000
-FUZZ = settings(max_examples=150, deadline=HANG_MS, suppress_health_check=[HealthCheck.too_slow])
+FUZZ = settings(max_examples=150, deadline=HANG_S * 1000, suppress_health_check=[HealthCheck.too_slow])
 
 
 def check(packet: bytes, limits: OscLimits = LIMITS) -> Decoded:

@@ -17,15 +17,12 @@ from choreo.wire import protocol as p
 from choreo.sim.board import SimBoard
 from choreo.sim.faults import JUNK, FaultPlan
 from choreo.sim.pty import PtyServer, ServeEnd, read_settings
-from runlog import wait_for
+from runlog import REPLY_S, wait_for
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
 
 STATUS = p.status_frame()
 IDLE = p.ram_reply(b"\x02\x00")
-# A read's timeout where a reply is due: it returns once the reply is in, so a long one costs
-# nothing, and a loaded machine's scheduler (a server process or thread put off) is no failure.
-REPLY_S = 5.0
 
 
 @contextlib.contextmanager
