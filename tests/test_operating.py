@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from choreo.live.osclimits import LIMITS
-from choreo.live.oscwire import decode_packet, encode_message
+from choreo.live.oscwire import END, decode_packet, encode_message, slip_decode
 from runlog import REPO, ended_if_left, read_log, start_choreo, wait_for
 from test_music import write_song
 from test_osc import free_port
@@ -70,11 +70,12 @@ def _packet(peer: Peer) -> bytes:
     """The next packet from choreo: a datagram, or one SLIP frame over TCP."""
     if peer.transport == "udp":
         return peer.sock.recv(65536)
-    buffer = b""  # SLIP: a frame ends at its END byte (0xC0); ESC (0xDB) sequences undone
-    while b"\xc0" not in buffer.lstrip(b"\xc0"):
+    buffer = b""  # SLIP: a frame ends at its END byte
+    while END not in buffer.lstrip(END):
         buffer += peer.sock.recv(65536)
-    frame = buffer.lstrip(b"\xc0").split(b"\xc0")[0]
-    return frame.replace(b"\xdb\xdc", b"\xc0").replace(b"\xdb\xdd", b"\xdb")
+    packet = slip_decode(buffer.lstrip(END).split(END)[0])
+    assert packet is not None, buffer
+    return packet
 
 
 def status(peer: Peer, wait_s: float = ANSWER_S) -> dict | None:
