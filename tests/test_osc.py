@@ -520,7 +520,7 @@ def go_when_waiting(osc, process: subprocess.Popen) -> None:  # type: ignore[no-
     GOs of a run a loaded machine took 0.6 s to bring from listening to its cue spent that
     budget, and the GOs past it were ignored as a flood (logged so) or their replies not sent."""
     every_s = 1 / LIMITS.commands_per_sender.per_s
-    deadline = time.monotonic() + 30
+    deadline = time.monotonic() + POLL_S
     while True:
         assert time.monotonic() < deadline and process.poll() is None, "no GO taken"
         sent = time.monotonic()
